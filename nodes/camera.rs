@@ -1,0 +1,49 @@
+//! Cameras.
+
+use glam::Vec3;
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::scene::Camera;
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
+    kind: "OrbitCamera",
+    category: Category::Scene,
+    doc: "A perspective camera orbiting a target; with orbit_speed it turns around the object over the frames.",
+    inputs: &[],
+    outputs: &[PortSpec::output("camera", PortType::Camera, "The camera.")],
+    params: &[
+        ParamSpec::new("target", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "The point looked at."),
+        ParamSpec::new("distance", ParamKind::Float { default: 3.0, min: 1e-3, max: 1e5 }, "Distance from the target."),
+        ParamSpec::new("yaw", ParamKind::Float { default: 30.0, min: -3600.0, max: 3600.0 }, "Angle around +Y in degrees (0 looks along -Z)."),
+        ParamSpec::new("pitch", ParamKind::Float { default: 20.0, min: -89.0, max: 89.0 }, "Elevation in degrees."),
+        ParamSpec::new("fov", ParamKind::Float { default: 40.0, min: 1.0, max: 170.0 }, "Vertical field of view in degrees."),
+        ParamSpec::new("orbit_speed", ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 }, "Degrees of yaw added per second of animation."),
+        ParamSpec::new("near", ParamKind::Float { default: 0.05, min: 1e-5, max: 1e4 }, "Near clipping distance."),
+        ParamSpec::new("far", ParamKind::Float { default: 100.0, min: 1e-3, max: 1e7 }, "Far clipping distance."),
+    ],
+    is_output: false,
+    create: || Box::new(OrbitCameraNode),
+};
+
+struct OrbitCameraNode;
+impl Node for OrbitCameraNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let speed = cx.f64("orbit_speed");
+        // Only an animated camera reads the time, so a still one is not re-run every frame.
+        let yaw = cx.f64("yaw") + if speed != 0.0 { speed * cx.time().seconds() } else { 0.0 };
+        let (near, far) = (cx.f32("near"), cx.f32("far"));
+        if near >= far {
+            return Err(NodeError::msg(format!("near ({near}) must be less than far ({far})")));
+        }
+        let (yaw, pitch) = ((yaw as f32).to_radians(), cx.f32("pitch").to_radians());
+        let dir = Vec3::new(yaw.sin() * pitch.cos(), pitch.sin(), yaw.cos() * pitch.cos());
+        let target = cx.vec3("target");
+        cx.set(
+            "camera",
+            Value::Camera(Camera { eye: target + dir * cx.f32("distance"), target, up: Vec3::Y, fov_y_degrees: cx.f32("fov"), near, far }),
+        );
+        Ok(())
+    }
+}

@@ -1,0 +1,191 @@
+//! Geometry sources: parametric primitives with a UV parametrization, and mesh files.
+
+use std::f32::consts::{PI, TAU};
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::mesh::{self, Mesh};
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+pub static PRIMITIVE: NodeSpec = NodeSpec {
+    kind: "Primitive",
+    category: Category::Geometry,
+    doc: "A parametric shape with analytic normals and a UV parametrization (u around, v along).",
+    inputs: &[],
+    outputs: &[PortSpec::output("mesh", PortType::Surface, "The shape; its UVs are its parametrization.")],
+    params: &[
+        ParamSpec::new(
+            "shape",
+            ParamKind::Choice { default: "sphere", options: &["plane", "cylinder", "sphere", "torus", "disc", "box"] },
+            "plane: size x size in XZ; cylinder: radius, height along Y (open); sphere: radius; torus: radius, minor_radius; disc: a button of radius and height; box: size cube.",
+        ),
+        ParamSpec::new("size", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Edge length of plane and box."),
+        ParamSpec::new("radius", ParamKind::Float { default: 0.5, min: 1e-4, max: 1e4 }, "Radius (major radius for the torus)."),
+        ParamSpec::new("minor_radius", ParamKind::Float { default: 0.15, min: 1e-4, max: 1e4 }, "Tube radius of the torus."),
+        ParamSpec::new("height", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Height of cylinder and disc."),
+        ParamSpec::new("segments_u", ParamKind::Int { default: 48, min: 1, max: 4096 }, "Subdivisions along u (around)."),
+        ParamSpec::new("segments_v", ParamKind::Int { default: 24, min: 1, max: 4096 }, "Subdivisions along v."),
+    ],
+    is_output: false,
+    create: || Box::new(PrimitiveNode),
+};
+
+struct PrimitiveNode;
+impl Node for PrimitiveNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let (su, sv) = (cx.int("segments_u") as u32, cx.int("segments_v") as u32);
+        let mesh = match cx.str("shape") {
+            "plane" => plane(cx.f32("size"), su, sv),
+            "cylinder" => cylinder(cx.f32("radius"), cx.f32("height"), su.max(3), sv),
+            "torus" => torus(cx.f32("radius"), cx.f32("minor_radius"), su.max(3), sv.max(3)),
+            "disc" => disc(cx.f32("radius"), cx.f32("height"), su.max(3)),
+            "box" => cube(cx.f32("size")),
+            _ => sphere(cx.f32("radius"), su.max(3), sv.max(2)),
+        }?;
+        cx.set("mesh", Value::Mesh(Arc::new(mesh)));
+        Ok(())
+    }
+}
+
+/// A (su+1) x (sv+1) vertex grid over (u, v) in [0,1]^2, mapped by `f` to (position, normal).
+fn grid(su: u32, sv: u32, f: impl Fn(f32, f32) -> (Vec3, Vec3)) -> anyhow::Result<Mesh> {
+    let (mut p, mut n, mut uv, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for j in 0..=sv {
+        for i in 0..=su {
+            let (u, v) = (i as f32 / su as f32, j as f32 / sv as f32);
+            let (pos, nor) = f(u, v);
+            p.push(pos);
+            n.push(nor);
+            uv.push(Vec2::new(u, v));
+        }
+    }
+    let row = su + 1;
+    for j in 0..sv {
+        for i in 0..su {
+            let a = j * row + i;
+            idx.extend_from_slice(&[a, a + row, a + 1, a + 1, a + row, a + row + 1]);
+        }
+    }
+    Mesh::build(p, Some(uv), Some(n), idx)
+}
+
+/// In the XZ plane, normal +Y; u along +X, v along +Z.
+pub fn plane(size: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
+    grid(su, sv, |u, v| (Vec3::new((u - 0.5) * size, 0.0, (v - 0.5) * size), Vec3::Y))
+}
+
+/// Open cylinder around +Y: P(u, v) = (r sin 2πu, h (0.5 - v), r cos 2πu).
+pub fn cylinder(r: f32, h: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
+    grid(su, sv, |u, v| {
+        let a = u * TAU;
+        let n = Vec3::new(a.sin(), 0.0, a.cos());
+        (n * r + Vec3::Y * h * (0.5 - v), n)
+    })
+}
+
+/// P(u, v) = r (sin θ sin φ, cos θ, sin θ cos φ) with φ = 2πu, θ = πv.
+pub fn sphere(r: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
+    grid(su, sv, |u, v| {
+        let (phi, theta) = (u * TAU, v * PI);
+        let n = Vec3::new(theta.sin() * phi.sin(), theta.cos(), theta.sin() * phi.cos());
+        (n * r, n)
+    })
+}
+
+/// Torus around +Y, major radius `big`, tube radius `small`.
+pub fn torus(big: f32, small: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
+    grid(su, sv, |u, v| {
+        let (phi, theta) = (u * TAU, v * TAU);
+        let ring = Vec3::new(phi.sin(), 0.0, phi.cos());
+        let n = ring * theta.cos() + Vec3::Y * theta.sin();
+        (ring * big + n * small, n)
+    })
+}
+
+/// A closed cuboid; each face its own UV square.
+pub fn cube(size: f32) -> anyhow::Result<Mesh> {
+    let h = size * 0.5;
+    let (mut p, mut n, mut uv, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for axis in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z] {
+        let t = if axis.y.abs() > 0.5 { Vec3::X } else { Vec3::Y.cross(axis) };
+        let b = axis.cross(t);
+        let base = p.len() as u32;
+        for (su, sv) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+            p.push((axis + t * (su * 2.0 - 1.0) + b * (sv * 2.0 - 1.0)) * h);
+            n.push(axis);
+            uv.push(Vec2::new(su, sv));
+        }
+        idx.extend_from_slice(&[base, base + 1, base + 2, base + 2, base + 1, base + 3]);
+    }
+    Mesh::build(p, Some(uv), Some(n), idx)
+}
+
+/// A button: a short closed cylinder around +Y with flat caps (UVs: planar on the caps).
+pub fn disc(r: f32, h: f32, segments: u32) -> anyhow::Result<Mesh> {
+    let side = cylinder(r, h, segments, 1)?;
+    let (mut p, mut n, mut uv, mut idx) = (side.positions, side.normals, side.uvs, side.indices);
+    for (y, up) in [(h * 0.5, 1.0f32), (-h * 0.5, -1.0)] {
+        let centre = p.len() as u32;
+        p.push(Vec3::new(0.0, y, 0.0));
+        n.push(Vec3::Y * up);
+        uv.push(Vec2::splat(0.5));
+        for i in 0..=segments {
+            let a = i as f32 / segments as f32 * TAU;
+            p.push(Vec3::new(a.sin() * r, y, a.cos() * r));
+            n.push(Vec3::Y * up);
+            uv.push(Vec2::new(0.5 + 0.5 * a.sin(), 0.5 + 0.5 * a.cos()));
+        }
+        for i in 0..segments {
+            let (a, b) = (centre + 1 + i, centre + 2 + i);
+            if up > 0.0 {
+                idx.extend_from_slice(&[centre, a, b]);
+            } else {
+                idx.extend_from_slice(&[centre, b, a]);
+            }
+        }
+    }
+    Mesh::build(p, Some(uv), Some(n), idx)
+}
+
+pub static MESH_FILE: NodeSpec = NodeSpec {
+    kind: "MeshFile",
+    category: Category::Geometry,
+    doc: "Loads a mesh from an OBJ file (on a worker thread); missing normals and tangents are computed, broken triangles repaired with a warning.",
+    inputs: &[],
+    outputs: &[PortSpec::output("mesh", PortType::Mesh, "The loaded mesh.")],
+    params: &[
+        ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["obj"] }, "The file, relative to the graph's folder."),
+        ParamSpec::new("normalize", ParamKind::Bool { default: true }, "Centre the mesh and scale it to unit height."),
+    ],
+    is_output: false,
+    create: || Box::new(MeshFileNode),
+};
+
+struct MeshFileNode;
+impl Node for MeshFileNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        if cx.str("path").is_empty() {
+            return Err(NodeError::msg("parameter \"path\" is empty: name an .obj file"));
+        }
+        let path = cx.path("path");
+        let loaded = cx.load(&path, mesh::load_obj)?;
+        for r in &loaded.repairs {
+            cx.warn(format!("{}: {r}", path.display()));
+        }
+        let mesh = if cx.bool("normalize") {
+            let (lo, hi) = loaded.bounds();
+            let scale = 1.0 / (hi.y - lo.y).max(1e-6);
+            let centre = (lo + hi) * 0.5;
+            let mut m = (*loaded).clone();
+            m.positions.iter_mut().for_each(|p| *p = (*p - centre) * scale);
+            Arc::new(m)
+        } else {
+            loaded
+        };
+        cx.set("mesh", Value::Mesh(mesh));
+        Ok(())
+    }
+}

@@ -1,0 +1,150 @@
+//! Materials and drawable items: what a G-buffer pass draws.
+
+use std::sync::Arc;
+
+use glam::{EulerRot, Mat4, Quat, Vec3};
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::scene::{DrawItem, Image8, Material};
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+pub static MATERIAL: NodeSpec = NodeSpec {
+    kind: "Material",
+    category: Category::Scene,
+    doc: "Base colour and glossiness, optionally modulated by a texture (a procedural checker or an image file).",
+    inputs: &[],
+    outputs: &[PortSpec::output("material", PortType::Material, "The material.")],
+    params: &[
+        ParamSpec::new("base_color", ParamKind::Color { default: [0.8, 0.8, 0.8] }, "Linear RGB base colour."),
+        ParamSpec::new("glossiness", ParamKind::Float { default: 0.2, min: 0.0, max: 1.0 }, "0 rough, 1 mirror-like."),
+        ParamSpec::new("texture", ParamKind::Choice { default: "none", options: &["none", "checker", "file"] }, "Base-colour map."),
+        ParamSpec::new("texture_path", ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] }, "Image for texture = file."),
+        ParamSpec::new("checker_color", ParamKind::Color { default: [0.2, 0.2, 0.2] }, "Second colour of the checker."),
+        ParamSpec::new("uv_scale", ParamKind::Float { default: 8.0, min: 1e-3, max: 1e4 }, "Texture repeats per UV unit."),
+    ],
+    is_output: false,
+    create: || Box::new(MaterialNode),
+};
+
+struct MaterialNode;
+impl Node for MaterialNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let texture = match cx.str("texture") {
+            "checker" => Some(Arc::new(checker(cx.vec3("checker_color")))),
+            "file" => {
+                if cx.str("texture_path").is_empty() {
+                    return Err(NodeError::msg("texture = \"file\" but parameter \"texture_path\" is empty"));
+                }
+                let path = cx.path("texture_path");
+                Some(cx.load(&path, load_image)?)
+            }
+            _ => None,
+        };
+        cx.set(
+            "material",
+            Value::Material(Arc::new(Material {
+                base_color: cx.vec3("base_color"),
+                glossiness: cx.f32("glossiness"),
+                texture,
+                uv_scale: cx.f32("uv_scale"),
+            })),
+        );
+        Ok(())
+    }
+}
+
+/// An 8x8 checker of white and `dark` (linear), stored sRGB-encoded.
+fn checker(dark: Vec3) -> Image8 {
+    let n = 64u32;
+    let encode = |c: f32| (255.0 * linear_to_srgb(c.clamp(0.0, 1.0))).round() as u8;
+    let dark = [encode(dark.x), encode(dark.y), encode(dark.z), 255];
+    let mut rgba = Vec::with_capacity((n * n * 4) as usize);
+    for y in 0..n {
+        for x in 0..n {
+            let odd = ((x / 8) + (y / 8)) % 2 == 1;
+            rgba.extend_from_slice(if odd { &dark } else { &[255, 255, 255, 255] });
+        }
+    }
+    Image8::new(n, n, rgba)
+}
+
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+}
+
+fn load_image(path: &std::path::Path) -> anyhow::Result<Image8> {
+    let img = image::open(path).map_err(|e| anyhow::anyhow!("cannot read image: {e}"))?.to_rgba8();
+    Ok(Image8::new(img.width(), img.height(), img.into_raw()))
+}
+
+pub static DRAW: NodeSpec = NodeSpec {
+    kind: "Draw",
+    category: Category::Scene,
+    doc: "Places a mesh with a material and a transform (scale, then rotate XYZ in degrees, then translate).",
+    inputs: &[
+        PortSpec::required("mesh", PortType::Mesh, "What to draw."),
+        PortSpec::optional("material", PortType::Material, "Its material (default: light grey)."),
+    ],
+    outputs: &[PortSpec::output("scene", PortType::Scene, "One draw item.")],
+    params: &[
+        ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation."),
+        ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees."),
+        ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis."),
+        ParamSpec::new("detail", ParamKind::Bool { default: false }, "Mark as detail geometry in the G-buffer (for the local AO pass)."),
+    ],
+    is_output: false,
+    create: || Box::new(DrawNode),
+};
+
+struct DrawNode;
+impl Node for DrawNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let Value::Mesh(mesh) = cx.required("mesh")? else { return Err(NodeError::msg("mesh input is not a mesh")) };
+        let mesh = mesh.clone();
+        let material = match cx.input("material") {
+            Some(Value::Material(m)) => m.clone(),
+            _ => Arc::new(Material::default()),
+        };
+        let r = cx.vec3("rotate");
+        let rotation = Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
+        let model = Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
+        if model.determinant().abs() < 1e-12 {
+            return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
+        }
+        let item = DrawItem { mesh, material, model, detail: cx.bool("detail") };
+        cx.set("scene", Value::Scene(Arc::new(vec![item])));
+        Ok(())
+    }
+}
+
+pub static MERGE: NodeSpec = NodeSpec {
+    kind: "Merge",
+    category: Category::Scene,
+    doc: "Combines up to four scenes into one.",
+    inputs: &[
+        PortSpec::optional("a", PortType::Scene, "Scene a."),
+        PortSpec::optional("b", PortType::Scene, "Scene b."),
+        PortSpec::optional("c", PortType::Scene, "Scene c."),
+        PortSpec::optional("d", PortType::Scene, "Scene d."),
+    ],
+    outputs: &[PortSpec::output("scene", PortType::Scene, "All items, in input order.")],
+    params: &[],
+    is_output: false,
+    create: || Box::new(MergeNode),
+};
+
+struct MergeNode;
+impl Node for MergeNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let mut items = Vec::new();
+        for port in ["a", "b", "c", "d"] {
+            if let Some(Value::Scene(s)) = cx.input(port) {
+                items.extend(s.iter().cloned());
+            }
+        }
+        cx.set("scene", Value::Scene(Arc::new(items)));
+        Ok(())
+    }
+}
+

@@ -1,0 +1,49 @@
+//! Exposure and tone mapping to an 8-bit sRGB image.
+
+use std::sync::Arc;
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::gpu::GpuImage;
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+use super::passes::FullscreenPass;
+
+pub const LDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const OPERATORS: &[&str] = &["none", "reinhard", "aces", "filmic"];
+
+pub static TONEMAP: NodeSpec = NodeSpec {
+    kind: "Tonemap",
+    category: Category::Render,
+    doc: "Applies exposure (in stops) and a tone curve (Reinhard, ACES fit, Hable filmic) and encodes sRGB.",
+    inputs: &[PortSpec::required("image", PortType::Texture, "Linear HDR input.")],
+    outputs: &[PortSpec::output("image", PortType::Texture, "Display-ready Rgba8UnormSrgb.")],
+    params: &[
+        ParamSpec::new("exposure", ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 }, "Exposure in stops (multiplies by 2^exposure)."),
+        ParamSpec::new("operator", ParamKind::Choice { default: "aces", options: OPERATORS }, "The tone curve."),
+    ],
+    is_output: false,
+    create: || Box::new(TonemapNode::default()),
+};
+
+#[derive(Default)]
+struct TonemapNode {
+    pass: Option<FullscreenPass>,
+}
+
+impl Node for TonemapNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let Value::Texture(input) = cx.required("image")? else { return Err(NodeError::msg("image input is not a texture")) };
+        let input = input.clone();
+        if self.pass.is_none() {
+            self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, LDR_FORMAT)?);
+        }
+        let op = OPERATORS.iter().position(|o| *o == cx.str("operator")).unwrap_or(2);
+        let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];
+        let out = GpuImage::target(gpu, "tonemapped", input.width, input.height, LDR_FORMAT);
+        self.pass.as_ref().expect("created above").run(gpu, bytemuck::bytes_of(&settings), &[&input], &out)?;
+        cx.set("image", Value::Texture(Arc::new(out)));
+        Ok(())
+    }
+}

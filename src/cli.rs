@@ -1,0 +1,220 @@
+//! The command line: render, check, fmt, nodes, info, bench.
+
+use std::io::IsTerminal as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::gpu::{Backend, GpuContext};
+use crate::graph::Graph;
+
+#[derive(Parser)]
+#[command(name = "werkstatt", version, about = "A real-time garment renderer as a node graph: render, check and format .ron graphs")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a graph headless: one image per output node per frame, plus stats.json.
+    Render {
+        /// The graph file (.ron).
+        graph: PathBuf,
+        /// Frames to render: N, or A..B (inclusive).
+        #[arg(long, default_value = "0")]
+        frames: String,
+        /// Frames per second of the animation time.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Image size WxH.
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Override a parameter: node.param=value (repeatable).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        sets: Vec<String>,
+        /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
+        #[arg(long = "dump", value_name = "NODE.PORT")]
+        dumps: Vec<String>,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Validate graphs without a GPU; reports every problem with file, line and node.
+    Check {
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+    },
+    /// Rewrite graphs in canonical form, or with --check list those that are not.
+    Fmt {
+        #[arg(long)]
+        check: bool,
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+    },
+    /// List node kinds, or write the Markdown reference (docs/nodes.md).
+    Nodes {
+        #[arg(long)]
+        markdown: bool,
+    },
+    /// Print the GPU adapters wgpu finds.
+    Info {
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Measure the framework itself.
+    Bench {
+        #[command(subcommand)]
+        what: BenchWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// Evaluator overhead per idle frame (nothing changed) for a graph of cheap nodes.
+    Graph {
+        #[arg(long, default_value_t = 200)]
+        nodes: usize,
+        #[arg(long, default_value_t = 20000)]
+        frames: usize,
+    },
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli.command) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn pick_backend(flag: Option<Backend>) -> anyhow::Result<Backend> {
+    match flag {
+        Some(b) => Ok(b),
+        None => Backend::from_env().map_err(anyhow::Error::msg),
+    }
+}
+
+fn parse_frames(text: &str) -> anyhow::Result<(i64, i64)> {
+    let bad = || anyhow::anyhow!("--frames \"{text}\": expected N or A..B with A <= B");
+    let (a, b) = match text.split_once("..") {
+        Some((a, b)) => (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?),
+        None => {
+            let n = text.trim().parse().map_err(|_| bad())?;
+            (n, n)
+        }
+    };
+    if a > b {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
+    let bad = || anyhow::anyhow!("--size \"{text}\": expected WxH, e.g. 640x480, each 1..=8192");
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn run(command: Command) -> anyhow::Result<ExitCode> {
+    match command {
+        Command::Render { graph, frames, fps, size, out, sets, dumps, backend } => {
+            let frames = parse_frames(&frames)?;
+            let (width, height) = parse_size(&size)?;
+            if !(fps > 0.0 && fps.is_finite()) {
+                anyhow::bail!("--fps must be a positive number");
+            }
+            // Validate before touching the GPU, so a bad graph fails fast and clearly.
+            crate::render::load_with_overrides(&graph, &sets)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+            let opts = crate::render::RenderOptions { graph_path: graph, frames, fps, width, height, out_dir: out.clone(), sets, dumps, progress };
+            let stats = crate::render::render(&opts, &gpu)?;
+            eprintln!(
+                "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
+                stats.frames.len(),
+                stats.adapter,
+                stats.files.len(),
+                out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Check { graphs } => {
+            let mut failed = 0;
+            for path in &graphs {
+                match Graph::load(path) {
+                    Ok(g) => println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len()),
+                    Err(e) => {
+                        failed += 1;
+                        eprintln!("{e}");
+                    }
+                }
+            }
+            if failed > 0 {
+                eprintln!("{failed} of {} graph(s) have errors", graphs.len());
+                return Ok(ExitCode::FAILURE);
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Fmt { check, graphs } => {
+            let mut bad = 0;
+            for path in &graphs {
+                let g = match Graph::load(path) {
+                    Ok(g) => g,
+                    Err(e) => {
+                        bad += 1;
+                        eprintln!("{e}");
+                        continue;
+                    }
+                };
+                let text = std::fs::read_to_string(path)?;
+                let canonical = g.to_ron();
+                if text != canonical {
+                    if check {
+                        bad += 1;
+                        println!("not canonical: {}", path.display());
+                    } else {
+                        g.save(path)?;
+                        println!("formatted: {}", path.display());
+                    }
+                }
+            }
+            Ok(if bad > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Nodes { markdown } => {
+            print!("{}", if markdown { crate::docs::markdown() } else { crate::docs::listing() });
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Info { backend } => {
+            let backend = pick_backend(backend)?;
+            let adapters = crate::gpu::list_adapters(backend);
+            if adapters.is_empty() {
+                eprintln!("no GPU adapter found for backend {backend:?}\n  help: {}", crate::gpu::NO_ADAPTER_HELP);
+                return Ok(ExitCode::FAILURE);
+            }
+            for a in adapters {
+                println!("{a}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Graph { nodes, frames } } => {
+            let r = crate::bench::idle_overhead(nodes, frames)?;
+            println!(
+                "evaluator overhead, {} nodes, nothing changed: {:.2} us/frame (median of {} batches of {} frames); first frame (all run): {:.1} us",
+                nodes, r.median_us, r.batches, r.frames_per_batch, r.first_frame_us
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}

@@ -1,0 +1,555 @@
+//! Per-frame evaluation: a graph compiles to a plan (the nodes that feed an output, in
+//! topological order); each frame every planned node is skipped when its fingerprint
+//! (parameters, input versions, touched resources, and the time if it read it) is unchanged.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crate::gpu::GpuContext;
+use crate::graph::Graph;
+use crate::resources::{Resources, SlotRef};
+use crate::spec::{self, NodeSpec, ParamValue};
+use crate::value::Value;
+
+/// A node's behaviour. Instances live as long as their node in the graph, so a node may
+/// keep GPU pipelines or simulation state between frames.
+pub trait Node: Send {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError>;
+}
+
+#[derive(Debug)]
+pub enum NodeError {
+    /// A resource it needs is still loading; not an error in interactive mode.
+    Pending(PathBuf),
+    Failed(String),
+}
+
+impl NodeError {
+    pub fn msg(m: impl Into<String>) -> Self {
+        NodeError::Failed(m.into())
+    }
+}
+
+impl From<anyhow::Error> for NodeError {
+    fn from(e: anyhow::Error) -> Self {
+        NodeError::Failed(format!("{e:#}"))
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameTime {
+    pub frame: i64,
+    pub fps: f64,
+}
+
+impl FrameTime {
+    pub fn seconds(&self) -> f64 {
+        self.frame as f64 / self.fps
+    }
+}
+
+/// What every node of a frame shares.
+#[derive(Clone, Debug)]
+pub struct FrameSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Folder that relative resource paths are resolved against (the graph file's folder).
+    pub base_dir: PathBuf,
+}
+
+impl Default for FrameSettings {
+    fn default() -> Self {
+        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from(".") }
+    }
+}
+
+/// What a node sees while it runs.
+pub struct EvalCx<'a> {
+    pub node_id: &'a str,
+    pub spec: &'static NodeSpec,
+    params: &'a [ParamValue],
+    inputs: &'a [Option<Value>],
+    outputs: &'a mut [Option<Value>],
+    time: FrameTime,
+    used_time: bool,
+    gpu: Option<&'a GpuContext>,
+    resources: &'a Resources,
+    touched: &'a mut Vec<SlotRef>,
+    warnings: &'a mut Vec<String>,
+    pub settings: &'a FrameSettings,
+}
+
+impl<'a> EvalCx<'a> {
+    fn param(&self, name: &str) -> &ParamValue {
+        let (i, _) = self
+            .spec
+            .param(name)
+            .unwrap_or_else(|| panic!("node kind {} reads undeclared parameter {name}", self.spec.kind));
+        &self.params[i]
+    }
+
+    pub fn f64(&self, name: &str) -> f64 {
+        self.param(name).as_f64().unwrap_or_default()
+    }
+    pub fn f32(&self, name: &str) -> f32 {
+        self.f64(name) as f32
+    }
+    pub fn int(&self, name: &str) -> i64 {
+        match self.param(name) {
+            ParamValue::Int(i) => *i,
+            other => other.as_f64().unwrap_or_default() as i64,
+        }
+    }
+    pub fn bool(&self, name: &str) -> bool {
+        matches!(self.param(name), ParamValue::Bool(true))
+    }
+    pub fn vec3(&self, name: &str) -> glam::Vec3 {
+        match self.param(name) {
+            ParamValue::Vec(v) if v.len() == 3 => glam::Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32),
+            _ => glam::Vec3::ZERO,
+        }
+    }
+    pub fn str(&self, name: &str) -> &str {
+        match self.param(name) {
+            ParamValue::Str(s) => s,
+            _ => "",
+        }
+    }
+    /// A path parameter resolved against the graph's folder.
+    pub fn path(&self, name: &str) -> PathBuf {
+        let p = Path::new(self.str(name));
+        if p.is_absolute() { p.to_path_buf() } else { self.settings.base_dir.join(p) }
+    }
+
+    pub fn input(&self, name: &str) -> Option<&Value> {
+        let (i, _) = self.spec.input(name)?;
+        self.inputs[i].as_ref()
+    }
+
+    pub fn required(&self, name: &str) -> Result<&Value, NodeError> {
+        self.input(name).ok_or_else(|| NodeError::msg(format!("input \"{name}\" has no value")))
+    }
+
+    pub fn set(&mut self, name: &str, value: Value) {
+        let (i, _) = self
+            .spec
+            .output(name)
+            .unwrap_or_else(|| panic!("node kind {} writes undeclared output {name}", self.spec.kind));
+        self.outputs[i] = Some(value);
+    }
+
+    /// The frame time. Reading it makes the node re-run whenever the time changes.
+    pub fn time(&mut self) -> FrameTime {
+        self.used_time = true;
+        self.time
+    }
+
+    pub fn gpu(&self) -> Result<&'a GpuContext, NodeError> {
+        self.gpu.ok_or_else(|| NodeError::msg("this node needs a GPU, but evaluation runs without one"))
+    }
+
+    pub fn warn(&mut self, message: impl Into<String>) {
+        self.warnings.push(message.into());
+    }
+
+    /// Loads a file through the lazy resource system. While it loads this returns
+    /// `NodeError::Pending`; the node re-runs when the resource is ready or reloaded.
+    pub fn load<T: Send + Sync + 'static>(
+        &mut self,
+        path: &Path,
+        loader: fn(&Path) -> anyhow::Result<T>,
+    ) -> Result<Arc<T>, NodeError> {
+        let (slot, state) = self.resources.request(path, loader);
+        self.touched.push(slot);
+        state
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum NodeStatus {
+    NotRun,
+    Ok,
+    Pending(PathBuf),
+    Failed(String),
+    /// An input's source has no value (it failed or is pending).
+    Blocked(String),
+}
+
+struct NodeState {
+    instance: Box<dyn Node>,
+    fingerprint: Option<u64>,
+    version: u64,
+    status: NodeStatus,
+    outputs: Vec<Option<Value>>,
+    uses_time: bool,
+    touched: Vec<SlotRef>,
+    warnings: Vec<String>,
+    last_cpu: Duration,
+    ran_last_frame: bool,
+    runs: u64,
+}
+
+/// The compiled graph with per-node caches.
+pub struct Evaluator {
+    ids: Vec<String>,
+    index: HashMap<String, usize>,
+    specs: Vec<&'static NodeSpec>,
+    params: Vec<Vec<ParamValue>>,
+    param_hash: Vec<u64>,
+    /// Per node, per input port: the source node and its output index.
+    sources: Vec<Vec<Option<(usize, usize)>>>,
+    /// Nodes that feed a root, sources first.
+    order: Vec<usize>,
+    roots: Vec<usize>,
+    state: Vec<NodeState>,
+    scratch_inputs: Vec<Option<Value>>,
+    next_version: u64,
+}
+
+/// Counts of one frame's evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameSummary {
+    pub ran: usize,
+    pub skipped: usize,
+    pub pending: usize,
+    pub failed: usize,
+}
+
+/// One node's record for the last frame.
+#[derive(Clone, Debug)]
+pub struct NodeReport<'a> {
+    pub id: &'a str,
+    pub kind: &'static str,
+    pub ran: bool,
+    pub cpu: Duration,
+    pub status: &'a NodeStatus,
+    pub warnings: &'a [String],
+    pub runs: u64,
+}
+
+#[inline]
+fn mix(h: u64, x: u64) -> u64 {
+    (h.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95)
+}
+
+impl Evaluator {
+    /// Compiles a validated graph. `extra_roots` are nodes to evaluate besides the output
+    /// nodes (for `--dump node.port`).
+    pub fn new(graph: &Graph, extra_roots: &[String]) -> Result<Evaluator, String> {
+        let mut ev = Evaluator {
+            ids: Vec::new(),
+            index: HashMap::new(),
+            specs: Vec::new(),
+            params: Vec::new(),
+            param_hash: Vec::new(),
+            sources: Vec::new(),
+            order: Vec::new(),
+            roots: Vec::new(),
+            state: Vec::new(),
+            scratch_inputs: Vec::new(),
+            next_version: 1,
+        };
+        ev.rebuild(graph, extra_roots, HashMap::new())?;
+        Ok(ev)
+    }
+
+    /// Recompiles after an edit, keeping the caches (and node instances) of nodes whose
+    /// kind is unchanged: only what the edit touched re-runs.
+    pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
+        let mut old = HashMap::new();
+        let ids = std::mem::take(&mut self.ids);
+        for (id, (state, spec)) in ids.into_iter().zip(std::mem::take(&mut self.state).into_iter().zip(self.specs.drain(..))) {
+            old.insert(id, (spec.kind, state));
+        }
+        self.rebuild(graph, extra_roots, old)
+    }
+
+    fn rebuild(
+        &mut self,
+        graph: &Graph,
+        extra_roots: &[String],
+        mut old: HashMap<String, (&'static str, NodeState)>,
+    ) -> Result<(), String> {
+        let problems = graph.validate();
+        if let Some(p) = problems.first() {
+            return Err(p.message.clone());
+        }
+        self.ids.clear();
+        self.index.clear();
+        self.specs.clear();
+        self.params.clear();
+        self.param_hash.clear();
+        self.sources.clear();
+        self.state.clear();
+        for (i, (id, doc)) in graph.nodes.iter().enumerate() {
+            let spec = spec::find(&doc.kind).ok_or_else(|| format!("unknown kind {}", doc.kind))?;
+            let params: Vec<ParamValue> = spec
+                .params
+                .iter()
+                .map(|p| doc.params.get(p.name).and_then(|v| p.kind.check(v).ok()).unwrap_or_else(|| p.kind.default_value()))
+                .collect();
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            for p in &params {
+                p.hash_into(&mut h);
+            }
+            let state = match old.remove(id) {
+                Some((kind, state)) if kind == spec.kind => state,
+                _ => NodeState {
+                    instance: (spec.create)(),
+                    fingerprint: None,
+                    version: 0,
+                    status: NodeStatus::NotRun,
+                    outputs: vec![None; spec.outputs.len()],
+                    uses_time: false,
+                    touched: Vec::new(),
+                    warnings: Vec::new(),
+                    last_cpu: Duration::ZERO,
+                    ran_last_frame: false,
+                    runs: 0,
+                },
+            };
+            self.ids.push(id.clone());
+            self.index.insert(id.clone(), i);
+            self.specs.push(spec);
+            self.params.push(params);
+            self.param_hash.push(std::hash::Hasher::finish(&h));
+            self.sources.push(vec![None; spec.inputs.len()]);
+            self.state.push(state);
+        }
+        for link in &graph.links {
+            let (Some(&from), Some(&to)) = (self.index.get(&link.from.node), self.index.get(&link.to.node)) else {
+                continue;
+            };
+            let (out, _) = self.specs[from].output(&link.from.port).ok_or("unknown output")?;
+            let (inp, _) = self.specs[to].input(&link.to.port).ok_or("unknown input")?;
+            self.sources[to][inp] = Some((from, out));
+        }
+        self.roots = (0..self.ids.len()).filter(|&i| self.specs[i].is_output).collect();
+        for id in extra_roots {
+            let &i = self.index.get(id).ok_or_else(|| format!("there is no node \"{id}\""))?;
+            if !self.roots.contains(&i) {
+                self.roots.push(i);
+            }
+        }
+        // Post-order DFS from the roots over input links gives sources before consumers.
+        self.order.clear();
+        let mut visited = vec![false; self.ids.len()];
+        for &root in &self.roots.clone() {
+            let mut stack = vec![(root, 0usize)];
+            while let Some((n, next)) = stack.pop() {
+                if next == 0 {
+                    if visited[n] {
+                        continue;
+                    }
+                    visited[n] = true;
+                }
+                if let Some(src) = self.sources[n].get(next) {
+                    stack.push((n, next + 1));
+                    if let Some((s, _)) = src
+                        && !visited[*s]
+                    {
+                        stack.push((*s, 0));
+                    }
+                } else {
+                    self.order.push(n);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Evaluates one frame. Nodes whose fingerprint is unchanged are skipped.
+    pub fn evaluate(
+        &mut self,
+        time: FrameTime,
+        gpu: Option<&GpuContext>,
+        resources: &Resources,
+        settings: &FrameSettings,
+    ) -> FrameSummary {
+        let mut summary = FrameSummary::default();
+        for oi in 0..self.order.len() {
+            let n = self.order[oi];
+            let blocked = self.sources[n]
+                .iter()
+                .flatten()
+                .find(|(s, _)| self.state[*s].status != NodeStatus::Ok)
+                .map(|(s, _)| self.ids[*s].as_str());
+            let h = self.recompute(n, time);
+            let state = &self.state[n];
+            if let Some(upstream) = blocked {
+                let msg = format!("waiting for input from \"{upstream}\"");
+                let state = &mut self.state[n];
+                state.ran_last_frame = false;
+                state.last_cpu = Duration::ZERO;
+                state.fingerprint = None;
+                if state.status != NodeStatus::Blocked(msg.clone()) {
+                    state.status = NodeStatus::Blocked(msg);
+                    state.outputs.iter_mut().for_each(|o| *o = None);
+                }
+                summary.skipped += 1;
+                continue;
+            }
+            if state.fingerprint == Some(h) {
+                let state = &mut self.state[n];
+                state.ran_last_frame = false;
+                state.last_cpu = Duration::ZERO;
+                summary.skipped += 1;
+                match state.status {
+                    NodeStatus::Pending(_) => summary.pending += 1,
+                    NodeStatus::Failed(_) => summary.failed += 1,
+                    _ => {}
+                }
+                continue;
+            }
+            self.run_node(n, time, gpu, resources, settings);
+            // Hash again: the run may have started or stopped reading the time, or touched resources.
+            self.state[n].fingerprint = Some(self.recompute(n, time));
+            summary.ran += 1;
+            match self.state[n].status {
+                NodeStatus::Pending(_) => summary.pending += 1,
+                NodeStatus::Failed(_) => summary.failed += 1,
+                _ => {}
+            }
+        }
+        summary
+    }
+
+    /// The fingerprint of node `n` from its current sources, time use and resources.
+    fn recompute(&self, n: usize, time: FrameTime) -> u64 {
+        let mut h = self.param_hash[n];
+        for src in &self.sources[n] {
+            h = match src {
+                Some((s, _)) => mix(h, self.state[*s].version),
+                None => mix(h, u64::MAX),
+            };
+        }
+        let state = &self.state[n];
+        if state.uses_time {
+            h = mix(h, time.frame as u64);
+            h = mix(h, time.fps.to_bits());
+        }
+        for slot in &state.touched {
+            h = mix(h, slot.version());
+        }
+        h
+    }
+
+    fn run_node(&mut self, n: usize, time: FrameTime, gpu: Option<&GpuContext>, resources: &Resources, settings: &FrameSettings) {
+        let mut inputs = std::mem::take(&mut self.scratch_inputs);
+        inputs.clear();
+        inputs.extend(self.sources[n].iter().map(|src| src.and_then(|(s, o)| self.state[s].outputs[o].clone())));
+        let spec = self.specs[n];
+        let state = &mut self.state[n];
+        let mut outputs = vec![None; spec.outputs.len()];
+        state.touched.clear();
+        state.warnings.clear();
+        let start = Instant::now();
+        let (result, used_time) = {
+            let mut cx = EvalCx {
+                node_id: &self.ids[n],
+                spec,
+                params: &self.params[n],
+                inputs: &inputs,
+                outputs: &mut outputs,
+                time,
+                used_time: false,
+                gpu,
+                resources,
+                touched: &mut state.touched,
+                warnings: &mut state.warnings,
+                settings,
+            };
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.instance.eval(&mut cx)));
+            let r = r.unwrap_or_else(|panic| {
+                let what = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                Err(NodeError::msg(format!("internal error (panic) in {}: {what}", spec.kind)))
+            });
+            (r, cx.used_time)
+        };
+        state.last_cpu = start.elapsed();
+        state.ran_last_frame = true;
+        state.runs += 1;
+        state.uses_time = used_time;
+        match result {
+            Ok(()) => {
+                state.status = NodeStatus::Ok;
+                state.outputs = outputs;
+                state.version = self.next_version;
+                self.next_version += 1;
+            }
+            Err(NodeError::Pending(p)) => {
+                state.status = NodeStatus::Pending(p);
+                state.outputs.iter_mut().for_each(|o| *o = None);
+            }
+            Err(NodeError::Failed(m)) => {
+                state.status = NodeStatus::Failed(m);
+                state.outputs.iter_mut().for_each(|o| *o = None);
+            }
+        }
+        inputs.clear();
+        self.scratch_inputs = inputs;
+    }
+
+    /// Forgets every cache, e.g. after the frame size changed.
+    pub fn invalidate_all(&mut self) {
+        for s in &mut self.state {
+            s.fingerprint = None;
+        }
+    }
+
+    pub fn node_ids(&self) -> &[String] {
+        &self.ids
+    }
+
+    /// The nodes evaluation runs, in order.
+    pub fn planned(&self) -> impl Iterator<Item = &str> {
+        self.order.iter().map(|&i| self.ids[i].as_str())
+    }
+
+    pub fn roots(&self) -> impl Iterator<Item = &str> {
+        self.roots.iter().map(|&i| self.ids[i].as_str())
+    }
+
+    pub fn report(&self, id: &str) -> Option<NodeReport<'_>> {
+        let &i = self.index.get(id)?;
+        Some(self.report_at(i))
+    }
+
+    fn report_at(&self, i: usize) -> NodeReport<'_> {
+        let s = &self.state[i];
+        NodeReport {
+            id: &self.ids[i],
+            kind: self.specs[i].kind,
+            ran: s.ran_last_frame,
+            cpu: s.last_cpu,
+            status: &s.status,
+            warnings: &s.warnings,
+            runs: s.runs,
+        }
+    }
+
+    /// Reports of the planned nodes, in evaluation order.
+    pub fn reports(&self) -> impl Iterator<Item = NodeReport<'_>> {
+        self.order.iter().map(|&i| self.report_at(i))
+    }
+
+    pub fn output(&self, id: &str, port: &str) -> Option<&Value> {
+        let &i = self.index.get(id)?;
+        let (o, _) = self.specs[i].output(port)?;
+        self.state[i].outputs[o].as_ref()
+    }
+
+    /// The value feeding input `port` of node `id`.
+    pub fn input(&self, id: &str, port: &str) -> Option<&Value> {
+        let &i = self.index.get(id)?;
+        let (p, _) = self.specs[i].input(port)?;
+        let (s, o) = self.sources[i][p]?;
+        self.state[s].outputs[o].as_ref()
+    }
+}

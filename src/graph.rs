@@ -1,0 +1,812 @@
+//! Graph documents: the `.ron` file model, its canonical writer, migrations and validation.
+//!
+//! A graph file looks like this (the canonical form `werkstatt fmt` writes):
+//!
+//! ```ron
+//! (
+//!     version: 1,
+//!     nodes: {
+//!         "camera": (
+//!             kind: "OrbitCamera",
+//!             pos: (40.0, 120.0),
+//!             params: {
+//!                 "distance": 3.0,
+//!             },
+//!         ),
+//!     },
+//!     links: [
+//!         ("camera.camera", "gbuffer.camera"),
+//!     ],
+//! )
+//! ```
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::{self, Write as _};
+use std::path::{Path, PathBuf};
+
+use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::Deserialize;
+
+use crate::spec::{self, ParamValue};
+
+/// The file format version this build writes.
+pub const CURRENT_VERSION: u32 = 1;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Graph {
+    pub version: u32,
+    pub nodes: BTreeMap<String, NodeDoc>,
+    pub links: Vec<Link>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeDoc {
+    pub kind: String,
+    /// Position on the editor canvas.
+    pub pos: [f32; 2],
+    /// The parameters the file sets; the others take their spec's default.
+    pub params: BTreeMap<String, ParamValue>,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct PortRef {
+    pub node: String,
+    pub port: String,
+}
+
+impl PortRef {
+    pub fn parse(text: &str) -> Option<PortRef> {
+        let (node, port) = text.split_once('.')?;
+        (valid_id(node) && !port.is_empty()).then(|| PortRef { node: node.into(), port: port.into() })
+    }
+}
+
+impl fmt::Display for PortRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}.{}", self.node, self.port)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Link {
+    pub from: PortRef,
+    pub to: PortRef,
+}
+
+/// Node ids are used in `node.port` references and file names, so keep them plain.
+pub fn valid_id(id: &str) -> bool {
+    !id.is_empty() && id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+// ---------------------------------------------------------------------------
+// Problems and their places
+// ---------------------------------------------------------------------------
+
+/// What is wrong, independent of where it is written.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ProblemKind {
+    Syntax,
+    Io,
+    VersionTooNew,
+    DuplicateId,
+    InvalidId,
+    UnknownKind,
+    UnknownParam,
+    ParamType,
+    ParamRange,
+    BadLinkSyntax,
+    UnknownNode,
+    UnknownPort,
+    LinkTypeMismatch,
+    InputLinkedTwice,
+    MissingInput,
+    Cycle,
+}
+
+/// Where a problem sits in the document, used to find its line and column.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Place {
+    File,
+    Node(String),
+    Param(String, String),
+    Link(usize),
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Problem {
+    pub kind: ProblemKind,
+    pub place: Place,
+    /// The node and port the problem is about, when there is one.
+    pub node: Option<String>,
+    pub port: Option<String>,
+    pub message: String,
+    pub help: Option<String>,
+}
+
+impl Problem {
+    fn new(kind: ProblemKind, place: Place, message: impl Into<String>) -> Self {
+        let node = match &place {
+            Place::Node(n) | Place::Param(n, _) => Some(n.clone()),
+            _ => None,
+        };
+        Problem { kind, place, node, port: None, message: message.into(), help: None }
+    }
+    fn port(mut self, node: &str, port: &str) -> Self {
+        self.node = Some(node.into());
+        self.port = Some(port.into());
+        self
+    }
+    fn help(mut self, help: impl Into<String>) -> Self {
+        self.help = Some(help.into());
+        self
+    }
+}
+
+/// A problem with its file position, ready to print.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Diagnostic {
+    pub file: PathBuf,
+    pub line: usize,
+    pub col: usize,
+    pub problem: Problem,
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}:{}: error", self.file.display(), self.line, self.col)?;
+        match (&self.problem.node, &self.problem.port) {
+            (Some(n), Some(p)) => write!(f, " in node \"{n}\", port \"{p}\"")?,
+            (Some(n), None) => write!(f, " in node \"{n}\"")?,
+            _ => {}
+        }
+        write!(f, ": {}", self.problem.message)?;
+        if let Some(help) = &self.problem.help {
+            write!(f, "\n  help: {help}")?;
+        }
+        Ok(())
+    }
+}
+
+/// All problems of one file.
+#[derive(Debug)]
+pub struct LoadError {
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, d) in self.diagnostics.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{d}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+// ---------------------------------------------------------------------------
+// Parsing
+// ---------------------------------------------------------------------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGraph {
+    version: u32,
+    #[serde(default)]
+    nodes: RawEntries<RawNode>,
+    #[serde(default)]
+    links: Vec<(String, String)>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawNode {
+    kind: String,
+    #[serde(default)]
+    pos: (f32, f32),
+    #[serde(default)]
+    params: RawEntries<ParamValue>,
+}
+
+/// Only the version, read first so that a newer file is refused before its contents are.
+#[derive(Deserialize)]
+struct VersionProbe {
+    version: u32,
+}
+
+/// A map read in file order with duplicates kept, so that a repeated id is an error
+/// instead of the last one silently winning.
+struct RawEntries<T>(Vec<(String, T)>);
+
+impl<T> Default for RawEntries<T> {
+    fn default() -> Self {
+        RawEntries(Vec::new())
+    }
+}
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for RawEntries<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V<T>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>> Visitor<'de> for V<T> {
+            type Value = RawEntries<T>;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a map of \"name\": value entries")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut entries = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, T>()? {
+                    entries.push((k, v));
+                }
+                Ok(RawEntries(entries))
+            }
+        }
+        d.deserialize_map(V(std::marker::PhantomData))
+    }
+}
+
+impl<'de> Deserialize<'de> for ParamValue {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = ParamValue;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number, bool, string or list of numbers")
+            }
+            fn visit_bool<E>(self, v: bool) -> Result<ParamValue, E> {
+                Ok(ParamValue::Bool(v))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<ParamValue, E> {
+                Ok(ParamValue::Int(v))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<ParamValue, E> {
+                i64::try_from(v).map(ParamValue::Int).map_err(|_| E::custom("integer too large"))
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<ParamValue, E> {
+                Ok(ParamValue::Float(v))
+            }
+            fn visit_str<E>(self, v: &str) -> Result<ParamValue, E> {
+                Ok(ParamValue::Str(v.to_string()))
+            }
+            fn visit_string<E>(self, v: String) -> Result<ParamValue, E> {
+                Ok(ParamValue::Str(v))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<ParamValue, A::Error> {
+                let mut out = Vec::new();
+                while let Some(x) = seq.next_element::<f64>()? {
+                    out.push(x);
+                }
+                Ok(ParamValue::Vec(out))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// A step that upgrades a document from `from` to `from + 1`.
+pub struct Migration {
+    pub from: u32,
+    pub note: &'static str,
+    pub apply: fn(&mut Graph),
+}
+
+/// Every format change adds an entry here; old files then keep opening.
+pub const MIGRATIONS: &[Migration] = &[];
+
+/// Upgrades `graph` to `target` with `table`, returning the notes of the applied steps.
+pub fn migrate(graph: &mut Graph, target: u32, table: &[Migration]) -> Result<Vec<&'static str>, String> {
+    let mut notes = Vec::new();
+    while graph.version < target {
+        let step = table
+            .iter()
+            .find(|m| m.from == graph.version)
+            .ok_or_else(|| format!("no migration from version {} (this build reads {target})", graph.version))?;
+        (step.apply)(graph);
+        notes.push(step.note);
+        graph.version += 1;
+    }
+    Ok(notes)
+}
+
+impl Graph {
+    pub fn new() -> Self {
+        Graph { version: CURRENT_VERSION, nodes: BTreeMap::new(), links: Vec::new() }
+    }
+
+    /// Reads and validates a graph file. All problems found are reported together.
+    pub fn load(path: &Path) -> Result<Graph, LoadError> {
+        let source = std::fs::read_to_string(path).map_err(|e| LoadError {
+            diagnostics: vec![Diagnostic {
+                file: path.to_path_buf(),
+                line: 0,
+                col: 0,
+                problem: Problem::new(ProblemKind::Io, Place::File, format!("cannot read the file: {e}")),
+            }],
+        })?;
+        Graph::load_str(&source, path)
+    }
+
+    /// Parses and validates `source`; `path` is used in messages only.
+    pub fn load_str(source: &str, path: &Path) -> Result<Graph, LoadError> {
+        let (graph, mut problems) = Graph::parse_unvalidated(source).map_err(|d| LoadError {
+            diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }],
+        })?;
+        problems.extend(graph.validate());
+        if problems.is_empty() {
+            Ok(graph)
+        } else {
+            let map = SourceMap::new(source);
+            let diagnostics = problems
+                .into_iter()
+                .map(|problem| {
+                    let (line, col) = map.locate(&problem.place, &graph);
+                    Diagnostic { file: path.to_path_buf(), line, col, problem }
+                })
+                .collect();
+            Err(LoadError { diagnostics })
+        }
+    }
+
+    /// Parses without validating the nodes against the registry; returns the problems
+    /// (duplicates, bad link syntax) that the document model cannot hold.
+    fn parse_unvalidated(source: &str) -> Result<(Graph, Vec<Problem>), Diagnostic> {
+        let syntax = |e: ron::error::SpannedError| Diagnostic {
+            file: PathBuf::new(),
+            line: e.span.start.line,
+            col: e.span.start.col,
+            problem: Problem::new(ProblemKind::Syntax, Place::File, e.code.to_string()),
+        };
+        let probe: VersionProbe = ron::from_str(source).map_err(syntax)?;
+        if probe.version > CURRENT_VERSION {
+            let line = source.lines().position(|l| l.contains("version")).map_or(1, |i| i + 1);
+            return Err(Diagnostic {
+                file: PathBuf::new(),
+                line,
+                col: 1,
+                problem: Problem::new(
+                    ProblemKind::VersionTooNew,
+                    Place::File,
+                    format!(
+                        "the file has format version {}, newer than this build's {CURRENT_VERSION}",
+                        probe.version
+                    ),
+                )
+                .help("update werkstatt to open it"),
+            });
+        }
+        let raw: RawGraph = ron::from_str(source).map_err(syntax)?;
+        let mut problems = Vec::new();
+        let mut nodes = BTreeMap::new();
+        for (id, node) in raw.nodes.0 {
+            let mut params = BTreeMap::new();
+            for (name, value) in node.params.0 {
+                if params.insert(name.clone(), value).is_some() {
+                    problems.push(Problem::new(
+                        ProblemKind::DuplicateId,
+                        Place::Param(id.clone(), name.clone()),
+                        format!("parameter \"{name}\" is set twice"),
+                    ));
+                }
+            }
+            let doc = NodeDoc { kind: node.kind, pos: [node.pos.0, node.pos.1], params };
+            if nodes.insert(id.clone(), doc).is_some() {
+                problems.push(
+                    Problem::new(ProblemKind::DuplicateId, Place::Node(id.clone()), format!("node id \"{id}\" is used twice"))
+                        .help("give each node its own id"),
+                );
+            }
+        }
+        let mut links = Vec::new();
+        for (i, (from, to)) in raw.links.into_iter().enumerate() {
+            match (PortRef::parse(&from), PortRef::parse(&to)) {
+                (Some(from), Some(to)) => links.push(Link { from, to }),
+                _ => problems.push(
+                    Problem::new(ProblemKind::BadLinkSyntax, Place::Link(i), format!("link (\"{from}\", \"{to}\") is malformed"))
+                        .help("links are written (\"node.output\", \"node.input\")"),
+                ),
+            }
+        }
+        let mut graph = Graph { version: raw.version, nodes, links };
+        migrate(&mut graph, CURRENT_VERSION, MIGRATIONS).map_err(|message| Diagnostic {
+            file: PathBuf::new(),
+            line: 1,
+            col: 1,
+            problem: Problem::new(ProblemKind::VersionTooNew, Place::File, message),
+        })?;
+        Ok((graph, problems))
+    }
+
+    /// Checks the document against the node registry: kinds, parameters, ports, link
+    /// types, required inputs and cycles.
+    pub fn validate(&self) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        for (id, node) in &self.nodes {
+            if !valid_id(id) {
+                problems.push(
+                    Problem::new(ProblemKind::InvalidId, Place::Node(id.clone()), format!("node id \"{id}\" is not valid"))
+                        .help("use letters, digits, '_' and '-' only"),
+                );
+            }
+            let Some(spec) = spec::find(&node.kind) else {
+                let mut p = Problem::new(
+                    ProblemKind::UnknownKind,
+                    Place::Node(id.clone()),
+                    format!("unknown node kind \"{}\"", node.kind),
+                );
+                p.help = Some(match spec::closest(&node.kind, spec::all().iter().map(|s| s.kind)) {
+                    Some(k) => format!("did you mean \"{k}\"? (`werkstatt nodes` lists all kinds)"),
+                    None => "`werkstatt nodes` lists all kinds".into(),
+                });
+                problems.push(p);
+                continue;
+            };
+            for (name, value) in &node.params {
+                let place = Place::Param(id.clone(), name.clone());
+                match spec.param(name) {
+                    None => {
+                        let mut p = Problem::new(
+                            ProblemKind::UnknownParam,
+                            place,
+                            format!("{} has no parameter \"{name}\"", spec.kind),
+                        );
+                        p.help = Some(match spec::closest(name, spec.params.iter().map(|p| p.name)) {
+                            Some(n) => format!("did you mean \"{n}\"?"),
+                            None => format!(
+                                "its parameters are: {}",
+                                spec.params.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+                            ),
+                        });
+                        problems.push(p);
+                    }
+                    Some((_, ps)) => {
+                        if let Err(msg) = ps.kind.check(value) {
+                            let kind = if msg.starts_with("expected") { ProblemKind::ParamType } else { ProblemKind::ParamRange };
+                            problems.push(Problem::new(kind, place, format!("parameter \"{name}\": {msg}")));
+                        }
+                    }
+                }
+            }
+        }
+
+        let mut fed: BTreeMap<(&str, &str), usize> = BTreeMap::new();
+        for (i, link) in self.links.iter().enumerate() {
+            let place = Place::Link(i);
+            let from_ty = self.port_type(&link.from, false, &place, &mut problems);
+            let to_ty = self.port_type(&link.to, true, &place, &mut problems);
+            if let (Some(a), Some(b)) = (from_ty, to_ty)
+                && !b.accepts(a)
+            {
+                problems.push(
+                    Problem::new(
+                        ProblemKind::LinkTypeMismatch,
+                        place.clone(),
+                        format!("cannot link {} ({a}) to {} ({b})", link.from, link.to),
+                    )
+                    .port(&link.to.node, &link.to.port),
+                );
+            }
+            if let Some(first) = fed.insert((&link.to.node, &link.to.port), i) {
+                problems.push(
+                    Problem::new(
+                        ProblemKind::InputLinkedTwice,
+                        place,
+                        format!("input {} is fed by two links (links #{} and #{})", link.to, first + 1, i + 1),
+                    )
+                    .port(&link.to.node, &link.to.port)
+                    .help("an input takes one link; remove one of them"),
+                );
+            }
+        }
+        for (id, node) in &self.nodes {
+            let Some(spec) = spec::find(&node.kind) else { continue };
+            for input in spec.inputs.iter().filter(|p| p.required) {
+                if !fed.contains_key(&(id.as_str(), input.name)) {
+                    problems.push(
+                        Problem::new(
+                            ProblemKind::MissingInput,
+                            Place::Node(id.clone()),
+                            format!("required input \"{}\" ({}) is not connected", input.name, input.ty),
+                        )
+                        .port(id, input.name),
+                    );
+                }
+            }
+        }
+        if let Some(cycle) = self.find_cycle() {
+            let first = cycle[0].clone();
+            problems.push(
+                Problem::new(
+                    ProblemKind::Cycle,
+                    Place::Node(first),
+                    format!("the links form a cycle: {} -> {}", cycle.join(" -> "), cycle[0]),
+                )
+                .help("a node's output cannot feed back into its own inputs"),
+            );
+        }
+        problems
+    }
+
+    fn port_type(&self, port: &PortRef, input: bool, place: &Place, problems: &mut Vec<Problem>) -> Option<spec::PortType> {
+        let Some(node) = self.nodes.get(&port.node) else {
+            problems.push(Problem::new(
+                ProblemKind::UnknownNode,
+                place.clone(),
+                format!("link names node \"{}\", which does not exist", port.node),
+            ));
+            return None;
+        };
+        let spec = spec::find(&node.kind)?;
+        let ports = if input { spec.inputs } else { spec.outputs };
+        match ports.iter().find(|p| p.name == port.port) {
+            Some(p) => Some(p.ty),
+            None => {
+                let which = if input { "input" } else { "output" };
+                let names: Vec<&str> = ports.iter().map(|p| p.name).collect();
+                let help = match spec::closest(&port.port, names.iter().copied()) {
+                    Some(n) => format!("did you mean \"{n}\"?"),
+                    None if names.is_empty() => format!("{} has no {which}s", spec.kind),
+                    None => format!("its {which}s are: {}", names.join(", ")),
+                };
+                problems.push(
+                    Problem::new(ProblemKind::UnknownPort, place.clone(), format!("{} has no {which} \"{}\"", spec.kind, port.port))
+                        .port(&port.node, &port.port)
+                        .help(help),
+                );
+                None
+            }
+        }
+    }
+
+    /// A cycle through the links, as the node ids along it, if there is one.
+    pub fn find_cycle(&self) -> Option<Vec<String>> {
+        let mut succ: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
+        for l in &self.links {
+            succ.entry(&l.from.node).or_default().insert(&l.to.node);
+        }
+        // Iterative DFS with colours; the grey stack is the current path.
+        let mut colour: BTreeMap<&str, u8> = BTreeMap::new();
+        for start in self.nodes.keys() {
+            if colour.contains_key(start.as_str()) {
+                continue;
+            }
+            let mut stack: Vec<(&str, Vec<&str>)> = vec![(start, succ.get(start.as_str()).map(|s| s.iter().copied().collect()).unwrap_or_default())];
+            colour.insert(start, 1);
+            while let Some((node, next)) = stack.last_mut() {
+                let node = *node;
+                match next.pop() {
+                    Some(n) => match colour.get(n) {
+                        Some(1) => {
+                            let pos = stack.iter().position(|(s, _)| *s == n).unwrap_or(0);
+                            return Some(stack[pos..].iter().map(|(s, _)| s.to_string()).collect());
+                        }
+                        Some(_) => {}
+                        None => {
+                            colour.insert(n, 1);
+                            stack.push((n, succ.get(n).map(|s| s.iter().copied().collect()).unwrap_or_default()));
+                        }
+                    },
+                    None => {
+                        colour.insert(node, 2);
+                        stack.pop();
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// The canonical text: sorted ids, parameters and links, four-space indents,
+    /// floats in their shortest exact form. `load` then `to_ron` gives back the same bytes.
+    pub fn to_ron(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "(\n    version: {},\n    nodes: {{", self.version);
+        for (id, node) in &self.nodes {
+            let _ = writeln!(out, "        {}: (", quote(id));
+            let _ = writeln!(out, "            kind: {},", quote(&node.kind));
+            let _ = writeln!(out, "            pos: ({}, {}),", float(node.pos[0] as f64), float(node.pos[1] as f64));
+            if node.params.is_empty() {
+                out.push_str("            params: {},\n");
+            } else {
+                out.push_str("            params: {\n");
+                for (name, value) in &node.params {
+                    let _ = writeln!(out, "                {}: {},", quote(name), value_ron(value));
+                }
+                out.push_str("            },\n");
+            }
+            out.push_str("        ),\n");
+        }
+        out.push_str("    },\n");
+        let mut links = self.links.clone();
+        links.sort();
+        if links.is_empty() {
+            out.push_str("    links: [],\n");
+        } else {
+            out.push_str("    links: [\n");
+            for l in &links {
+                let _ = writeln!(out, "        ({}, {}),", quote(&l.from.to_string()), quote(&l.to.to_string()));
+            }
+            out.push_str("    ],\n");
+        }
+        out.push_str(")\n");
+        out
+    }
+
+    /// Writes the canonical text atomically: a temporary file in the same folder, then a rename,
+    /// so a crash mid-save never leaves a half-written graph.
+    pub fn save(&self, path: &Path) -> std::io::Result<()> {
+        write_atomic(path, self.to_ron().as_bytes())
+    }
+
+    /// The value of a parameter: the file's, or the spec's default.
+    pub fn param(&self, node: &str, name: &str) -> Option<ParamValue> {
+        let doc = self.nodes.get(node)?;
+        if let Some(v) = doc.params.get(name) {
+            return Some(v.clone());
+        }
+        spec::find(&doc.kind)?.param(name).map(|(_, p)| p.kind.default_value())
+    }
+
+    /// Applies `node.param=value` from the command line, checked against the spec.
+    pub fn set_from_cli(&mut self, assignment: &str) -> Result<(), String> {
+        let (target, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
+        let (id, name) = target
+            .split_once('.')
+            .ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
+        let node = self.nodes.get_mut(id).ok_or_else(|| format!("--set: there is no node \"{id}\""))?;
+        let spec = spec::find(&node.kind).ok_or_else(|| format!("--set: node \"{id}\" has unknown kind {}", node.kind))?;
+        let (_, ps) = spec.param(name).ok_or_else(|| {
+            format!(
+                "--set: {} (node \"{id}\") has no parameter \"{name}\"; its parameters are: {}",
+                spec.kind,
+                spec.params.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+            )
+        })?;
+        let parsed = ps.kind.parse_cli(value).map_err(|e| format!("--set {id}.{name}: {e}"))?;
+        node.params.insert(name.to_string(), parsed);
+        Ok(())
+    }
+}
+
+impl Default for Graph {
+    fn default() -> Self {
+        Graph::new()
+    }
+}
+
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+fn quote(s: &str) -> String {
+    // Rust's debug escapes (\", \\, \n, \u{..}) are valid RON string escapes.
+    format!("{s:?}")
+}
+
+fn float(v: f64) -> String {
+    // `{:?}` is the shortest text that parses back to the same bits, and always has a '.' or 'e'.
+    format!("{v:?}")
+}
+
+fn value_ron(v: &ParamValue) -> String {
+    match v {
+        ParamValue::Bool(b) => b.to_string(),
+        ParamValue::Int(i) => i.to_string(),
+        ParamValue::Float(f) => float(*f),
+        ParamValue::Str(s) => quote(s),
+        ParamValue::Vec(v) => format!("[{}]", v.iter().map(|x| float(*x)).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// Finds where ids, parameters and links are written, for error positions.
+/// RON values carry no spans, so this searches the text for the quoted names.
+struct SourceMap<'a> {
+    source: &'a str,
+}
+
+impl<'a> SourceMap<'a> {
+    fn new(source: &'a str) -> Self {
+        SourceMap { source }
+    }
+
+    fn locate(&self, place: &Place, graph: &Graph) -> (usize, usize) {
+        let offset = match place {
+            Place::File => Some(0),
+            Place::Node(id) => self.node_offset(id),
+            Place::Param(id, name) => self.node_offset(id).and_then(|start| {
+                let end = self.next_node_offset(start, graph);
+                self.find_key(name, start, end)
+            }),
+            Place::Link(i) => self.link_offset(*i),
+        };
+        self.line_col(offset.unwrap_or(0))
+    }
+
+    fn nodes_section(&self) -> usize {
+        self.source.find("nodes").unwrap_or(0)
+    }
+
+    fn node_offset(&self, id: &str) -> Option<usize> {
+        self.find_key(id, self.nodes_section(), self.source.len())
+    }
+
+    fn next_node_offset(&self, start: usize, graph: &Graph) -> usize {
+        graph
+            .nodes
+            .keys()
+            .filter_map(|id| self.node_offset(id))
+            .filter(|&o| o > start)
+            .min()
+            .or_else(|| self.source[start..].find("links").map(|o| o + start))
+            .unwrap_or(self.source.len())
+    }
+
+    /// The offset of `"key"` followed by `:` between `start` and `end`.
+    fn find_key(&self, key: &str, start: usize, end: usize) -> Option<usize> {
+        let needle = quote(key);
+        let hay = &self.source[start..end];
+        let mut from = 0;
+        while let Some(i) = hay[from..].find(&needle) {
+            let at = from + i;
+            if hay[at + needle.len()..].trim_start().starts_with(':') {
+                return Some(start + at);
+            }
+            from = at + needle.len();
+        }
+        None
+    }
+
+    /// The offset of the i-th entry of the links list.
+    fn link_offset(&self, index: usize) -> Option<usize> {
+        let links = self.source.rfind("links")?;
+        let open = links + self.source[links..].find('[')?;
+        let mut depth = 0;
+        let mut count = 0;
+        let mut in_string = false;
+        let mut prev = '\0';
+        for (i, c) in self.source[open + 1..].char_indices() {
+            if in_string {
+                if c == '"' && prev != '\\' {
+                    in_string = false;
+                }
+            } else if c == '"' {
+                in_string = true;
+            } else if c == '(' {
+                if depth == 0 {
+                    if count == index {
+                        return Some(open + 1 + i);
+                    }
+                    count += 1;
+                }
+                depth += 1;
+            } else if c == ')' {
+                depth -= 1;
+            } else if c == ']' && depth == 0 {
+                break;
+            }
+            prev = c;
+        }
+        None
+    }
+
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let before = &self.source[..offset.min(self.source.len())];
+        let line = before.matches('\n').count() + 1;
+        let col = before.rfind('\n').map_or(before.chars().count(), |nl| before[nl + 1..].chars().count()) + 1;
+        (line, col)
+    }
+}

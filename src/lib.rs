@@ -1,0 +1,23 @@
+//! werkstatt: a real-time garment renderer as a node graph.
+//!
+//! A graph (`.ron`, see [`graph`]) names nodes from the registry ([`spec`], [`nodes`]);
+//! [`eval::Evaluator`] runs the nodes that feed an output, skipping those whose inputs,
+//! parameters, resources and time are unchanged. [`render`] is the headless batch runner.
+
+pub mod bench;
+pub mod cli;
+pub mod docs;
+pub mod eval;
+pub mod gpu;
+pub mod graph;
+pub mod image_io;
+pub mod mesh;
+pub mod render;
+pub mod resources;
+pub mod scene;
+pub mod shaders;
+pub mod spec;
+pub mod value;
+
+#[path = "../nodes/mod.rs"]
+pub mod nodes;

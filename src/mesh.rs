@@ -1,0 +1,271 @@
+//! CPU meshes: what Mesh and Surface ports carry. GPU buffers are created once per mesh,
+//! on first draw, and live as long as the mesh.
+
+use std::sync::OnceLock;
+
+use anyhow::{Context as _, bail};
+use glam::{Vec2, Vec3};
+
+#[derive(Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub uvs: Vec<Vec2>,
+    /// dP/du and dP/dv, orthogonalized against the normal and normalized (t_u, t_v).
+    pub tangents_u: Vec<Vec3>,
+    pub tangents_v: Vec<Vec3>,
+    pub indices: Vec<u32>,
+    /// Pattern piece of each vertex (Surfaces); empty for plain meshes.
+    pub piece_ids: Vec<u32>,
+    /// Notes about repairs made while building the mesh, shown as node warnings.
+    pub repairs: Vec<String>,
+    gpu: OnceLock<GpuMesh>,
+}
+
+impl Clone for Mesh {
+    fn clone(&self) -> Self {
+        Mesh {
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            uvs: self.uvs.clone(),
+            tangents_u: self.tangents_u.clone(),
+            tangents_v: self.tangents_v.clone(),
+            indices: self.indices.clone(),
+            piece_ids: self.piece_ids.clone(),
+            repairs: self.repairs.clone(),
+            gpu: OnceLock::new(),
+        }
+    }
+}
+
+impl std::fmt::Debug for Mesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Mesh({} vertices, {} triangles)", self.positions.len(), self.triangle_count())
+    }
+}
+
+/// The interleaved vertex layout shared by every mesh shader.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Vertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub tangent_u: [f32; 3],
+    pub uv: [f32; 2],
+}
+
+impl Vertex {
+    pub const ATTRIBUTES: [wgpu::VertexAttribute; 4] =
+        wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x2];
+    pub fn layout() -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Vertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &Self::ATTRIBUTES,
+        }
+    }
+}
+
+pub struct GpuMesh {
+    pub vertices: wgpu::Buffer,
+    pub indices: wgpu::Buffer,
+    pub index_count: u32,
+}
+
+impl Mesh {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Builds a mesh from positions, optional UVs and normals, and triangle indices:
+    /// checks indices, repairs what can be repaired (NaN positions, degenerate triangles,
+    /// missing normals, tangents from UV gradients) and records what it did in `repairs`.
+    pub fn build(positions: Vec<Vec3>, uvs: Option<Vec<Vec2>>, normals: Option<Vec<Vec3>>, indices: Vec<u32>) -> anyhow::Result<Mesh> {
+        let n = positions.len();
+        if n == 0 {
+            bail!("the mesh has no vertices");
+        }
+        if indices.len() % 3 != 0 {
+            bail!("the index count {} is not a multiple of 3", indices.len());
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+            bail!("index {bad} is out of range (the mesh has {n} vertices)");
+        }
+        let mut repairs = Vec::new();
+        let bad_positions: Vec<bool> = positions.iter().map(|p| !p.is_finite()).collect();
+        let nan_count = bad_positions.iter().filter(|b| **b).count();
+        if nan_count == n {
+            bail!("every vertex position is NaN or infinite");
+        }
+        let mut kept = Vec::with_capacity(indices.len());
+        let mut degenerate = 0;
+        let mut dropped_nan = 0;
+        for t in indices.chunks_exact(3) {
+            let [a, b, c] = [t[0] as usize, t[1] as usize, t[2] as usize];
+            if bad_positions[a] || bad_positions[b] || bad_positions[c] {
+                dropped_nan += 1;
+                continue;
+            }
+            let area2 = (positions[b] - positions[a]).cross(positions[c] - positions[a]).length();
+            if a == b || b == c || a == c || area2 <= f32::MIN_POSITIVE {
+                degenerate += 1;
+                continue;
+            }
+            kept.extend_from_slice(t);
+        }
+        if dropped_nan > 0 {
+            repairs.push(format!("{nan_count} vertices had NaN or infinite positions; dropped the {dropped_nan} triangles using them"));
+        }
+        if degenerate > 0 {
+            repairs.push(format!("dropped {degenerate} degenerate (zero-area) triangles"));
+        }
+        if kept.is_empty() {
+            bail!("no triangle is left after removing degenerate and NaN triangles");
+        }
+        let positions: Vec<Vec3> = positions.into_iter().map(|p| if p.is_finite() { p } else { Vec3::ZERO }).collect();
+        let uvs = match uvs {
+            Some(u) if u.len() == n && u.iter().all(|x| x.is_finite()) => u,
+            Some(_) => {
+                repairs.push("UVs were incomplete or not finite; replaced by a planar projection".into());
+                planar_uvs(&positions)
+            }
+            None => {
+                repairs.push("no UVs; generated a planar projection".into());
+                planar_uvs(&positions)
+            }
+        };
+        let normals = match normals {
+            Some(nr) if nr.len() == n && nr.iter().all(|x| x.is_finite() && x.length_squared() > 0.0) => {
+                nr.into_iter().map(|v| v.normalize()).collect()
+            }
+            Some(_) => {
+                repairs.push("normals were incomplete or invalid; recomputed from faces".into());
+                vertex_normals(&positions, &kept)
+            }
+            None => vertex_normals(&positions, &kept),
+        };
+        let (tangents_u, tangents_v) = uv_tangents(&positions, &normals, &uvs, &kept);
+        Ok(Mesh { positions, normals, uvs, tangents_u, tangents_v, indices: kept, piece_ids: Vec::new(), repairs, gpu: OnceLock::new() })
+    }
+
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.positions
+            .iter()
+            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+    }
+
+    pub fn gpu(&self, gpu: &crate::gpu::GpuContext) -> &GpuMesh {
+        use wgpu::util::DeviceExt;
+        self.gpu.get_or_init(|| {
+            let verts: Vec<Vertex> = (0..self.positions.len())
+                .map(|i| Vertex {
+                    position: self.positions[i].to_array(),
+                    normal: self.normals[i].to_array(),
+                    tangent_u: self.tangents_u[i].to_array(),
+                    uv: self.uvs[i].to_array(),
+                })
+                .collect();
+            let vertices = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh vertices"),
+                contents: bytemuck::cast_slice(&verts),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
+            });
+            let indices = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh indices"),
+                contents: bytemuck::cast_slice(&self.indices),
+                usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
+            });
+            GpuMesh { vertices, indices, index_count: self.indices.len() as u32 }
+        })
+    }
+}
+
+/// Area-weighted vertex normals.
+pub fn vertex_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> {
+    let mut normals = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0] as usize, t[1] as usize, t[2] as usize];
+        let n = (positions[b] - positions[a]).cross(positions[c] - positions[a]);
+        normals[a] += n;
+        normals[b] += n;
+        normals[c] += n;
+    }
+    normals.into_iter().map(|n| n.try_normalize().unwrap_or(Vec3::Y)).collect()
+}
+
+/// Per-vertex t_u = dP/du and t_v = dP/dv from the UV gradients of the adjacent triangles,
+/// Gram-Schmidt orthogonalized against the normal. Where the UVs are degenerate, an
+/// arbitrary frame around the normal is used.
+pub fn uv_tangents(positions: &[Vec3], normals: &[Vec3], uvs: &[Vec2], indices: &[u32]) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut tu = vec![Vec3::ZERO; positions.len()];
+    let mut tv = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0] as usize, t[1] as usize, t[2] as usize];
+        let (e1, e2) = (positions[b] - positions[a], positions[c] - positions[a]);
+        let (d1, d2) = (uvs[b] - uvs[a], uvs[c] - uvs[a]);
+        let det = d1.x * d2.y - d2.x * d1.y;
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        let r = 1.0 / det;
+        // Solve [e1 e2] = [dP/du dP/dv] [d1 d2].
+        let du = (e1 * d2.y - e2 * d1.y) * r;
+        let dv = (e2 * d1.x - e1 * d2.x) * r;
+        for i in [a, b, c] {
+            tu[i] += du;
+            tv[i] += dv;
+        }
+    }
+    for i in 0..positions.len() {
+        let n = normals[i];
+        let u = (tu[i] - n * n.dot(tu[i])).try_normalize().unwrap_or_else(|| n.any_orthonormal_vector());
+        let v = (tv[i] - n * n.dot(tv[i]) - u * u.dot(tv[i]))
+            .try_normalize()
+            .unwrap_or_else(|| n.cross(u));
+        tu[i] = u;
+        tv[i] = v;
+    }
+    (tu, tv)
+}
+
+/// UVs from the two largest extents of the bounding box.
+fn planar_uvs(positions: &[Vec3]) -> Vec<Vec2> {
+    let (lo, hi) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let ext = (hi - lo).max(Vec3::splat(1e-9));
+    let (a, b) = if ext.x.min(ext.y).min(ext.z) == ext.x { (2, 1) } else if ext.y <= ext.z { (0, 2) } else { (0, 1) };
+    positions.iter().map(|p| Vec2::new((p[a] - lo[a]) / ext[a], (p[b] - lo[b]) / ext[b])).collect()
+}
+
+/// Loads an OBJ file (all its models merged) with `tobj`.
+pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
+    let (models, _) = tobj::load_obj(path, &tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() })
+        .with_context(|| format!("cannot parse OBJ file {}", path.display()))?;
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    let mut normals = Vec::new();
+    let mut indices = Vec::new();
+    let (mut all_uvs, mut all_normals) = (true, true);
+    for m in &models {
+        let mesh = &m.mesh;
+        let base = positions.len() as u32;
+        let count = mesh.positions.len() / 3;
+        positions.extend(mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+        if mesh.texcoords.len() == count * 2 {
+            // OBJ's v axis points up; textures here have v down.
+            uvs.extend(mesh.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], 1.0 - t[1])));
+        } else {
+            all_uvs = false;
+        }
+        if mesh.normals.len() == count * 3 {
+            normals.extend(mesh.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
+        } else {
+            all_normals = false;
+        }
+        indices.extend(mesh.indices.iter().map(|i| i + base));
+    }
+    if positions.is_empty() {
+        bail!("{} contains no geometry", path.display());
+    }
+    Mesh::build(positions, all_uvs.then_some(uvs), all_normals.then_some(normals), indices)
+        .with_context(|| format!("invalid mesh in {}", path.display()))
+}

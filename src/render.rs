@@ -1,0 +1,217 @@
+//! The headless batch runner behind `werkstatt render`: evaluates frames, waits for every
+//! resource (so output is deterministic), writes the output nodes' images and `stats.json`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use serde::Serialize;
+
+use crate::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use crate::gpu::{self, GpuContext};
+use crate::graph::{Graph, PortRef};
+use crate::image_io;
+use crate::resources::Resources;
+use crate::value::Value;
+
+pub struct RenderOptions {
+    pub graph_path: PathBuf,
+    /// Inclusive frame range.
+    pub frames: (i64, i64),
+    pub fps: f64,
+    pub width: u32,
+    pub height: u32,
+    pub out_dir: PathBuf,
+    /// `node.param=value` overrides.
+    pub sets: Vec<String>,
+    /// `node.port` texture outputs to write besides the output nodes.
+    pub dumps: Vec<String>,
+    pub progress: bool,
+}
+
+#[derive(Serialize)]
+pub struct NodeTiming {
+    pub cpu_ms: f64,
+    pub ran: bool,
+}
+
+#[derive(Serialize)]
+pub struct FrameStats {
+    pub frame: i64,
+    pub wall_ms: f64,
+    pub nodes: BTreeMap<String, NodeTiming>,
+}
+
+#[derive(Serialize)]
+pub struct Stats {
+    pub graph: String,
+    /// FNV-1a 64 of the graph's canonical text (after --set), hex.
+    pub graph_hash: String,
+    pub adapter: String,
+    pub width: u32,
+    pub height: u32,
+    pub frames: Vec<FrameStats>,
+    /// Values reported by Watch nodes, one per frame.
+    pub values: BTreeMap<String, Vec<f64>>,
+    /// Files written, relative to the output folder.
+    pub files: Vec<String>,
+}
+
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// Loads the graph and applies `--set` overrides, re-validating afterwards.
+pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
+    let mut graph = Graph::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    for s in sets {
+        graph.set_from_cli(s).map_err(anyhow::Error::msg)?;
+    }
+    Ok(graph)
+}
+
+/// Renders the frames; returns the statistics (also written to `stats.json`).
+pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
+    let graph = load_with_overrides(&opts.graph_path, &opts.sets)?;
+    let dumps: Vec<PortRef> = opts
+        .dumps
+        .iter()
+        .map(|d| parse_dump(&graph, d))
+        .collect::<anyhow::Result<_>>()?;
+    let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
+    let mut evaluator = Evaluator::new(&graph, &extra_roots).map_err(anyhow::Error::msg)?;
+    if evaluator.roots().next().is_none() {
+        bail!("{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render", opts.graph_path.display());
+    }
+    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("cannot create {}", opts.out_dir.display()))?;
+    let resources = Resources::new(false);
+    let settings = FrameSettings {
+        width: opts.width,
+        height: opts.height,
+        base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let mut stats = Stats {
+        graph: opts.graph_path.display().to_string(),
+        graph_hash: format!("{:016x}", fnv1a(graph.to_ron().as_bytes())),
+        adapter: gpu.adapter_name(),
+        width: opts.width,
+        height: opts.height,
+        frames: Vec::new(),
+        values: BTreeMap::new(),
+        files: Vec::new(),
+    };
+    let (first, last) = opts.frames;
+    let bar = opts.progress.then(|| {
+        let bar = indicatif::ProgressBar::new((last - first + 1) as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {elapsed} (eta {eta})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    for frame in first..=last {
+        let time = FrameTime { frame, fps: opts.fps };
+        let start = Instant::now();
+        let mut nodes = BTreeMap::new();
+        // Batch mode waits for loads: evaluate, wait for resources, repeat until settled.
+        loop {
+            let summary = evaluator.evaluate(time, Some(gpu), &resources, &settings);
+            for r in evaluator.reports() {
+                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming { cpu_ms: 0.0, ran: false });
+                t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
+                t.ran |= r.ran;
+            }
+            if summary.pending == 0 {
+                break;
+            }
+            if resources.in_flight() == 0 && summary.ran == 0 {
+                bail!("frame {frame}: nodes are pending but nothing is loading");
+            }
+            resources.wait_idle();
+        }
+        gpu.wait_idle();
+        let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let failures = failures(&evaluator);
+        if !failures.is_empty() {
+            if let Some(b) = &bar {
+                b.abandon();
+            }
+            bail!("frame {frame}: {}", failures.join("\n  "));
+        }
+        for r in evaluator.reports() {
+            for w in r.warnings {
+                if frame == first {
+                    eprintln!("warning: node \"{}\" ({}): {w}", r.id, r.kind);
+                }
+            }
+        }
+        let roots: Vec<String> = evaluator.roots().map(str::to_string).collect();
+        for id in &roots {
+            match evaluator.output(id, "image").or_else(|| evaluator.output(id, "value")) {
+                Some(Value::Texture(img)) => {
+                    let exr = graph.param(id, "format") == Some(crate::spec::ParamValue::Str("exr".into()));
+                    let name = format!("{id}_{frame:04}.{}", if exr { "exr" } else { "png" });
+                    write_image(gpu, img, &opts.out_dir.join(&name), exr)?;
+                    stats.files.push(name);
+                }
+                Some(Value::Scalar(v)) => stats.values.entry(id.clone()).or_default().push(*v),
+                _ => {}
+            }
+        }
+        for d in &dumps {
+            let value = evaluator.output(&d.node, &d.port);
+            let Some(img) = value.and_then(Value::as_texture) else {
+                bail!("--dump {d}: the port holds no texture this frame");
+            };
+            let exr = !matches!(img.format, wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm);
+            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, if exr { "exr" } else { "png" });
+            write_image(gpu, img, &opts.out_dir.join(&name), exr)?;
+            stats.files.push(name);
+        }
+        stats.frames.push(FrameStats { frame, wall_ms, nodes });
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let json = serde_json::to_string_pretty(&stats)?;
+    crate::graph::write_atomic(&opts.out_dir.join("stats.json"), json.as_bytes())?;
+    Ok(stats)
+}
+
+fn write_image(gpu: &GpuContext, img: &gpu::GpuImage, path: &Path, exr: bool) -> anyhow::Result<()> {
+    let px = gpu::read_back(gpu, img)?;
+    if exr { image_io::write_exr(path, &px) } else { image_io::write_png(path, &px) }
+}
+
+fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
+    let r = PortRef::parse(text).with_context(|| format!("--dump \"{text}\": expected node.port"))?;
+    let node = graph.nodes.get(&r.node).with_context(|| format!("--dump {text}: there is no node \"{}\"", r.node))?;
+    let spec = crate::spec::find(&node.kind).context("unknown kind")?;
+    let Some((_, port)) = spec.output(&r.port) else {
+        bail!(
+            "--dump {text}: {} has no output \"{}\"; its outputs are: {}",
+            spec.kind,
+            r.port,
+            spec.outputs.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+        );
+    };
+    if !matches!(port.ty, crate::spec::PortType::Texture | crate::spec::PortType::GBuffer) {
+        bail!("--dump {text}: the port is a {}, not a texture", port.ty);
+    }
+    Ok(r)
+}
+
+/// Messages for every failed node, naming node and kind.
+pub fn failures(ev: &Evaluator) -> Vec<String> {
+    ev.reports()
+        .filter_map(|r| match r.status {
+            NodeStatus::Failed(m) => Some(format!("node \"{}\" ({}) failed: {m}", r.id, r.kind)),
+            NodeStatus::Pending(p) => Some(format!("node \"{}\" ({}) is still waiting for {}", r.id, r.kind, p.display())),
+            _ => None,
+        })
+        .collect()
+}

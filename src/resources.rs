@@ -1,0 +1,220 @@
+//! Lazy resources: files named by path, loaded on worker threads. A handle is Pending,
+//! Ready or Failed; its version bumps whenever it (re)loads, which is what makes the
+//! nodes that use it re-run. In watch mode, edited files are reloaded.
+
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Condvar, Mutex};
+
+use crate::eval::NodeError;
+
+type Loaded = Arc<dyn Any + Send + Sync>;
+type LoadFn = Box<dyn Fn(&Path) -> anyhow::Result<Loaded> + Send + Sync>;
+
+#[derive(Clone)]
+pub enum SlotState {
+    Pending,
+    Ready(Loaded),
+    Failed(String),
+}
+
+pub struct Slot {
+    pub path: PathBuf,
+    state: Mutex<SlotState>,
+    version: AtomicU64,
+    load: LoadFn,
+}
+
+pub type SlotRef = Arc<Slot>;
+
+impl Slot {
+    pub fn version(&self) -> u64 {
+        self.version.load(Ordering::Acquire)
+    }
+    pub fn state(&self) -> SlotState {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+}
+
+struct Inner {
+    slots: Mutex<HashMap<(PathBuf, TypeId), SlotRef>>,
+    jobs: Mutex<Option<Sender<SlotRef>>>,
+    in_flight: Mutex<usize>,
+    idle: Condvar,
+    watcher: Mutex<Option<notify::RecommendedWatcher>>,
+    watched_dirs: Mutex<Vec<PathBuf>>,
+}
+
+/// The resource manager. Cheap to clone.
+#[derive(Clone)]
+pub struct Resources {
+    inner: Arc<Inner>,
+}
+
+impl Resources {
+    /// `watch`: reload files when they change on disk (interactive mode).
+    pub fn new(watch: bool) -> Resources {
+        let (tx, rx) = channel::<SlotRef>();
+        let inner = Arc::new(Inner {
+            slots: Mutex::new(HashMap::new()),
+            jobs: Mutex::new(Some(tx)),
+            in_flight: Mutex::new(0),
+            idle: Condvar::new(),
+            watcher: Mutex::new(None),
+            watched_dirs: Mutex::new(Vec::new()),
+        });
+        let rx = Arc::new(Mutex::new(rx));
+        let workers = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(1, 4);
+        for i in 0..workers {
+            let rx = rx.clone();
+            let weak = Arc::downgrade(&inner);
+            std::thread::Builder::new()
+                .name(format!("werkstatt-loader-{i}"))
+                .spawn(move || worker(rx, weak))
+                .expect("cannot start a resource loader thread");
+        }
+        let resources = Resources { inner };
+        if watch {
+            resources.start_watcher();
+        }
+        resources
+    }
+
+    /// Returns the slot for `path` (starting its load the first time) and its current value.
+    pub fn request<T: Send + Sync + 'static>(
+        &self,
+        path: &Path,
+        loader: fn(&Path) -> anyhow::Result<T>,
+    ) -> (SlotRef, Result<Arc<T>, NodeError>) {
+        let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+        let key = (path.clone(), TypeId::of::<T>());
+        let (slot, fresh) = {
+            let mut slots = self.inner.slots.lock().unwrap_or_else(|e| e.into_inner());
+            match slots.get(&key) {
+                Some(s) => (s.clone(), false),
+                None => {
+                    let slot = Arc::new(Slot {
+                        path: path.clone(),
+                        state: Mutex::new(SlotState::Pending),
+                        version: AtomicU64::new(0),
+                        load: Box::new(move |p| loader(p).map(|v| Arc::new(v) as Loaded)),
+                    });
+                    slots.insert(key, slot.clone());
+                    (slot, true)
+                }
+            }
+        };
+        if fresh {
+            self.watch_dir(&path);
+            self.enqueue(slot.clone());
+        }
+        let value = match slot.state() {
+            SlotState::Pending => Err(NodeError::Pending(path)),
+            SlotState::Failed(e) => Err(NodeError::Failed(e)),
+            SlotState::Ready(v) => v
+                .downcast::<T>()
+                .map_err(|_| NodeError::msg(format!("{}: loaded as another type", path.display()))),
+        };
+        (slot, value)
+    }
+
+    fn enqueue(&self, slot: SlotRef) {
+        *self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+        if let Some(tx) = self.inner.jobs.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+            let _ = tx.send(slot);
+        }
+    }
+
+    /// Blocks until no load is in flight (batch mode, for deterministic output).
+    pub fn wait_idle(&self) {
+        let mut n = self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner());
+        while *n > 0 {
+            n = self.inner.idle.wait(n).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+
+    pub fn in_flight(&self) -> usize {
+        *self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Reloads every resource whose file is `path` (called by the watcher).
+    pub fn reload(&self, path: &Path) {
+        let slots: Vec<SlotRef> = self
+            .inner
+            .slots
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|s| s.path == path)
+            .cloned()
+            .collect();
+        for s in slots {
+            self.enqueue(s);
+        }
+    }
+
+    fn start_watcher(&self) {
+        let weak = Arc::downgrade(&self.inner);
+        let handler = move |event: notify::Result<notify::Event>| {
+            let (Ok(event), Some(inner)) = (event, weak.upgrade()) else { return };
+            if !(event.kind.is_modify() || event.kind.is_create()) {
+                return;
+            }
+            let me = Resources { inner };
+            for p in &event.paths {
+                me.reload(p);
+            }
+        };
+        match notify::recommended_watcher(handler) {
+            Ok(w) => *self.inner.watcher.lock().unwrap_or_else(|e| e.into_inner()) = Some(w),
+            Err(e) => eprintln!("warning: cannot watch files for changes ({e}); edits on disk will not reload"),
+        }
+    }
+
+    /// Watches the file's folder, not the file: editors save by replacing the file.
+    fn watch_dir(&self, path: &Path) {
+        use notify::Watcher;
+        let mut guard = self.inner.watcher.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(watcher) = guard.as_mut() else { return };
+        let Some(dir) = path.parent() else { return };
+        let mut dirs = self.inner.watched_dirs.lock().unwrap_or_else(|e| e.into_inner());
+        if dirs.iter().any(|d| d == dir) {
+            return;
+        }
+        if watcher.watch(dir, notify::RecursiveMode::NonRecursive).is_ok() {
+            dirs.push(dir.to_path_buf());
+        }
+    }
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        // Closing the channel ends the workers.
+        self.jobs.lock().unwrap_or_else(|e| e.into_inner()).take();
+    }
+}
+
+fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
+    loop {
+        let job = {
+            let rx = rx.lock().unwrap_or_else(|e| e.into_inner());
+            rx.recv()
+        };
+        let Ok(slot) = job else { return };
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (slot.load)(&slot.path)));
+        let state = match result {
+            Ok(Ok(v)) => SlotState::Ready(v),
+            Ok(Err(e)) => SlotState::Failed(format!("{}: {e:#}", slot.path.display())),
+            Err(_) => SlotState::Failed(format!("{}: the loader crashed on this file", slot.path.display())),
+        };
+        *slot.state.lock().unwrap_or_else(|e| e.into_inner()) = state;
+        slot.version.fetch_add(1, Ordering::AcqRel);
+        let Some(inner) = inner.upgrade() else { return };
+        let mut n = inner.in_flight.lock().unwrap_or_else(|e| e.into_inner());
+        *n = n.saturating_sub(1);
+        inner.idle.notify_all();
+    }
+}

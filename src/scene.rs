@@ -1,0 +1,110 @@
+//! Scene data that flows between render nodes: cameras, materials, drawable items, G-buffers.
+
+use std::sync::{Arc, OnceLock};
+
+use glam::{Mat4, Vec3};
+
+use crate::gpu::{GpuContext, GpuImage};
+use crate::mesh::Mesh;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    pub fov_y_degrees: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Camera {
+    pub fn view(&self) -> Mat4 {
+        Mat4::look_at_rh(self.eye, self.target, self.up)
+    }
+    /// A right-handed perspective projection with depth in [0, 1] (wgpu's convention).
+    pub fn projection(&self, aspect: f32) -> Mat4 {
+        Mat4::perspective_rh(self.fov_y_degrees.to_radians(), aspect, self.near, self.far)
+    }
+}
+
+/// An RGBA8 (sRGB-encoded) image on the CPU, e.g. a material's base-colour map.
+pub struct Image8 {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+    gpu: OnceLock<GpuImage>,
+}
+
+impl Image8 {
+    pub fn new(width: u32, height: u32, rgba: Vec<u8>) -> Image8 {
+        Image8 { width, height, rgba, gpu: OnceLock::new() }
+    }
+
+    /// Uploads on first use; sampled as sRGB so shaders see linear values.
+    pub fn gpu(&self, gpu: &GpuContext) -> &GpuImage {
+        self.gpu.get_or_init(|| {
+            let img = GpuImage::new(
+                gpu,
+                "image",
+                self.width,
+                self.height,
+                wgpu::TextureFormat::Rgba8UnormSrgb,
+                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            );
+            gpu.queue.write_texture(
+                wgpu::TexelCopyTextureInfo { texture: &img.texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+                &self.rgba,
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * self.width), rows_per_image: Some(self.height) },
+                wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+            );
+            img
+        })
+    }
+}
+
+pub struct Material {
+    /// Linear RGB.
+    pub base_color: Vec3,
+    /// 0 = rough, 1 = mirror-like; stored in the G-buffer's colour alpha.
+    pub glossiness: f32,
+    pub texture: Option<Arc<Image8>>,
+    pub uv_scale: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material { base_color: Vec3::splat(0.8), glossiness: 0.2, texture: None, uv_scale: 1.0 }
+    }
+}
+
+/// One mesh to draw, with its material and model transform.
+#[derive(Clone)]
+pub struct DrawItem {
+    pub mesh: Arc<Mesh>,
+    pub material: Arc<Material>,
+    pub model: Mat4,
+    /// Detail geometry (attachments) versus coarse cloth; written to the G-buffer flag.
+    pub detail: bool,
+}
+
+/// The deferred renderer's multiple render targets.
+pub struct GBuffer {
+    /// Linear base colour (rgb) and glossiness (a), Rgba16Float.
+    pub color: GpuImage,
+    /// World-space normal (rgb) and the detail flag (a: 0 coarse, 1 detail), Rgba16Float.
+    pub normal: GpuImage,
+    /// Linear view-space depth, R32Float; 0 where nothing was drawn.
+    pub depth: GpuImage,
+    /// The hardware depth buffer, Depth32Float.
+    pub depth_buffer: GpuImage,
+    pub camera: Camera,
+}
+
+impl GBuffer {
+    pub fn width(&self) -> u32 {
+        self.color.width
+    }
+    pub fn height(&self) -> u32 {
+        self.color.height
+    }
+}
