@@ -30,20 +30,20 @@ pub struct RenderOptions {
     pub progress: bool,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Debug)]
 pub struct NodeTiming {
     pub cpu_ms: f64,
     pub ran: bool,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Debug)]
 pub struct FrameStats {
     pub frame: i64,
     pub wall_ms: f64,
     pub nodes: BTreeMap<String, NodeTiming>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Debug)]
 pub struct Stats {
     pub graph: String,
     /// FNV-1a 64 of the graph's canonical text (after --set), hex.

@@ -1,0 +1,93 @@
+//! The command line as users and CI see it: exit codes and messages.
+
+use std::process::Command;
+
+fn werkstatt(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_werkstatt")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn docs_node_reference_is_up_to_date() {
+    let expected = werkstatt::docs::markdown();
+    let actual = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/nodes.md")).unwrap_or_default();
+    assert!(actual == expected, "docs/nodes.md is out of date: run `cargo run -- nodes --markdown > docs/nodes.md`");
+}
+
+#[test]
+fn every_node_kind_is_documented_and_used_by_a_graph() {
+    let graphs: String = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs"))
+        .unwrap()
+        .map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap())
+        .collect();
+    let mut kinds = std::collections::BTreeSet::new();
+    for spec in werkstatt::spec::all() {
+        assert!(kinds.insert(spec.kind), "kind {} registered twice", spec.kind);
+        assert!(!spec.doc.is_empty(), "{} has no doc", spec.kind);
+        for p in spec.params {
+            assert!(!p.doc.is_empty(), "{}.{} has no doc", spec.kind, p.name);
+            assert!(p.kind.check(&p.kind.default_value()).is_ok(), "{}.{}: default is invalid", spec.kind, p.name);
+        }
+        assert!(graphs.contains(&format!("kind: \"{}\"", spec.kind)), "no graph in graphs/ uses {}", spec.kind);
+    }
+}
+
+#[test]
+fn check_passes_good_graphs_and_fails_bad_ones() {
+    let (code, out, _) = werkstatt(&["check", "graphs/default.ron"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("ok: graphs/default.ron"));
+    let (code, _, err) = werkstatt(&["check", "graphs/default.ron", "tests/data/bad/unknown_kind.ron"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("tests/data/bad/unknown_kind.ron:5:9: error in node \"cam\": unknown node kind \"OrbitCamra\""), "{err}");
+    assert!(err.contains("1 of 2 graph(s) have errors"), "{err}");
+}
+
+#[test]
+fn fmt_check_reports_non_canonical_files() {
+    let dir = std::env::temp_dir().join(format!("werkstatt-fmt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("g.ron");
+    std::fs::write(&path, r#"(version: 1, nodes: {"n": (kind: "Number")}, links: [])"#).unwrap();
+    let p = path.to_str().unwrap();
+    let (code, out, _) = werkstatt(&["fmt", "--check", p]);
+    assert_eq!((code, out.contains("not canonical")), (1, true));
+    assert_eq!(werkstatt(&["fmt", p]).0, 0);
+    assert_eq!(werkstatt(&["fmt", "--check", p]).0, 0);
+    assert_eq!(werkstatt(&["fmt", "--check", "graphs/default.ron"]).0, 0);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn render_rejects_bad_arguments_before_rendering() {
+    for (args, needle) in [
+        (vec!["render", "graphs/default.ron", "--frames", "5..2"], "--frames"),
+        (vec!["render", "graphs/default.ron", "--size", "big"], "--size"),
+        (vec!["render", "graphs/default.ron", "--set", "camera.fov=500"], "out of range"),
+        (vec!["render", "tests/data/bad/cycle.ron"], "cycle"),
+    ] {
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 1, "{args:?}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn render_writes_frames_and_stats() {
+    let out = std::env::temp_dir().join(format!("werkstatt-cli-render-{}", std::process::id()));
+    let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--frames", "0..2", "--size", "64x48", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    for f in ["image_0000.png", "image_0001.png", "image_0002.png", "stats.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    std::fs::remove_dir_all(out).unwrap();
+}
+
+#[test]
+fn help_exists_for_every_command() {
+    for cmd in ["render", "check", "fmt", "nodes", "info", "bench"] {
+        let (code, out, _) = werkstatt(&[cmd, "--help"]);
+        assert_eq!(code, 0, "{cmd}");
+        assert!(out.contains("Usage"), "{cmd}");
+    }
+}

@@ -1,0 +1,146 @@
+//! Shared test helpers: one GPU context per test binary, rendering into temp folders,
+//! and the golden-image comparison.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use werkstatt::gpu::{Backend, GpuContext, Pixels};
+use werkstatt::render::{RenderOptions, Stats, render};
+
+pub fn gpu() -> &'static GpuContext {
+    static GPU: OnceLock<GpuContext> = OnceLock::new();
+    GPU.get_or_init(|| {
+        GpuContext::headless(Backend::from_env().unwrap())
+            .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}"))
+    })
+}
+
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn out_dir(name: &str) -> PathBuf {
+    let dir = root().join("target/test-out").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn render_graph(graph: &Path, out: &Path, frames: (i64, i64), size: (u32, u32), sets: &[&str], dumps: &[&str]) -> anyhow::Result<Stats> {
+    let opts = RenderOptions {
+        graph_path: graph.to_path_buf(),
+        frames,
+        fps: 30.0,
+        width: size.0,
+        height: size.1,
+        out_dir: out.to_path_buf(),
+        sets: sets.iter().map(|s| s.to_string()).collect(),
+        dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        progress: false,
+    };
+    render(&opts, gpu())
+}
+
+pub fn read_exr(path: &Path) -> Pixels {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgba32f();
+    Pixels { width: img.width(), height: img.height(), rgba: img.into_raw(), is_ldr: false }
+}
+
+pub fn read_png(path: &Path) -> image::RgbaImage {
+    image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgba8()
+}
+
+/// How float channels map to 8-bit for a golden image.
+#[derive(Clone, Copy)]
+pub enum Encoding {
+    /// Values already in [0, 1] (colours): stored as they are.
+    Unit,
+    /// Signed unit vectors (normals): x * 0.5 + 0.5.
+    Signed,
+    /// Distances: x / range.
+    Range(f32),
+}
+
+pub fn encode(px: &Pixels, enc: Encoding) -> image::RgbaImage {
+    let bytes = px
+        .rgba
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            let v = if i % 4 == 3 {
+                1.0
+            } else {
+                match enc {
+                    Encoding::Unit => v,
+                    Encoding::Signed => v * 0.5 + 0.5,
+                    Encoding::Range(r) => v / r,
+                }
+            };
+            (v.clamp(0.0, 1.0) * 255.0).round() as u8
+        })
+        .collect();
+    image::RgbaImage::from_raw(px.width, px.height, bytes).unwrap()
+}
+
+/// The tolerance of a golden comparison.
+#[derive(Clone, Copy, Debug)]
+pub struct Tolerance {
+    /// Lowest accepted PSNR over RGB, in dB.
+    pub min_psnr: f64,
+    /// A pixel "differs" when a channel is off by more than this many levels.
+    pub level: u8,
+    /// Highest accepted share of differing pixels.
+    pub max_differing: f64,
+}
+
+pub const STRICT: Tolerance = Tolerance { min_psnr: 40.0, level: 3, max_differing: 0.005 };
+
+/// Compares `actual` with `tests/golden/NAME.png`. With `WERKSTATT_BLESS=1` the reference is
+/// (re)written instead. On failure a diff image (differences x8) is written beside the output.
+pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
+    let golden = root().join("tests/golden").join(format!("{name}.png"));
+    if std::env::var_os("WERKSTATT_BLESS").is_some() {
+        actual.save(&golden).unwrap();
+        eprintln!("blessed {}", golden.display());
+        return;
+    }
+    assert!(golden.exists(), "no reference image {}: run the tests with WERKSTATT_BLESS=1 to create it", golden.display());
+    let expected = read_png(&golden);
+    assert_eq!(expected.dimensions(), actual.dimensions(), "{name}: size differs from the reference");
+    let (mut sq, mut differing) = (0f64, 0usize);
+    let mut diff = image::RgbaImage::new(actual.width(), actual.height());
+    for ((a, e), d) in actual.pixels().zip(expected.pixels()).zip(diff.pixels_mut()) {
+        let mut worst = 0u8;
+        for c in 0..3 {
+            let delta = a[c].abs_diff(e[c]);
+            sq += (delta as f64).powi(2);
+            worst = worst.max(delta);
+            d[c] = delta.saturating_mul(8);
+        }
+        d[3] = 255;
+        if worst > tol.level {
+            differing += 1;
+        }
+    }
+    let n = (actual.width() * actual.height()) as f64;
+    let mse = sq / (n * 3.0);
+    let psnr = if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() };
+    let share = differing as f64 / n;
+    if psnr < tol.min_psnr || share > tol.max_differing {
+        let dir = root().join("target/golden-diff");
+        std::fs::create_dir_all(&dir).unwrap();
+        actual.save(dir.join(format!("{name}.actual.png"))).unwrap();
+        diff.save(dir.join(format!("{name}.diff.png"))).unwrap();
+        panic!(
+            "{name}: PSNR {psnr:.1} dB (min {}), {:.2}% pixels differ by more than {} levels (max {:.2}%); \
+             see {}/{name}.diff.png; if the change is intended, re-bless with WERKSTATT_BLESS=1",
+            tol.min_psnr,
+            share * 100.0,
+            tol.level,
+            tol.max_differing * 100.0,
+            dir.display()
+        );
+    }
+}

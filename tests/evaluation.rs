@@ -1,0 +1,275 @@
+//! Pull-from-outputs and caching, checked by counting node executions.
+
+use std::time::{Duration, Instant};
+
+use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::graph::Graph;
+use werkstatt::resources::Resources;
+
+fn graph(text: &str) -> Graph {
+    Graph::load_str(text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn runs(ev: &Evaluator, id: &str) -> u64 {
+    ev.report(id).map_or(0, |r| r.runs)
+}
+
+fn frame(n: i64) -> FrameTime {
+    FrameTime { frame: n, fps: 30.0 }
+}
+
+const DIAMOND: &str = r#"(
+    version: 1,
+    nodes: {
+        "x": (kind: "Number", params: {"value": 2.0}),
+        "y": (kind: "Number", params: {"value": 3.0}),
+        "sum": (kind: "Math", params: {"op": "add"}),
+        "double": (kind: "Math", params: {"op": "multiply", "b": 2.0}),
+        "unused": (kind: "Math", params: {"op": "add"}),
+        "out": (kind: "Watch"),
+        "time": (kind: "Time"),
+        "wave": (kind: "Math", params: {"op": "sin", "b": 1.0}),
+        "out_time": (kind: "Watch"),
+    },
+    links: [
+        ("x.value", "sum.a"),
+        ("y.value", "sum.b"),
+        ("sum.result", "double.a"),
+        ("double.result", "out.value"),
+        ("x.value", "unused.a"),
+        ("time.seconds", "wave.a"),
+        ("wave.result", "out_time.value"),
+    ],
+)"#;
+
+fn scalar(ev: &Evaluator, id: &str) -> f64 {
+    match ev.output(id, "value") {
+        Some(werkstatt::value::Value::Scalar(v)) => *v,
+        _ => panic!("{id} has no scalar"),
+    }
+}
+
+#[test]
+fn only_nodes_feeding_an_output_run() {
+    let g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    ev.evaluate(frame(0), None, &res, &FrameSettings::default());
+    assert_eq!(runs(&ev, "unused"), 0, "a node that feeds no output must not run");
+    assert_eq!(runs(&ev, "double"), 1);
+    assert_eq!(scalar(&ev, "out"), 10.0);
+    assert!(!ev.planned().any(|id| id == "unused"));
+}
+
+#[test]
+fn unchanged_frames_skip_everything_but_time_readers() {
+    let g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    let first = ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(first.ran, 8);
+    // Same frame again: nothing runs.
+    let again = ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(again.ran, 0);
+    // Next frame: only Time and what depends on it.
+    let next = ev.evaluate(frame(1), None, &res, &s);
+    assert_eq!(next.ran, 3);
+    for id in ["x", "y", "sum", "double", "out"] {
+        assert_eq!(runs(&ev, id), 1, "{id} re-ran although nothing it depends on changed");
+    }
+    for id in ["time", "wave", "out_time"] {
+        assert_eq!(runs(&ev, id), 2, "{id} must re-run when the time changes");
+    }
+    assert!((scalar(&ev, "out_time") - (1.0f64 / 30.0).sin()).abs() < 1e-12);
+}
+
+#[test]
+fn changing_one_parameter_reruns_that_node_and_its_dependents_only() {
+    let mut g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(0), None, &res, &s);
+    g.set_from_cli("y.value=5").unwrap();
+    ev.update(&g, &[]).unwrap();
+    let summary = ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(summary.ran, 4, "y, sum, double, out");
+    assert_eq!((runs(&ev, "x"), runs(&ev, "y"), runs(&ev, "sum"), runs(&ev, "out")), (1, 2, 2, 2));
+    assert_eq!((runs(&ev, "time"), runs(&ev, "wave")), (1, 1));
+    assert_eq!(scalar(&ev, "out"), 14.0);
+}
+
+#[test]
+fn rewiring_reruns_the_consumer() {
+    let mut g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(0), None, &res, &s);
+    // Feed sum.b from x instead of y.
+    g.links.retain(|l| l.to.to_string() != "sum.b");
+    g.links.push(werkstatt::graph::Link {
+        from: werkstatt::graph::PortRef::parse("x.value").unwrap(),
+        to: werkstatt::graph::PortRef::parse("sum.b").unwrap(),
+    });
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!((runs(&ev, "x"), runs(&ev, "sum"), runs(&ev, "double")), (1, 2, 2));
+    assert_eq!(runs(&ev, "y"), 1, "y no longer feeds an output and must not re-run");
+    assert_eq!(scalar(&ev, "out"), 8.0);
+}
+
+#[test]
+fn still_camera_is_not_time_dependent_but_orbiting_one_is() {
+    let text = |speed: f64| {
+        format!(
+            r#"(version: 1, nodes: {{"cam": (kind: "OrbitCamera", params: {{"orbit_speed": {speed:?}}})}}, links: [])"#
+        )
+    };
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    for (speed, expected) in [(0.0, 1), (30.0, 3)] {
+        let g = graph(&text(speed));
+        let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
+        for f in 0..3 {
+            ev.evaluate(frame(f), None, &res, &s);
+        }
+        assert_eq!(runs(&ev, "cam"), expected, "orbit_speed {speed}");
+    }
+}
+
+#[test]
+fn a_failing_node_blocks_its_consumers_and_recovers() {
+    let mut g = graph(
+        r#"(version: 1, nodes: {
+            "div": (kind: "Math", params: {"op": "divide", "a": 1.0, "b": 0.0}),
+            "out": (kind: "Watch"),
+        }, links: [("div.result", "out.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    let sum = ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(sum.failed, 1);
+    assert!(matches!(ev.report("div").unwrap().status, NodeStatus::Failed(m) if m.contains("division by zero")));
+    assert!(matches!(ev.report("out").unwrap().status, NodeStatus::Blocked(m) if m.contains("\"div\"")));
+    // A failed node is not retried every frame while nothing changes.
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(runs(&ev, "div"), 1);
+    g.set_from_cli("div.b=4").unwrap();
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(scalar(&ev, "out"), 0.25);
+}
+
+#[test]
+fn watch_range_violation_fails() {
+    let g = graph(r#"(version: 1, nodes: {"n": (kind: "Number", params: {"value": 5.0}), "w": (kind: "Watch", params: {"max": 1.0})}, links: [("n.value", "w.value")])"#);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
+    assert!(matches!(ev.report("w").unwrap().status, NodeStatus::Failed(m) if m.contains("outside the accepted range")));
+}
+
+const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n";
+const QUAD_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("werkstatt-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn mesh_graph(path: &std::path::Path) -> Graph {
+    graph(&format!(
+        r#"(version: 1, nodes: {{"mesh": (kind: "MeshFile", params: {{"path": {:?}, "normalize": false}})}}, links: [])"#,
+        path.display().to_string()
+    ))
+}
+
+fn triangles(ev: &Evaluator) -> usize {
+    match ev.output("mesh", "mesh") {
+        Some(werkstatt::value::Value::Mesh(m)) => m.triangle_count(),
+        _ => 0,
+    }
+}
+
+#[test]
+fn resources_load_lazily_then_the_node_reruns() {
+    let dir = temp_dir("lazy");
+    let path = dir.join("tri.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let g = mesh_graph(&path);
+    let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    let first = ev.evaluate(frame(0), None, &res, &s);
+    // The interactive loop does not wait: the node is pending (unless the load won the race).
+    if first.pending == 1 {
+        assert!(matches!(ev.report("mesh").unwrap().status, NodeStatus::Pending(_)));
+        res.wait_idle();
+        ev.evaluate(frame(0), None, &res, &s);
+    }
+    assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
+    assert_eq!(triangles(&ev), 1);
+    let runs_now = runs(&ev, "mesh");
+    ev.evaluate(frame(1), None, &res, &s);
+    assert_eq!(runs(&ev, "mesh"), runs_now, "a loaded resource does not re-run its node");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn missing_and_corrupt_files_are_errors_naming_the_path() {
+    let dir = temp_dir("corrupt");
+    let bad = dir.join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nf 1 2 7\n").unwrap();
+    for path in [dir.join("missing.obj"), bad] {
+        let g = mesh_graph(&path);
+        let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
+        let res = Resources::new(false);
+        ev.evaluate(frame(0), None, &res, &FrameSettings::default());
+        res.wait_idle();
+        ev.evaluate(frame(0), None, &res, &FrameSettings::default());
+        match ev.report("mesh").unwrap().status {
+            NodeStatus::Failed(m) => assert!(m.contains(&path.display().to_string()), "{m}"),
+            other => panic!("expected an error, got {other:?}"),
+        }
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn edited_files_reload_in_watch_mode() {
+    let dir = temp_dir("reload");
+    let path = dir.join("shape.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let g = mesh_graph(&path);
+    let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
+    let res = Resources::new(true);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(0), None, &res, &s);
+    res.wait_idle();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(triangles(&ev), 1);
+    std::fs::write(&path, QUAD_OBJ).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while triangles(&ev) != 2 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+        ev.evaluate(frame(0), None, &res, &s);
+    }
+    assert_eq!(triangles(&ev), 2, "the edited file was not reloaded");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn idle_frames_of_a_large_graph_run_nothing() {
+    let g = werkstatt::bench::chain_graph(200);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    assert_eq!(ev.evaluate(frame(0), None, &res, &s).ran, 201);
+    assert_eq!(scalar(&ev, "watch"), 200.0);
+    for f in 1..50 {
+        assert_eq!(ev.evaluate(frame(f), None, &res, &s).ran, 0);
+    }
+}
