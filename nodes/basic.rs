@@ -37,11 +37,22 @@ pub static MATH: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "op",
-            ParamKind::Choice { default: "add", options: &["add", "subtract", "multiply", "divide", "min", "max", "power", "sin"] },
+            ParamKind::Choice {
+                default: "add",
+                options: &["add", "subtract", "multiply", "divide", "min", "max", "power", "sin"],
+            },
             "The operation (sin uses a only: sin(a) * b).",
         ),
-        ParamSpec::new("a", ParamKind::Float { default: 0.0, min: -1e12, max: 1e12 }, "a when the input is unconnected."),
-        ParamSpec::new("b", ParamKind::Float { default: 0.0, min: -1e12, max: 1e12 }, "b when the input is unconnected."),
+        ParamSpec::new(
+            "a",
+            ParamKind::Float { default: 0.0, min: -1e12, max: 1e12 },
+            "a when the input is unconnected.",
+        ),
+        ParamSpec::new(
+            "b",
+            ParamKind::Float { default: 0.0, min: -1e12, max: 1e12 },
+            "b when the input is unconnected.",
+        ),
     ],
     is_output: false,
     create: || Box::new(MathNode),

@@ -16,10 +16,22 @@ pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new("target", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "The point looked at."),
         ParamSpec::new("distance", ParamKind::Float { default: 3.0, min: 1e-3, max: 1e5 }, "Distance from the target."),
-        ParamSpec::new("yaw", ParamKind::Float { default: 30.0, min: -3600.0, max: 3600.0 }, "Angle around +Y in degrees (0 looks along -Z)."),
+        ParamSpec::new(
+            "yaw",
+            ParamKind::Float { default: 30.0, min: -3600.0, max: 3600.0 },
+            "Angle around +Y in degrees (0 looks along -Z).",
+        ),
         ParamSpec::new("pitch", ParamKind::Float { default: 20.0, min: -89.0, max: 89.0 }, "Elevation in degrees."),
-        ParamSpec::new("fov", ParamKind::Float { default: 40.0, min: 1.0, max: 170.0 }, "Vertical field of view in degrees."),
-        ParamSpec::new("orbit_speed", ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 }, "Degrees of yaw added per second of animation."),
+        ParamSpec::new(
+            "fov",
+            ParamKind::Float { default: 40.0, min: 1.0, max: 170.0 },
+            "Vertical field of view in degrees.",
+        ),
+        ParamSpec::new(
+            "orbit_speed",
+            ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
+            "Degrees of yaw added per second of animation.",
+        ),
         ParamSpec::new("near", ParamKind::Float { default: 0.05, min: 1e-5, max: 1e4 }, "Near clipping distance."),
         ParamSpec::new("far", ParamKind::Float { default: 100.0, min: 1e-3, max: 1e7 }, "Far clipping distance."),
     ],
@@ -42,7 +54,14 @@ impl Node for OrbitCameraNode {
         let target = cx.vec3("target");
         cx.set(
             "camera",
-            Value::Camera(Camera { eye: target + dir * cx.f32("distance"), target, up: Vec3::Y, fov_y_degrees: cx.f32("fov"), near, far }),
+            Value::Camera(Camera {
+                eye: target + dir * cx.f32("distance"),
+                target,
+                up: Vec3::Y,
+                fov_y_degrees: cx.f32("fov"),
+                near,
+                far,
+            }),
         );
         Ok(())
     }

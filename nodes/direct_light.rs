@@ -18,12 +18,20 @@ pub static DIRECT_LIGHT: NodeSpec = NodeSpec {
     inputs: &[PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer to shade.")],
     outputs: &[PortSpec::output("image", PortType::Texture, "Linear HDR radiance, Rgba16Float.")],
     params: &[
-        ParamSpec::new("sun_direction", ParamKind::Vec3 { default: [-0.4, -1.0, -0.6] }, "Direction the light travels."),
+        ParamSpec::new(
+            "sun_direction",
+            ParamKind::Vec3 { default: [-0.4, -1.0, -0.6] },
+            "Direction the light travels.",
+        ),
         ParamSpec::new("sun_color", ParamKind::Color { default: [1.0, 0.96, 0.9] }, "Light colour."),
         ParamSpec::new("sun_intensity", ParamKind::Float { default: 3.0, min: 0.0, max: 1e5 }, "Irradiance scale."),
         ParamSpec::new("sky_color", ParamKind::Color { default: [0.35, 0.4, 0.5] }, "Ambient from above."),
         ParamSpec::new("ground_color", ParamKind::Color { default: [0.15, 0.13, 0.12] }, "Ambient from below."),
-        ParamSpec::new("background", ParamKind::Color { default: [0.05, 0.05, 0.06] }, "Colour where nothing was drawn."),
+        ParamSpec::new(
+            "background",
+            ParamKind::Color { default: [0.05, 0.05, 0.06] },
+            "Colour where nothing was drawn.",
+        ),
     ],
     is_output: false,
     create: || Box::new(DirectLightNode::default()),
@@ -50,9 +58,12 @@ struct DirectLightNode {
 impl Node for DirectLightNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::GBuffer(g) = cx.required("gbuffer")? else { return Err(NodeError::msg("gbuffer input is not a G-buffer")) };
+        let Value::GBuffer(g) = cx.required("gbuffer")? else {
+            return Err(NodeError::msg("gbuffer input is not a G-buffer"));
+        };
         let g = g.clone();
-        let dir = cx.vec3("sun_direction").try_normalize().ok_or_else(|| NodeError::msg("sun_direction must not be zero"))?;
+        let dir =
+            cx.vec3("sun_direction").try_normalize().ok_or_else(|| NodeError::msg("sun_direction must not be zero"))?;
         if self.pass.is_none() {
             self.pass = Some(FullscreenPass::new(gpu, "direct_light.wgsl", 3, HDR_FORMAT)?);
         }

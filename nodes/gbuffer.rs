@@ -2,7 +2,6 @@
 
 use std::sync::Arc;
 
-
 use wgpu::util::DeviceExt;
 
 use crate::eval::{EvalCx, Node, NodeError};
@@ -68,7 +67,11 @@ fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGrou
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
-        ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
         count: None,
     }
 }
@@ -153,8 +156,12 @@ impl Pipeline {
 impl Node for GBufferPassNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Scene(items) = cx.required("scene")? else { return Err(NodeError::msg("scene input is not a scene")) };
-        let Value::Camera(camera) = cx.required("camera")? else { return Err(NodeError::msg("camera input is not a camera")) };
+        let Value::Scene(items) = cx.required("scene")? else {
+            return Err(NodeError::msg("scene input is not a scene"));
+        };
+        let Value::Camera(camera) = cx.required("camera")? else {
+            return Err(NodeError::msg("camera input is not a camera"));
+        };
         let (items, camera) = (items.clone(), *camera);
         if self.pipeline.is_none() {
             self.pipeline = Some(Pipeline::new(gpu)?);
@@ -170,7 +177,10 @@ impl Node for GBufferPassNode {
         let view_proj = camera.projection(w as f32 / h as f32) * view;
         let frame_buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("gbuffer frame"),
-            contents: bytemuck::bytes_of(&FrameUniform { view_proj: view_proj.to_cols_array_2d(), view: view.to_cols_array_2d() }),
+            contents: bytemuck::bytes_of(&FrameUniform {
+                view_proj: view_proj.to_cols_array_2d(),
+                view: view.to_cols_array_2d(),
+            }),
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let frame_bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -186,7 +196,12 @@ impl Node for GBufferPassNode {
                     model: item.model.to_cols_array_2d(),
                     normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
                     base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
-                    params: [m.uv_scale, f32::from(u8::from(m.texture.is_some())), f32::from(u8::from(item.detail)), 0.0],
+                    params: [
+                        m.uv_scale,
+                        f32::from(u8::from(m.texture.is_some())),
+                        f32::from(u8::from(item.detail)),
+                        0.0,
+                    ],
                 };
                 let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("gbuffer object"),
@@ -213,7 +228,10 @@ impl Node for GBufferPassNode {
                     view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })
             };
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -263,4 +281,3 @@ fn share(_gpu: &GpuContext, img: &GpuImage) -> GpuImage {
         height: img.height,
     }
 }
-

@@ -23,10 +23,26 @@ pub static PRIMITIVE: NodeSpec = NodeSpec {
             "plane: size x size in XZ; cylinder: radius, height along Y (open); sphere: radius; torus: radius, minor_radius; disc: a button of radius and height; box: size cube.",
         ),
         ParamSpec::new("size", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Edge length of plane and box."),
-        ParamSpec::new("radius", ParamKind::Float { default: 0.5, min: 1e-4, max: 1e4 }, "Radius (major radius for the torus)."),
-        ParamSpec::new("minor_radius", ParamKind::Float { default: 0.15, min: 1e-4, max: 1e4 }, "Tube radius of the torus."),
-        ParamSpec::new("height", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Height of cylinder and disc."),
-        ParamSpec::new("segments_u", ParamKind::Int { default: 48, min: 1, max: 4096 }, "Subdivisions along u (around)."),
+        ParamSpec::new(
+            "radius",
+            ParamKind::Float { default: 0.5, min: 1e-4, max: 1e4 },
+            "Radius (major radius for the torus).",
+        ),
+        ParamSpec::new(
+            "minor_radius",
+            ParamKind::Float { default: 0.15, min: 1e-4, max: 1e4 },
+            "Tube radius of the torus.",
+        ),
+        ParamSpec::new(
+            "height",
+            ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 },
+            "Height of cylinder and disc.",
+        ),
+        ParamSpec::new(
+            "segments_u",
+            ParamKind::Int { default: 48, min: 1, max: 4096 },
+            "Subdivisions along u (around).",
+        ),
         ParamSpec::new("segments_v", ParamKind::Int { default: 24, min: 1, max: 4096 }, "Subdivisions along v."),
     ],
     is_output: false,
@@ -157,7 +173,11 @@ pub static MESH_FILE: NodeSpec = NodeSpec {
     inputs: &[],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The loaded mesh.")],
     params: &[
-        ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["obj"] }, "The file, relative to the graph's folder."),
+        ParamSpec::new(
+            "path",
+            ParamKind::Path { default: "", extensions: &["obj"] },
+            "The file, relative to the graph's folder.",
+        ),
         ParamSpec::new("normalize", ParamKind::Bool { default: true }, "Centre the mesh and scale it to unit height."),
     ],
     is_output: false,

@@ -15,12 +15,21 @@ pub struct FullscreenPass {
 impl FullscreenPass {
     /// `shader` must define `vs_fullscreen` and `fs_main`, with the uniform at binding 0
     /// and `textures` textures at bindings 1.. of group 0.
-    pub fn new(gpu: &GpuContext, shader: &'static str, textures: usize, target: wgpu::TextureFormat) -> anyhow::Result<Self> {
+    pub fn new(
+        gpu: &GpuContext,
+        shader: &'static str,
+        textures: usize,
+        target: wgpu::TextureFormat,
+    ) -> anyhow::Result<Self> {
         let module = gpu.shader(shader)?;
         let mut entries = vec![wgpu::BindGroupLayoutEntry {
             binding: 0,
             visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
             count: None,
         }];
         for i in 0..textures {
@@ -35,7 +44,9 @@ impl FullscreenPass {
                 count: None,
             });
         }
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(shader), entries: &entries });
+        let layout = gpu
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(shader), entries: &entries });
         let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(shader),
             bind_group_layouts: &[Some(&layout)],
@@ -54,7 +65,11 @@ impl FullscreenPass {
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some("fs_main"),
-                    targets: &[Some(wgpu::ColorTargetState { format: target, blend: None, write_mask: wgpu::ColorWrites::ALL })],
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: target,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
                     compilation_options: Default::default(),
                 }),
                 primitive: Default::default(),
@@ -67,7 +82,13 @@ impl FullscreenPass {
         Ok(FullscreenPass { pipeline, layout, name: shader })
     }
 
-    pub fn run(&self, gpu: &GpuContext, uniform: &[u8], textures: &[&GpuImage], target: &GpuImage) -> anyhow::Result<()> {
+    pub fn run(
+        &self,
+        gpu: &GpuContext,
+        uniform: &[u8],
+        textures: &[&GpuImage],
+        target: &GpuImage,
+    ) -> anyhow::Result<()> {
         let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(self.name),
             contents: uniform,
@@ -75,10 +96,17 @@ impl FullscreenPass {
         });
         let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() }];
         for (i, t) in textures.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: 1 + i as u32, resource: wgpu::BindingResource::TextureView(&t.view) });
+            entries.push(wgpu::BindGroupEntry {
+                binding: 1 + i as u32,
+                resource: wgpu::BindingResource::TextureView(&t.view),
+            });
         }
         let bind_group = gpu.checked(self.name, || {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(self.name), layout: &self.layout, entries: &entries })
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(self.name),
+                layout: &self.layout,
+                entries: &entries,
+            })
         })?;
         let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name) });
         {
@@ -88,7 +116,10 @@ impl FullscreenPass {
                     view: &target.view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })],
                 depth_stencil_attachment: None,
                 timestamp_writes: None,

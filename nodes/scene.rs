@@ -18,10 +18,22 @@ pub static MATERIAL: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new("base_color", ParamKind::Color { default: [0.8, 0.8, 0.8] }, "Linear RGB base colour."),
         ParamSpec::new("glossiness", ParamKind::Float { default: 0.2, min: 0.0, max: 1.0 }, "0 rough, 1 mirror-like."),
-        ParamSpec::new("texture", ParamKind::Choice { default: "none", options: &["none", "checker", "file"] }, "Base-colour map."),
-        ParamSpec::new("texture_path", ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] }, "Image for texture = file."),
+        ParamSpec::new(
+            "texture",
+            ParamKind::Choice { default: "none", options: &["none", "checker", "file"] },
+            "Base-colour map.",
+        ),
+        ParamSpec::new(
+            "texture_path",
+            ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] },
+            "Image for texture = file.",
+        ),
         ParamSpec::new("checker_color", ParamKind::Color { default: [0.2, 0.2, 0.2] }, "Second colour of the checker."),
-        ParamSpec::new("uv_scale", ParamKind::Float { default: 8.0, min: 1e-3, max: 1e4 }, "Texture repeats per UV unit."),
+        ParamSpec::new(
+            "uv_scale",
+            ParamKind::Float { default: 8.0, min: 1e-3, max: 1e4 },
+            "Texture repeats per UV unit.",
+        ),
     ],
     is_output: false,
     create: || Box::new(MaterialNode),
@@ -91,7 +103,11 @@ pub static DRAW: NodeSpec = NodeSpec {
         ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation."),
         ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees."),
         ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis."),
-        ParamSpec::new("detail", ParamKind::Bool { default: false }, "Mark as detail geometry in the G-buffer (for the local AO pass)."),
+        ParamSpec::new(
+            "detail",
+            ParamKind::Bool { default: false },
+            "Mark as detail geometry in the G-buffer (for the local AO pass).",
+        ),
     ],
     is_output: false,
     create: || Box::new(DrawNode),
@@ -147,4 +163,3 @@ impl Node for MergeNode {
         Ok(())
     }
 }
-

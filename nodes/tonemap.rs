@@ -19,7 +19,11 @@ pub static TONEMAP: NodeSpec = NodeSpec {
     inputs: &[PortSpec::required("image", PortType::Texture, "Linear HDR input.")],
     outputs: &[PortSpec::output("image", PortType::Texture, "Display-ready Rgba8UnormSrgb.")],
     params: &[
-        ParamSpec::new("exposure", ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 }, "Exposure in stops (multiplies by 2^exposure)."),
+        ParamSpec::new(
+            "exposure",
+            ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 },
+            "Exposure in stops (multiplies by 2^exposure).",
+        ),
         ParamSpec::new("operator", ParamKind::Choice { default: "aces", options: OPERATORS }, "The tone curve."),
     ],
     is_output: false,
@@ -34,7 +38,9 @@ struct TonemapNode {
 impl Node for TonemapNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Texture(input) = cx.required("image")? else { return Err(NodeError::msg("image input is not a texture")) };
+        let Value::Texture(input) = cx.required("image")? else {
+            return Err(NodeError::msg("image input is not a texture"));
+        };
         let input = input.clone();
         if self.pass.is_none() {
             self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, LDR_FORMAT)?);

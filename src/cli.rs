@@ -10,7 +10,11 @@ use crate::gpu::{Backend, GpuContext};
 use crate::graph::Graph;
 
 #[derive(Parser)]
-#[command(name = "werkstatt", version, about = "A real-time garment renderer as a node graph: render, check and format .ron graphs")]
+#[command(
+    name = "werkstatt",
+    version,
+    about = "A real-time garment renderer as a node graph: render, check and format .ron graphs"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -139,7 +143,17 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             crate::render::load_with_overrides(&graph, &sets)?;
             let gpu = GpuContext::headless(pick_backend(backend)?)?;
             let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
-            let opts = crate::render::RenderOptions { graph_path: graph, frames, fps, width, height, out_dir: out.clone(), sets, dumps, progress };
+            let opts = crate::render::RenderOptions {
+                graph_path: graph,
+                frames,
+                fps,
+                width,
+                height,
+                out_dir: out.clone(),
+                sets,
+                dumps,
+                progress,
+            };
             let stats = crate::render::render(&opts, &gpu)?;
             eprintln!(
                 "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",

@@ -13,7 +13,9 @@ fn kind_text(k: &ParamKind) -> (String, String) {
         ParamKind::Vec3 { default } => ("vec3".into(), list(default)),
         ParamKind::Color { default } => ("color".into(), list(default)),
         ParamKind::Text { default } => ("string".into(), format!("\"{default}\"")),
-        ParamKind::Path { default, extensions } => (format!("path ({})", extensions.join(", ")), format!("\"{default}\"")),
+        ParamKind::Path { default, extensions } => {
+            (format!("path ({})", extensions.join(", ")), format!("\"{default}\""))
+        }
         ParamKind::Choice { default, options } => (format!("one of {}", options.join(", ")), format!("\"{default}\"")),
     }
 }
@@ -37,7 +39,14 @@ pub fn markdown() -> String {
             if !s.inputs.is_empty() {
                 out.push_str("\n| input | type | required | |\n|---|---|---|---|\n");
                 for p in s.inputs {
-                    let _ = writeln!(out, "| `{}` | {} | {} | {} |", p.name, p.ty, if p.required { "yes" } else { "no" }, p.doc);
+                    let _ = writeln!(
+                        out,
+                        "| `{}` | {} | {} | {} |",
+                        p.name,
+                        p.ty,
+                        if p.required { "yes" } else { "no" },
+                        p.doc
+                    );
                 }
             }
             if !s.outputs.is_empty() {
@@ -68,7 +77,9 @@ pub fn listing() -> String {
         }
         let _ = writeln!(out, "{cat}:");
         for s in specs {
-            let ports = |ps: &[spec::PortSpec]| ps.iter().map(|p| format!("{}: {}", p.name, p.ty)).collect::<Vec<_>>().join(", ");
+            let ports = |ps: &[spec::PortSpec]| {
+                ps.iter().map(|p| format!("{}: {}", p.name, p.ty)).collect::<Vec<_>>().join(", ")
+            };
             let _ = writeln!(out, "  {:<14} {}", s.kind, s.doc);
             let _ = writeln!(out, "  {:<14} in ({}) -> out ({})", "", ports(s.inputs), ports(s.outputs));
         }

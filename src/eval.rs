@@ -260,7 +260,9 @@ impl Evaluator {
     pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
         let mut old = HashMap::new();
         let ids = std::mem::take(&mut self.ids);
-        for (id, (state, spec)) in ids.into_iter().zip(std::mem::take(&mut self.state).into_iter().zip(self.specs.drain(..))) {
+        for (id, (state, spec)) in
+            ids.into_iter().zip(std::mem::take(&mut self.state).into_iter().zip(self.specs.drain(..)))
+        {
             old.insert(id, (spec.kind, state));
         }
         self.rebuild(graph, extra_roots, old)
@@ -288,7 +290,9 @@ impl Evaluator {
             let params: Vec<ParamValue> = spec
                 .params
                 .iter()
-                .map(|p| doc.params.get(p.name).and_then(|v| p.kind.check(v).ok()).unwrap_or_else(|| p.kind.default_value()))
+                .map(|p| {
+                    doc.params.get(p.name).and_then(|v| p.kind.check(v).ok()).unwrap_or_else(|| p.kind.default_value())
+                })
                 .collect();
             let mut h = std::collections::hash_map::DefaultHasher::new();
             for p in &params {
@@ -436,7 +440,14 @@ impl Evaluator {
         h
     }
 
-    fn run_node(&mut self, n: usize, time: FrameTime, gpu: Option<&GpuContext>, resources: &Resources, settings: &FrameSettings) {
+    fn run_node(
+        &mut self,
+        n: usize,
+        time: FrameTime,
+        gpu: Option<&GpuContext>,
+        resources: &Resources,
+        settings: &FrameSettings,
+    ) {
         let mut inputs = std::mem::take(&mut self.scratch_inputs);
         inputs.clear();
         inputs.extend(self.sources[n].iter().map(|src| src.and_then(|(s, o)| self.state[s].outputs[o].clone())));

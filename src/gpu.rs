@@ -175,7 +175,14 @@ pub struct GpuImage {
 }
 
 impl GpuImage {
-    pub fn new(gpu: &GpuContext, label: &str, width: u32, height: u32, format: wgpu::TextureFormat, usage: wgpu::TextureUsages) -> GpuImage {
+    pub fn new(
+        gpu: &GpuContext,
+        label: &str,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> GpuImage {
         let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -241,7 +248,11 @@ pub fn read_back(gpu: &GpuContext, image: &GpuImage) -> anyhow::Result<Pixels> {
         },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(image.height) },
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(image.height),
+            },
         },
         wgpu::Extent3d { width: image.width, height: image.height, depth_or_array_layers: 1 },
     );
@@ -266,7 +277,12 @@ pub fn read_back(gpu: &GpuContext, image: &GpuImage) -> anyhow::Result<Pixels> {
                     }
                 }
                 F::Bgra8Unorm | F::Bgra8UnormSrgb => {
-                    px = [texel[2] as f32 / 255.0, texel[1] as f32 / 255.0, texel[0] as f32 / 255.0, texel[3] as f32 / 255.0];
+                    px = [
+                        texel[2] as f32 / 255.0,
+                        texel[1] as f32 / 255.0,
+                        texel[0] as f32 / 255.0,
+                        texel[3] as f32 / 255.0,
+                    ];
                 }
                 F::Rgba16Float => {
                     for c in 0..4 {

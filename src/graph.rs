@@ -24,8 +24,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::{self, Write as _};
 use std::path::{Path, PathBuf};
 
-use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::Deserialize;
+use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 
 use crate::spec::{self, ParamValue};
 
@@ -330,9 +330,8 @@ impl Graph {
 
     /// Parses and validates `source`; `path` is used in messages only.
     pub fn load_str(source: &str, path: &Path) -> Result<Graph, LoadError> {
-        let (graph, mut problems) = Graph::parse_unvalidated(source).map_err(|d| LoadError {
-            diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }],
-        })?;
+        let (graph, mut problems) = Graph::parse_unvalidated(source)
+            .map_err(|d| LoadError { diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }] })?;
         problems.extend(graph.validate());
         if problems.is_empty() {
             Ok(graph)
@@ -351,6 +350,7 @@ impl Graph {
 
     /// Parses without validating the nodes against the registry; returns the problems
     /// (duplicates, bad link syntax) that the document model cannot hold.
+    #[allow(clippy::result_large_err)] // built once per load, on the error path only
     fn parse_unvalidated(source: &str) -> Result<(Graph, Vec<Problem>), Diagnostic> {
         let syntax = |e: ron::error::SpannedError| Diagnostic {
             file: PathBuf::new(),
@@ -368,10 +368,7 @@ impl Graph {
                 problem: Problem::new(
                     ProblemKind::VersionTooNew,
                     Place::File,
-                    format!(
-                        "the file has format version {}, newer than this build's {CURRENT_VERSION}",
-                        probe.version
-                    ),
+                    format!("the file has format version {}, newer than this build's {CURRENT_VERSION}", probe.version),
                 )
                 .help("update werkstatt to open it"),
             });
@@ -393,8 +390,12 @@ impl Graph {
             let doc = NodeDoc { kind: node.kind, pos: [node.pos.0, node.pos.1], params };
             if nodes.insert(id.clone(), doc).is_some() {
                 problems.push(
-                    Problem::new(ProblemKind::DuplicateId, Place::Node(id.clone()), format!("node id \"{id}\" is used twice"))
-                        .help("give each node its own id"),
+                    Problem::new(
+                        ProblemKind::DuplicateId,
+                        Place::Node(id.clone()),
+                        format!("node id \"{id}\" is used twice"),
+                    )
+                    .help("give each node its own id"),
                 );
             }
         }
@@ -403,8 +404,12 @@ impl Graph {
             match (PortRef::parse(&from), PortRef::parse(&to)) {
                 (Some(from), Some(to)) => links.push(Link { from, to }),
                 _ => problems.push(
-                    Problem::new(ProblemKind::BadLinkSyntax, Place::Link(i), format!("link (\"{from}\", \"{to}\") is malformed"))
-                        .help("links are written (\"node.output\", \"node.input\")"),
+                    Problem::new(
+                        ProblemKind::BadLinkSyntax,
+                        Place::Link(i),
+                        format!("link (\"{from}\", \"{to}\") is malformed"),
+                    )
+                    .help("links are written (\"node.output\", \"node.input\")"),
                 ),
             }
         }
@@ -425,8 +430,12 @@ impl Graph {
         for (id, node) in &self.nodes {
             if !valid_id(id) {
                 problems.push(
-                    Problem::new(ProblemKind::InvalidId, Place::Node(id.clone()), format!("node id \"{id}\" is not valid"))
-                        .help("use letters, digits, '_' and '-' only"),
+                    Problem::new(
+                        ProblemKind::InvalidId,
+                        Place::Node(id.clone()),
+                        format!("node id \"{id}\" is not valid"),
+                    )
+                    .help("use letters, digits, '_' and '-' only"),
                 );
             }
             let Some(spec) = spec::find(&node.kind) else {
@@ -462,7 +471,11 @@ impl Graph {
                     }
                     Some((_, ps)) => {
                         if let Err(msg) = ps.kind.check(value) {
-                            let kind = if msg.starts_with("expected") { ProblemKind::ParamType } else { ProblemKind::ParamRange };
+                            let kind = if msg.starts_with("expected") {
+                                ProblemKind::ParamType
+                            } else {
+                                ProblemKind::ParamRange
+                            };
                             problems.push(Problem::new(kind, place, format!("parameter \"{name}\": {msg}")));
                         }
                     }
@@ -528,7 +541,13 @@ impl Graph {
         problems
     }
 
-    fn port_type(&self, port: &PortRef, input: bool, place: &Place, problems: &mut Vec<Problem>) -> Option<spec::PortType> {
+    fn port_type(
+        &self,
+        port: &PortRef,
+        input: bool,
+        place: &Place,
+        problems: &mut Vec<Problem>,
+    ) -> Option<spec::PortType> {
         let Some(node) = self.nodes.get(&port.node) else {
             problems.push(Problem::new(
                 ProblemKind::UnknownNode,
@@ -550,9 +569,13 @@ impl Graph {
                     None => format!("its {which}s are: {}", names.join(", ")),
                 };
                 problems.push(
-                    Problem::new(ProblemKind::UnknownPort, place.clone(), format!("{} has no {which} \"{}\"", spec.kind, port.port))
-                        .port(&port.node, &port.port)
-                        .help(help),
+                    Problem::new(
+                        ProblemKind::UnknownPort,
+                        place.clone(),
+                        format!("{} has no {which} \"{}\"", spec.kind, port.port),
+                    )
+                    .port(&port.node, &port.port)
+                    .help(help),
                 );
                 None
             }
@@ -571,7 +594,8 @@ impl Graph {
             if colour.contains_key(start.as_str()) {
                 continue;
             }
-            let mut stack: Vec<(&str, Vec<&str>)> = vec![(start, succ.get(start.as_str()).map(|s| s.iter().copied().collect()).unwrap_or_default())];
+            let mut stack: Vec<(&str, Vec<&str>)> =
+                vec![(start, succ.get(start.as_str()).map(|s| s.iter().copied().collect()).unwrap_or_default())];
             colour.insert(start, 1);
             while let Some((node, next)) = stack.last_mut() {
                 let node = *node;
@@ -650,14 +674,13 @@ impl Graph {
 
     /// Applies `node.param=value` from the command line, checked against the spec.
     pub fn set_from_cli(&mut self, assignment: &str) -> Result<(), String> {
-        let (target, value) = assignment
-            .split_once('=')
-            .ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
-        let (id, name) = target
-            .split_once('.')
-            .ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
+        let (target, value) =
+            assignment.split_once('=').ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
+        let (id, name) =
+            target.split_once('.').ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
         let node = self.nodes.get_mut(id).ok_or_else(|| format!("--set: there is no node \"{id}\""))?;
-        let spec = spec::find(&node.kind).ok_or_else(|| format!("--set: node \"{id}\" has unknown kind {}", node.kind))?;
+        let spec =
+            spec::find(&node.kind).ok_or_else(|| format!("--set: node \"{id}\" has unknown kind {}", node.kind))?;
         let (_, ps) = spec.param(name).ok_or_else(|| {
             format!(
                 "--set: {} (node \"{id}\") has no parameter \"{name}\"; its parameters are: {}",

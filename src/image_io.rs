@@ -29,8 +29,10 @@ pub fn to_rgba8(px: &Pixels) -> Vec<u8> {
 
 /// Writes float RGBA OpenEXR, values as they are.
 pub fn write_exr(path: &Path, px: &Pixels) -> anyhow::Result<()> {
-    let img = image::Rgba32FImage::from_raw(px.width, px.height, px.rgba.clone()).context("pixel buffer has the wrong size")?;
+    let img = image::Rgba32FImage::from_raw(px.width, px.height, px.rgba.clone())
+        .context("pixel buffer has the wrong size")?;
     let tmp = path.with_extension("exr.tmp");
-    img.save_with_format(&tmp, image::ImageFormat::OpenExr).with_context(|| format!("cannot write {}", path.display()))?;
+    img.save_with_format(&tmp, image::ImageFormat::OpenExr)
+        .with_context(|| format!("cannot write {}", path.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
 }

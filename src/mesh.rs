@@ -80,12 +80,17 @@ impl Mesh {
     /// Builds a mesh from positions, optional UVs and normals, and triangle indices:
     /// checks indices, repairs what can be repaired (NaN positions, degenerate triangles,
     /// missing normals, tangents from UV gradients) and records what it did in `repairs`.
-    pub fn build(positions: Vec<Vec3>, uvs: Option<Vec<Vec2>>, normals: Option<Vec<Vec3>>, indices: Vec<u32>) -> anyhow::Result<Mesh> {
+    pub fn build(
+        positions: Vec<Vec3>,
+        uvs: Option<Vec<Vec2>>,
+        normals: Option<Vec<Vec3>>,
+        indices: Vec<u32>,
+    ) -> anyhow::Result<Mesh> {
         let n = positions.len();
         if n == 0 {
             bail!("the mesh has no vertices");
         }
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             bail!("the index count {} is not a multiple of 3", indices.len());
         }
         if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
@@ -114,7 +119,9 @@ impl Mesh {
             kept.extend_from_slice(t);
         }
         if dropped_nan > 0 {
-            repairs.push(format!("{nan_count} vertices had NaN or infinite positions; dropped the {dropped_nan} triangles using them"));
+            repairs.push(format!(
+                "{nan_count} vertices had NaN or infinite positions; dropped the {dropped_nan} triangles using them"
+            ));
         }
         if degenerate > 0 {
             repairs.push(format!("dropped {degenerate} degenerate (zero-area) triangles"));
@@ -145,7 +152,17 @@ impl Mesh {
             None => vertex_normals(&positions, &kept),
         };
         let (tangents_u, tangents_v) = uv_tangents(&positions, &normals, &uvs, &kept);
-        Ok(Mesh { positions, normals, uvs, tangents_u, tangents_v, indices: kept, piece_ids: Vec::new(), repairs, gpu: OnceLock::new() })
+        Ok(Mesh {
+            positions,
+            normals,
+            uvs,
+            tangents_u,
+            tangents_v,
+            indices: kept,
+            piece_ids: Vec::new(),
+            repairs,
+            gpu: OnceLock::new(),
+        })
     }
 
     pub fn bounds(&self) -> (Vec3, Vec3) {
@@ -219,9 +236,7 @@ pub fn uv_tangents(positions: &[Vec3], normals: &[Vec3], uvs: &[Vec2], indices: 
     for i in 0..positions.len() {
         let n = normals[i];
         let u = (tu[i] - n * n.dot(tu[i])).try_normalize().unwrap_or_else(|| n.any_orthonormal_vector());
-        let v = (tv[i] - n * n.dot(tv[i]) - u * u.dot(tv[i]))
-            .try_normalize()
-            .unwrap_or_else(|| n.cross(u));
+        let v = (tv[i] - n * n.dot(tv[i]) - u * u.dot(tv[i])).try_normalize().unwrap_or_else(|| n.cross(u));
         tu[i] = u;
         tv[i] = v;
     }
@@ -230,16 +245,24 @@ pub fn uv_tangents(positions: &[Vec3], normals: &[Vec3], uvs: &[Vec2], indices: 
 
 /// UVs from the two largest extents of the bounding box.
 fn planar_uvs(positions: &[Vec3]) -> Vec<Vec2> {
-    let (lo, hi) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let (lo, hi) =
+        positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let ext = (hi - lo).max(Vec3::splat(1e-9));
-    let (a, b) = if ext.x.min(ext.y).min(ext.z) == ext.x { (2, 1) } else if ext.y <= ext.z { (0, 2) } else { (0, 1) };
+    let (a, b) = if ext.x.min(ext.y).min(ext.z) == ext.x {
+        (2, 1)
+    } else if ext.y <= ext.z {
+        (0, 2)
+    } else {
+        (0, 1)
+    };
     positions.iter().map(|p| Vec2::new((p[a] - lo[a]) / ext[a], (p[b] - lo[b]) / ext[b])).collect()
 }
 
 /// Loads an OBJ file (all its models merged) with `tobj`.
 pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
-    let (models, _) = tobj::load_obj(path, &tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() })
-        .with_context(|| format!("cannot parse OBJ file {}", path.display()))?;
+    let (models, _) =
+        tobj::load_obj(path, &tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() })
+            .with_context(|| format!("cannot parse OBJ file {}", path.display()))?;
     let mut positions = Vec::new();
     let mut uvs = Vec::new();
     let mut normals = Vec::new();

@@ -74,15 +74,14 @@ pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph
 /// Renders the frames; returns the statistics (also written to `stats.json`).
 pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     let graph = load_with_overrides(&opts.graph_path, &opts.sets)?;
-    let dumps: Vec<PortRef> = opts
-        .dumps
-        .iter()
-        .map(|d| parse_dump(&graph, d))
-        .collect::<anyhow::Result<_>>()?;
+    let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(&graph, d)).collect::<anyhow::Result<_>>()?;
     let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
     let mut evaluator = Evaluator::new(&graph, &extra_roots).map_err(anyhow::Error::msg)?;
     if evaluator.roots().next().is_none() {
-        bail!("{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render", opts.graph_path.display());
+        bail!(
+            "{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render",
+            opts.graph_path.display()
+        );
     }
     std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("cannot create {}", opts.out_dir.display()))?;
     let resources = Resources::new(false);
@@ -210,7 +209,9 @@ pub fn failures(ev: &Evaluator) -> Vec<String> {
     ev.reports()
         .filter_map(|r| match r.status {
             NodeStatus::Failed(m) => Some(format!("node \"{}\" ({}) failed: {m}", r.id, r.kind)),
-            NodeStatus::Pending(p) => Some(format!("node \"{}\" ({}) is still waiting for {}", r.id, r.kind, p.display())),
+            NodeStatus::Pending(p) => {
+                Some(format!("node \"{}\" ({}) is still waiting for {}", r.id, r.kind, p.display()))
+            }
             _ => None,
         })
         .collect()

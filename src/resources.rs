@@ -114,9 +114,9 @@ impl Resources {
         let value = match slot.state() {
             SlotState::Pending => Err(NodeError::Pending(path)),
             SlotState::Failed(e) => Err(NodeError::Failed(e)),
-            SlotState::Ready(v) => v
-                .downcast::<T>()
-                .map_err(|_| NodeError::msg(format!("{}: loaded as another type", path.display()))),
+            SlotState::Ready(v) => {
+                v.downcast::<T>().map_err(|_| NodeError::msg(format!("{}: loaded as another type", path.display())))
+            }
         };
         (slot, value)
     }

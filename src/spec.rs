@@ -123,16 +123,38 @@ impl PortSpec {
 /// The type, default and valid range of a parameter.
 #[derive(Clone, Copy, Debug)]
 pub enum ParamKind {
-    Float { default: f64, min: f64, max: f64 },
-    Int { default: i64, min: i64, max: i64 },
-    Bool { default: bool },
-    Vec3 { default: [f64; 3] },
+    Float {
+        default: f64,
+        min: f64,
+        max: f64,
+    },
+    Int {
+        default: i64,
+        min: i64,
+        max: i64,
+    },
+    Bool {
+        default: bool,
+    },
+    Vec3 {
+        default: [f64; 3],
+    },
     /// Linear RGB, each channel in [0, inf) (HDR colours are allowed).
-    Color { default: [f64; 3] },
-    Text { default: &'static str },
+    Color {
+        default: [f64; 3],
+    },
+    Text {
+        default: &'static str,
+    },
     /// A file, relative to the graph file's folder.
-    Path { default: &'static str, extensions: &'static [&'static str] },
-    Choice { default: &'static str, options: &'static [&'static str] },
+    Path {
+        default: &'static str,
+        extensions: &'static [&'static str],
+    },
+    Choice {
+        default: &'static str,
+        options: &'static [&'static str],
+    },
 }
 
 impl ParamKind {
@@ -211,9 +233,15 @@ impl ParamKind {
     pub fn parse_cli(&self, text: &str) -> Result<ParamValue, String> {
         let text = text.trim();
         let value = match self {
-            ParamKind::Float { .. } => ParamValue::Float(text.parse().map_err(|_| format!("\"{text}\" is not a number"))?),
-            ParamKind::Int { .. } => ParamValue::Int(text.parse().map_err(|_| format!("\"{text}\" is not an integer"))?),
-            ParamKind::Bool { .. } => ParamValue::Bool(text.parse().map_err(|_| format!("\"{text}\" is not true or false"))?),
+            ParamKind::Float { .. } => {
+                ParamValue::Float(text.parse().map_err(|_| format!("\"{text}\" is not a number"))?)
+            }
+            ParamKind::Int { .. } => {
+                ParamValue::Int(text.parse().map_err(|_| format!("\"{text}\" is not an integer"))?)
+            }
+            ParamKind::Bool { .. } => {
+                ParamValue::Bool(text.parse().map_err(|_| format!("\"{text}\" is not true or false"))?)
+            }
             ParamKind::Vec3 { .. } | ParamKind::Color { .. } => {
                 let parts: Result<Vec<f64>, _> = text
                     .trim_matches(|c| c == '[' || c == ']' || c == '(' || c == ')')
@@ -222,7 +250,9 @@ impl ParamKind {
                     .collect();
                 ParamValue::Vec(parts.map_err(|_| format!("\"{text}\" is not a list of numbers like 1,0.5,0"))?)
             }
-            ParamKind::Text { .. } | ParamKind::Path { .. } | ParamKind::Choice { .. } => ParamValue::Str(text.to_string()),
+            ParamKind::Text { .. } | ParamKind::Path { .. } | ParamKind::Choice { .. } => {
+                ParamValue::Str(text.to_string())
+            }
         };
         self.check(&value)
     }

@@ -3,8 +3,16 @@
 use std::process::Command;
 
 fn werkstatt(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_werkstatt")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    let out = Command::new(env!("CARGO_BIN_EXE_werkstatt"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 #[test]
@@ -39,7 +47,10 @@ fn check_passes_good_graphs_and_fails_bad_ones() {
     assert!(out.contains("ok: graphs/default.ron"));
     let (code, _, err) = werkstatt(&["check", "graphs/default.ron", "tests/data/bad/unknown_kind.ron"]);
     assert_eq!(code, 1);
-    assert!(err.contains("tests/data/bad/unknown_kind.ron:5:9: error in node \"cam\": unknown node kind \"OrbitCamra\""), "{err}");
+    assert!(
+        err.contains("tests/data/bad/unknown_kind.ron:5:9: error in node \"cam\": unknown node kind \"OrbitCamra\""),
+        "{err}"
+    );
     assert!(err.contains("1 of 2 graph(s) have errors"), "{err}");
 }
 
@@ -75,7 +86,16 @@ fn render_rejects_bad_arguments_before_rendering() {
 #[test]
 fn render_writes_frames_and_stats() {
     let out = std::env::temp_dir().join(format!("werkstatt-cli-render-{}", std::process::id()));
-    let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--frames", "0..2", "--size", "64x48", "--out", out.to_str().unwrap()]);
+    let (code, _, err) = werkstatt(&[
+        "render",
+        "graphs/default.ron",
+        "--frames",
+        "0..2",
+        "--size",
+        "64x48",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     for f in ["image_0000.png", "image_0001.png", "image_0002.png", "stats.json"] {
         assert!(out.join(f).exists(), "{f} missing");

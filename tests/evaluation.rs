@@ -165,10 +165,14 @@ fn a_failing_node_blocks_its_consumers_and_recovers() {
 
 #[test]
 fn watch_range_violation_fails() {
-    let g = graph(r#"(version: 1, nodes: {"n": (kind: "Number", params: {"value": 5.0}), "w": (kind: "Watch", params: {"max": 1.0})}, links: [("n.value", "w.value")])"#);
+    let g = graph(
+        r#"(version: 1, nodes: {"n": (kind: "Number", params: {"value": 5.0}), "w": (kind: "Watch", params: {"max": 1.0})}, links: [("n.value", "w.value")])"#,
+    );
     let mut ev = Evaluator::new(&g, &[]).unwrap();
     ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
-    assert!(matches!(ev.report("w").unwrap().status, NodeStatus::Failed(m) if m.contains("outside the accepted range")));
+    assert!(
+        matches!(ev.report("w").unwrap().status, NodeStatus::Failed(m) if m.contains("outside the accepted range"))
+    );
 }
 
 const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n";

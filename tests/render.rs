@@ -21,7 +21,8 @@ fn default_graph_renders_a_lit_non_blank_image() {
     assert!(mean > 30.0 && var.sqrt() > 20.0, "image looks blank: mean {mean}, std {}", var.sqrt());
     // The orbiting camera moves between frames.
     assert_ne!(read_png(&out.join("image_0001.png")).into_raw(), img.into_raw());
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
     assert_eq!(json["frames"].as_array().unwrap().len(), 2);
     assert!(json["frames"][0]["nodes"]["gbuffer"]["ran"].as_bool().unwrap());
     assert!(json["adapter"].as_str().unwrap().len() > 3);
@@ -43,7 +44,19 @@ fn same_graph_same_bytes() {
 #[test]
 fn gbuffer_depth_and_normal_are_exact_at_the_centre() {
     let out = out_dir("gbuffer-numbers");
-    let sets = ["camera.orbit_speed=0", "camera.yaw=0", "camera.pitch=0", "camera.distance=3", "camera.target=0,0,0", "draw_torus.translate=0,50,0", "draw_floor.translate=0,-50,0", "draw_ball.translate=0,0,0", "ball.radius=0.5", "ball.segments_u=256", "ball.segments_v=128"];
+    let sets = [
+        "camera.orbit_speed=0",
+        "camera.yaw=0",
+        "camera.pitch=0",
+        "camera.distance=3",
+        "camera.target=0,0,0",
+        "draw_torus.translate=0,50,0",
+        "draw_floor.translate=0,-50,0",
+        "draw_ball.translate=0,0,0",
+        "ball.radius=0.5",
+        "ball.segments_u=256",
+        "ball.segments_v=128",
+    ];
     render_graph(&default_graph(), &out, (0, 0), (161, 121), &sets, &["gbuffer.depth", "gbuffer.normal"]).unwrap();
     let depth = read_exr(&out.join("gbuffer.depth_0000.exr"));
     let normal = read_exr(&out.join("gbuffer.normal_0000.exr"));
@@ -57,11 +70,31 @@ fn gbuffer_depth_and_normal_are_exact_at_the_centre() {
 #[test]
 fn golden_final_image_and_gbuffer_channels() {
     let out = out_dir("golden");
-    render_graph(&default_graph(), &out, (0, 0), (160, 120), &[], &["gbuffer.color", "gbuffer.normal", "gbuffer.depth"]).unwrap();
+    render_graph(
+        &default_graph(),
+        &out,
+        (0, 0),
+        (160, 120),
+        &[],
+        &["gbuffer.color", "gbuffer.normal", "gbuffer.depth"],
+    )
+    .unwrap();
     assert_golden("default_image", &read_png(&out.join("image_0000.png")), STRICT);
-    assert_golden("default_gbuffer_color", &encode(&read_exr(&out.join("gbuffer.color_0000.exr")), Encoding::Unit), STRICT);
-    assert_golden("default_gbuffer_normal", &encode(&read_exr(&out.join("gbuffer.normal_0000.exr")), Encoding::Signed), STRICT);
-    assert_golden("default_gbuffer_depth", &encode(&read_exr(&out.join("gbuffer.depth_0000.exr")), Encoding::Range(8.0)), STRICT);
+    assert_golden(
+        "default_gbuffer_color",
+        &encode(&read_exr(&out.join("gbuffer.color_0000.exr")), Encoding::Unit),
+        STRICT,
+    );
+    assert_golden(
+        "default_gbuffer_normal",
+        &encode(&read_exr(&out.join("gbuffer.normal_0000.exr")), Encoding::Signed),
+        STRICT,
+    );
+    assert_golden(
+        "default_gbuffer_depth",
+        &encode(&read_exr(&out.join("gbuffer.depth_0000.exr")), Encoding::Range(8.0)),
+        STRICT,
+    );
 }
 
 #[test]

@@ -22,7 +22,12 @@ fn every_graph_round_trips_byte_for_byte() {
     for path in graph_files() {
         let text = std::fs::read_to_string(&path).unwrap();
         let graph = Graph::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        assert!(graph.to_ron() == text, "{} is not in canonical form: run `werkstatt fmt {}`", path.display(), path.display());
+        assert!(
+            graph.to_ron() == text,
+            "{} is not in canonical form: run `werkstatt fmt {}`",
+            path.display(),
+            path.display()
+        );
         let again = Graph::load_str(&graph.to_ron(), &path).unwrap();
         assert_eq!(again, graph);
     }
@@ -78,7 +83,10 @@ fn migrations_upgrade_old_versions_in_order() {
         Migration { from: 2, note: "canvas units halved", apply: double_pos },
     ];
     let mut g = Graph::new();
-    g.nodes.insert("c".into(), werkstatt::graph::NodeDoc { kind: "Constant".into(), pos: [1.0, 2.0], params: Default::default() });
+    g.nodes.insert(
+        "c".into(),
+        werkstatt::graph::NodeDoc { kind: "Constant".into(), pos: [1.0, 2.0], params: Default::default() },
+    );
     let notes = migrate(&mut g, 3, &table).unwrap();
     assert_eq!(notes, ["Constant is now Number", "canvas units halved"]);
     assert_eq!((g.version, g.nodes["c"].kind.as_str(), g.nodes["c"].pos), (3, "Number", [2.0, 4.0]));

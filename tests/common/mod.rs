@@ -12,8 +12,9 @@ use werkstatt::render::{RenderOptions, Stats, render};
 pub fn gpu() -> &'static GpuContext {
     static GPU: OnceLock<GpuContext> = OnceLock::new();
     GPU.get_or_init(|| {
-        GpuContext::headless(Backend::from_env().unwrap())
-            .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}"))
+        GpuContext::headless(Backend::from_env().unwrap()).unwrap_or_else(|e| {
+            panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}")
+        })
     })
 }
 
@@ -28,7 +29,14 @@ pub fn out_dir(name: &str) -> PathBuf {
     dir
 }
 
-pub fn render_graph(graph: &Path, out: &Path, frames: (i64, i64), size: (u32, u32), sets: &[&str], dumps: &[&str]) -> anyhow::Result<Stats> {
+pub fn render_graph(
+    graph: &Path,
+    out: &Path,
+    frames: (i64, i64),
+    size: (u32, u32),
+    sets: &[&str],
+    dumps: &[&str],
+) -> anyhow::Result<Stats> {
     let opts = RenderOptions {
         graph_path: graph.to_path_buf(),
         frames,
@@ -106,7 +114,11 @@ pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
         eprintln!("blessed {}", golden.display());
         return;
     }
-    assert!(golden.exists(), "no reference image {}: run the tests with WERKSTATT_BLESS=1 to create it", golden.display());
+    assert!(
+        golden.exists(),
+        "no reference image {}: run the tests with WERKSTATT_BLESS=1 to create it",
+        golden.display()
+    );
     let expected = read_png(&golden);
     assert_eq!(expected.dimensions(), actual.dimensions(), "{name}: size differs from the reference");
     let (mut sq, mut differing) = (0f64, 0usize);
