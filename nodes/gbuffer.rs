@@ -242,7 +242,7 @@ impl Node for GBufferPassNode {
                     depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: None,
+                timestamp_writes: gpu.pass_timestamps(),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });

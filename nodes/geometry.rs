@@ -169,13 +169,13 @@ pub fn disc(r: f32, h: f32, segments: u32) -> anyhow::Result<Mesh> {
 pub static MESH_FILE: NodeSpec = NodeSpec {
     kind: "MeshFile",
     category: Category::Geometry,
-    doc: "Loads a mesh from an OBJ file (on a worker thread); missing normals and tangents are computed, broken triangles repaired with a warning.",
+    doc: "Loads a mesh from an OBJ or glTF file (on a worker thread); missing normals and tangents are computed, broken triangles repaired with a warning.",
     inputs: &[],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The loaded mesh.")],
     params: &[
         ParamSpec::new(
             "path",
-            ParamKind::Path { default: "", extensions: &["obj"] },
+            ParamKind::Path { default: "", extensions: &["obj", "gltf", "glb"] },
             "The file, relative to the graph's folder.",
         ),
         ParamSpec::new("normalize", ParamKind::Bool { default: true }, "Centre the mesh and scale it to unit height."),
@@ -191,7 +191,7 @@ impl Node for MeshFileNode {
             return Err(NodeError::msg("parameter \"path\" is empty: name an .obj file"));
         }
         let path = cx.path("path");
-        let loaded = cx.load(&path, mesh::load_obj)?;
+        let loaded = cx.load(&path, mesh::load_mesh_file)?;
         for r in &loaded.repairs {
             cx.warn(format!("{}: {r}", path.display()));
         }

@@ -122,7 +122,7 @@ impl FullscreenPass {
                     },
                 })],
                 depth_stencil_attachment: None,
-                timestamp_writes: None,
+                timestamp_writes: gpu.pass_timestamps(),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });

@@ -456,6 +456,9 @@ impl Evaluator {
         let mut outputs = vec![None; spec.outputs.len()];
         state.touched.clear();
         state.warnings.clear();
+        if let Some(gpu) = gpu {
+            gpu.set_current_node(Some(&self.ids[n]));
+        }
         let start = Instant::now();
         let (result, used_time) = {
             let mut cx = EvalCx {
@@ -484,6 +487,9 @@ impl Evaluator {
             (r, cx.used_time)
         };
         state.last_cpu = start.elapsed();
+        if let Some(gpu) = gpu {
+            gpu.set_current_node(None);
+        }
         state.ran_last_frame = true;
         state.runs += 1;
         state.uses_time = used_time;

@@ -49,7 +49,22 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     shaders: Mutex<HashMap<&'static str, Arc<wgpu::ShaderModule>>>,
     errors: Arc<Mutex<Vec<String>>>,
+    timer: Option<GpuTimer>,
 }
+
+/// GPU time per node from timestamp queries: passes ask for timestamp writes, which are
+/// attributed to the node the evaluator is running.
+struct GpuTimer {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    read: wgpu::Buffer,
+    period_ns: f32,
+    /// (first query index of a pass, node id), in allocation order.
+    passes: Mutex<Vec<(u32, Arc<str>)>>,
+    current_node: Mutex<Option<Arc<str>>>,
+}
+
+const MAX_TIMED_PASSES: u32 = 512;
 
 fn instance(backend: Backend) -> wgpu::Instance {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
@@ -114,7 +129,32 @@ impl GpuContext {
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
             sink.lock().unwrap_or_else(|p| p.into_inner()).push(e.to_string());
         }));
-        Ok(GpuContext { device, queue, info, features, limits, shaders: Mutex::default(), errors })
+        let timer = features.contains(wgpu::Features::TIMESTAMP_QUERY).then(|| {
+            let size = 2 * MAX_TIMED_PASSES as u64 * 8;
+            GpuTimer {
+                queries: device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("node timings"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2 * MAX_TIMED_PASSES,
+                }),
+                resolve: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamp resolve"),
+                    size,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                read: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamp read"),
+                    size,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                }),
+                period_ns: queue.get_timestamp_period(),
+                passes: Mutex::default(),
+                current_node: Mutex::default(),
+            }
+        });
+        Ok(GpuContext { device, queue, info, features, limits, shaders: Mutex::default(), errors, timer })
     }
 
     pub fn adapter_name(&self) -> String {
@@ -158,6 +198,70 @@ impl GpuContext {
     /// Forgets cached shader modules so the next use re-reads them (shader hot reload).
     pub fn clear_shader_cache(&self) {
         self.shaders.lock().unwrap_or_else(|p| p.into_inner()).clear();
+    }
+
+    /// Whether passes are timed on the GPU (the adapter has timestamp queries).
+    pub fn has_gpu_timing(&self) -> bool {
+        self.timer.is_some()
+    }
+
+    /// Set by the evaluator around each node's run, so pass timings are attributed to it.
+    pub fn set_current_node(&self, node: Option<&str>) {
+        if let Some(t) = &self.timer {
+            *t.current_node.lock().unwrap_or_else(|p| p.into_inner()) = node.map(Arc::from);
+        }
+    }
+
+    /// Timestamp writes for a render pass, or `None` where timing is unsupported or the
+    /// frame's query budget is spent.
+    pub fn pass_timestamps(&self) -> Option<wgpu::RenderPassTimestampWrites<'_>> {
+        let t = self.timer.as_ref()?;
+        let node = t.current_node.lock().unwrap_or_else(|p| p.into_inner()).clone()?;
+        let mut passes = t.passes.lock().unwrap_or_else(|p| p.into_inner());
+        let index = 2 * passes.len() as u32;
+        if index >= 2 * MAX_TIMED_PASSES {
+            return None;
+        }
+        passes.push((index, node));
+        Some(wgpu::RenderPassTimestampWrites {
+            query_set: &t.queries,
+            beginning_of_pass_write_index: Some(index),
+            end_of_pass_write_index: Some(index + 1),
+        })
+    }
+
+    /// GPU milliseconds per node for the passes timed since the last call.
+    pub fn collect_timings(&self) -> HashMap<Arc<str>, f64> {
+        let mut out = HashMap::new();
+        let Some(t) = &self.timer else { return out };
+        let passes = std::mem::take(&mut *t.passes.lock().unwrap_or_else(|p| p.into_inner()));
+        if passes.is_empty() {
+            return out;
+        }
+        let count = 2 * passes.len() as u32;
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("timings") });
+        enc.resolve_query_set(&t.queries, 0..count, &t.resolve, 0);
+        enc.copy_buffer_to_buffer(&t.resolve, 0, &t.read, 0, count as u64 * 8);
+        self.queue.submit([enc.finish()]);
+        let slice = t.read.slice(..count as u64 * 8);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait_idle();
+        if !matches!(rx.recv(), Ok(Ok(()))) {
+            return out;
+        }
+        if let Ok(data) = slice.get_mapped_range() {
+            let stamps: &[u64] = bytemuck::cast_slice(&data);
+            for (index, node) in &passes {
+                let (a, b) = (stamps[*index as usize], stamps[*index as usize + 1]);
+                let ms = b.saturating_sub(a) as f64 * t.period_ns as f64 * 1e-6;
+                *out.entry(node.clone()).or_insert(0.0) += ms;
+            }
+        }
+        t.read.unmap();
+        out
     }
 
     pub fn wait_idle(&self) {

@@ -292,3 +292,58 @@ pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
     Mesh::build(positions, all_uvs.then_some(uvs), all_normals.then_some(normals), indices)
         .with_context(|| format!("invalid mesh in {}", path.display()))
 }
+
+/// Loads every mesh of a glTF file's default scene (node transforms applied) with `gltf`.
+pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
+    let (doc, buffers, _) = gltf::import(path).with_context(|| format!("cannot parse glTF file {}", path.display()))?;
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    let mut normals = Vec::new();
+    let mut indices = Vec::new();
+    let (mut all_uvs, mut all_normals) = (true, true);
+    let scene = doc.default_scene().or_else(|| doc.scenes().next()).context("the file has no scene")?;
+    let mut stack: Vec<(gltf::Node, glam::Mat4)> = scene.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * glam::Mat4::from_cols_array_2d(&node.transform().matrix());
+        stack.extend(node.children().map(|c| (c, world)));
+        let Some(mesh) = node.mesh() else { continue };
+        let normal_matrix = glam::Mat3::from_mat4(world).inverse().transpose();
+        for prim in mesh.primitives() {
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                continue;
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
+            let Some(pos) = reader.read_positions() else { continue };
+            let base = positions.len() as u32;
+            let before = positions.len();
+            positions.extend(pos.map(|p| world.transform_point3(Vec3::from(p))));
+            let count = positions.len() - before;
+            match reader.read_tex_coords(0) {
+                Some(t) => uvs.extend(t.into_f32().map(Vec2::from)),
+                None => all_uvs = false,
+            }
+            match reader.read_normals() {
+                Some(n) => normals.extend(n.map(|n| normal_matrix * Vec3::from(n))),
+                None => all_normals = false,
+            }
+            match reader.read_indices() {
+                Some(i) => indices.extend(i.into_u32().map(|i| i + base)),
+                None => indices.extend(base..base + count as u32),
+            }
+        }
+    }
+    if positions.is_empty() {
+        bail!("{} contains no triangle geometry", path.display());
+    }
+    Mesh::build(positions, all_uvs.then_some(uvs), all_normals.then_some(normals), indices)
+        .with_context(|| format!("invalid mesh in {}", path.display()))
+}
+
+/// Loads a mesh file by its extension: .obj, .gltf or .glb.
+pub fn load_mesh_file(path: &std::path::Path) -> anyhow::Result<Mesh> {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("obj") => load_obj(path),
+        Some("gltf" | "glb") => load_gltf(path),
+        _ => bail!("{}: unsupported mesh format (use .obj, .gltf or .glb)", path.display()),
+    }
+}

@@ -33,6 +33,9 @@ pub struct RenderOptions {
 #[derive(Serialize, Debug)]
 pub struct NodeTiming {
     pub cpu_ms: f64,
+    /// Time of the node's GPU passes, where the adapter has timestamp queries.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_ms: Option<f64>,
     pub ran: bool,
 }
 
@@ -117,7 +120,7 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
         loop {
             let summary = evaluator.evaluate(time, Some(gpu), &resources, &settings);
             for r in evaluator.reports() {
-                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming { cpu_ms: 0.0, ran: false });
+                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming { cpu_ms: 0.0, gpu_ms: None, ran: false });
                 t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
                 t.ran |= r.ran;
             }
@@ -129,7 +132,11 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
             }
             resources.wait_idle();
         }
-        gpu.wait_idle();
+        for (node, ms) in gpu.collect_timings() {
+            if let Some(t) = nodes.get_mut(&*node) {
+                *t.gpu_ms.get_or_insert(0.0) += ms;
+            }
+        }
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let failures = failures(&evaluator);
         if !failures.is_empty() {
