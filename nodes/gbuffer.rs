@@ -1,4 +1,5 @@
-//! The G-buffer pass of the deferred renderer (dissertation section 4.2).
+//! The G-buffer pass of the deferred renderer (dissertation section 4.2): plain meshes and
+//! deferred-warped detail geometry (instanced through the matrix texture) into the same targets.
 
 use std::sync::Arc;
 
@@ -7,9 +8,10 @@ use wgpu::util::DeviceExt;
 use crate::eval::{EvalCx, Node, NodeError};
 use crate::gpu::{GpuContext, GpuImage};
 use crate::mesh::Vertex;
-use crate::scene::{GBuffer, Image8};
+use crate::scene::{DrawItem, GBuffer, Image8};
 use crate::spec::{Category, NodeSpec, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
+use crate::warp::InstanceData;
 
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
@@ -18,7 +20,7 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
 pub static GBUFFER_PASS: NodeSpec = NodeSpec {
     kind: "GBufferPass",
     category: Category::Render,
-    doc: "Rasterizes a scene into the G-buffer: colour + glossiness, normal + coarse/detail flag, linear depth.",
+    doc: "Rasterizes a scene into the G-buffer: colour + glossiness, normal + coarse/detail flag, linear depth. Attached (deferred-warped) items are drawn instanced through their matrix texture.",
     inputs: &[
         PortSpec::required("scene", PortType::Scene, "What to draw."),
         PortSpec::required("camera", PortType::Camera, "The view."),
@@ -50,20 +52,22 @@ struct ObjectUniform {
     params: [f32; 4],
 }
 
-struct Pipeline {
-    pipeline: wgpu::RenderPipeline,
+pub struct Pipelines {
+    plain: wgpu::RenderPipeline,
+    attached: wgpu::RenderPipeline,
     frame_layout: wgpu::BindGroupLayout,
     object_layout: wgpu::BindGroupLayout,
+    warp_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     white: Image8,
 }
 
 #[derive(Default)]
 pub struct GBufferPassNode {
-    pipeline: Option<Pipeline>,
+    pipelines: Option<Pipelines>,
 }
 
-fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
@@ -76,9 +80,57 @@ fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGrou
     }
 }
 
-impl Pipeline {
-    fn new(gpu: &GpuContext) -> anyhow::Result<Pipeline> {
-        let shader = gpu.shader("gbuffer.wgsl")?;
+pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages, filterable: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// Group 2 of shaders/warp.wgsl: the matrix texture's three columns and the warp settings.
+pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayout {
+    gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("warp"),
+        entries: &[
+            texture_entry(0, visibility, false),
+            texture_entry(1, visibility, false),
+            texture_entry(2, visibility, false),
+            uniform_entry(3, visibility),
+        ],
+    })
+}
+
+pub fn warp_bind_group(
+    gpu: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    draw: &crate::warp::AttachedDraw,
+) -> wgpu::BindGroup {
+    let uniform = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("warp settings"),
+        contents: bytemuck::cast_slice(&draw.settings.uniform()),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let m = &draw.matrix;
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("warp"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&m.col_u.view) },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&m.col_n.view) },
+            wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&m.col_v.view) },
+            wgpu::BindGroupEntry { binding: 3, resource: uniform.as_entire_binding() },
+        ],
+    })
+}
+
+impl Pipelines {
+    fn new(gpu: &GpuContext) -> anyhow::Result<Pipelines> {
         let device = &gpu.device;
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gbuffer frame"),
@@ -88,16 +140,7 @@ impl Pipeline {
             label: Some("gbuffer object"),
             entries: &[
                 uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(1, wgpu::ShaderStages::FRAGMENT, true),
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -106,24 +149,63 @@ impl Pipeline {
                 },
             ],
         });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("gbuffer"),
-            bind_group_layouts: &[Some(&frame_layout), Some(&object_layout)],
+        let warp_layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
+        let plain = Self::pipeline(
+            gpu,
+            "gbuffer.wgsl",
+            &[Some(&frame_layout), Some(&object_layout)],
+            &[Some(Vertex::layout())],
+        )?;
+        let attached = Self::pipeline(
+            gpu,
+            "attach.wgsl",
+            &[Some(&frame_layout), Some(&object_layout), Some(&warp_layout)],
+            &[Some(Vertex::layout()), Some(InstanceData::layout())],
+        )?;
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("base map"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        Ok(Pipelines {
+            plain,
+            attached,
+            frame_layout,
+            object_layout,
+            warp_layout,
+            sampler,
+            white: Image8::new(1, 1, vec![255; 4]),
+        })
+    }
+
+    fn pipeline(
+        gpu: &GpuContext,
+        shader: &'static str,
+        groups: &[Option<&wgpu::BindGroupLayout>],
+        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+    ) -> anyhow::Result<wgpu::RenderPipeline> {
+        let module = gpu.shader(shader)?;
+        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(shader),
+            bind_group_layouts: groups,
             immediate_size: 0,
         });
         let target = |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
-        let pipeline = gpu.checked("gbuffer pipeline", || {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("gbuffer"),
+        gpu.checked(shader, || {
+            gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(shader),
                 layout: Some(&layout),
                 vertex: wgpu::VertexState {
-                    module: &shader,
+                    module: &module,
                     entry_point: Some("vs_main"),
-                    buffers: &[Some(Vertex::layout())],
+                    buffers,
                     compilation_options: Default::default(),
                 },
                 fragment: Some(wgpu::FragmentState {
-                    module: &shader,
+                    module: &module,
                     entry_point: Some("fs_main"),
                     targets: &[target(COLOR_FORMAT), target(NORMAL_FORMAT), target(DEPTH_FORMAT)],
                     compilation_options: Default::default(),
@@ -140,17 +222,126 @@ impl Pipeline {
                 multiview_mask: None,
                 cache: None,
             })
-        })?;
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("base map"),
-            address_mode_u: wgpu::AddressMode::Repeat,
-            address_mode_v: wgpu::AddressMode::Repeat,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-        Ok(Pipeline { pipeline, frame_layout, object_layout, sampler, white: Image8::new(1, 1, vec![255; 4]) })
+        })
     }
+
+    fn object_bind_group(&self, gpu: &GpuContext, item: &DrawItem) -> wgpu::BindGroup {
+        let m = &item.material;
+        let uniform = ObjectUniform {
+            model: item.model.to_cols_array_2d(),
+            normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
+            base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
+            params: [m.uv_scale, f32::from(u8::from(m.texture.is_some())), f32::from(u8::from(item.detail)), 0.0],
+        };
+        let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("gbuffer object"),
+            contents: bytemuck::bytes_of(&uniform),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gbuffer object"),
+            layout: &self.object_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&tex.view) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+            ],
+        })
+    }
+}
+
+/// Renders `items` into a new G-buffer of `w` x `h`. Shared by the node and the benchmarks.
+pub fn render_gbuffer(
+    gpu: &GpuContext,
+    pipelines: &mut Option<Pipelines>,
+    items: &[DrawItem],
+    camera: crate::scene::Camera,
+    w: u32,
+    h: u32,
+) -> anyhow::Result<GBuffer> {
+    if pipelines.is_none() {
+        *pipelines = Some(Pipelines::new(gpu)?);
+    }
+    let p = pipelines.as_ref().expect("created above");
+    let color = GpuImage::target(gpu, "gbuffer color", w, h, COLOR_FORMAT);
+    let normal = GpuImage::target(gpu, "gbuffer normal", w, h, NORMAL_FORMAT);
+    let depth = GpuImage::target(gpu, "gbuffer depth", w, h, DEPTH_FORMAT);
+    let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, wgpu::TextureFormat::Depth32Float);
+
+    let view = camera.view();
+    let view_proj = camera.projection(w as f32 / h as f32) * view;
+    let frame_buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("gbuffer frame"),
+        contents: bytemuck::bytes_of(&FrameUniform {
+            view_proj: view_proj.to_cols_array_2d(),
+            view: view.to_cols_array_2d(),
+        }),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let frame_bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("gbuffer frame"),
+        layout: &p.frame_layout,
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() }],
+    });
+    let object_bgs: Vec<wgpu::BindGroup> = items.iter().map(|item| p.object_bind_group(gpu, item)).collect();
+    let warp_bgs: Vec<Option<wgpu::BindGroup>> =
+        items.iter().map(|item| item.attached.as_ref().map(|a| warp_bind_group(gpu, &p.warp_layout, a))).collect();
+
+    let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gbuffer") });
+    {
+        let clear = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("gbuffer"),
+            color_attachments: &[clear(&color.view), clear(&normal.view), clear(&depth.view)],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_buffer.view,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: gpu.pass_timestamps(),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &frame_bg, &[]);
+        for ((item, bg), warp_bg) in items.iter().zip(&object_bgs).zip(&warp_bgs) {
+            let mesh = item.mesh.gpu(gpu);
+            pass.set_bind_group(1, bg, &[]);
+            pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+            pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            match (&item.attached, warp_bg) {
+                (Some(a), Some(wbg)) => {
+                    if a.instances.is_empty() {
+                        continue;
+                    }
+                    pass.set_pipeline(&p.attached);
+                    pass.set_bind_group(2, wbg, &[]);
+                    pass.set_vertex_buffer(1, a.instance_buffer(gpu).slice(..));
+                    pass.draw_indexed(0..mesh.index_count, 0, 0..a.instances.len() as u32);
+                }
+                _ => {
+                    pass.set_pipeline(&p.plain);
+                    pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+                }
+            }
+        }
+    }
+    gpu.queue.submit([enc.finish()]);
+    let errors = gpu.take_errors();
+    if !errors.is_empty() {
+        anyhow::bail!("GPU error: {}", errors.join("; "));
+    }
+    Ok(GBuffer { color, normal, depth, depth_buffer, camera })
 }
 
 impl Node for GBufferPassNode {
@@ -163,121 +354,13 @@ impl Node for GBufferPassNode {
             return Err(NodeError::msg("camera input is not a camera"));
         };
         let (items, camera) = (items.clone(), *camera);
-        if self.pipeline.is_none() {
-            self.pipeline = Some(Pipeline::new(gpu)?);
-        }
-        let p = self.pipeline.as_ref().expect("created above");
-        let (w, h) = (cx.settings.width, cx.settings.height);
-        let color = GpuImage::target(gpu, "gbuffer color", w, h, COLOR_FORMAT);
-        let normal = GpuImage::target(gpu, "gbuffer normal", w, h, NORMAL_FORMAT);
-        let depth = GpuImage::target(gpu, "gbuffer depth", w, h, DEPTH_FORMAT);
-        let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, wgpu::TextureFormat::Depth32Float);
-
-        let view = camera.view();
-        let view_proj = camera.projection(w as f32 / h as f32) * view;
-        let frame_buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("gbuffer frame"),
-            contents: bytemuck::bytes_of(&FrameUniform {
-                view_proj: view_proj.to_cols_array_2d(),
-                view: view.to_cols_array_2d(),
-            }),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let frame_bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer frame"),
-            layout: &p.frame_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() }],
-        });
-        let object_bgs: Vec<wgpu::BindGroup> = items
-            .iter()
-            .map(|item| {
-                let m = &item.material;
-                let uniform = ObjectUniform {
-                    model: item.model.to_cols_array_2d(),
-                    normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
-                    base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
-                    params: [
-                        m.uv_scale,
-                        f32::from(u8::from(m.texture.is_some())),
-                        f32::from(u8::from(item.detail)),
-                        0.0,
-                    ],
-                };
-                let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("gbuffer object"),
-                    contents: bytemuck::bytes_of(&uniform),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                let tex = m.texture.as_deref().unwrap_or(&p.white).gpu(gpu);
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("gbuffer object"),
-                    layout: &p.object_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&tex.view) },
-                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&p.sampler) },
-                    ],
-                })
-            })
-            .collect();
-
-        let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gbuffer") });
-        {
-            let clear = |view| {
-                Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })
-            };
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("gbuffer"),
-                color_attachments: &[clear(&color.view), clear(&normal.view), clear(&depth.view)],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_buffer.view,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: gpu.pass_timestamps(),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&p.pipeline);
-            pass.set_bind_group(0, &frame_bg, &[]);
-            for (item, bg) in items.iter().zip(&object_bgs) {
-                let mesh = item.mesh.gpu(gpu);
-                pass.set_bind_group(1, bg, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-            }
-        }
-        gpu.queue.submit([enc.finish()]);
-        let errors = gpu.take_errors();
-        if !errors.is_empty() {
-            return Err(NodeError::msg(format!("GPU error: {}", errors.join("; "))));
-        }
-        let gbuffer = Arc::new(GBuffer { color, normal, depth, depth_buffer, camera });
-        // The per-channel ports share the G-buffer's textures through cheap re-wrapping.
-        cx.set("color", Value::Texture(Arc::new(share(gpu, &gbuffer.color))));
-        cx.set("normal", Value::Texture(Arc::new(share(gpu, &gbuffer.normal))));
-        cx.set("depth", Value::Texture(Arc::new(share(gpu, &gbuffer.depth))));
+        let gbuffer =
+            Arc::new(render_gbuffer(gpu, &mut self.pipelines, &items, camera, cx.settings.width, cx.settings.height)?);
+        // The per-channel ports are further handles to the same textures.
+        cx.set("color", Value::Texture(Arc::new(gbuffer.color.share())));
+        cx.set("normal", Value::Texture(Arc::new(gbuffer.normal.share())));
+        cx.set("depth", Value::Texture(Arc::new(gbuffer.depth.share())));
         cx.set("gbuffer", Value::GBuffer(gbuffer));
         Ok(())
-    }
-}
-
-/// Another handle to the same texture (wgpu textures are reference counted).
-fn share(_gpu: &GpuContext, img: &GpuImage) -> GpuImage {
-    GpuImage {
-        texture: img.texture.clone(),
-        view: img.view.clone(),
-        format: img.format,
-        width: img.width,
-        height: img.height,
     }
 }

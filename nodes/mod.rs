@@ -1,12 +1,16 @@
 //! The node library: one file per node family. `ALL` is the registry.
 
+pub mod attach;
 pub mod basic;
 pub mod camera;
+pub mod curves;
 pub mod direct_light;
 pub mod gbuffer;
 pub mod geometry;
+pub mod matrix_texture;
 pub mod output;
 pub mod passes;
+pub mod placements;
 pub mod scene;
 pub mod tonemap;
 
@@ -23,6 +27,15 @@ pub static ALL: &[&NodeSpec] = &[
     &scene::DRAW,
     &scene::MERGE,
     &camera::ORBIT_CAMERA,
+    &matrix_texture::MATRIX_TEXTURE,
+    &placements::SCATTER,
+    &placements::GRID_PLACEMENT,
+    &placements::CURVE_PLACEMENT,
+    &placements::PLACEMENT_FILE,
+    &curves::SVG_CURVES,
+    &attach::POINT_ATTACHMENT,
+    &attach::AREA_ATTACHMENT,
+    &attach::CURVE_ATTACHMENT,
     &gbuffer::GBUFFER_PASS,
     &direct_light::DIRECT_LIGHT,
     &tonemap::TONEMAP,

@@ -1,5 +1,5 @@
 //! A full-screen pass: one uniform block plus textures read with `textureLoad`, drawn
-//! as a single triangle into one target. Lighting, tone mapping and later screen-space
+//! as a single triangle into one or more targets. Lighting, tone mapping and later screen-space
 //! passes are all of this shape.
 
 use wgpu::util::DeviceExt;
@@ -19,7 +19,7 @@ impl FullscreenPass {
         gpu: &GpuContext,
         shader: &'static str,
         textures: usize,
-        target: wgpu::TextureFormat,
+        targets: &[wgpu::TextureFormat],
     ) -> anyhow::Result<Self> {
         let module = gpu.shader(shader)?;
         let mut entries = vec![wgpu::BindGroupLayoutEntry {
@@ -52,6 +52,10 @@ impl FullscreenPass {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
+        let color_targets: Vec<Option<wgpu::ColorTargetState>> = targets
+            .iter()
+            .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
+            .collect();
         let pipeline = gpu.checked(shader, || {
             gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(shader),
@@ -65,11 +69,7 @@ impl FullscreenPass {
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some("fs_main"),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: target,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
+                    targets: &color_targets,
                     compilation_options: Default::default(),
                 }),
                 primitive: Default::default(),
@@ -88,6 +88,17 @@ impl FullscreenPass {
         uniform: &[u8],
         textures: &[&GpuImage],
         target: &GpuImage,
+    ) -> anyhow::Result<()> {
+        self.run_mrt(gpu, uniform, textures, &[target])
+    }
+
+    /// Like `run`, writing several targets (multiple render targets).
+    pub fn run_mrt(
+        &self,
+        gpu: &GpuContext,
+        uniform: &[u8],
+        textures: &[&GpuImage],
+        targets: &[&GpuImage],
     ) -> anyhow::Result<()> {
         let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(self.name),
@@ -108,19 +119,25 @@ impl FullscreenPass {
                 entries: &entries,
             })
         })?;
+        let attachments: Vec<_> = targets
+            .iter()
+            .map(|t| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view: &t.view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            })
+            .collect();
         let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name) });
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some(self.name),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &target.view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
+                color_attachments: &attachments,
                 depth_stencil_attachment: None,
                 timestamp_writes: gpu.pass_timestamps(),
                 occlusion_query_set: None,

@@ -128,7 +128,7 @@ impl Node for DrawNode {
         if model.determinant().abs() < 1e-12 {
             return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
         }
-        let item = DrawItem { mesh, material, model, detail: cx.bool("detail") };
+        let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None };
         cx.set("scene", Value::Scene(Arc::new(vec![item])));
         Ok(())
     }

@@ -43,7 +43,7 @@ impl Node for TonemapNode {
         };
         let input = input.clone();
         if self.pass.is_none() {
-            self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, LDR_FORMAT)?);
+            self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, &[LDR_FORMAT])?);
         }
         let op = OPERATORS.iter().position(|o| *o == cx.str("operator")).unwrap_or(2);
         let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];

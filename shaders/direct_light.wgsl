@@ -21,12 +21,7 @@ struct Light {
 @group(0) @binding(2) var g_normal: texture_2d<f32>;
 @group(0) @binding(3) var g_depth: texture_2d<f32>;
 
-@vertex
-fn vs_fullscreen(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    // One triangle covering the screen.
-    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
-    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
-}
+// #include "fullscreen.wgsl"
 
 const PI: f32 = 3.14159265;
 

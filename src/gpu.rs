@@ -301,6 +301,17 @@ impl GpuImage {
         GpuImage { texture, view, format, width, height }
     }
 
+    /// Another handle to the same texture (wgpu textures are reference counted).
+    pub fn share(&self) -> GpuImage {
+        GpuImage {
+            texture: self.texture.clone(),
+            view: self.view.clone(),
+            format: self.format,
+            width: self.width,
+            height: self.height,
+        }
+    }
+
     /// A render target that can also be sampled and read back.
     pub fn target(gpu: &GpuContext, label: &str, width: u32, height: u32, format: wgpu::TextureFormat) -> GpuImage {
         GpuImage::new(

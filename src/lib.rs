@@ -18,6 +18,7 @@ pub mod scene;
 pub mod shaders;
 pub mod spec;
 pub mod value;
+pub mod warp;
 
 #[path = "../nodes/mod.rs"]
 pub mod nodes;

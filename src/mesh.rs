@@ -52,11 +52,14 @@ pub struct Vertex {
     pub normal: [f32; 3],
     pub tangent_u: [f32; 3],
     pub uv: [f32; 2],
+    pub tangent_v: [f32; 3],
 }
 
 impl Vertex {
-    pub const ATTRIBUTES: [wgpu::VertexAttribute; 4] =
-        wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x2];
+    pub const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
+        wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x2, 4 => Float32x3];
+    /// Floats per vertex, for shaders that read the vertex buffer as storage.
+    pub const FLOATS: usize = 14;
     pub fn layout() -> wgpu::VertexBufferLayout<'static> {
         wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<Vertex>() as u64,
@@ -180,6 +183,7 @@ impl Mesh {
                     normal: self.normals[i].to_array(),
                     tangent_u: self.tangents_u[i].to_array(),
                     uv: self.uvs[i].to_array(),
+                    tangent_v: self.tangents_v[i].to_array(),
                 })
                 .collect();
             let vertices = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

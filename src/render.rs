@@ -205,7 +205,10 @@ fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
             spec.outputs.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
         );
     };
-    if !matches!(port.ty, crate::spec::PortType::Texture | crate::spec::PortType::GBuffer) {
+    if !matches!(
+        port.ty,
+        crate::spec::PortType::Texture | crate::spec::PortType::GBuffer | crate::spec::PortType::MatrixTexture
+    ) {
         bail!("--dump {text}: the port is a {}, not a texture", port.ty);
     }
     Ok(r)

@@ -94,6 +94,8 @@ pub struct DrawItem {
     pub model: Mat4,
     /// Detail geometry (attachments) versus coarse cloth; written to the G-buffer flag.
     pub detail: bool,
+    /// Set for deferred-warped detail geometry: drawn instanced through the matrix texture.
+    pub attached: Option<Arc<crate::warp::AttachedDraw>>,
 }
 
 /// The deferred renderer's multiple render targets.

@@ -1,20 +1,33 @@
-//! WGSL sources, one file per pass under `shaders/`, embedded in the binary.
+//! WGSL sources, one file per pass under `shaders/`, embedded in the binary. A line
+//! `// #include "name.wgsl"` is replaced by that file, so passes share code (the G-buffer
+//! output, the deferred-warping transform) without copies.
 
-use anyhow::Context as _;
+use anyhow::{Context as _, bail};
 
 const EMBEDDED: &[(&str, &str)] = &[
+    ("gbuffer_common.wgsl", include_str!("../shaders/gbuffer_common.wgsl")),
     ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
+    ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
     ("tonemap.wgsl", include_str!("../shaders/tonemap.wgsl")),
+    ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
+    ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
+    ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
+    ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
+    ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),
 ];
 
 pub fn names() -> impl Iterator<Item = &'static str> {
     EMBEDDED.iter().map(|(n, _)| *n)
 }
 
-/// The source of `shaders/NAME`: from `WERKSTATT_SHADER_DIR` when set (live editing),
-/// otherwise the copy embedded at build time.
+/// The source of `shaders/NAME` with includes expanded: read from `WERKSTATT_SHADER_DIR` when
+/// set (live editing), otherwise the copy embedded at build time.
 pub fn source(name: &str) -> anyhow::Result<String> {
+    expand(name, 0)
+}
+
+fn raw(name: &str) -> anyhow::Result<String> {
     if let Some(dir) = crate::gpu::shader_dir() {
         let path = dir.join(name);
         return std::fs::read_to_string(&path).with_context(|| format!("cannot read shader {}", path.display()));
@@ -24,4 +37,23 @@ pub fn source(name: &str) -> anyhow::Result<String> {
         .find(|(n, _)| *n == name)
         .map(|(_, s)| s.to_string())
         .with_context(|| format!("no shader named {name} is embedded"))
+}
+
+fn expand(name: &str, depth: usize) -> anyhow::Result<String> {
+    if depth > 8 {
+        bail!("shader includes nest too deeply at {name} (a cycle?)");
+    }
+    let text = raw(name)?;
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        match line.trim().strip_prefix("// #include ") {
+            Some(inc) => {
+                let inc = inc.trim().trim_matches('"');
+                out.push_str(&expand(inc, depth + 1).with_context(|| format!("included from {name}"))?);
+            }
+            None => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    Ok(out)
 }

@@ -9,6 +9,7 @@ use crate::gpu::GpuImage;
 use crate::mesh::Mesh;
 use crate::scene::{Camera, DrawItem, GBuffer, Material};
 use crate::spec::PortType;
+use crate::warp::{Curves, MatrixTexture, Placement};
 
 #[derive(Clone)]
 pub enum Value {
@@ -22,6 +23,9 @@ pub enum Value {
     Camera(Camera),
     Texture(Arc<GpuImage>),
     GBuffer(Arc<GBuffer>),
+    MatrixTexture(Arc<MatrixTexture>),
+    Instances(Arc<Vec<Placement>>),
+    Curves(Arc<Curves>),
 }
 
 impl Value {
@@ -36,6 +40,9 @@ impl Value {
             Value::Camera(_) => "Camera",
             Value::Texture(_) => "Texture",
             Value::GBuffer(_) => "GBuffer",
+            Value::MatrixTexture(_) => "MatrixTexture",
+            Value::Instances(_) => "Instances",
+            Value::Curves(_) => "Curves",
         }
     }
 
@@ -51,6 +58,9 @@ impl Value {
                 | (Value::Camera(_), PortType::Camera)
                 | (Value::Texture(_), PortType::Texture)
                 | (Value::GBuffer(_), PortType::GBuffer)
+                | (Value::MatrixTexture(_), PortType::MatrixTexture)
+                | (Value::Instances(_), PortType::Instances)
+                | (Value::Curves(_), PortType::Curves)
         )
     }
 
@@ -65,6 +75,9 @@ impl Value {
             Value::Camera(c) => format!("camera at {:?}", c.eye.to_array()),
             Value::Texture(t) => format!("{}x{} {:?}", t.width, t.height, t.format),
             Value::GBuffer(g) => format!("G-buffer {}x{}", g.width(), g.height()),
+            Value::MatrixTexture(m) => format!("matrix texture {0}x{0}", m.resolution),
+            Value::Instances(p) => format!("{} placements", p.len()),
+            Value::Curves(c) => format!("{} paths, {} Bezier segments", c.paths.len(), c.segment_count()),
         }
     }
 
@@ -73,6 +86,7 @@ impl Value {
         match self {
             Value::Texture(t) => Some(t),
             Value::GBuffer(g) => Some(&g.color),
+            Value::MatrixTexture(m) => Some(&m.col_n),
             _ => None,
         }
     }

@@ -1,0 +1,229 @@
+//! Deferred warping, pass 1: the matrix texture of a surface (paper section 3.2, eq. 3).
+
+use std::sync::Arc;
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::gpu::{GpuContext, GpuImage, read_back};
+use crate::mesh::{Mesh, Vertex};
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
+
+use super::passes::FullscreenPass;
+
+pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
+    kind: "MatrixTexture",
+    category: Category::Attachment,
+    doc: "Renders a surface in UV space into a matrix texture: per texel the orthonormal frame (t_u, n, t_v) and position of eq. (3). Empty texels stay zero so lookups outside the pieces are detected.",
+    inputs: &[PortSpec::required(
+        "surface",
+        PortType::Surface,
+        "The deformed surface; its UVs are the packed pattern coordinates.",
+    )],
+    outputs: &[
+        PortSpec::output("matrix", PortType::MatrixTexture, "The matrix texture, for attachment nodes."),
+        PortSpec::output("normal", PortType::Texture, "The normal column (n in rgb, position y in a), for inspection."),
+        PortSpec::output("min_resolution", PortType::Scalar, "The sampling-theorem minimum: 2 / shortest UV edge."),
+    ],
+    params: &[
+        ParamSpec::new(
+            "resolution",
+            ParamKind::Int { default: 512, min: 8, max: 8192 },
+            "Width and height in texels (the paper used 512).",
+        ),
+        ParamSpec::new(
+            "precision",
+            ParamKind::Choice { default: "f32", options: &["f32", "f16"] },
+            "Texel format: Rgba32Float, or Rgba16Float (half the memory, about 1e-3 relative position error).",
+        ),
+        ParamSpec::new(
+            "filter_radius",
+            ParamKind::Int { default: 0, min: 0, max: 32 },
+            "Low-pass filter of the orientation field in texels (0 = off), against self-intersections of tall details.",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(MatrixTextureNode::default()),
+};
+
+#[derive(Default)]
+pub struct MatrixTextureNode {
+    pipeline: Option<(wgpu::RenderPipeline, wgpu::TextureFormat)>,
+    filter: Option<(FullscreenPass, wgpu::TextureFormat)>,
+}
+
+/// The shortest triangle edge in UV space; the sampling theorem asks for at least two texels
+/// across it (dissertation section 4.1.2).
+pub fn min_resolution(mesh: &Mesh) -> f64 {
+    let mut shortest = f32::MAX;
+    for t in mesh.indices.chunks_exact(3) {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let e = (mesh.uvs[a as usize] - mesh.uvs[b as usize]).length();
+            if e > 0.0 {
+                shortest = shortest.min(e);
+            }
+        }
+    }
+    if shortest == f32::MAX { 0.0 } else { (2.0 / shortest as f64).ceil() }
+}
+
+impl MatrixTextureNode {
+    fn pipeline(&mut self, gpu: &GpuContext, format: wgpu::TextureFormat) -> anyhow::Result<&wgpu::RenderPipeline> {
+        if self.pipeline.as_ref().is_none_or(|(_, f)| *f != format) {
+            let module = gpu.shader("matrix_texture.wgsl")?;
+            let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("matrix texture"),
+                bind_group_layouts: &[],
+                immediate_size: 0,
+            });
+            let target = Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
+            let pipeline = gpu.checked("matrix_texture.wgsl", || {
+                gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some("matrix texture"),
+                    layout: Some(&layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some("vs_main"),
+                        buffers: &[Some(Vertex::layout())],
+                        compilation_options: Default::default(),
+                    },
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some("fs_main"),
+                        targets: &[target.clone(), target.clone(), target],
+                        compilation_options: Default::default(),
+                    }),
+                    primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                    depth_stencil: None,
+                    multisample: Default::default(),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            })?;
+            self.pipeline = Some((pipeline, format));
+        }
+        Ok(&self.pipeline.as_ref().expect("created above").0)
+    }
+
+    /// Renders the matrix texture of `mesh`; used by the node and by benchmarks.
+    pub fn render(
+        &mut self,
+        gpu: &GpuContext,
+        mesh: &Mesh,
+        resolution: u32,
+        format: wgpu::TextureFormat,
+        filter_radius: u32,
+    ) -> anyhow::Result<MatrixTexture> {
+        let make = |name| GpuImage::target(gpu, name, resolution, resolution, format);
+        let (col_u, col_n, col_v) = (make("matrix t_u"), make("matrix n"), make("matrix t_v"));
+        let gpu_mesh = mesh.gpu(gpu);
+        let pipeline = self.pipeline(gpu, format)?;
+        let mut enc =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matrix texture") });
+        {
+            let clear = |view| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            };
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("matrix texture"),
+                color_attachments: &[clear(&col_u.view), clear(&col_n.view), clear(&col_v.view)],
+                depth_stencil_attachment: None,
+                timestamp_writes: gpu.pass_timestamps(),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_vertex_buffer(0, gpu_mesh.vertices.slice(..));
+            pass.set_index_buffer(gpu_mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
+        }
+        gpu.queue.submit([enc.finish()]);
+        let mut m = MatrixTexture { col_u, col_n, col_v, resolution };
+        if filter_radius > 0 {
+            if self.filter.as_ref().is_none_or(|(_, f)| *f != format) {
+                self.filter = Some((FullscreenPass::new(gpu, "matrix_filter.wgsl", 3, &[format; 3])?, format));
+            }
+            let (pass, _) = self.filter.as_ref().expect("created above");
+            for dir in [[1.0f32, 0.0], [0.0, 1.0]] {
+                let out = MatrixTexture {
+                    col_u: make("matrix t_u"),
+                    col_n: make("matrix n"),
+                    col_v: make("matrix t_v"),
+                    resolution,
+                };
+                let params = [dir[0], dir[1], filter_radius as f32, 0.0];
+                pass.run_mrt(
+                    gpu,
+                    bytemuck::cast_slice(&params),
+                    &[&m.col_u, &m.col_n, &m.col_v],
+                    &[&out.col_u, &out.col_n, &out.col_v],
+                )?;
+                m = out;
+            }
+        }
+        let errors = gpu.take_errors();
+        if !errors.is_empty() {
+            anyhow::bail!("GPU error: {}", errors.join("; "));
+        }
+        Ok(m)
+    }
+}
+
+impl Node for MatrixTextureNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let Value::Mesh(mesh) = cx.required("surface")? else {
+            return Err(NodeError::msg("surface input is not a surface"));
+        };
+        let mesh = mesh.clone();
+        let resolution = cx.int("resolution") as u32;
+        if resolution > gpu.limits.max_texture_dimension_2d {
+            return Err(NodeError::msg(format!(
+                "resolution {resolution} exceeds this adapter's texture limit {}",
+                gpu.limits.max_texture_dimension_2d
+            )));
+        }
+        let min_res = min_resolution(&mesh);
+        if (resolution as f64) < min_res {
+            cx.warn(format!(
+                "resolution {resolution} is below the sampling minimum {min_res} (2 texels across the shortest UV edge); small triangles will be undersampled"
+            ));
+        }
+        if mesh.uvs.iter().any(|uv| uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0) {
+            cx.warn("some UVs lie outside [0,1]^2; those parts of the surface are not in the matrix texture");
+        }
+        let format = if cx.str("precision") == "f16" {
+            wgpu::TextureFormat::Rgba16Float
+        } else {
+            wgpu::TextureFormat::Rgba32Float
+        };
+        let m = self.render(gpu, &mesh, resolution, format, cx.int("filter_radius") as u32)?;
+        cx.set("normal", Value::Texture(Arc::new(m.col_n.share())));
+        cx.set("matrix", Value::MatrixTexture(Arc::new(m)));
+        cx.set("min_resolution", Value::Scalar(min_res));
+        Ok(())
+    }
+}
+
+/// Copies a matrix texture to the CPU.
+pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<MatrixTexels> {
+    let (u, n, v) = (read_back(gpu, &m.col_u)?, read_back(gpu, &m.col_n)?, read_back(gpu, &m.col_v)?);
+    let v3 = |px: &[f32], i: usize| glam::Vec3::new(px[4 * i], px[4 * i + 1], px[4 * i + 2]);
+    let frames = (0..(m.resolution * m.resolution) as usize)
+        .map(|i| TexelFrame {
+            tu: v3(&u.rgba, i),
+            n: v3(&n.rgba, i),
+            tv: v3(&v.rgba, i),
+            p: glam::Vec3::new(u.rgba[4 * i + 3], n.rgba[4 * i + 3], v.rgba[4 * i + 3]),
+        })
+        .collect();
+    Ok(MatrixTexels { resolution: m.resolution, frames })
+}

@@ -1,0 +1,364 @@
+//! Where detail geometry goes: placement generators (scatter, grid, along curves) and a
+//! designer's placement file.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::{Context as _, bail};
+use glam::Vec2;
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::mesh::Mesh;
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+use crate::warp::{ArcTable, Placement, bezier, bezier_tangent};
+
+const REGION: [ParamSpec; 4] = [
+    ParamSpec::new("u_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest u."),
+    ParamSpec::new("u_max", ParamKind::Float { default: 1.0, min: 0.0, max: 1.0 }, "Region: highest u."),
+    ParamSpec::new("v_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest v."),
+    ParamSpec::new("v_max", ParamKind::Float { default: 1.0, min: 0.0, max: 1.0 }, "Region: highest v."),
+];
+
+/// SplitMix64: a small, fixed generator, so a seed gives the same layout in every build.
+pub struct SplitMix(u64);
+
+impl SplitMix {
+    pub fn new(seed: u64) -> Self {
+        SplitMix(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Which pattern piece covers a UV point: a uniform grid over the surface's UV triangles.
+pub struct UvCoverage<'a> {
+    mesh: &'a Mesh,
+    cells: Vec<Vec<u32>>,
+    n: usize,
+}
+
+impl<'a> UvCoverage<'a> {
+    pub fn new(mesh: &'a Mesh) -> Self {
+        let n = ((mesh.triangle_count() as f64).sqrt() as usize).clamp(1, 512);
+        let mut cells = vec![Vec::new(); n * n];
+        for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+            let uv = [mesh.uvs[tri[0] as usize], mesh.uvs[tri[1] as usize], mesh.uvs[tri[2] as usize]];
+            let lo = uv[0].min(uv[1]).min(uv[2]);
+            let hi = uv[0].max(uv[1]).max(uv[2]);
+            let cell = |x: f32| ((x * n as f32) as isize).clamp(0, n as isize - 1) as usize;
+            for cy in cell(lo.y)..=cell(hi.y) {
+                for cx in cell(lo.x)..=cell(hi.x) {
+                    cells[cy * n + cx].push(t as u32);
+                }
+            }
+        }
+        UvCoverage { mesh, cells, n }
+    }
+
+    /// The piece id at `uv`, if a triangle covers it.
+    pub fn piece_at(&self, uv: Vec2) -> Option<u32> {
+        if !(0.0..=1.0).contains(&uv.x) || !(0.0..=1.0).contains(&uv.y) {
+            return None;
+        }
+        let cell = |x: f32| ((x * self.n as f32) as usize).min(self.n - 1);
+        for &t in &self.cells[cell(uv.y) * self.n + cell(uv.x)] {
+            let i = &self.mesh.indices[3 * t as usize..3 * t as usize + 3];
+            let [a, b, c] = [self.mesh.uvs[i[0] as usize], self.mesh.uvs[i[1] as usize], self.mesh.uvs[i[2] as usize]];
+            let d = (b - a).perp_dot(c - a);
+            if d.abs() < 1e-20 {
+                continue;
+            }
+            let (l1, l2) = ((uv - a).perp_dot(c - a) / d, (b - a).perp_dot(uv - a) / d);
+            if l1 >= 0.0 && l2 >= 0.0 && l1 + l2 <= 1.0 {
+                return Some(self.mesh.piece_ids.get(i[0] as usize).copied().unwrap_or(0));
+            }
+        }
+        None
+    }
+}
+
+fn region(cx: &EvalCx<'_>) -> Result<(Vec2, Vec2), NodeError> {
+    let lo = Vec2::new(cx.f32("u_min"), cx.f32("v_min"));
+    let hi = Vec2::new(cx.f32("u_max"), cx.f32("v_max"));
+    if lo.x >= hi.x || lo.y >= hi.y {
+        return Err(NodeError::msg("the region is empty: u_min must be below u_max and v_min below v_max"));
+    }
+    Ok((lo, hi))
+}
+
+fn surface_input(cx: &EvalCx<'_>) -> Option<Arc<Mesh>> {
+    match cx.input("surface") {
+        Some(Value::Mesh(m)) => Some(m.clone()),
+        _ => None,
+    }
+}
+
+pub static SCATTER: NodeSpec = NodeSpec {
+    kind: "Scatter",
+    category: Category::Attachment,
+    doc: "Random placements in a UV region with a minimum spacing (dart throwing, seeded); with a surface, only where a pattern piece covers the point.",
+    inputs: &[PortSpec::optional(
+        "surface",
+        PortType::Surface,
+        "Keeps placements on the pieces and records their piece id.",
+    )],
+    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    params: &[
+        ParamSpec::new(
+            "count",
+            ParamKind::Int { default: 500, min: 0, max: 10_000_000 },
+            "How many placements to try to make.",
+        ),
+        ParamSpec::new(
+            "min_spacing",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
+            "Minimum UV distance between placements (0 = none).",
+        ),
+        ParamSpec::new("seed", ParamKind::Int { default: 1, min: 0, max: i64::MAX }, "Random seed."),
+        ParamSpec::new("scale_min", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Smallest random scale."),
+        ParamSpec::new("scale_max", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Largest random scale."),
+        ParamSpec::new("random_angle", ParamKind::Bool { default: true }, "Random rotation about the normal."),
+        REGION[0],
+        REGION[1],
+        REGION[2],
+        REGION[3],
+    ],
+    is_output: false,
+    create: || Box::new(ScatterNode),
+};
+
+struct ScatterNode;
+impl Node for ScatterNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let (lo, hi) = region(cx)?;
+        let surface = surface_input(cx);
+        let coverage = surface.as_deref().map(UvCoverage::new);
+        let count = cx.int("count") as usize;
+        let spacing = cx.f32("min_spacing");
+        let (smin, smax) = (cx.f32("scale_min"), cx.f32("scale_max").max(cx.f32("scale_min")));
+        let mut rng = SplitMix::new(cx.int("seed") as u64);
+        // Spatial hash of accepted points for the spacing test.
+        let cell = spacing.max(1e-6);
+        let mut grid: std::collections::BTreeMap<(i32, i32), Vec<Vec2>> = Default::default();
+        let mut out = Vec::with_capacity(count);
+        let attempts = count.saturating_mul(if spacing > 0.0 { 30 } else { 4 }).max(count);
+        for _ in 0..attempts {
+            if out.len() >= count {
+                break;
+            }
+            let uv = lo + (hi - lo) * Vec2::new(rng.next_f32(), rng.next_f32());
+            let (angle, scale) = (rng.next_f32() * 360.0, smin + (smax - smin) * rng.next_f32());
+            let piece = match &coverage {
+                Some(c) => match c.piece_at(uv) {
+                    Some(p) => p,
+                    None => continue,
+                },
+                None => 0,
+            };
+            if spacing > 0.0 {
+                let key = ((uv.x / cell).floor() as i32, (uv.y / cell).floor() as i32);
+                let near = (-1..=1).any(|dy| {
+                    (-1..=1).any(|dx| {
+                        grid.get(&(key.0 + dx, key.1 + dy))
+                            .is_some_and(|pts| pts.iter().any(|p| p.distance(uv) < spacing))
+                    })
+                });
+                if near {
+                    continue;
+                }
+                grid.entry(key).or_default().push(uv);
+            }
+            out.push(Placement {
+                piece,
+                u: uv.x,
+                v: uv.y,
+                angle: if cx.bool("random_angle") { angle } else { 0.0 },
+                scale,
+            });
+        }
+        if out.len() < count {
+            cx.warn(format!("placed {} of {count}: the region is full at this spacing or coverage", out.len()));
+        }
+        cx.set("placements", Value::Instances(Arc::new(out)));
+        Ok(())
+    }
+}
+
+pub static GRID_PLACEMENT: NodeSpec = NodeSpec {
+    kind: "GridPlacement",
+    category: Category::Attachment,
+    doc: "Placements on a regular grid over a UV region (cell centres); with a surface, only where a piece covers the point.",
+    inputs: &[PortSpec::optional(
+        "surface",
+        PortType::Surface,
+        "Keeps placements on the pieces and records their piece id.",
+    )],
+    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    params: &[
+        ParamSpec::new("columns", ParamKind::Int { default: 8, min: 1, max: 100_000 }, "Cells along u."),
+        ParamSpec::new("rows", ParamKind::Int { default: 8, min: 1, max: 100_000 }, "Cells along v."),
+        ParamSpec::new(
+            "angle",
+            ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
+            "Rotation about the normal, degrees.",
+        ),
+        ParamSpec::new("scale", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Scale of each placement."),
+        REGION[0],
+        REGION[1],
+        REGION[2],
+        REGION[3],
+    ],
+    is_output: false,
+    create: || Box::new(GridNode),
+};
+
+struct GridNode;
+impl Node for GridNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let (lo, hi) = region(cx)?;
+        let surface = surface_input(cx);
+        let coverage = surface.as_deref().map(UvCoverage::new);
+        let (cols, rows) = (cx.int("columns") as usize, cx.int("rows") as usize);
+        if cols * rows > 10_000_000 {
+            return Err(NodeError::msg(format!("{cols} x {rows} placements is more than the limit of 10 million")));
+        }
+        let mut out = Vec::with_capacity(cols * rows);
+        for r in 0..rows {
+            for c in 0..cols {
+                let uv = lo + (hi - lo) * Vec2::new((c as f32 + 0.5) / cols as f32, (r as f32 + 0.5) / rows as f32);
+                let piece = match &coverage {
+                    Some(cov) => match cov.piece_at(uv) {
+                        Some(p) => p,
+                        None => continue,
+                    },
+                    None => 0,
+                };
+                out.push(Placement { piece, u: uv.x, v: uv.y, angle: cx.f32("angle"), scale: cx.f32("scale") });
+            }
+        }
+        cx.set("placements", Value::Instances(Arc::new(out)));
+        Ok(())
+    }
+}
+
+pub static CURVE_PLACEMENT: NodeSpec = NodeSpec {
+    kind: "CurvePlacement",
+    category: Category::Attachment,
+    doc: "Placements at equal arc-length steps along curves (buttons along a placket), turned to the curve direction.",
+    inputs: &[PortSpec::required("curves", PortType::Curves, "Curves in UV space.")],
+    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    params: &[
+        ParamSpec::new(
+            "spacing",
+            ParamKind::Float { default: 0.05, min: 1e-5, max: 1.0 },
+            "UV distance between placements.",
+        ),
+        ParamSpec::new(
+            "angle",
+            ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
+            "Added rotation, degrees.",
+        ),
+        ParamSpec::new("scale", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Scale of each placement."),
+    ],
+    is_output: false,
+    create: || Box::new(CurvePlacementNode),
+};
+
+struct CurvePlacementNode;
+impl Node for CurvePlacementNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let Value::Curves(curves) = cx.required("curves")? else {
+            return Err(NodeError::msg("curves input is not curves"));
+        };
+        let curves = curves.clone();
+        let spacing = cx.f32("spacing");
+        let mut out = Vec::new();
+        for path in &curves.paths {
+            let table = ArcTable::new(path, 32);
+            let n = (table.length() / spacing).floor() as usize;
+            for i in 0..=n {
+                let (seg, t) = table.at(i as f32 * spacing);
+                let p = bezier(&path[seg], t);
+                let d = bezier_tangent(&path[seg], t);
+                // Angle about the normal from +u towards +v, matching M_tan's rotation.
+                let angle = -d.y.atan2(d.x).to_degrees() + cx.f32("angle");
+                out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
+            }
+        }
+        cx.set("placements", Value::Instances(Arc::new(out)));
+        Ok(())
+    }
+}
+
+pub static PLACEMENT_FILE: NodeSpec = NodeSpec {
+    kind: "PlacementFile",
+    category: Category::Attachment,
+    doc: "Loads a designer's layout: CSV with a header `piece,u,v,angle,scale` (angle in degrees), or RON: a list of (piece, u, v, angle, scale).",
+    inputs: &[],
+    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    params: &[ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["csv", "ron"] }, "The layout file.")],
+    is_output: false,
+    create: || Box::new(PlacementFileNode),
+};
+
+struct PlacementFileNode;
+impl Node for PlacementFileNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        if cx.str("path").is_empty() {
+            return Err(NodeError::msg("parameter \"path\" is empty: name a .csv or .ron layout"));
+        }
+        let path = cx.path("path");
+        let placements = cx.load(&path, load_placements)?;
+        cx.set("placements", Value::Instances(Arc::new((*placements).clone())));
+        Ok(())
+    }
+}
+
+/// Parses a placement file; errors name the file and line.
+pub fn load_placements(path: &Path) -> anyhow::Result<Vec<Placement>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let rows: Vec<(u32, f32, f32, f32, f32)> = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ron")) {
+        ron::from_str(&text).map_err(|e| anyhow::anyhow!("{}:{}: {}", path.display(), e.span.start, e.code))?
+    } else {
+        let mut rows = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') || (i == 0 && line.starts_with("piece")) {
+                continue;
+            }
+            let f: Vec<&str> = line.split(',').map(str::trim).collect();
+            if f.len() != 5 {
+                bail!("{}:{}: expected 5 fields piece,u,v,angle,scale, found {}", path.display(), i + 1, f.len());
+            }
+            let num = |k: usize| -> anyhow::Result<f32> {
+                f[k].parse::<f32>().ok().filter(|x| x.is_finite()).with_context(|| {
+                    format!("{}:{}: field {} (\"{}\") is not a number", path.display(), i + 1, k + 1, f[k])
+                })
+            };
+            let piece = f[0]
+                .parse::<u32>()
+                .with_context(|| format!("{}:{}: piece \"{}\" is not a whole number", path.display(), i + 1, f[0]))?;
+            rows.push((piece, num(1)?, num(2)?, num(3)?, num(4)?));
+        }
+        rows
+    };
+    rows.into_iter()
+        .enumerate()
+        .map(|(i, (piece, u, v, angle, scale))| {
+            if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) {
+                bail!("{}: placement {} has (u, v) = ({u}, {v}) outside [0, 1]", path.display(), i + 1);
+            }
+            Ok(Placement { piece, u, v, angle, scale })
+        })
+        .collect()
+}

@@ -1,0 +1,58 @@
+// Low-pass filter of the matrix texture's orientation field (paper section 6, "Flexibility"):
+// a separable box filter over valid texels of the same piece neighbourhood, positions left
+// as they are, frames re-orthonormalized. It smooths sudden orientation changes that make
+// tall attached geometry intersect itself.
+
+// #include "fullscreen.wgsl"
+
+struct Params {
+    // xy: step direction in texels, z: radius in texels.
+    dir_radius: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var col_u: texture_2d<f32>;
+@group(0) @binding(2) var col_n: texture_2d<f32>;
+@group(0) @binding(3) var col_v: texture_2d<f32>;
+
+struct MatrixOut {
+    @location(0) col_u: vec4<f32>,
+    @location(1) col_n: vec4<f32>,
+    @location(2) col_v: vec4<f32>,
+};
+
+@fragment
+fn fs_main(@builtin(position) frag: vec4<f32>) -> MatrixOut {
+    let px = vec2<i32>(frag.xy);
+    let dims = vec2<i32>(textureDimensions(col_n));
+    let centre_n = textureLoad(col_n, px, 0);
+    var out: MatrixOut;
+    out.col_u = textureLoad(col_u, px, 0);
+    out.col_n = centre_n;
+    out.col_v = textureLoad(col_v, px, 0);
+    if dot(centre_n.xyz, centre_n.xyz) < 0.25 {
+        return out; // empty texel stays zero
+    }
+    let radius = i32(params.dir_radius.z);
+    let dir = vec2<i32>(params.dir_radius.xy);
+    var su = vec3<f32>(0.0);
+    var sn = vec3<f32>(0.0);
+    var sv = vec3<f32>(0.0);
+    for (var k = -radius; k <= radius; k = k + 1) {
+        let q = clamp(px + dir * k, vec2<i32>(0), dims - 1);
+        let n = textureLoad(col_n, q, 0).xyz;
+        if dot(n, n) < 0.25 {
+            continue;
+        }
+        su = su + textureLoad(col_u, q, 0).xyz;
+        sn = sn + n;
+        sv = sv + textureLoad(col_v, q, 0).xyz;
+    }
+    let n = normalize(sn);
+    let tu = normalize(su - n * dot(n, su));
+    let tv = normalize(sv - n * dot(n, sv) - tu * dot(tu, sv));
+    out.col_u = vec4<f32>(tu, out.col_u.w);
+    out.col_n = vec4<f32>(n, centre_n.w);
+    out.col_v = vec4<f32>(tv, out.col_v.w);
+    return out;
+}

@@ -1,0 +1,359 @@
+//! Deferred warping data (Knuth et al., "Deferred Warping"): the matrix texture, placements,
+//! curves, per-instance transforms, and a CPU reference of the warp used by the CPU
+//! benchmark path and by tests to cross-check the GPU.
+
+use std::sync::Arc;
+
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+
+use crate::gpu::GpuImage;
+use crate::mesh::Mesh;
+
+/// The matrix texture: per texel the 3x4 matrix [t_u n t_v p] of eq. (3), as three RGBA
+/// textures holding one column each plus one position component in w.
+pub struct MatrixTexture {
+    pub col_u: GpuImage,
+    pub col_n: GpuImage,
+    pub col_v: GpuImage,
+    pub resolution: u32,
+}
+
+/// A frame read back from the matrix texture (for tests and CPU paths).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelFrame {
+    pub tu: Vec3,
+    pub n: Vec3,
+    pub tv: Vec3,
+    pub p: Vec3,
+}
+
+/// A matrix texture copied to the CPU.
+pub struct MatrixTexels {
+    pub resolution: u32,
+    pub frames: Vec<TexelFrame>,
+}
+
+impl MatrixTexels {
+    pub fn at(&self, x: u32, y: u32) -> TexelFrame {
+        self.frames[(y * self.resolution + x) as usize]
+    }
+
+    pub fn is_empty_texel(&self, x: u32, y: u32) -> bool {
+        self.at(x, y).n.length_squared() < 0.25
+    }
+
+    /// The CPU twin of `lookup_frame` in shaders/warp.wgsl.
+    pub fn lookup(&self, uv: Vec2, min_weight: f32) -> Option<TexelFrame> {
+        let res = self.resolution as i32;
+        let st = uv * self.resolution as f32 - Vec2::splat(0.5);
+        let base = st.floor();
+        let f = st - base;
+        let (mut su, mut sn, mut sv, mut sp, mut weight) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0);
+        for k in 0..4 {
+            let (ox, oy) = (k & 1, k >> 1);
+            let (qx, qy) = (base.x as i32 + ox, base.y as i32 + oy);
+            if qx < 0 || qy < 0 || qx >= res || qy >= res {
+                continue;
+            }
+            let t = self.at(qx as u32, qy as u32);
+            if t.n.length_squared() < 0.25 {
+                continue;
+            }
+            let w = if ox == 1 { f.x } else { 1.0 - f.x } * if oy == 1 { f.y } else { 1.0 - f.y };
+            su += w * t.tu;
+            sn += w * t.n;
+            sv += w * t.tv;
+            sp += w * t.p;
+            weight += w;
+        }
+        if weight < min_weight.max(1e-6) {
+            return None;
+        }
+        let (u, n, v) = (su / weight, sn / weight, sv / weight);
+        if (n.length() - 1.0).abs() >= 0.25 || (u.length() - 1.0).abs() >= 0.25 {
+            return None;
+        }
+        let n = n.normalize();
+        let tu = (u - n * n.dot(u)).normalize();
+        let tv = (v - n * n.dot(v) - tu * tu.dot(v)).normalize();
+        Some(TexelFrame { tu, n, tv, p: sp / weight })
+    }
+}
+
+/// How detail geometry is attached (paper sections 3.3-3.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WarpMode {
+    Point = 0,
+    Area = 1,
+    Curve = 2,
+    CurveAligned = 3,
+}
+
+/// One placement of detail geometry in texture space (a designer's layout row).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    pub piece: u32,
+    pub u: f32,
+    pub v: f32,
+    /// Rotation about the surface normal, degrees.
+    pub angle: f32,
+    pub scale: f32,
+}
+
+/// Cubic Bezier segments in UV space (control points p0..p3), grouped into paths.
+#[derive(Clone, Debug, Default)]
+pub struct Curves {
+    pub paths: Vec<Vec<[Vec2; 4]>>,
+}
+
+impl Curves {
+    pub fn segment_count(&self) -> usize {
+        self.paths.iter().map(Vec::len).sum()
+    }
+}
+
+pub fn bezier(c: &[Vec2; 4], t: f32) -> Vec2 {
+    let s = 1.0 - t;
+    c[0] * (s * s * s) + c[1] * (3.0 * s * s * t) + c[2] * (3.0 * s * t * t) + c[3] * (t * t * t)
+}
+
+pub fn bezier_tangent(c: &[Vec2; 4], t: f32) -> Vec2 {
+    let s = 1.0 - t;
+    (c[1] - c[0]) * (3.0 * s * s) + (c[2] - c[1]) * (6.0 * s * t) + (c[3] - c[2]) * (3.0 * t * t)
+}
+
+/// Arc length along a path, sampled: (segment, t, cumulative length) per sample.
+pub struct ArcTable {
+    samples: Vec<(usize, f32, f32)>,
+}
+
+impl ArcTable {
+    pub fn new(path: &[[Vec2; 4]], per_segment: usize) -> ArcTable {
+        let mut samples = vec![(0, 0.0, 0.0)];
+        let mut total = 0.0;
+        for (i, seg) in path.iter().enumerate() {
+            let mut prev = bezier(seg, 0.0);
+            for k in 1..=per_segment {
+                let t = k as f32 / per_segment as f32;
+                let p = bezier(seg, t);
+                total += (p - prev).length();
+                prev = p;
+                samples.push((i, t, total));
+            }
+        }
+        ArcTable { samples }
+    }
+
+    pub fn length(&self) -> f32 {
+        self.samples.last().map_or(0.0, |s| s.2)
+    }
+
+    /// The (segment, t) at arc length `s`, interpolating between samples.
+    pub fn at(&self, s: f32) -> (usize, f32) {
+        let i = self.samples.partition_point(|x| x.2 < s).clamp(1, self.samples.len().max(2) - 1);
+        let (a, b) = (self.samples[i - 1], self.samples[i]);
+        if a.0 != b.0 {
+            return (b.0, (b.1 * (s - a.2) / (b.2 - a.2).max(1e-12)).clamp(0.0, 1.0));
+        }
+        let w = ((s - a.2) / (b.2 - a.2).max(1e-12)).clamp(0.0, 1.0);
+        (a.0, a.1 + (b.1 - a.1) * w)
+    }
+}
+
+/// Per-instance data, laid out as the `Instance` struct of shaders/warp.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct InstanceData {
+    /// Rows of M_tex (2x3): u' = dot(row0.xyz, (u, v, 1)).
+    pub m_tex0: [f32; 4],
+    pub m_tex1: [f32; 4],
+    /// Columns of M_tan.
+    pub m_tan: [[f32; 4]; 4],
+    pub curve01: [f32; 4],
+    pub curve23: [f32; 4],
+    /// t0, t1, z0, z1.
+    pub range: [f32; 4],
+}
+
+impl InstanceData {
+    pub const ATTRIBUTES: [wgpu::VertexAttribute; 9] = wgpu::vertex_attr_array![
+        5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4, 9 => Float32x4,
+        10 => Float32x4, 11 => Float32x4, 12 => Float32x4, 13 => Float32x4
+    ];
+
+    pub fn layout() -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<InstanceData>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &Self::ATTRIBUTES,
+        }
+    }
+
+    /// M_tex as an affine map of UV space: scale, rotation (degrees) and translation.
+    pub fn with_tex(mut self, m: glam::Affine2) -> Self {
+        let (c0, c1, t) = (m.matrix2.x_axis, m.matrix2.y_axis, m.translation);
+        self.m_tex0 = [c0.x, c1.x, t.x, 0.0];
+        self.m_tex1 = [c0.y, c1.y, t.y, 0.0];
+        self
+    }
+
+    pub fn with_tan(mut self, m: Mat4) -> Self {
+        self.m_tan = m.to_cols_array_2d();
+        self
+    }
+
+    pub fn with_curve(mut self, c: &[Vec2; 4], t0: f32, t1: f32, z0: f32, z1: f32) -> Self {
+        self.curve01 = [c[0].x, c[0].y, c[1].x, c[1].y];
+        self.curve23 = [c[2].x, c[2].y, c[3].x, c[3].y];
+        self.range = [t0, t1, z0, z1];
+        self
+    }
+
+    pub fn identity() -> Self {
+        InstanceData::default().with_tex(glam::Affine2::IDENTITY).with_tan(Mat4::IDENTITY)
+    }
+
+    fn curve(&self) -> [Vec2; 4] {
+        [
+            Vec2::new(self.curve01[0], self.curve01[1]),
+            Vec2::new(self.curve01[2], self.curve01[3]),
+            Vec2::new(self.curve23[0], self.curve23[1]),
+            Vec2::new(self.curve23[2], self.curve23[3]),
+        ]
+    }
+}
+
+/// Uniform settings of one attachment draw, laid out as `Warp` in shaders/warp.wgsl.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WarpSettings {
+    pub mode: WarpMode,
+    /// Fur gravity c of eq. (11); 0 = off.
+    pub gravity: f32,
+    /// Lowest accepted sum of bilinear weights of valid texels; below it a vertex is an outlier.
+    pub min_weight: f32,
+}
+
+impl WarpSettings {
+    pub fn uniform(&self) -> [f32; 4] {
+        [self.mode as u32 as f32, self.gravity, self.min_weight, 0.0]
+    }
+}
+
+/// Attached detail geometry as drawn by the G-buffer pass.
+pub struct AttachedDraw {
+    pub matrix: Arc<MatrixTexture>,
+    pub settings: WarpSettings,
+    pub instances: Arc<Vec<InstanceData>>,
+    instance_buffer: std::sync::OnceLock<wgpu::Buffer>,
+}
+
+impl AttachedDraw {
+    pub fn new(matrix: Arc<MatrixTexture>, settings: WarpSettings, instances: Vec<InstanceData>) -> Self {
+        AttachedDraw { matrix, settings, instances: Arc::new(instances), instance_buffer: Default::default() }
+    }
+
+    pub fn instance_buffer(&self, gpu: &crate::gpu::GpuContext) -> &wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.instance_buffer.get_or_init(|| {
+            let bytes: &[u8] = if self.instances.is_empty() {
+                &[0u8; std::mem::size_of::<InstanceData>()]
+            } else {
+                bytemuck::cast_slice(&self.instances)
+            };
+            gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("attachment instances"),
+                contents: bytes,
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
+            })
+        })
+    }
+}
+
+/// A warped vertex from the CPU reference.
+#[derive(Clone, Copy, Debug)]
+pub struct WarpedVertex {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub valid: bool,
+}
+
+/// The CPU reference of `warp_vertex` in shaders/warp.wgsl (eqs. 1-12).
+pub fn warp_vertex_cpu(
+    texels: &MatrixTexels,
+    s: &WarpSettings,
+    inst: &InstanceData,
+    p: Vec3,
+    normal: Vec3,
+) -> WarpedVertex {
+    let mut uv_in = Vec2::ZERO;
+    let mut f_map = p.extend(1.0);
+    let mut n_local = normal;
+    match s.mode {
+        WarpMode::Point => {}
+        WarpMode::Area => {
+            uv_in = Vec2::new(p.x, p.z);
+            f_map = Vec4::new(0.0, p.y, 0.0, 1.0);
+        }
+        WarpMode::Curve | WarpMode::CurveAligned => {
+            let c = inst.curve();
+            let r = inst.range;
+            let sz = (p.z - r[2]) / (r[3] - r[2]).max(1e-12);
+            let t = r[0] + (r[1] - r[0]) * sz;
+            uv_in = bezier(&c, t);
+            f_map = Vec4::new(p.x, p.y, 0.0, 1.0);
+            if s.mode == WarpMode::CurveAligned {
+                let d = bezier_tangent(&c, t).normalize();
+                let nc = Vec2::new(-d.y, d.x);
+                f_map = Vec4::new(nc.x * p.x, p.y, nc.y * p.x, 1.0);
+                n_local = normal.x * Vec3::new(nc.x, 0.0, nc.y)
+                    + Vec3::new(0.0, normal.y, 0.0)
+                    + normal.z * Vec3::new(d.x, 0.0, d.y);
+            }
+        }
+    }
+    let h = uv_in.extend(1.0);
+    let uv = Vec2::new(Vec3::from_slice(&inst.m_tex0).dot(h), Vec3::from_slice(&inst.m_tex1).dot(h));
+    let Some(f) = texels.lookup(uv, s.min_weight) else {
+        return WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false };
+    };
+    let m_tan = Mat4::from_cols_array_2d(&inst.m_tan);
+    let q = m_tan * f_map;
+    let mut position = f.tu * q.x + f.n * q.y + f.tv * q.z + f.p;
+    let nt = Mat3::from_mat4(m_tan).inverse().transpose() * n_local;
+    let normal = (f.tu * nt.x + f.n * nt.y + f.tv * nt.z).normalize();
+    if s.gravity > 0.0 {
+        let bent = position - Vec3::new(0.0, s.gravity * q.y * q.y, 0.0);
+        let len = (position - f.p).length();
+        let dir = bent - f.p;
+        if dir.length_squared() > 1e-20 {
+            position = f.p + len * dir.normalize();
+        }
+    }
+    WarpedVertex { position, normal, valid: true }
+}
+
+/// Warps every instance of `mesh` on the CPU with all threads: the classic path the paper
+/// compares against (the result would be uploaded every frame).
+pub fn warp_all_cpu(
+    texels: &MatrixTexels,
+    s: &WarpSettings,
+    mesh: &Mesh,
+    instances: &[InstanceData],
+) -> Vec<WarpedVertex> {
+    let n = mesh.positions.len();
+    let mut out = vec![WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false }; n * instances.len()];
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).max(1);
+    let chunk = instances.len().div_ceil(threads).max(1);
+    std::thread::scope(|scope| {
+        for (insts, outs) in instances.chunks(chunk).zip(out.chunks_mut(chunk * n)) {
+            scope.spawn(move || {
+                for (inst, o) in insts.iter().zip(outs.chunks_mut(n)) {
+                    for (v, slot) in o.iter_mut().enumerate() {
+                        *slot = warp_vertex_cpu(texels, s, inst, mesh.positions[v], mesh.normals[v]);
+                    }
+                }
+            });
+        }
+    });
+    out
+}
