@@ -5,6 +5,7 @@ pub mod basic;
 pub mod camera;
 pub mod curves;
 pub mod direct_light;
+pub mod export;
 pub mod gbuffer;
 pub mod geometry;
 pub mod matrix_texture;
@@ -41,5 +42,6 @@ pub static ALL: &[&NodeSpec] = &[
     &tonemap::TONEMAP,
     &output::IMAGE_WRITE,
     &output::PREVIEW,
+    &export::EXPORT_GEOMETRY,
     &basic::WATCH,
 ];

@@ -57,11 +57,13 @@ pub struct FrameSettings {
     pub height: u32,
     /// Folder that relative resource paths are resolved against (the graph file's folder).
     pub base_dir: PathBuf,
+    /// Where output nodes that write files put them (`render --out`); `None` while editing.
+    pub out_dir: Option<PathBuf>,
 }
 
 impl Default for FrameSettings {
     fn default() -> Self {
-        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from(".") }
+        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from("."), out_dir: None }
     }
 }
 

@@ -92,6 +92,7 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
         width: opts.width,
         height: opts.height,
         base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
+        out_dir: Some(opts.out_dir.clone()),
     };
     let mut stats = Stats {
         graph: opts.graph_path.display().to_string(),
