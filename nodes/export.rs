@@ -18,7 +18,7 @@ use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
 
-use super::gbuffer::{uniform_entry, warp_bind_group, warp_layout};
+use super::gbuffer::{InstanceResolver, uniform_entry, warp_bind_group, warp_layout};
 
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
@@ -79,6 +79,7 @@ pub struct GpuWarper {
     pipeline: wgpu::ComputePipeline,
     io_layout: wgpu::BindGroupLayout,
     warp_layout: wgpu::BindGroupLayout,
+    resolver: InstanceResolver,
 }
 
 impl GpuWarper {
@@ -119,7 +120,7 @@ impl GpuWarper {
                 cache: None,
             })
         })?;
-        Ok(GpuWarper { pipeline, io_layout, warp_layout })
+        Ok(GpuWarper { pipeline, io_layout, warp_layout, resolver: InstanceResolver::new(gpu)? })
     }
 
     /// Warps every instance of `mesh`; the result is instance-major.
@@ -129,9 +130,17 @@ impl GpuWarper {
         let per_instance = (nv * 32) as u64;
         let max_binding = gpu.limits.max_storage_buffer_binding_size.min(gpu.limits.max_buffer_size);
         let chunk = ((max_binding / per_instance.max(1)) as usize).clamp(1, 1 << 20);
-        let warp_bg = warp_bind_group(gpu, &self.warp_layout, draw);
-        let mut out = Vec::with_capacity(nv * draw.instances.len());
-        for insts in draw.instances.chunks(chunk) {
+        // The same instance data as rendering: point frames resolved once per instance.
+        let resolved = draw.per_instance_frames();
+        let instances: Vec<InstanceData> = if resolved {
+            let buffer = draw.draw_buffer(gpu, |raw| self.resolver.resolve(gpu, raw, draw))?;
+            read_buffer(gpu, buffer)?
+        } else {
+            draw.instances.to_vec()
+        };
+        let warp_bg = warp_bind_group(gpu, &self.warp_layout, draw, resolved);
+        let mut out = Vec::with_capacity(nv * instances.len());
+        for insts in instances.chunks(chunk) {
             out.extend(self.warp_chunk(gpu, gm, nv, insts, &warp_bg)?);
         }
         Ok(out)
@@ -219,6 +228,39 @@ impl GpuWarper {
         read.unmap();
         Ok(out)
     }
+}
+
+/// Copies a GPU buffer of plain-old-data values to the CPU.
+fn read_buffer<T: bytemuck::Pod>(gpu: &GpuContext, buffer: &wgpu::Buffer) -> anyhow::Result<Vec<T>> {
+    let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("read back"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read back") });
+    enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
+    gpu.queue.submit([enc.finish()]);
+    map_read(gpu, &read)
+}
+
+fn map_read<T: bytemuck::Pod>(gpu: &GpuContext, read: &wgpu::Buffer) -> anyhow::Result<Vec<T>> {
+    let slice = read.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    gpu.wait_idle();
+    rx.recv().context("read-back was cancelled")?.context("cannot map a read-back buffer")?;
+    let errors = gpu.take_errors();
+    if !errors.is_empty() {
+        anyhow::bail!("GPU error: {}", errors.join("; "));
+    }
+    let data = slice.get_mapped_range().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let out = bytemuck::cast_slice(&data).to_vec();
+    drop(data);
+    read.unmap();
+    Ok(out)
 }
 
 /// One mesh of everything the scene draws: plain items transformed by their model matrix,

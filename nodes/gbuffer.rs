@@ -60,6 +60,7 @@ pub struct Pipelines {
     warp_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     white: Image8,
+    resolver: InstanceResolver,
 }
 
 #[derive(Default)]
@@ -106,14 +107,16 @@ pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::Bi
     })
 }
 
+/// `resolved`: the instances carry per-instance frames (see `InstanceResolver`).
 pub fn warp_bind_group(
     gpu: &GpuContext,
     layout: &wgpu::BindGroupLayout,
     draw: &crate::warp::AttachedDraw,
+    resolved: bool,
 ) -> wgpu::BindGroup {
     let uniform = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("warp settings"),
-        contents: bytemuck::cast_slice(&draw.settings.uniform()),
+        contents: bytemuck::cast_slice(&draw.settings.uniform(resolved)),
         usage: wgpu::BufferUsages::UNIFORM,
     });
     let m = &draw.matrix;
@@ -127,6 +130,89 @@ pub fn warp_bind_group(
             wgpu::BindGroupEntry { binding: 3, resource: uniform.as_entire_binding() },
         ],
     })
+}
+
+/// Looks up point attachments' frames once per instance (shaders/attach_resolve.wgsl).
+pub struct InstanceResolver {
+    pipeline: wgpu::ComputePipeline,
+    io_layout: wgpu::BindGroupLayout,
+    warp_layout: wgpu::BindGroupLayout,
+}
+
+impl InstanceResolver {
+    pub fn new(gpu: &GpuContext) -> anyhow::Result<Self> {
+        let module = gpu.shader("attach_resolve.wgsl")?;
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let io_layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("instance resolve io"),
+            entries: &[storage(0, true), storage(1, false)],
+        });
+        let warp_layout = warp_layout(gpu, wgpu::ShaderStages::COMPUTE);
+        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("instance resolve"),
+            bind_group_layouts: &[Some(&io_layout), None, Some(&warp_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = gpu.checked("attach_resolve.wgsl", || {
+            gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("instance resolve"),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })?;
+        Ok(InstanceResolver { pipeline, io_layout, warp_layout })
+    }
+
+    /// A new instance buffer with each instance's frame filled in.
+    pub fn resolve(
+        &self,
+        gpu: &GpuContext,
+        raw: &wgpu::Buffer,
+        draw: &crate::warp::AttachedDraw,
+    ) -> anyhow::Result<wgpu::Buffer> {
+        let out = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("resolved instances"),
+            size: raw.size(),
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let io = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("instance resolve io"),
+            layout: &self.io_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: raw.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: out.as_entire_binding() },
+            ],
+        });
+        let warp = warp_bind_group(gpu, &self.warp_layout, draw, false);
+        let groups = draw.instances.len().div_ceil(64).max(1) as u32;
+        let mut enc =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("instance resolve") });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("instance resolve"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &io, &[]);
+            pass.set_bind_group(2, &warp, &[]);
+            pass.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
+        }
+        gpu.queue.submit([enc.finish()]);
+        Ok(out)
+    }
 }
 
 impl Pipelines {
@@ -178,6 +264,7 @@ impl Pipelines {
             warp_layout,
             sampler,
             white: Image8::new(1, 1, vec![255; 4]),
+            resolver: InstanceResolver::new(gpu)?,
         })
     }
 
@@ -285,8 +372,16 @@ pub fn render_gbuffer(
         entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() }],
     });
     let object_bgs: Vec<wgpu::BindGroup> = items.iter().map(|item| p.object_bind_group(gpu, item)).collect();
-    let warp_bgs: Vec<Option<wgpu::BindGroup>> =
-        items.iter().map(|item| item.attached.as_ref().map(|a| warp_bind_group(gpu, &p.warp_layout, a))).collect();
+    let mut warp_bgs: Vec<Option<(wgpu::BindGroup, &wgpu::Buffer)>> = Vec::with_capacity(items.len());
+    for item in items {
+        warp_bgs.push(match &item.attached {
+            Some(a) => {
+                let buffer = a.draw_buffer(gpu, |raw| p.resolver.resolve(gpu, raw, a))?;
+                Some((warp_bind_group(gpu, &p.warp_layout, a, a.per_instance_frames()), buffer))
+            }
+            None => None,
+        });
+    }
 
     let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gbuffer") });
     {
@@ -320,13 +415,13 @@ pub fn render_gbuffer(
             pass.set_vertex_buffer(0, mesh.vertices.slice(..));
             pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
             match (&item.attached, warp_bg) {
-                (Some(a), Some(wbg)) => {
+                (Some(a), Some((wbg, buffer))) => {
                     if a.instances.is_empty() {
                         continue;
                     }
                     pass.set_pipeline(&p.attached);
                     pass.set_bind_group(2, wbg, &[]);
-                    pass.set_vertex_buffer(1, a.instance_buffer(gpu).slice(..));
+                    pass.set_vertex_buffer(1, buffer.slice(..));
                     pass.draw_indexed(0..mesh.index_count, 0, 0..a.instances.len() as u32);
                 }
                 _ => {

@@ -7,7 +7,9 @@
 @group(2) @binding(2) var mt_v: texture_2d<f32>;
 
 struct Warp {
-    // x: mode (0 point, 1 area, 2 curve, 3 curve aligned to the curve normal),
+    // x: mode (0 point, 1 area, 2 curve, 3 curve aligned to the curve normal,
+    //    4 no surface: plain instancing, M_tex's translation as the xz offset; a benchmark baseline,
+    //    5 point with the frame resolved once per instance by attach_resolve.wgsl),
     // y: fur gravity c (eq. 11), z: lowest valid-texel weight, w: time in seconds.
     params: vec4<f32>,
 };
@@ -119,7 +121,7 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
     if mode == 1 {
         uv_in = p.xz;                                   // eq. (6)
         f_map = vec4<f32>(0.0, p.y, 0.0, 1.0);          // eq. (7)
-    } else if mode >= 2 {
+    } else if mode == 2 || mode == 3 {
         let s = (p.z - inst.range.z) / max(inst.range.w - inst.range.z, 1e-12);
         let t = mix(inst.range.x, inst.range.y, s);
         uv_in = bezier(inst, t);                        // eq. (8)
@@ -135,7 +137,15 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
     }
     // eq. (1): M_tex . f_uv
     let uv = vec2<f32>(dot(inst.m_tex0.xyz, vec3<f32>(uv_in, 1.0)), dot(inst.m_tex1.xyz, vec3<f32>(uv_in, 1.0)));
-    let frame = lookup_frame(uv);
+    var frame: SurfaceFrame;
+    if mode == 5 {
+        // A point attachment's frame is the same for all its vertices: looked up once per instance.
+        frame = SurfaceFrame(inst.m_tex0.xyz, inst.m_tex1.xyz, inst.curve01.xyz, vec3<f32>(inst.m_tex0.w, inst.m_tex1.w, inst.curve01.w), inst.curve23.x > 0.5);
+    } else if mode == 4 {
+        frame = SurfaceFrame(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(uv.x, 0.0, uv.y), true);
+    } else {
+        frame = lookup_frame(uv);
+    }
     let m_tan = mat4x4<f32>(inst.m_tan0, inst.m_tan1, inst.m_tan2, inst.m_tan3);
     let q = m_tan * f_map;
     // eq. (2): p_w = M_mt . M_tan . f_map(p), M_mt = [t_u n t_v p]

@@ -59,3 +59,190 @@ pub fn idle_overhead(nodes: usize, frames: usize) -> anyhow::Result<IdleOverhead
     samples.sort_by(f64::total_cmp);
     Ok(IdleOverhead { median_us: samples[batches / 2], first_frame_us, batches, frames_per_batch: per })
 }
+
+/// One row of `werkstatt bench attachments`.
+#[derive(Debug, serde::Serialize)]
+pub struct AttachRow {
+    pub path: &'static str,
+    pub instances: usize,
+    pub triangles: usize,
+    pub ms_per_frame: f64,
+    pub mtri_per_s: f64,
+}
+
+/// The paper's Fig. 10 experiment: a 928-triangle button attached `counts` times to a
+/// surface with point, area and curve attachments, against plain instancing of the same
+/// geometry and a CPU path that warps with threads and uploads every frame.
+pub fn attachments(
+    gpu: &crate::gpu::GpuContext,
+    counts: &[usize],
+    frames: usize,
+    size: (u32, u32),
+    cpu_path: bool,
+    mut report: impl FnMut(&AttachRow),
+) -> anyhow::Result<Vec<AttachRow>> {
+    use std::sync::Arc;
+
+    use glam::{Affine2, Mat4, Vec2, Vec3};
+
+    use crate::nodes::attach::point_instance;
+    use crate::nodes::gbuffer::render_gbuffer;
+    use crate::nodes::geometry;
+    use crate::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
+    use crate::scene::{Camera, DrawItem, Material};
+    use crate::warp::{AttachedDraw, InstanceData, Placement, WarpMode, WarpSettings, warp_all_cpu};
+
+    let surface = geometry::plane(1.0, 64, 64)?;
+    let matrix =
+        Arc::new(MatrixTextureNode::default().render(gpu, &surface, 512, wgpu::TextureFormat::Rgba32Float, 0)?);
+    let texels = read_matrix(gpu, &matrix)?;
+    let button = Arc::new(geometry::disc(0.5, 0.2, 232)?);
+    assert_eq!(button.triangle_count(), 928);
+    let camera = Camera {
+        eye: Vec3::new(0.0, 1.4, 0.9),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        near: 0.05,
+        far: 10.0,
+    };
+    let material = Arc::new(Material::default());
+    let mut pipelines = None;
+    let mut rows = Vec::new();
+    let time_frames = |items: &[DrawItem], pipelines: &mut Option<_>| -> anyhow::Result<f64> {
+        render_gbuffer(gpu, pipelines, items, camera, size.0, size.1)?;
+        gpu.wait_idle();
+        let mut samples = Vec::new();
+        for _ in 0..frames.max(1) {
+            let t = Instant::now();
+            render_gbuffer(gpu, pipelines, items, camera, size.0, size.1)?;
+            gpu.wait_idle();
+            samples.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        samples.sort_by(f64::total_cmp);
+        Ok(samples[samples.len() / 2])
+    };
+    for &count in counts {
+        let side = (count as f64).sqrt().ceil() as usize;
+        let cell = 1.0 / side as f32;
+        let places: Vec<Placement> = (0..count)
+            .map(|i| Placement {
+                piece: 0,
+                u: (i % side) as f32 * cell + cell / 2.0,
+                v: (i / side) as f32 * cell + cell / 2.0,
+                angle: 0.0,
+                scale: 1.0,
+            })
+            .collect();
+        let point: Vec<InstanceData> = places.iter().map(|p| point_instance(p, cell * 0.8, 1.0, 0.0, 0.0)).collect();
+        // Plain instancing: the same instances placed without a surface (xz = uv - 0.5).
+        let plain: Vec<InstanceData> = places
+            .iter()
+            .map(|p| point_instance(&Placement { u: p.u - 0.5, v: p.v - 0.5, ..*p }, cell * 0.8, 1.0, 0.0, 0.0))
+            .collect();
+        let area: Vec<InstanceData> = places
+            .iter()
+            .map(|p| {
+                let m = Affine2::from_translation(Vec2::new(p.u, p.v)) * Affine2::from_scale(Vec2::splat(cell * 0.8));
+                InstanceData::identity().with_tex(m).with_tan(Mat4::from_scale(Vec3::new(1.0, cell * 0.8, 1.0)))
+            })
+            .collect();
+        // Curves: one straight cubic per row, `side` repetitions along each.
+        let curve: Vec<InstanceData> = places
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let (k, row_v) = (i % side, p.v);
+                let seg = [
+                    Vec2::new(0.0, row_v),
+                    Vec2::new(1.0 / 3.0, row_v),
+                    Vec2::new(2.0 / 3.0, row_v),
+                    Vec2::new(1.0, row_v),
+                ];
+                InstanceData::identity().with_tan(Mat4::from_scale(Vec3::splat(cell * 0.8))).with_curve(
+                    &seg,
+                    k as f32 / side as f32,
+                    (k + 1) as f32 / side as f32,
+                    -0.5,
+                    0.5,
+                )
+            })
+            .collect();
+        let tris = count * button.triangle_count();
+        let cases: [(&'static str, WarpMode, &Vec<InstanceData>); 4] = [
+            ("plain instancing", WarpMode::Unattached, &plain),
+            ("point", WarpMode::Point, &point),
+            ("area", WarpMode::Area, &area),
+            ("curve", WarpMode::CurveAligned, &curve),
+        ];
+        for (name, mode, instances) in cases {
+            let draw = AttachedDraw::new(
+                matrix.clone(),
+                WarpSettings { mode, gravity: 0.0, min_weight: 0.5 },
+                instances.clone(),
+            );
+            let item = DrawItem {
+                mesh: button.clone(),
+                material: material.clone(),
+                model: Mat4::IDENTITY,
+                detail: true,
+                attached: Some(Arc::new(draw)),
+            };
+            let ms = time_frames(std::slice::from_ref(&item), &mut pipelines)?;
+            let row = AttachRow {
+                path: name,
+                instances: count,
+                triangles: tris,
+                ms_per_frame: ms,
+                mtri_per_s: tris as f64 / ms / 1e3,
+            };
+            report(&row);
+            rows.push(row);
+        }
+        if cpu_path {
+            let settings = WarpSettings { mode: WarpMode::Point, gravity: 0.0, min_weight: 0.5 };
+            let nv = button.positions.len();
+            let indices: Vec<u32> =
+                (0..count as u32).flat_map(|i| button.indices.iter().map(move |&k| k + i * nv as u32)).collect();
+            let uvs: Vec<Vec2> = (0..count).flat_map(|_| button.uvs.iter().copied()).collect();
+            let mut samples = Vec::new();
+            for _ in 0..frames.max(1) + 1 {
+                let t = Instant::now();
+                let warped = warp_all_cpu(&texels, &settings, &button, &point);
+                let normals: Vec<Vec3> = warped.iter().map(|w| w.normal).collect();
+                let positions = warped.iter().map(|w| w.position).collect();
+                let mesh = crate::mesh::Mesh::from_raw(
+                    positions,
+                    normals.clone(),
+                    uvs.clone(),
+                    normals.clone(),
+                    normals,
+                    indices.clone(),
+                );
+                let item = DrawItem {
+                    mesh: Arc::new(mesh),
+                    material: material.clone(),
+                    model: Mat4::IDENTITY,
+                    detail: true,
+                    attached: None,
+                };
+                render_gbuffer(gpu, &mut pipelines, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                gpu.wait_idle();
+                samples.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            samples.remove(0);
+            samples.sort_by(f64::total_cmp);
+            let ms = samples[samples.len() / 2];
+            let row = AttachRow {
+                path: "cpu warp + upload",
+                instances: count,
+                triangles: tris,
+                ms_per_frame: ms,
+                mtri_per_s: tris as f64 / ms / 1e3,
+            };
+            report(&row);
+            rows.push(row);
+        }
+    }
+    Ok(rows)
+}

@@ -86,6 +86,26 @@ enum BenchWhat {
         #[arg(long, default_value_t = 20000)]
         frames: usize,
     },
+    /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
+    /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
+    Attachments {
+        /// Instance counts, comma-separated.
+        #[arg(long, default_value = "1000,2000,4000,8000,16000,32000,65000", value_delimiter = ',')]
+        counts: Vec<usize>,
+        /// Timed frames per measurement (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Skip the CPU warp path.
+        #[arg(long)]
+        no_cpu: bool,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
 }
 
 pub fn main() -> ExitCode {
@@ -219,6 +239,22 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             for a in adapters {
                 println!("{a}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Attachments { counts, frames, size, no_cpu, json, backend } } => {
+            let size = parse_size(&size)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!("{:>18} {:>9} {:>12} {:>10} {:>9}", "path", "instances", "triangles", "ms/frame", "MTri/s");
+            let rows = crate::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| {
+                println!(
+                    "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
+                    r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
+                );
+            })?;
+            if let Some(path) = json {
+                crate::graph::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -168,6 +168,19 @@ impl Mesh {
         })
     }
 
+    /// A mesh from arrays the caller vouches for (same lengths, valid indices), with no
+    /// checks or derived data: for hot paths such as the CPU warp benchmark.
+    pub fn from_raw(
+        positions: Vec<Vec3>,
+        normals: Vec<Vec3>,
+        uvs: Vec<Vec2>,
+        tangents_u: Vec<Vec3>,
+        tangents_v: Vec<Vec3>,
+        indices: Vec<u32>,
+    ) -> Mesh {
+        Mesh { positions, normals, uvs, tangents_u, tangents_v, indices, ..Default::default() }
+    }
+
     pub fn bounds(&self) -> (Vec3, Vec3) {
         self.positions
             .iter()

@@ -15,6 +15,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),
+    ("attach_resolve.wgsl", include_str!("../shaders/attach_resolve.wgsl")),
 ];
 
 pub fn names() -> impl Iterator<Item = &'static str> {

@@ -87,6 +87,9 @@ pub enum WarpMode {
     Area = 1,
     Curve = 2,
     CurveAligned = 3,
+    /// No matrix texture lookup: M_tex's translation is the xz offset. The baseline of
+    /// `werkstatt bench attachments` (plain instancing of the same geometry).
+    Unattached = 4,
 }
 
 /// One placement of detail geometry in texture space (a designer's layout row).
@@ -234,8 +237,10 @@ pub struct WarpSettings {
 }
 
 impl WarpSettings {
-    pub fn uniform(&self) -> [f32; 4] {
-        [self.mode as u32 as f32, self.gravity, self.min_weight, 0.0]
+    /// The `Warp` uniform; `resolved`: point frames were looked up per instance (mode 5).
+    pub fn uniform(&self, resolved: bool) -> [f32; 4] {
+        let mode = if resolved && self.mode == WarpMode::Point { 5.0 } else { self.mode as u32 as f32 };
+        [mode, self.gravity, self.min_weight, 0.0]
     }
 }
 
@@ -245,11 +250,18 @@ pub struct AttachedDraw {
     pub settings: WarpSettings,
     pub instances: Arc<Vec<InstanceData>>,
     instance_buffer: std::sync::OnceLock<wgpu::Buffer>,
+    resolved_buffer: std::sync::OnceLock<Result<wgpu::Buffer, String>>,
 }
 
 impl AttachedDraw {
     pub fn new(matrix: Arc<MatrixTexture>, settings: WarpSettings, instances: Vec<InstanceData>) -> Self {
-        AttachedDraw { matrix, settings, instances: Arc::new(instances), instance_buffer: Default::default() }
+        AttachedDraw {
+            matrix,
+            settings,
+            instances: Arc::new(instances),
+            instance_buffer: Default::default(),
+            resolved_buffer: Default::default(),
+        }
     }
 
     pub fn instance_buffer(&self, gpu: &crate::gpu::GpuContext) -> &wgpu::Buffer {
@@ -266,6 +278,30 @@ impl AttachedDraw {
                 usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
             })
         })
+    }
+}
+
+impl AttachedDraw {
+    /// Whether this draw's frames are resolved once per instance (point attachments).
+    pub fn per_instance_frames(&self) -> bool {
+        self.settings.mode == WarpMode::Point
+    }
+
+    /// The instances to draw: for point attachments with their frames resolved by
+    /// `resolve` (a compute pass, run once per draw and matrix texture), else as given.
+    pub fn draw_buffer(
+        &self,
+        gpu: &crate::gpu::GpuContext,
+        resolve: impl FnOnce(&wgpu::Buffer) -> anyhow::Result<wgpu::Buffer>,
+    ) -> anyhow::Result<&wgpu::Buffer> {
+        let raw = self.instance_buffer(gpu);
+        if !self.per_instance_frames() {
+            return Ok(raw);
+        }
+        self.resolved_buffer
+            .get_or_init(|| resolve(raw).map_err(|e| format!("{e:#}")))
+            .as_ref()
+            .map_err(|e| anyhow::anyhow!("{e}"))
     }
 }
 
@@ -289,7 +325,7 @@ pub fn warp_vertex_cpu(
     let mut f_map = p.extend(1.0);
     let mut n_local = normal;
     match s.mode {
-        WarpMode::Point => {}
+        WarpMode::Point | WarpMode::Unattached => {}
         WarpMode::Area => {
             uv_in = Vec2::new(p.x, p.z);
             f_map = Vec4::new(0.0, p.y, 0.0, 1.0);
@@ -313,7 +349,12 @@ pub fn warp_vertex_cpu(
     }
     let h = uv_in.extend(1.0);
     let uv = Vec2::new(Vec3::from_slice(&inst.m_tex0).dot(h), Vec3::from_slice(&inst.m_tex1).dot(h));
-    let Some(f) = texels.lookup(uv, s.min_weight) else {
+    let found = if s.mode == WarpMode::Unattached {
+        Some(TexelFrame { tu: Vec3::X, n: Vec3::Y, tv: Vec3::Z, p: Vec3::new(uv.x, 0.0, uv.y) })
+    } else {
+        texels.lookup(uv, s.min_weight)
+    };
+    let Some(f) = found else {
         return WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false };
     };
     let m_tan = Mat4::from_cols_array_2d(&inst.m_tan);
