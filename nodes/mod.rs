@@ -5,6 +5,8 @@ pub mod camera;
 pub mod direct_light;
 pub mod gbuffer;
 pub mod geometry;
+pub mod live_link;
+pub mod mesh_sequence;
 pub mod output;
 pub mod passes;
 pub mod scene;
@@ -19,6 +21,8 @@ pub static ALL: &[&NodeSpec] = &[
     &basic::TIME,
     &geometry::PRIMITIVE,
     &geometry::MESH_FILE,
+    &mesh_sequence::MESH_SEQUENCE,
+    &live_link::LIVE_LINK,
     &scene::MATERIAL,
     &scene::DRAW,
     &scene::MERGE,

@@ -165,6 +165,11 @@ impl Resources {
         }
     }
 
+    /// How many resources are held (loaded, loading or failed).
+    pub fn resident(&self) -> usize {
+        self.inner.slots.lock().unwrap_or_else(|e| e.into_inner()).len()
+    }
+
     pub fn in_flight(&self) -> usize {
         *self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner())
     }
