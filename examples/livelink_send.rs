@@ -39,7 +39,7 @@ fn parse_args() -> Result<Options, String> {
             _ => return Err(format!("unknown option {a}")),
         }
     }
-    if !(2..=2048).contains(&o.size) || !(o.fps > 0.0 && o.fps <= 1000.0) {
+    if !((2..=2048).contains(&o.size) && o.fps > 0.0 && o.fps <= 1000.0) {
         return Err("--size must be in 2..=2048 and --fps in (0, 1000]".into());
     }
     Ok(o)

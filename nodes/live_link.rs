@@ -94,7 +94,10 @@ impl Header {
     /// Parses and checks a header on its own (magic, version, type, flags, limits, payload size).
     pub fn decode(b: &[u8; HEADER_BYTES]) -> Result<Header, String> {
         if b[0..4] != MAGIC {
-            return Err(format!("bad magic {:02x?} (expected \"WKLL\"): not a LiveLink sender, or out of step", &b[0..4]));
+            return Err(format!(
+                "bad magic {:02x?} (expected \"WKLL\"): not a LiveLink sender, or out of step",
+                &b[0..4]
+            ));
         }
         let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
         let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
@@ -297,9 +300,11 @@ impl Node for LiveLinkNode {
 }
 
 fn resolve(address: &str) -> Result<SocketAddr, String> {
-    address.to_socket_addrs().ok().and_then(|mut a| a.next()).ok_or_else(|| {
-        format!("parameter \"address\": \"{address}\" is not a host:port address like 127.0.0.1:7878")
-    })
+    address
+        .to_socket_addrs()
+        .ok()
+        .and_then(|mut a| a.next())
+        .ok_or_else(|| format!("parameter \"address\": \"{address}\" is not a host:port address like 127.0.0.1:7878"))
 }
 
 /// The listener thread: binds (retrying while the port is taken), then serves one sender at
@@ -313,7 +318,8 @@ fn listen(shared: Arc<Shared>, addr: SocketAddr) {
             Ok(l) => break l,
             Err(e) => {
                 let msg = format!("cannot listen on {addr}: {e} (retrying)");
-                let changed = shared.latest.lock().unwrap_or_else(|e| e.into_inner()).listen_error.as_ref() != Some(&msg);
+                let changed =
+                    shared.latest.lock().unwrap_or_else(|e| e.into_inner()).listen_error.as_ref() != Some(&msg);
                 if changed {
                     eprintln!("warning: LiveLink: {msg}");
                     shared.publish(|l| l.listen_error = Some(msg));

@@ -23,7 +23,7 @@ use crate::value::Value;
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
     category: Category::Simulation,
-    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads, two at a time.",
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads; only the files around the current time are held in memory.",
     inputs: &[],
     outputs: &[PortSpec::output(
         "surface",
@@ -182,9 +182,12 @@ struct MeshSequenceNode {
     reference: Option<(PathBuf, Topology)>,
     /// Frame files this node requested and has not released yet.
     held: Vec<PathBuf>,
-    /// The last output and the frames and weight it was made from, reused while they stay.
-    last: Option<(Arc<SeqFrame>, Arc<SeqFrame>, f64, Arc<Mesh>)>,
+    /// The last output, reused while its frames and weight stay.
+    last: Option<LastOutput>,
 }
+
+/// An output surface and the two frames and weight it was made from.
+type LastOutput = (Arc<SeqFrame>, Arc<SeqFrame>, f64, Arc<Mesh>);
 
 impl Node for MeshSequenceNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
@@ -278,7 +281,10 @@ pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     } else {
         let name = path.file_name().and_then(|n| n.to_str()).context("the path has no file name")?;
         let (prefix, suffix) = split_pattern(name).with_context(|| {
-            format!("{} is neither a folder nor a pattern (use frame_%04d.obj, frame_####.obj or frame_*.obj)", path.display())
+            format!(
+                "{} is neither a folder nor a pattern (use frame_%04d.obj, frame_####.obj or frame_*.obj)",
+                path.display()
+            )
         })?;
         (path.parent().map(Path::to_path_buf).unwrap_or_default(), Some(prefix), Some(suffix))
     };
@@ -414,10 +420,7 @@ pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
                     .map(|w| parse_corner(w, v.len(), vt.len(), vn.len()).with_context(at))
                     .collect::<anyhow::Result<_>>()?;
                 if face.iter().any(|c| c[1] == NONE) {
-                    bail!(
-                        "{}: a face has no texture coordinates (vt); a sequence frame needs the pattern's UVs",
-                        at()
-                    );
+                    bail!("{}: a face has no texture coordinates (vt); a sequence frame needs the pattern's UVs", at());
                 }
                 for k in 1..face.len().saturating_sub(1) {
                     corners.extend_from_slice(&[face[0], face[k], face[k + 1]]);

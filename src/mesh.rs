@@ -198,7 +198,9 @@ impl Mesh {
             Some(nr) if nr.len() == n => nr
                 .into_iter()
                 .enumerate()
-                .map(|(i, v)| v.try_normalize().ok_or_else(|| anyhow::anyhow!("vertex {i} has a zero or invalid normal")))
+                .map(|(i, v)| {
+                    v.try_normalize().ok_or_else(|| anyhow::anyhow!("vertex {i} has a zero or invalid normal"))
+                })
                 .collect::<anyhow::Result<Vec<Vec3>>>()?,
             Some(nr) => bail!("{n} positions but {} normals", nr.len()),
             None => vertex_normals(&positions, &indices),

@@ -167,8 +167,16 @@ fn assert_dropped(mut s: TcpStream) {
 }
 
 fn header(kind: u16, flags: u32, vertices: u32, indices: u32, payload: u32, frame: u64) -> [u8; HEADER_BYTES] {
-    Header { version: VERSION, kind, flags, vertex_count: vertices, index_count: indices, payload_bytes: payload, frame }
-        .encode()
+    Header {
+        version: VERSION,
+        kind,
+        flags,
+        vertex_count: vertices,
+        index_count: indices,
+        payload_bytes: payload,
+        frame,
+    }
+    .encode()
 }
 
 #[test]
@@ -234,22 +242,14 @@ fn malformed_messages_are_rejected_and_the_last_good_frame_stays() {
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("bad magic", [b"XXXX".as_slice(), &cloth.frame(9)[4..]].concat(), "bad magic"),
         ("oversized vertex count", header(MSG_FRAME, 0, u32::MAX, i, 0, 9).to_vec(), "vertex count 4294967295"),
-        (
-            "oversized topology",
-            header(MSG_TOPOLOGY, 0, MAX_VERTICES + 1, 3, 0, 0).to_vec(),
-            "vertex count 4194305",
-        ),
+        ("oversized topology", header(MSG_TOPOLOGY, 0, MAX_VERTICES + 1, 3, 0, 0).to_vec(), "vertex count 4194305"),
         ("payload size disagreeing with the counts", header(MSG_FRAME, 0, v, i, 5, 9).to_vec(), "declares 5 payload"),
         ("unknown flags", header(MSG_FRAME, 8, v, i, v * 12, 9).to_vec(), "unknown flags"),
         ("other protocol version", [&cloth.frame(9)[..4], &[9, 0], &cloth.frame(9)[6..]].concat(), "version 9"),
         ("truncated frame", [cloth.topology(), truncated].concat(), "truncated message"),
         ("counts disagreeing with the topology", [cloth.topology(), too_many].concat(), "has 17 vertices"),
         ("frame before the topology", cloth.frame(9), "before the topology"),
-        (
-            "index out of range",
-            encode_topology(&[0, 1, 99], &cloth.uvs, None),
-            "index 99 is out of range",
-        ),
+        ("index out of range", encode_topology(&[0, 1, 99], &cloth.uvs, None), "index 99 is out of range"),
     ];
     for (what, bytes, needle) in cases {
         let mut s = rig.connect();
