@@ -8,7 +8,9 @@ pub mod direct_light;
 pub mod export;
 pub mod gbuffer;
 pub mod geometry;
+pub mod live_link;
 pub mod matrix_texture;
+pub mod mesh_sequence;
 pub mod output;
 pub mod passes;
 pub mod placements;
@@ -24,6 +26,8 @@ pub static ALL: &[&NodeSpec] = &[
     &basic::TIME,
     &geometry::PRIMITIVE,
     &geometry::MESH_FILE,
+    &mesh_sequence::MESH_SEQUENCE,
+    &live_link::LIVE_LINK,
     &scene::MATERIAL,
     &scene::DRAW,
     &scene::MERGE,

@@ -5,6 +5,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::gpu::GpuContext;
@@ -50,6 +51,26 @@ impl FrameTime {
     }
 }
 
+/// A version counter that something outside the graph (a network listener, a simulator
+/// thread) bumps when it has new data for a node. A node that calls [`EvalCx::watch`] re-runs
+/// when the counter changes, the way it re-runs when a file it loaded reloads; it need not
+/// read the time (and re-run every frame) to notice. Cheap to clone (shared).
+#[derive(Clone, Debug, Default)]
+pub struct ChangeSignal(Arc<AtomicU64>);
+
+impl ChangeSignal {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Marks a change: nodes watching this signal re-run on the next evaluated frame.
+    pub fn bump(&self) {
+        self.0.fetch_add(1, Ordering::AcqRel);
+    }
+    pub fn version(&self) -> u64 {
+        self.0.load(Ordering::Acquire)
+    }
+}
+
 /// What every node of a frame shares.
 #[derive(Clone, Debug)]
 pub struct FrameSettings {
@@ -78,7 +99,8 @@ pub struct EvalCx<'a> {
     used_time: bool,
     gpu: Option<&'a GpuContext>,
     resources: &'a Resources,
-    touched: &'a mut Vec<SlotRef>,
+    touched: &'a mut Vec<(SlotRef, u64)>,
+    signals: &'a mut Vec<(ChangeSignal, u64)>,
     warnings: &'a mut Vec<String>,
     pub settings: &'a FrameSettings,
 }
@@ -163,9 +185,31 @@ impl<'a> EvalCx<'a> {
         path: &Path,
         loader: fn(&Path) -> anyhow::Result<T>,
     ) -> Result<Arc<T>, NodeError> {
-        let (slot, state) = self.resources.request(path, loader);
-        self.touched.push(slot);
+        let (slot, version, state) = self.resources.request_observed(path, loader);
+        self.touched.push((slot, version));
         state
+    }
+
+    /// Starts loading a file that a later run will `load`, without making this run depend on
+    /// it (it does not re-run when the load completes).
+    pub fn prefetch<T: Send + Sync + 'static>(&self, path: &Path, loader: fn(&Path) -> anyhow::Result<T>) {
+        let _ = self.resources.request(path, loader);
+    }
+
+    /// Lets the resource system forget a file loaded as `T` that this node no longer needs
+    /// (frees its memory). Returns false, and keeps it, while another node or a loader still
+    /// uses it; call again later.
+    pub fn release<T: 'static>(&self, path: &Path) -> bool {
+        self.resources.release::<T>(path)
+    }
+
+    /// Makes this run depend on an external change signal: the node re-runs when the signal
+    /// is bumped. Returns the version seen; the fingerprint records that version, so a bump
+    /// that races with this run still triggers the next one.
+    pub fn watch(&mut self, signal: &ChangeSignal) -> u64 {
+        let v = signal.version();
+        self.signals.push((signal.clone(), v));
+        v
     }
 }
 
@@ -186,7 +230,9 @@ struct NodeState {
     status: NodeStatus,
     outputs: Vec<Option<Value>>,
     uses_time: bool,
-    touched: Vec<SlotRef>,
+    /// Resources and external signals the last run depended on, with the versions it saw.
+    touched: Vec<(SlotRef, u64)>,
+    signals: Vec<(ChangeSignal, u64)>,
     warnings: Vec<String>,
     last_cpu: Duration,
     ran_last_frame: bool,
@@ -310,6 +356,7 @@ impl Evaluator {
                     outputs: vec![None; spec.outputs.len()],
                     uses_time: false,
                     touched: Vec::new(),
+                    signals: Vec::new(),
                     warnings: Vec::new(),
                     last_cpu: Duration::ZERO,
                     ran_last_frame: false,
@@ -382,7 +429,7 @@ impl Evaluator {
                 .flatten()
                 .find(|(s, _)| self.state[*s].status != NodeStatus::Ok)
                 .map(|(s, _)| self.ids[*s].as_str());
-            let h = self.recompute(n, time);
+            let h = self.recompute(n, time, false);
             let state = &self.state[n];
             if let Some(upstream) = blocked {
                 let msg = format!("waiting for input from \"{upstream}\"");
@@ -411,7 +458,8 @@ impl Evaluator {
             }
             self.run_node(n, time, gpu, resources, settings);
             // Hash again: the run may have started or stopped reading the time, or touched resources.
-            self.state[n].fingerprint = Some(self.recompute(n, time));
+            // Versions as the run saw them: a load or signal that changed during the run re-runs it.
+            self.state[n].fingerprint = Some(self.recompute(n, time, true));
             summary.ran += 1;
             match self.state[n].status {
                 NodeStatus::Pending(_) => summary.pending += 1,
@@ -422,8 +470,9 @@ impl Evaluator {
         summary
     }
 
-    /// The fingerprint of node `n` from its current sources, time use and resources.
-    fn recompute(&self, n: usize, time: FrameTime) -> u64 {
+    /// The fingerprint of node `n` from its current sources, time use, resources and signals;
+    /// `as_seen`: with the resource and signal versions its last run observed, not the current ones.
+    fn recompute(&self, n: usize, time: FrameTime, as_seen: bool) -> u64 {
         let mut h = self.param_hash[n];
         for src in &self.sources[n] {
             h = match src {
@@ -436,8 +485,11 @@ impl Evaluator {
             h = mix(h, time.frame as u64);
             h = mix(h, time.fps.to_bits());
         }
-        for slot in &state.touched {
-            h = mix(h, slot.version());
+        for (slot, seen) in &state.touched {
+            h = mix(h, if as_seen { *seen } else { slot.version() });
+        }
+        for (signal, seen) in &state.signals {
+            h = mix(h, if as_seen { *seen } else { signal.version() });
         }
         h
     }
@@ -457,6 +509,7 @@ impl Evaluator {
         let state = &mut self.state[n];
         let mut outputs = vec![None; spec.outputs.len()];
         state.touched.clear();
+        state.signals.clear();
         state.warnings.clear();
         if let Some(gpu) = gpu {
             gpu.set_current_node(Some(&self.ids[n]));
@@ -474,6 +527,7 @@ impl Evaluator {
                 gpu,
                 resources,
                 touched: &mut state.touched,
+                signals: &mut state.signals,
                 warnings: &mut state.warnings,
                 settings,
             };

@@ -181,6 +181,60 @@ impl Mesh {
         Mesh { positions, normals, uvs, tangents_u, tangents_v, indices, ..Default::default() }
     }
 
+    /// A mesh from complete data whose topology must be kept as it is (a simulator's frame):
+    /// no repairs, no triangles dropped; normals computed when `normals` is None; tangents
+    /// from the UV gradients. Checks lengths, index range and finiteness.
+    pub fn from_parts(
+        positions: Vec<Vec3>,
+        normals: Option<Vec<Vec3>>,
+        uvs: Vec<Vec2>,
+        indices: Vec<u32>,
+        piece_ids: Vec<u32>,
+    ) -> anyhow::Result<Mesh> {
+        let n = positions.len();
+        if n == 0 || indices.is_empty() {
+            bail!("the mesh has no vertices or no triangles");
+        }
+        if !indices.len().is_multiple_of(3) {
+            bail!("the index count {} is not a multiple of 3", indices.len());
+        }
+        if uvs.len() != n || !(piece_ids.is_empty() || piece_ids.len() == n) {
+            bail!("{n} positions but {} UVs and {} piece ids", uvs.len(), piece_ids.len());
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+            bail!("index {bad} is out of range (the mesh has {n} vertices)");
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            bail!("vertex {i} has a NaN or infinite position");
+        }
+        if let Some(i) = uvs.iter().position(|p| !p.is_finite()) {
+            bail!("vertex {i} has a NaN or infinite UV");
+        }
+        let normals = match normals {
+            Some(nr) if nr.len() == n => nr
+                .into_iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    v.try_normalize().ok_or_else(|| anyhow::anyhow!("vertex {i} has a zero or invalid normal"))
+                })
+                .collect::<anyhow::Result<Vec<Vec3>>>()?,
+            Some(nr) => bail!("{n} positions but {} normals", nr.len()),
+            None => vertex_normals(&positions, &indices),
+        };
+        let (tangents_u, tangents_v) = uv_tangents(&positions, &normals, &uvs, &indices);
+        Ok(Mesh {
+            positions,
+            normals,
+            uvs,
+            tangents_u,
+            tangents_v,
+            indices,
+            piece_ids,
+            repairs: Vec::new(),
+            gpu: OnceLock::new(),
+        })
+    }
+
     pub fn bounds(&self) -> (Vec3, Vec3) {
         self.positions
             .iter()

@@ -89,6 +89,18 @@ impl Resources {
         path: &Path,
         loader: fn(&Path) -> anyhow::Result<T>,
     ) -> (SlotRef, Result<Arc<T>, NodeError>) {
+        let (slot, _, value) = self.request_observed(path, loader);
+        (slot, value)
+    }
+
+    /// Like [`Resources::request`], also returning the slot's version read *before* its value:
+    /// a load that completes in between leaves an older version with a newer value, so a node
+    /// that records this version re-runs once more instead of missing the load.
+    pub fn request_observed<T: Send + Sync + 'static>(
+        &self,
+        path: &Path,
+        loader: fn(&Path) -> anyhow::Result<T>,
+    ) -> (SlotRef, u64, Result<Arc<T>, NodeError>) {
         let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
         let key = (path.clone(), TypeId::of::<T>());
         let (slot, fresh) = {
@@ -111,6 +123,7 @@ impl Resources {
             self.watch_dir(&path);
             self.enqueue(slot.clone());
         }
+        let version = slot.version();
         let value = match slot.state() {
             SlotState::Pending => Err(NodeError::Pending(path)),
             SlotState::Failed(e) => Err(NodeError::Failed(e)),
@@ -118,7 +131,23 @@ impl Resources {
                 v.downcast::<T>().map_err(|_| NodeError::msg(format!("{}: loaded as another type", path.display())))
             }
         };
-        (slot, value)
+        (slot, version, value)
+    }
+
+    /// Forgets the resource `path` loaded as `T`, freeing its value, unless something else
+    /// still holds its slot (a node that touched it in its last run, a loader working on it).
+    /// Returns whether it is gone (or was never there).
+    pub fn release<T: 'static>(&self, path: &Path) -> bool {
+        let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+        let key = (path, TypeId::of::<T>());
+        let mut slots = self.inner.slots.lock().unwrap_or_else(|e| e.into_inner());
+        match slots.get(&key) {
+            Some(slot) if Arc::strong_count(slot) > 1 => false,
+            _ => {
+                slots.remove(&key);
+                true
+            }
+        }
     }
 
     fn enqueue(&self, slot: SlotRef) {
@@ -134,6 +163,11 @@ impl Resources {
         while *n > 0 {
             n = self.inner.idle.wait(n).unwrap_or_else(|e| e.into_inner());
         }
+    }
+
+    /// How many resources are held (loaded, loading or failed).
+    pub fn resident(&self) -> usize {
+        self.inner.slots.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
 
     pub fn in_flight(&self) -> usize {

@@ -1,0 +1,488 @@
+//! Simulator input from files: an OBJ frame sequence (`frame_0001.obj`, ...) that another
+//! simulator exported, played back against the frame time with linear interpolation.
+//!
+//! Every frame file loads through the lazy resource system on a worker thread; the node
+//! holds the (at most two) files the current time needs, prefetches the next one and lets
+//! the resource system forget the others, so memory stays bounded however long the
+//! sequence is. All frames must share one topology (vertices, triangles, UVs, pieces); a
+//! frame that does not is an error naming its file.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{Context as _, bail};
+use glam::{Vec2, Vec3};
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::mesh::{self, Mesh};
+use crate::render::fnv1a;
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
+    kind: "MeshSequence",
+    category: Category::Simulation,
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads; only the files around the current time are held in memory.",
+    inputs: &[],
+    outputs: &[PortSpec::output(
+        "surface",
+        PortType::Surface,
+        "The garment at the current time; UVs are the pattern coordinates (v down), piece ids from the OBJ objects.",
+    )],
+    params: &[
+        ParamSpec::new(
+            "path",
+            ParamKind::Path { default: "", extensions: &["obj"] },
+            "A folder holding one sequence, or a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame); relative to the graph's folder.",
+        ),
+        ParamSpec::new(
+            "fps",
+            ParamKind::Float { default: 24.0, min: 1e-3, max: 1e4 },
+            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0.",
+        ),
+        ParamSpec::new(
+            "start_frame",
+            ParamKind::Int { default: -1, min: -1, max: 1_000_000_000 },
+            "The sequence frame shown at time 0 (in mode hold: always); -1: the first file's number.",
+        ),
+        ParamSpec::new(
+            "mode",
+            ParamKind::Choice { default: "clamp", options: &["clamp", "loop", "hold"] },
+            "Outside the files' range: clamp shows the first or last file; loop repeats the sequence (blending the last file into the first over one file spacing); hold shows start_frame as a still and does not follow the time.",
+        ),
+        ParamSpec::new(
+            "interpolate",
+            ParamKind::Bool { default: true },
+            "Blend positions (and normals, renormalized; tangents recomputed) linearly between the two files around the time; off: show the file at or before it.",
+        ),
+    ],
+    is_output: false,
+    create: || Box::<MeshSequenceNode>::default(),
+};
+
+/// The frame files of one sequence, sorted by frame number.
+#[derive(Debug)]
+pub struct SequenceIndex {
+    pub frames: Vec<(i64, PathBuf)>,
+}
+
+/// One loaded frame: the complete surface and its topology signature.
+pub struct SeqFrame {
+    pub mesh: Arc<Mesh>,
+    pub topology: Topology,
+}
+
+/// What must stay the same across the frames of a sequence.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Topology {
+    pub vertices: usize,
+    pub triangles: usize,
+    pub index_hash: u64,
+    pub uv_hash: u64,
+    pub piece_hash: u64,
+}
+
+impl Topology {
+    fn of(mesh: &Mesh) -> Topology {
+        Topology {
+            vertices: mesh.positions.len(),
+            triangles: mesh.triangle_count(),
+            index_hash: fnv1a(bytemuck::cast_slice(&mesh.indices)),
+            uv_hash: fnv1a(bytemuck::cast_slice(&mesh.uvs)),
+            piece_hash: fnv1a(bytemuck::cast_slice(&mesh.piece_ids)),
+        }
+    }
+
+    /// Why `self` (of `file`) differs from `reference`, or None.
+    fn difference(&self, reference: &Topology) -> Option<String> {
+        if self.vertices != reference.vertices {
+            Some(format!("{} vertices instead of {}", self.vertices, reference.vertices))
+        } else if self.triangles != reference.triangles {
+            Some(format!("{} triangles instead of {}", self.triangles, reference.triangles))
+        } else if self.index_hash != reference.index_hash {
+            Some("the same counts but other triangles (the faces connect other vertices)".into())
+        } else if self.uv_hash != reference.uv_hash {
+            Some("the same triangles but other UVs".into())
+        } else if self.piece_hash != reference.piece_hash {
+            Some("the same triangles and UVs but other pattern pieces (OBJ objects)".into())
+        } else {
+            None
+        }
+    }
+}
+
+/// How time maps to frames outside (and, for hold, inside) the files' range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    Clamp,
+    Loop,
+    Hold,
+}
+
+impl Mode {
+    pub fn parse(s: &str) -> Mode {
+        match s {
+            "loop" => Mode::Loop,
+            "hold" => Mode::Hold,
+            _ => Mode::Clamp,
+        }
+    }
+}
+
+/// The two files to blend at sequence frame `s` (fractional) and the weight of the second:
+/// indices into `numbers` (sorted, distinct frame numbers of the files). Gaps in the
+/// numbering are interpolated across. In loop mode the sequence repeats with period
+/// `last - first + spacing`, where spacing is the gap between the last two files.
+pub fn bracket(numbers: &[i64], s: f64, mode: Mode) -> (usize, usize, f64) {
+    let n = numbers.len();
+    assert!(n > 0, "a sequence has at least one file");
+    let (first, last) = (numbers[0] as f64, numbers[n - 1] as f64);
+    let s = if mode == Mode::Loop && n > 1 {
+        let spacing = (numbers[n - 1] - numbers[n - 2]) as f64;
+        let s = first + (s - first).rem_euclid(last - first + spacing);
+        if s >= last {
+            return (n - 1, 0, ((s - last) / spacing).clamp(0.0, 1.0));
+        }
+        s
+    } else {
+        s
+    };
+    if s <= first {
+        return (0, 0, 0.0);
+    }
+    if s >= last {
+        return (n - 1, n - 1, 0.0);
+    }
+    let i = numbers.partition_point(|&x| x as f64 <= s) - 1;
+    let (a, b) = (numbers[i] as f64, numbers[i + 1] as f64);
+    (i, i + 1, (s - a) / (b - a))
+}
+
+/// Positions and normals blended linearly (normals renormalized), tangents recomputed;
+/// topology, UVs and pieces from `a` (equal in `b`).
+pub fn blend(a: &Mesh, b: &Mesh, w: f32) -> Mesh {
+    let mut m = a.clone();
+    m.positions = a.positions.iter().zip(&b.positions).map(|(p, q)| p.lerp(*q, w)).collect();
+    m.normals = a
+        .normals
+        .iter()
+        .zip(&b.normals)
+        .map(|(p, q)| p.lerp(*q, w).try_normalize().unwrap_or(if w < 0.5 { *p } else { *q }))
+        .collect();
+    let (tu, tv) = mesh::uv_tangents(&m.positions, &m.normals, &m.uvs, &m.indices);
+    m.tangents_u = tu;
+    m.tangents_v = tv;
+    m
+}
+
+#[derive(Default)]
+struct MeshSequenceNode {
+    /// The sequence's first file and its topology, which every frame is checked against.
+    reference: Option<(PathBuf, Topology)>,
+    /// Frame files this node requested and has not released yet.
+    held: Vec<PathBuf>,
+    /// The last output, reused while its frames and weight stay.
+    last: Option<LastOutput>,
+}
+
+/// An output surface and the two frames and weight it was made from.
+type LastOutput = (Arc<SeqFrame>, Arc<SeqFrame>, f64, Arc<Mesh>);
+
+impl Node for MeshSequenceNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        if cx.str("path").is_empty() {
+            return Err(NodeError::msg(
+                "parameter \"path\" is empty: name a folder of OBJ frames or a pattern like frames/frame_%04d.obj",
+            ));
+        }
+        let index = cx.load(&cx.path("path"), load_index)?;
+        let numbers: Vec<i64> = index.frames.iter().map(|(n, _)| *n).collect();
+        let mode = Mode::parse(cx.str("mode"));
+        let start = match cx.int("start_frame") {
+            -1 => numbers[0],
+            s => s,
+        };
+        let s = if mode == Mode::Hold {
+            start as f64
+        } else {
+            let t = cx.time();
+            start as f64 + t.frame as f64 * cx.f64("fps") / t.fps
+        };
+        let (mut a, mut b, mut w) = bracket(&numbers, s, mode);
+        if !cx.bool("interpolate") || w < 1e-6 {
+            (b, w) = (a, 0.0);
+        } else if w > 1.0 - 1e-6 {
+            (a, w) = (b, 0.0);
+        }
+        let first = index.frames[0].1.clone();
+        if self.reference.as_ref().is_some_and(|(p, _)| *p != first) {
+            self.reference = None;
+            self.last = None;
+        }
+        // The file after the pair, to have it ready when the time gets there.
+        let next = match mode {
+            Mode::Hold => None,
+            _ if b + 1 < numbers.len() => Some(b + 1),
+            Mode::Loop => Some(0),
+            Mode::Clamp => None,
+        }
+        .map(|i| index.frames[i].1.clone());
+        let (pa, pb) = (index.frames[a].1.clone(), index.frames[b].1.clone());
+        let mut wanted = vec![pa.clone(), pb.clone()];
+        if self.reference.is_none() {
+            wanted.push(first.clone());
+        }
+        wanted.extend(next.clone());
+        // Let go of what this time does not need before loading (bounded memory while scrubbing).
+        self.held.retain(|p| wanted.contains(p) || !cx.release::<SeqFrame>(p));
+        for p in &wanted {
+            if !self.held.contains(p) {
+                self.held.push(p.clone());
+            }
+        }
+        if let Some(p) = &next {
+            cx.prefetch(p, load_frame);
+        }
+        // Request all before waiting on any, so they load in parallel.
+        let reference = self.reference.is_none().then(|| cx.load(&first, load_frame));
+        let (fa, fb) = (cx.load(&pa, load_frame), cx.load(&pb, load_frame));
+        if let Some(r) = reference {
+            self.reference = Some((first.clone(), r?.topology.clone()));
+        }
+        let (fa, fb) = (fa?, fb?);
+        let (ref_path, ref_topology) = self.reference.as_ref().expect("set above");
+        for (frame, path) in [(&fa, &pa), (&fb, &pb)] {
+            if let Some(why) = frame.topology.difference(ref_topology) {
+                return Err(NodeError::msg(format!(
+                    "{}: the topology differs from {}, the first file of the sequence: {why}. Every frame of a sequence needs the same vertices, triangles and UVs",
+                    path.display(),
+                    ref_path.display()
+                )));
+            }
+        }
+        let mesh = match &self.last {
+            Some((la, lb, lw, m)) if Arc::ptr_eq(la, &fa) && Arc::ptr_eq(lb, &fb) && *lw == w => m.clone(),
+            _ if w == 0.0 => fa.mesh.clone(),
+            _ => Arc::new(blend(&fa.mesh, &fb.mesh, w as f32)),
+        };
+        self.last = Some((fa, fb, w, mesh.clone()));
+        cx.set("surface", Value::Mesh(mesh));
+        Ok(())
+    }
+}
+
+/// Lists the frame files of a sequence: `path` is a folder (all its OBJ files whose names
+/// end in a number, which must share one prefix) or a pattern whose file name holds
+/// `%d`, `%0Nd`, a run of `#` or one `*` where the frame number goes.
+pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
+    let (dir, prefix, suffix) = if path.is_dir() {
+        (path.to_path_buf(), None, None)
+    } else {
+        let name = path.file_name().and_then(|n| n.to_str()).context("the path has no file name")?;
+        let (prefix, suffix) = split_pattern(name).with_context(|| {
+            format!(
+                "{} is neither a folder nor a pattern (use frame_%04d.obj, frame_####.obj or frame_*.obj)",
+                path.display()
+            )
+        })?;
+        (path.parent().map(Path::to_path_buf).unwrap_or_default(), Some(prefix), Some(suffix))
+    };
+    let entries = std::fs::read_dir(&dir).with_context(|| format!("cannot list the folder {}", dir.display()))?;
+    let mut frames = Vec::new();
+    let mut prefixes: Vec<String> = Vec::new();
+    for entry in entries {
+        let entry = entry?;
+        let Some(name) = entry.file_name().to_str().map(str::to_string) else { continue };
+        let number = match (&prefix, &suffix) {
+            (Some(p), Some(s)) => name
+                .strip_prefix(p.as_str())
+                .and_then(|r| r.strip_suffix(s.as_str()))
+                .filter(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())),
+            _ => {
+                let Some(stem) = name.strip_suffix(".obj").or_else(|| name.strip_suffix(".OBJ")) else { continue };
+                let digits = stem.len() - stem.bytes().rev().take_while(u8::is_ascii_digit).count();
+                if digits == stem.len() {
+                    continue;
+                }
+                if !prefixes.iter().any(|p| p == &stem[..digits]) {
+                    prefixes.push(stem[..digits].to_string());
+                }
+                Some(&stem[digits..])
+            }
+        };
+        let Some(number) = number else { continue };
+        let n: i64 = number.parse().with_context(|| format!("frame number {number} in {name} is too large"))?;
+        frames.push((n, dir.join(&name)));
+    }
+    if prefixes.len() > 1 {
+        prefixes.sort();
+        bail!(
+            "the folder {} holds more than one sequence ({}): name one with a pattern like {}%04d.obj",
+            dir.display(),
+            prefixes.iter().map(|p| format!("{p}####.obj")).collect::<Vec<_>>().join(", "),
+            prefixes[0]
+        );
+    }
+    if frames.is_empty() {
+        bail!("no frame files found for {} (expected names like frame_0001.obj)", path.display());
+    }
+    frames.sort();
+    if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
+        bail!("{} and {} have the same frame number {}", w[0].1.display(), w[1].1.display(), w[0].0);
+    }
+    Ok(SequenceIndex { frames })
+}
+
+/// The text before and after the frame-number placeholder of a file-name pattern.
+fn split_pattern(name: &str) -> Option<(String, String)> {
+    if let Some(i) = name.find('%') {
+        let rest = &name[i + 1..];
+        let d = rest.find('d')?;
+        if !rest[..d].bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        return Some((name[..i].to_string(), rest[d + 1..].to_string()));
+    }
+    if let Some(i) = name.find('#') {
+        let end = i + name[i..].bytes().take_while(|&b| b == b'#').count();
+        return Some((name[..i].to_string(), name[end..].to_string()));
+    }
+    let i = name.find('*')?;
+    Some((name[..i].to_string(), name[i + 1..].to_string()))
+}
+
+/// Loads one frame file (see [`parse_obj`]).
+pub fn load_frame(path: &Path) -> anyhow::Result<SeqFrame> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mesh = parse_obj(&text).with_context(|| format!("cannot use {} as a sequence frame", path.display()))?;
+    Ok(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) })
+}
+
+const NONE: u32 = u32::MAX;
+
+/// Parses an OBJ frame into a Surface whose topology depends only on the faces' position and
+/// texture-coordinate indices: one vertex per distinct (v, vt) pair in order of first use,
+/// so a position on a UV seam becomes two vertices the same way in every frame, while the
+/// normal indices (which exporters renumber from frame to frame) do not matter. Normals are
+/// the file's, averaged per position (so seams do not show), or area-weighted face normals
+/// when the file has none. Polygons are fans; each `o` object is a pattern piece.
+pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
+    let (mut v, mut vt, mut vn) = (Vec::<Vec3>::new(), Vec::<Vec2>::new(), Vec::<Vec3>::new());
+    // Triangle corners as (v, vt, vn) with 0-based indices, and each triangle's piece.
+    let mut corners: Vec<[u32; 3]> = Vec::new();
+    let mut tri_piece: Vec<u32> = Vec::new();
+    let mut pieces: Vec<String> = Vec::new();
+    let mut piece: Option<u32> = None;
+    for (lineno, line) in text.lines().enumerate() {
+        let at = || format!("line {}", lineno + 1);
+        let mut words = line.split_whitespace();
+        let Some(tag) = words.next() else { continue };
+        let mut floats = |n: usize| -> anyhow::Result<Vec<f32>> {
+            let f: Vec<f32> = words
+                .by_ref()
+                .take(n)
+                .map(|w| w.parse::<f32>().with_context(|| format!("{}: \"{w}\" is not a number", at())))
+                .collect::<anyhow::Result<_>>()?;
+            if f.len() < n {
+                bail!("{}: expected {n} numbers after \"{tag}\"", at());
+            }
+            Ok(f)
+        };
+        match tag {
+            "v" => {
+                let f = floats(3)?;
+                v.push(Vec3::new(f[0], f[1], f[2]));
+            }
+            // OBJ's v axis points up; textures here have v down (as in mesh::load_obj).
+            "vt" => {
+                let f = floats(2)?;
+                vt.push(Vec2::new(f[0], 1.0 - f[1]));
+            }
+            "vn" => {
+                let f = floats(3)?;
+                vn.push(Vec3::new(f[0], f[1], f[2]));
+            }
+            "o" => {
+                let name = line.trim_start()[1..].trim().to_string();
+                let i = pieces.iter().position(|p| *p == name).unwrap_or_else(|| {
+                    pieces.push(name);
+                    pieces.len() - 1
+                });
+                piece = Some(i as u32);
+            }
+            "f" => {
+                let p = *piece.get_or_insert_with(|| {
+                    pieces.push(String::new());
+                    pieces.len() as u32 - 1
+                });
+                let face: Vec<[u32; 3]> = words
+                    .map(|w| parse_corner(w, v.len(), vt.len(), vn.len()).with_context(at))
+                    .collect::<anyhow::Result<_>>()?;
+                if face.iter().any(|c| c[1] == NONE) {
+                    bail!("{}: a face has no texture coordinates (vt); a sequence frame needs the pattern's UVs", at());
+                }
+                for k in 1..face.len().saturating_sub(1) {
+                    corners.extend_from_slice(&[face[0], face[k], face[k + 1]]);
+                    tri_piece.push(p);
+                }
+            }
+            _ => {}
+        }
+    }
+    if corners.is_empty() {
+        bail!("no faces");
+    }
+    let mut ids: HashMap<(u32, u32), u32> = HashMap::new();
+    let (mut pos_of, mut uvs, mut piece_ids, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (c, corner) in corners.iter().enumerate() {
+        let id = *ids.entry((corner[0], corner[1])).or_insert_with(|| {
+            pos_of.push(corner[0]);
+            uvs.push(vt[corner[1] as usize]);
+            piece_ids.push(tri_piece[c / 3]);
+            pos_of.len() as u32 - 1
+        });
+        indices.push(id);
+    }
+    let positions: Vec<Vec3> = pos_of.iter().map(|&i| v[i as usize]).collect();
+    let mut per_position = vec![Vec3::ZERO; v.len()];
+    if corners.iter().all(|c| c[2] != NONE) {
+        for c in &corners {
+            per_position[c[0] as usize] += vn[c[2] as usize].normalize_or_zero();
+        }
+    } else {
+        for t in corners.chunks_exact(3) {
+            let [a, b, c] = [t[0][0] as usize, t[1][0] as usize, t[2][0] as usize];
+            let n = (v[b] - v[a]).cross(v[c] - v[a]);
+            for i in [a, b, c] {
+                per_position[i] += n;
+            }
+        }
+    }
+    let normals = pos_of.iter().map(|&i| per_position[i as usize].try_normalize().unwrap_or(Vec3::Y)).collect();
+    if pieces.len() < 2 {
+        piece_ids.clear();
+    }
+    Mesh::from_parts(positions, Some(normals), uvs, indices, piece_ids)
+}
+
+/// `v`, `v/vt`, `v//vn` or `v/vt/vn`; 1-based or negative (relative) indices, made 0-based.
+fn parse_corner(word: &str, nv: usize, nvt: usize, nvn: usize) -> anyhow::Result<[u32; 3]> {
+    let mut parts = word.split('/');
+    let mut index = |count: usize, what: &str, required: bool| -> anyhow::Result<u32> {
+        let text = parts.next().unwrap_or("");
+        if text.is_empty() {
+            if required {
+                bail!("face corner \"{word}\" has no {what} index");
+            }
+            return Ok(NONE);
+        }
+        let i: i64 = text.parse().with_context(|| format!("face corner \"{word}\": \"{text}\" is not an index"))?;
+        let resolved = if i > 0 { i - 1 } else { count as i64 + i };
+        if i == 0 || resolved < 0 || resolved >= count as i64 {
+            bail!("face corner \"{word}\": {what} index {i} is out of range (there are {count} so far)");
+        }
+        Ok(resolved as u32)
+    };
+    Ok([index(nv, "position", true)?, index(nvt, "texture coordinate", false)?, index(nvn, "normal", false)?])
+}
