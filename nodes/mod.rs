@@ -3,6 +3,7 @@
 pub mod attach;
 pub mod basic;
 pub mod camera;
+pub mod cloth;
 pub mod curves;
 pub mod direct_light;
 pub mod export;
@@ -26,6 +27,8 @@ pub static ALL: &[&NodeSpec] = &[
     &basic::TIME,
     &geometry::PRIMITIVE,
     &geometry::MESH_FILE,
+    &geometry::TRANSFORM_MESH,
+    &cloth::node::CLOTH_SIM,
     &mesh_sequence::MESH_SEQUENCE,
     &live_link::LIVE_LINK,
     &scene::MATERIAL,

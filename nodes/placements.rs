@@ -20,26 +20,6 @@ const REGION: [ParamSpec; 4] = [
     ParamSpec::new("v_max", ParamKind::Float { default: 1.0, min: 0.0, max: 1.0 }, "Region: highest v."),
 ];
 
-/// SplitMix64: a small, fixed generator, so a seed gives the same layout in every build.
-pub struct SplitMix(u64);
-
-impl SplitMix {
-    pub fn new(seed: u64) -> Self {
-        SplitMix(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 /// Which pattern piece covers a UV point: a uniform grid over the surface's UV triangles.
 pub struct UvCoverage<'a> {
     mesh: &'a Mesh,
@@ -146,7 +126,7 @@ impl Node for ScatterNode {
         let count = cx.int("count") as usize;
         let spacing = cx.f32("min_spacing");
         let (smin, smax) = (cx.f32("scale_min"), cx.f32("scale_max").max(cx.f32("scale_min")));
-        let mut rng = SplitMix::new(cx.int("seed") as u64);
+        let mut rng = crate::rng::SplitMix64::new(cx.int("seed") as u64);
         // Spatial hash of accepted points for the spacing test.
         let cell = spacing.max(1e-6);
         let mut grid: std::collections::BTreeMap<(i32, i32), Vec<Vec2>> = Default::default();

@@ -14,6 +14,7 @@ pub mod image_io;
 pub mod mesh;
 pub mod render;
 pub mod resources;
+pub mod rng;
 pub mod scene;
 pub mod shaders;
 pub mod spec;

@@ -144,6 +144,9 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
             if let Some(b) = &bar {
                 b.abandon();
             }
+            // Keep the statistics of the frames that worked: CI wants them most when a frame fails.
+            stats.frames.push(FrameStats { frame, wall_ms, nodes });
+            let _ = write_stats(&opts.out_dir, &stats);
             bail!("frame {frame}: {}", failures.join("\n  "));
         }
         for r in evaluator.reports() {
@@ -184,9 +187,14 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let json = serde_json::to_string_pretty(&stats)?;
-    crate::graph::write_atomic(&opts.out_dir.join("stats.json"), json.as_bytes())?;
+    write_stats(&opts.out_dir, &stats)?;
     Ok(stats)
+}
+
+fn write_stats(dir: &Path, stats: &Stats) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(stats)?;
+    crate::graph::write_atomic(&dir.join("stats.json"), json.as_bytes())
+        .with_context(|| format!("cannot write {}/stats.json", dir.display()))
 }
 
 fn write_image(gpu: &GpuContext, img: &gpu::GpuImage, path: &Path, exr: bool) -> anyhow::Result<()> {

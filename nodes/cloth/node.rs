@@ -1,0 +1,146 @@
+//! The `ClothSim` node: the built-in simulator as the pipeline's input stage.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Quat, Vec2, Vec3};
+
+use crate::eval::{EvalCx, Node, NodeError};
+use crate::mesh::Mesh;
+use crate::nodes::geometry;
+use crate::scene::{DrawItem, Material};
+use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
+use crate::value::Value;
+
+use super::{Cloth, Collider, FRAME_DT, FlagParams, Preset, SkirtParams, TableclothParams};
+
+pub static CLOTH_SIM: NodeSpec = NodeSpec {
+    kind: "ClothSim",
+    category: Category::Simulation,
+    doc: "Built-in deterministic cloth (XPBD, 60 steps per second of animation) from 2D pattern pieces sewn together: a tablecloth over a torus, a flag in the wind, or a four-panel skirt on a capsule body. UVs are the packed pattern coordinates.",
+    inputs: &[],
+    outputs: &[
+        PortSpec::output("surface", PortType::Surface, "The cloth at the current time."),
+        PortSpec::output("colliders", PortType::Scene, "The collision bodies, to draw them."),
+        PortSpec::output("max_strain", PortType::Scalar, "The largest edge strain (stretch) this frame."),
+    ],
+    params: &[
+        ParamSpec::new(
+            "preset",
+            ParamKind::Choice { default: "tablecloth", options: &["tablecloth", "flag", "skirt"] },
+            "The scene.",
+        ),
+        ParamSpec::new("triangles", ParamKind::Int { default: 4000, min: 100, max: 200_000 }, "Target triangle count."),
+        ParamSpec::new(
+            "seed",
+            ParamKind::Int { default: 1, min: 0, max: i64::MAX },
+            "Seed of the preset's randomness (wind gusts, initial jitter).",
+        ),
+        ParamSpec::new(
+            "warmup",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 600.0 },
+            "Seconds simulated before frame 0 (to start from a settled drape).",
+        ),
+        ParamSpec::new(
+            "wind_speed",
+            ParamKind::Float { default: 6.0, min: 0.0, max: 100.0 },
+            "Mean wind speed in m/s (flag).",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(ClothSimNode::default()),
+};
+
+#[derive(Default)]
+struct ClothSimNode {
+    /// The running simulation, the preset it was built from, and its step count.
+    state: Option<(Cloth, String, u64)>,
+    colliders: Option<(String, Arc<Vec<DrawItem>>)>,
+}
+
+impl Node for ClothSimNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let (triangles, seed) = (cx.int("triangles") as usize, cx.int("seed") as u64);
+        let preset = match cx.str("preset") {
+            "flag" => Preset::Flag(FlagParams { triangles, seed, wind_speed: cx.f32("wind_speed") }),
+            "skirt" => Preset::Skirt(SkirtParams { triangles, seed, ..Default::default() }),
+            _ => Preset::Tablecloth(TableclothParams { triangles, seed, ..Default::default() }),
+        };
+        let key = format!("{preset:?}");
+        let time = cx.time();
+        let target = ((cx.f64("warmup") + time.seconds()) / FRAME_DT as f64).round().max(0.0) as u64;
+        // Deterministic by construction: going back in time, or changing the preset, replays from the start.
+        let rebuild = match &self.state {
+            Some((_, k, step)) => *k != key || *step > target,
+            None => true,
+        };
+        if rebuild {
+            self.state = Some((preset.build(), key.clone(), 0));
+        }
+        let (cloth, _, step) = self.state.as_mut().expect("built above");
+        while *step < target {
+            cloth.step_frame(FRAME_DT);
+            *step += 1;
+        }
+        let frame = cloth.surface();
+        let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
+        let mesh = Mesh::from_parts(
+            v3(&frame.positions),
+            Some(v3(&frame.normals)),
+            frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
+            frame.indices,
+            frame.piece_ids,
+        )
+        .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
+        let strain = cloth.max_strain() as f64;
+        if self.colliders.as_ref().is_none_or(|(k, _)| *k != key) {
+            self.colliders = Some((key, Arc::new(collider_items(cloth.colliders())?)));
+        }
+        cx.set("surface", Value::Mesh(Arc::new(mesh)));
+        cx.set("colliders", Value::Scene(self.colliders.as_ref().expect("set above").1.clone()));
+        cx.set("max_strain", Value::Scalar(strain));
+        Ok(())
+    }
+}
+
+/// Drawable stand-ins for the colliders (a capsule as a cylinder with two spheres).
+fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
+    let material = Arc::new(Material { base_color: Vec3::new(0.55, 0.55, 0.6), glossiness: 0.3, ..Default::default() });
+    let item = |mesh: Mesh, model: Mat4| DrawItem {
+        mesh: Arc::new(mesh),
+        material: material.clone(),
+        model,
+        detail: false,
+        attached: None,
+    };
+    let mut items = Vec::new();
+    for c in colliders {
+        match c {
+            Collider::Sphere { center, radius } => {
+                items.push(item(geometry::sphere(*radius, 48, 24)?, Mat4::from_translation(*center)));
+            }
+            Collider::Capsule { a, b, radius } => {
+                let axis = *b - *a;
+                let rotation = Quat::from_rotation_arc(Vec3::Y, axis.normalize_or(Vec3::Y));
+                let model = Mat4::from_rotation_translation(rotation, (*a + *b) * 0.5);
+                items.push(item(geometry::cylinder(*radius, axis.length().max(1e-6), 32, 1)?, model));
+                for end in [a, b] {
+                    items.push(item(geometry::sphere(*radius, 32, 16)?, Mat4::from_translation(*end)));
+                }
+            }
+            Collider::Box { center, half_extents, rotation } => {
+                let model = Mat4::from_scale_rotation_translation(*half_extents * 2.0, *rotation, *center);
+                items.push(item(geometry::cube(1.0)?, model));
+            }
+            Collider::Torus { center, axis, major_radius, minor_radius } => {
+                let rotation = Quat::from_rotation_arc(Vec3::Y, axis.normalize_or(Vec3::Y));
+                let model = Mat4::from_rotation_translation(rotation, *center);
+                items.push(item(geometry::torus(*major_radius, *minor_radius, 96, 32)?, model));
+            }
+            Collider::Mesh(m) => {
+                let indices = m.triangles().iter().flatten().copied().collect();
+                items.push(item(Mesh::build(m.positions().to_vec(), None, None, indices)?, Mat4::IDENTITY));
+            }
+        }
+    }
+    Ok(items)
+}
