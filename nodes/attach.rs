@@ -150,6 +150,11 @@ pub static AREA_ATTACHMENT: NodeSpec = NodeSpec {
             ParamKind::Float { default: 1.0, min: 0.0, max: 1e4 },
             "Scale of the mesh's y (height over the surface) (M_tan).",
         ),
+        ParamSpec::new(
+            "lift",
+            ParamKind::Float { default: 0.0, min: -1e3, max: 1e3 },
+            "Offset along the normal after scaling (M_tan), e.g. to keep a flat sticker off the cloth.",
+        ),
         ParamSpec::new("center", ParamKind::Vec3 { default: [0.5, 0.5, 0.0] }, "Decal centre in UV (x = u, y = v)."),
         ParamSpec::new("size", ParamKind::Float { default: 0.2, min: 1e-5, max: 10.0 }, "Decal size in UV units."),
         ParamSpec::new(
@@ -180,7 +185,8 @@ impl Node for AreaAttachmentNode {
                 "the detail mesh is flat in x or z; area attachments project it on the xz-plane (eq. 6)",
             ));
         }
-        let m_tan = Mat4::from_scale(Vec3::new(1.0, cx.f32("height"), 1.0));
+        let m_tan = Mat4::from_translation(Vec3::new(0.0, cx.f32("lift"), 0.0))
+            * Mat4::from_scale(Vec3::new(1.0, cx.f32("height"), 1.0));
         // M_tex maps the mesh's xz bounds onto a UV square of side `size` at `origin`.
         let tile = |origin: Vec2, size: f32, angle_deg: f32| {
             let to_unit = Affine2::from_scale(Vec2::ONE / extent) * Affine2::from_translation(-Vec2::new(lo.x, lo.z));

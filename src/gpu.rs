@@ -41,6 +41,8 @@ pub const NO_ADAPTER_HELP: &str = "werkstatt renders with wgpu and needs a Vulka
 without a GPU, install Mesa's software rasterizer: `apt-get install mesa-vulkan-drivers` (Vulkan, lavapipe) \
 or `libegl-mesa0` (OpenGL through EGL, then --backend gl)";
 
+/// The device and queue. A context serves one evaluator at a time: wgpu validation errors
+/// and pass timings are collected per device, not per caller.
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,

@@ -104,7 +104,7 @@ fn write_glb(path: &std::path::Path) {
     bin.extend(positions.iter().flatten().flat_map(|f| f.to_le_bytes()));
     bin.extend(uvs.iter().flatten().flat_map(|f| f.to_le_bytes()));
     bin.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let json = format!(
@@ -119,7 +119,7 @@ fn write_glb(path: &std::path::Path) {
         bin.len()
     );
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();

@@ -4,18 +4,20 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use werkstatt::gpu::{Backend, GpuContext, Pixels};
 use werkstatt::render::{RenderOptions, Stats, render};
 
+/// One GPU context per test thread: a context serves one evaluator at a time (validation
+/// errors and pass timings are collected per device), and tests run in parallel threads.
 pub fn gpu() -> &'static GpuContext {
-    static GPU: OnceLock<GpuContext> = OnceLock::new();
-    GPU.get_or_init(|| {
-        GpuContext::headless(Backend::from_env().unwrap()).unwrap_or_else(|e| {
-            panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}")
-        })
-    })
+    thread_local! {
+        static GPU: &'static GpuContext = Box::leak(Box::new(
+            GpuContext::headless(Backend::from_env().unwrap())
+                .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}")),
+        ));
+    }
+    GPU.with(|g| *g)
 }
 
 pub fn root() -> PathBuf {
