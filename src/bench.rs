@@ -246,3 +246,57 @@ pub fn attachments(
     }
     Ok(rows)
 }
+
+/// One row of `werkstatt bench cloth`.
+#[derive(Debug, serde::Serialize)]
+pub struct ClothRow {
+    pub target_triangles: usize,
+    pub triangles: usize,
+    pub mean_ms: f64,
+    pub median_ms: f64,
+    pub worst_ms: f64,
+    /// On-CPU time of the simulating thread (Linux), unaffected by a busy machine's waits.
+    pub cpu_ms: Option<f64>,
+    pub max_strain: f32,
+}
+
+/// Simulation time per frame (1/60 s) against triangle count for the tablecloth preset,
+/// after `warmup` frames so the cloth is in contact with the torus.
+pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
+    use crate::nodes::cloth::{FRAME_DT, Preset, TableclothParams};
+    let cpu_ns = || -> Option<u64> {
+        std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
+    };
+    sizes
+        .iter()
+        .map(|&target| {
+            let mut cloth = Preset::Tablecloth(TableclothParams { triangles: target, ..Default::default() }).build();
+            for _ in 0..warmup {
+                cloth.step_frame(FRAME_DT);
+            }
+            let cpu_start = cpu_ns();
+            let mut times: Vec<f64> = (0..frames.max(1))
+                .map(|_| {
+                    let t = Instant::now();
+                    cloth.step_frame(FRAME_DT);
+                    t.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            let cpu_ms = match (cpu_start, cpu_ns()) {
+                (Some(a), Some(b)) => Some((b - a) as f64 / 1e6 / times.len() as f64),
+                _ => None,
+            };
+            let mean_ms = times.iter().sum::<f64>() / times.len() as f64;
+            times.sort_by(f64::total_cmp);
+            ClothRow {
+                target_triangles: target,
+                triangles: cloth.triangle_count(),
+                mean_ms,
+                median_ms: times[times.len() / 2],
+                worst_ms: times[times.len() - 1],
+                cpu_ms,
+                max_strain: cloth.max_strain(),
+            }
+        })
+        .collect()
+}

@@ -86,6 +86,15 @@ enum BenchWhat {
         #[arg(long, default_value_t = 20000)]
         frames: usize,
     },
+    /// Cloth simulation time per frame against triangle count (tablecloth over a torus).
+    Cloth {
+        #[arg(long, default_value = "2000,5000,10000,20000,50000", value_delimiter = ',')]
+        triangles: Vec<usize>,
+        #[arg(long, default_value_t = 30)]
+        warmup: usize,
+        #[arg(long, default_value_t = 60)]
+        frames: usize,
+    },
     /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
     /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
     Attachments {
@@ -255,6 +264,20 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             })?;
             if let Some(path) = json {
                 crate::graph::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Cloth { triangles, warmup, frames } } => {
+            println!("tablecloth over torus, frame = 1/60 s, {warmup} warm-up + {frames} timed frames");
+            println!(
+                "| triangles | mean ms/frame | median | worst | CPU ms/frame | max strain |\n|---:|---:|---:|---:|---:|---:|"
+            );
+            for r in crate::bench::cloth(&triangles, warmup, frames) {
+                let cpu = r.cpu_ms.map_or("n/a".to_string(), |c| format!("{c:.2}"));
+                println!(
+                    "| {} | {:.2} | {:.2} | {:.2} | {cpu} | {:.3} |",
+                    r.triangles, r.mean_ms, r.median_ms, r.worst_ms, r.max_strain
+                );
             }
             Ok(ExitCode::SUCCESS)
         }
