@@ -18,7 +18,7 @@ use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
 
-use super::gbuffer::{InstanceResolver, uniform_entry, warp_bind_group, warp_layout};
+use super::gbuffer::{InstanceResolver, storage_entry, uniform_entry, warp_bind_group, warp_compute_pipeline};
 
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
@@ -84,42 +84,13 @@ pub struct GpuWarper {
 
 impl GpuWarper {
     pub fn new(gpu: &GpuContext) -> anyhow::Result<GpuWarper> {
-        let module = gpu.shader("attach_export.wgsl")?;
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let io_layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("warp export io"),
-            entries: &[
-                storage(0, true),
-                storage(1, true),
-                storage(2, false),
-                uniform_entry(3, wgpu::ShaderStages::COMPUTE),
-            ],
-        });
-        let warp_layout = warp_layout(gpu, wgpu::ShaderStages::COMPUTE);
-        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("warp export"),
-            bind_group_layouts: &[Some(&io_layout), None, Some(&warp_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.checked("attach_export.wgsl", || {
-            gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("warp export"),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        })?;
+        let io = [
+            storage_entry(0, true),
+            storage_entry(1, true),
+            storage_entry(2, false),
+            uniform_entry(3, wgpu::ShaderStages::COMPUTE),
+        ];
+        let (pipeline, io_layout, warp_layout) = warp_compute_pipeline(gpu, "attach_export.wgsl", &io)?;
         Ok(GpuWarper { pipeline, io_layout, warp_layout, resolver: InstanceResolver::new(gpu)? })
     }
 

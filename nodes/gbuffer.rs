@@ -139,39 +139,53 @@ pub struct InstanceResolver {
     warp_layout: wgpu::BindGroupLayout,
 }
 
+pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A compute pipeline over the warp (shaders/warp.wgsl): its own buffers in group 0, the
+/// matrix texture and warp settings in group 2. Returns the pipeline and both layouts.
+pub fn warp_compute_pipeline(
+    gpu: &GpuContext,
+    shader: &'static str,
+    io_entries: &[wgpu::BindGroupLayoutEntry],
+) -> anyhow::Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout, wgpu::BindGroupLayout)> {
+    let module = gpu.shader(shader)?;
+    let io_layout = gpu
+        .device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(shader), entries: io_entries });
+    let warp_layout = warp_layout(gpu, wgpu::ShaderStages::COMPUTE);
+    let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(shader),
+        bind_group_layouts: &[Some(&io_layout), None, Some(&warp_layout)],
+        immediate_size: 0,
+    });
+    let pipeline = gpu.checked(shader, || {
+        gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(shader),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    })?;
+    Ok((pipeline, io_layout, warp_layout))
+}
+
 impl InstanceResolver {
     pub fn new(gpu: &GpuContext) -> anyhow::Result<Self> {
-        let module = gpu.shader("attach_resolve.wgsl")?;
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let io_layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("instance resolve io"),
-            entries: &[storage(0, true), storage(1, false)],
-        });
-        let warp_layout = warp_layout(gpu, wgpu::ShaderStages::COMPUTE);
-        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("instance resolve"),
-            bind_group_layouts: &[Some(&io_layout), None, Some(&warp_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.checked("attach_resolve.wgsl", || {
-            gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("instance resolve"),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        })?;
+        let (pipeline, io_layout, warp_layout) =
+            warp_compute_pipeline(gpu, "attach_resolve.wgsl", &[storage_entry(0, true), storage_entry(1, false)])?;
         Ok(InstanceResolver { pipeline, io_layout, warp_layout })
     }
 

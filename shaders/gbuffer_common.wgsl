@@ -21,13 +21,7 @@ struct Object {
 @group(1) @binding(1) var base_map: texture_2d<f32>;
 @group(1) @binding(2) var base_sampler: sampler;
 
-struct VertexIn {
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) tangent_u: vec3<f32>,
-    @location(3) uv: vec2<f32>,
-    @location(4) tangent_v: vec3<f32>,
-};
+// #include "vertex_in.wgsl"
 
 struct GBufferOut {
     @location(0) color: vec4<f32>,

@@ -2,13 +2,7 @@
 // in UV space and write, per texel, the 3x4 matrix [t_u n t_v p]: the orthonormalized
 // tangent frame and the world position. Texels no piece covers keep the cleared zero matrix.
 
-struct VertexIn {
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) tangent_u: vec3<f32>,
-    @location(3) uv: vec2<f32>,
-    @location(4) tangent_v: vec3<f32>,
-};
+// #include "vertex_in.wgsl"
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

@@ -5,6 +5,7 @@
 use anyhow::{Context as _, bail};
 
 const EMBEDDED: &[(&str, &str)] = &[
+    ("vertex_in.wgsl", include_str!("../shaders/vertex_in.wgsl")),
     ("gbuffer_common.wgsl", include_str!("../shaders/gbuffer_common.wgsl")),
     ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),

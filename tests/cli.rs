@@ -111,3 +111,16 @@ fn help_exists_for_every_command() {
         assert!(out.contains("Usage"), "{cmd}");
     }
 }
+
+#[test]
+fn every_shader_file_is_embedded() {
+    let mut files: Vec<String> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".wgsl"))
+        .collect();
+    files.sort();
+    let mut embedded: Vec<String> = werkstatt::shaders::names().map(str::to_string).collect();
+    embedded.sort();
+    assert_eq!(files, embedded, "shaders/ and the embedded list in src/shaders.rs differ");
+}
