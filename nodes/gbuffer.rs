@@ -103,6 +103,7 @@ pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::Bi
             texture_entry(1, visibility, false),
             texture_entry(2, visibility, false),
             uniform_entry(3, visibility),
+            texture_entry(4, visibility, false),
         ],
     })
 }
@@ -128,6 +129,7 @@ pub fn warp_bind_group(
             wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&m.col_n.view) },
             wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&m.col_v.view) },
             wgpu::BindGroupEntry { binding: 3, resource: uniform.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&m.seams.view) },
         ],
     })
 }

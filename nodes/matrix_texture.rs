@@ -50,6 +50,17 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
 pub struct MatrixTextureNode {
     pipeline: Option<(wgpu::RenderPipeline, wgpu::TextureFormat)>,
     filter: Option<(FullscreenPass, wgpu::TextureFormat)>,
+    /// The seam map depends only on UVs, seams and resolution, not on positions: kept across frames.
+    seam_map: Option<(u64, GpuImage)>,
+}
+
+/// Gutter width of the seam map, in texels.
+pub const SEAM_GUTTER_TEXELS: f32 = 2.0;
+
+fn topology_key(mesh: &Mesh, resolution: u32) -> u64 {
+    let mut h = crate::render::fnv1a(bytemuck::cast_slice(&mesh.uvs));
+    h ^= crate::render::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
+    h ^ (resolution as u64).rotate_left(41)
 }
 
 /// The shortest triangle edge in UV space; the sampling theorem asks for at least two texels
@@ -146,7 +157,12 @@ impl MatrixTextureNode {
             pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
         }
         gpu.queue.submit([enc.finish()]);
-        let mut m = MatrixTexture { col_u, col_n, col_v, resolution };
+        let key = topology_key(mesh, resolution);
+        if self.seam_map.as_ref().is_none_or(|(k, _)| *k != key) {
+            self.seam_map = Some((key, upload_seam_map(gpu, mesh, resolution)));
+        }
+        let seams = self.seam_map.as_ref().expect("set above").1.share();
+        let mut m = MatrixTexture { col_u, col_n, col_v, seams, resolution };
         if filter_radius > 0 {
             if self.filter.as_ref().is_none_or(|(_, f)| *f != format) {
                 self.filter = Some((FullscreenPass::new(gpu, "matrix_filter.wgsl", 3, &[format; 3])?, format));
@@ -154,6 +170,7 @@ impl MatrixTextureNode {
             let (pass, _) = self.filter.as_ref().expect("created above");
             for dir in [[1.0f32, 0.0], [0.0, 1.0]] {
                 let out = MatrixTexture {
+                    seams: m.seams.share(),
                     col_u: make("matrix t_u"),
                     col_n: make("matrix n"),
                     col_v: make("matrix t_v"),
@@ -225,5 +242,34 @@ pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<Matrix
             p: glam::Vec3::new(u.rgba[4 * i + 3], n.rgba[4 * i + 3], v.rgba[4 * i + 3]),
         })
         .collect();
-    Ok(MatrixTexels { resolution: m.resolution, frames })
+    let seams = read_back(gpu, &m.seams)?.rgba.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    Ok(MatrixTexels { resolution: m.resolution, frames, seams })
+}
+
+fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {
+    let data = crate::warp::seam_map(mesh, resolution, SEAM_GUTTER_TEXELS);
+    let img = GpuImage::new(
+        gpu,
+        "seam map",
+        resolution,
+        resolution,
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    gpu.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &img.texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytemuck::cast_slice(&data),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(16 * resolution),
+            rows_per_image: Some(resolution),
+        },
+        wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 },
+    );
+    img
 }

@@ -15,6 +15,10 @@ struct Warp {
 };
 
 @group(2) @binding(3) var<uniform> warp: Warp;
+// Seam map: for gutter texels beside a sewn edge, the partner piece's UV (xy), the angle of
+// the map from this piece's UV directions to the partner's (z) and +1/-1 for a rotation or a
+// reflection (w); zero elsewhere (src/warp.rs `seam_map`).
+@group(2) @binding(4) var seam_map: texture_2d<f32>;
 
 // Per-instance placement: M_tex (2x3, rows), M_tan (4x4, columns), a cubic Bezier in UV space
 // and the curve-parameter range this instance covers.
@@ -39,6 +43,48 @@ struct SurfaceFrame {
     valid: bool,
 };
 
+struct Texel {
+    tu: vec3<f32>,
+    n: vec3<f32>,
+    tv: vec3<f32>,
+    p: vec3<f32>,
+    valid: bool,
+};
+
+fn load_texel(q: vec2<i32>) -> Texel {
+    let cu = textureLoad(mt_u, q, 0);
+    let cn = textureLoad(mt_n, q, 0);
+    let cv = textureLoad(mt_v, q, 0);
+    return Texel(cu.xyz, cn.xyz, cv.xyz, vec3<f32>(cu.w, cn.w, cv.w), dot(cn.xyz, cn.xyz) >= 0.25);
+}
+
+// A footprint texel's frame: its own where a piece covers it; in the gutter beside a seam, the
+// partner piece's frame with its tangents turned into this piece's UV directions, so lookups
+// blend both pieces across the seam (dissertation section 4.1.2, "Outliers and Seams").
+fn texel_or_partner(q: vec2<i32>, dims: vec2<i32>) -> Texel {
+    let own = load_texel(q);
+    if own.valid {
+        return own;
+    }
+    let seam = textureLoad(seam_map, q, 0);
+    if seam.w == 0.0 {
+        return own;
+    }
+    let pq = clamp(vec2<i32>(seam.xy * vec2<f32>(dims)), vec2<i32>(0), dims - 1);
+    var b = load_texel(pq);
+    let c = cos(seam.z);
+    let s = sin(seam.z);
+    let tu = b.tu;
+    if seam.w > 0.0 {
+        b.tu = c * tu + s * b.tv;
+        b.tv = -s * tu + c * b.tv;
+    } else {
+        b.tu = c * tu + s * b.tv;
+        b.tv = s * tu - c * b.tv;
+    }
+    return b;
+}
+
 // f_mt (eq. 3) with bilinear interpolation done by hand over the valid texels, so it works
 // on Rgba32Float without FLOAT32_FILTERABLE. Empty (zero) texels get no weight; a lookup whose
 // valid weight is below the threshold, or whose averaged axes are far from unit length
@@ -59,17 +105,15 @@ fn lookup_frame(uv: vec2<f32>) -> SurfaceFrame {
         if q.x < 0 || q.y < 0 || q.x >= dims.x || q.y >= dims.y {
             continue;
         }
-        let cn = textureLoad(mt_n, q, 0);
-        if dot(cn.xyz, cn.xyz) < 0.25 {
+        let t = texel_or_partner(q, dims);
+        if !t.valid {
             continue;
         }
         let w = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
-        let cu = textureLoad(mt_u, q, 0);
-        let cv = textureLoad(mt_v, q, 0);
-        su = su + w * cu.xyz;
-        sn = sn + w * cn.xyz;
-        sv = sv + w * cv.xyz;
-        sp = sp + w * vec3<f32>(cu.w, cn.w, cv.w);
+        su = su + w * t.tu;
+        sn = sn + w * t.n;
+        sv = sv + w * t.tv;
+        sp = sp + w * t.p;
         weight = weight + w;
     }
     var frame: SurfaceFrame;

@@ -17,6 +17,9 @@ pub struct Mesh {
     pub indices: Vec<u32>,
     /// Pattern piece of each vertex (Surfaces); empty for plain meshes.
     pub piece_ids: Vec<u32>,
+    /// Vertex pairs sewn together across pieces (Surfaces): the same point of the garment on
+    /// two pattern pieces. The matrix texture blends across them.
+    pub seams: Vec<[u32; 2]>,
     /// Notes about repairs made while building the mesh, shown as node warnings.
     pub repairs: Vec<String>,
     gpu: OnceLock<GpuMesh>,
@@ -32,6 +35,7 @@ impl Clone for Mesh {
             tangents_v: self.tangents_v.clone(),
             indices: self.indices.clone(),
             piece_ids: self.piece_ids.clone(),
+            seams: self.seams.clone(),
             repairs: self.repairs.clone(),
             gpu: OnceLock::new(),
         }
@@ -163,6 +167,7 @@ impl Mesh {
             tangents_v,
             indices: kept,
             piece_ids: Vec::new(),
+            seams: Vec::new(),
             repairs,
             gpu: OnceLock::new(),
         })
@@ -230,6 +235,7 @@ impl Mesh {
             tangents_v,
             indices,
             piece_ids,
+            seams: Vec::new(),
             repairs: Vec::new(),
             gpu: OnceLock::new(),
         })

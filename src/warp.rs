@@ -15,6 +15,8 @@ pub struct MatrixTexture {
     pub col_u: GpuImage,
     pub col_n: GpuImage,
     pub col_v: GpuImage,
+    /// The seam map (see `seam_map`), Rgba32Float; all zero for a surface without seams.
+    pub seams: GpuImage,
     pub resolution: u32,
 }
 
@@ -31,6 +33,7 @@ pub struct TexelFrame {
 pub struct MatrixTexels {
     pub resolution: u32,
     pub frames: Vec<TexelFrame>,
+    pub seams: Vec<[f32; 4]>,
 }
 
 impl MatrixTexels {
@@ -40,6 +43,27 @@ impl MatrixTexels {
 
     pub fn is_empty_texel(&self, x: u32, y: u32) -> bool {
         self.at(x, y).n.length_squared() < 0.25
+    }
+
+    /// The frame a footprint texel contributes: its own if a piece covers it, else, for a gutter
+    /// texel beside a seam, the partner piece's frame turned into this piece's UV directions.
+    fn texel_or_partner(&self, x: i32, y: i32) -> Option<TexelFrame> {
+        let res = self.resolution as i32;
+        let t = self.at(x as u32, y as u32);
+        if t.n.length_squared() >= 0.25 {
+            return Some(t);
+        }
+        let [pu, pv, angle, sigma] = self.seams[(y * res + x) as usize];
+        if sigma == 0.0 {
+            return None;
+        }
+        let (qx, qy) = (((pu * res as f32) as i32).clamp(0, res - 1), ((pv * res as f32) as i32).clamp(0, res - 1));
+        let b = self.at(qx as u32, qy as u32);
+        if b.n.length_squared() < 0.25 {
+            return None;
+        }
+        let m = seam_rotation(angle, sigma);
+        Some(TexelFrame { tu: b.tu * m[0][0] + b.tv * m[0][1], n: b.n, tv: b.tu * m[1][0] + b.tv * m[1][1], p: b.p })
     }
 
     /// The CPU twin of `lookup_frame` in shaders/warp.wgsl.
@@ -55,10 +79,7 @@ impl MatrixTexels {
             if qx < 0 || qy < 0 || qx >= res || qy >= res {
                 continue;
             }
-            let t = self.at(qx as u32, qy as u32);
-            if t.n.length_squared() < 0.25 {
-                continue;
-            }
+            let Some(t) = self.texel_or_partner(qx, qy) else { continue };
             let w = if ox == 1 { f.x } else { 1.0 - f.x } * if oy == 1 { f.y } else { 1.0 - f.y };
             su += w * t.tu;
             sn += w * t.n;
@@ -78,6 +99,100 @@ impl MatrixTexels {
         let tv = (v - n * n.dot(v) - tu * tu.dot(v)).normalize();
         Some(TexelFrame { tu, n, tv, p: sp / weight })
     }
+}
+
+/// The 2x2 map from this piece's UV directions to the partner's, as rows of coefficients:
+/// this piece's u axis is `m[0][0] t_u' + m[0][1] t_v'` of the partner. `sigma` is +1 for a
+/// rotation, -1 for a rotation with a reflection.
+pub fn seam_rotation(angle: f32, sigma: f32) -> [[f32; 2]; 2] {
+    let (s, c) = angle.sin_cos();
+    // Columns of M (A's u and v directions expressed in B's UV), transposed into rows.
+    if sigma > 0.0 { [[c, s], [-s, c]] } else { [[c, s], [s, -c]] }
+}
+
+/// The seam map of a surface at `res` x `res`: for texels within `gutter` texels outside a
+/// piece's boundary edge that is sewn to another piece, the UV of the corresponding point
+/// inside the partner piece (as far inside as the texel is outside), and the rotation (and
+/// reflection) from this piece's UV directions to the partner's. Lookups that reach past a
+/// seam then blend both pieces' frames (dissertation section 4.1.2, "Outliers and Seams").
+/// Texels elsewhere are zero.
+pub fn seam_map(mesh: &Mesh, res: u32, gutter: f32) -> Vec<[f32; 4]> {
+    use std::collections::HashMap;
+    let mut map = vec![[0.0f32; 4]; (res * res) as usize];
+    if mesh.seams.is_empty() {
+        return map;
+    }
+    // Boundary edges (used by one triangle) with the opposite vertex, to know which side is inside.
+    let mut edges: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
+    for t in mesh.indices.chunks_exact(3) {
+        for (a, b, c) in [(t[0], t[1], t[2]), (t[1], t[2], t[0]), (t[2], t[0], t[1])] {
+            edges.entry((a.min(b), a.max(b))).and_modify(|e| e.1 += 1).or_insert((c, 1));
+        }
+    }
+    let boundary: HashMap<(u32, u32), u32> =
+        edges.into_iter().filter(|(_, (_, n))| *n == 1).map(|(k, (opp, _))| (k, opp)).collect();
+    let mut partners: HashMap<u32, Vec<u32>> = HashMap::new();
+    for &[a, b] in &mesh.seams {
+        partners.entry(a).or_default().push(b);
+        partners.entry(b).or_default().push(a);
+    }
+    let uv = |i: u32| mesh.uvs[i as usize];
+    let mut best = vec![f32::MAX; map.len()];
+    let texel = 1.0 / res as f32;
+    let reach = gutter * texel;
+    let mut sorted: Vec<(&(u32, u32), &u32)> = boundary.iter().collect();
+    sorted.sort();
+    for (&(a0, a1), &opp_a) in sorted {
+        let (Some(p0), Some(p1)) = (partners.get(&a0), partners.get(&a1)) else { continue };
+        // The partner edge: a boundary edge between partners of both ends.
+        let Some((b0, b1, opp_b)) = p0.iter().find_map(|&b0| {
+            p1.iter().find_map(|&b1| boundary.get(&(b0.min(b1), b0.max(b1))).map(|&opp| (b0, b1, opp)))
+        }) else {
+            continue;
+        };
+        let (ua0, ua1, ub0, ub1) = (uv(a0), uv(a1), uv(b0), uv(b1));
+        let (ea, eb) = (ua1 - ua0, ub1 - ub0);
+        if ea.length_squared() < 1e-14 || eb.length_squared() < 1e-14 {
+            continue;
+        }
+        let (ea_hat, eb_hat) = (ea.normalize(), eb.normalize());
+        let inward = |e: Vec2, o: Vec2| {
+            let n = e.perp();
+            if n.dot(o) >= 0.0 { n } else { -n }
+        };
+        let out_a = -inward(ea_hat, uv(opp_a) - ua0);
+        let in_b = inward(eb_hat, uv(opp_b) - ub0);
+        // M maps A's UV directions to B's: e_A -> e_B, outward_A -> inward_B.
+        let m00 = eb_hat.x * ea_hat.x + in_b.x * out_a.x;
+        let m01 = eb_hat.x * ea_hat.y + in_b.x * out_a.y;
+        let m10 = eb_hat.y * ea_hat.x + in_b.y * out_a.x;
+        let m11 = eb_hat.y * ea_hat.y + in_b.y * out_a.y;
+        let sigma = (m00 * m11 - m01 * m10).signum();
+        let angle = m10.atan2(m00);
+        let scale = eb.length() / ea.length();
+        let lo = ua0.min(ua1) - Vec2::splat(reach);
+        let hi = ua0.max(ua1) + Vec2::splat(reach);
+        let cell = |x: f32| ((x * res as f32).floor() as i64).clamp(0, res as i64 - 1) as u32;
+        for y in cell(lo.y)..=cell(hi.y) {
+            for x in cell(lo.x)..=cell(hi.x) {
+                let c = Vec2::new((x as f32 + 0.5) * texel, (y as f32 + 0.5) * texel);
+                let rel = c - ua0;
+                let t = (rel.dot(ea) / ea.length_squared()).clamp(0.0, 1.0);
+                let d = rel.dot(out_a);
+                let dist = (rel - ea * t).length();
+                if d <= 0.0 || dist > reach {
+                    continue;
+                }
+                let i = (y * res + x) as usize;
+                if dist < best[i] {
+                    best[i] = dist;
+                    let pb = ub0 + eb * t + in_b * (d * scale);
+                    map[i] = [pb.x, pb.y, angle, sigma];
+                }
+            }
+        }
+    }
+    map
 }
 
 /// How detail geometry is attached (paper sections 3.3-3.5).

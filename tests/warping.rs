@@ -273,3 +273,76 @@ fn lookups_outside_the_pieces_are_outliers() {
     assert!(w[..n].iter().all(|v| v.valid));
     assert!(w[n..].iter().all(|v| !v.valid), "a lookup on empty texels must be flagged");
 }
+
+/// Two pieces of one flat garment sewn along x = 0; piece B is turned 90 degrees in the atlas.
+fn sewn_plane(sewn: bool) -> Mesh {
+    let n = 8;
+    let (mut p, mut uv, mut idx, mut piece) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (pi, x0) in [(0u32, -1.0f32), (1, 0.0)] {
+        let base = p.len() as u32;
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, z) = (x0 + i as f32 / n as f32, j as f32 / n as f32 - 0.5);
+                p.push(Vec3::new(x, 0.0, z));
+                uv.push(if pi == 0 {
+                    Vec2::new(0.05 + (x + 1.0) * 0.4, 0.3 + (z + 0.5) * 0.4)
+                } else {
+                    // t_u = +z, t_v = -x: a quarter turn in the atlas.
+                    Vec2::new(0.55 + (z + 0.5) * 0.4, 0.3 + (1.0 - x) * 0.4)
+                });
+                piece.push(pi);
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let a = base + j * (n + 1) + i;
+                idx.extend_from_slice(&[a, a + n + 1, a + 1, a + 1, a + n + 1, a + n + 2]);
+            }
+        }
+    }
+    let mut m = Mesh::from_parts(p, Some(vec![Vec3::Y; 2 * (n as usize + 1).pow(2)]), uv, idx, piece).unwrap();
+    if sewn {
+        // A's column i = n (x = 0) meets B's column i = 0 (x = 0).
+        let row = n + 1;
+        m.seams = (0..=n).map(|j| [j * row + n, row * row + j * row]).collect();
+    }
+    m
+}
+
+#[test]
+fn lookups_past_a_seam_blend_into_the_partner_piece() {
+    let res = 128;
+    let s = WarpSettings { mode: WarpMode::Point, gravity: 0.0, min_weight: 0.5 };
+    let detail = geometry::cube(1.0).unwrap();
+    // Along A's centre line, from inside A across its sewn edge (u = 0.45) into the gutter.
+    let us: Vec<f32> = (0..14).map(|k| 0.44 + 0.0015 * k as f32).collect();
+    let places: Vec<InstanceData> = us
+        .iter()
+        .map(|&u| point_instance(&Placement { piece: 0, u, v: 0.5, angle: 0.0, scale: 1.0 }, 0.01, 1.0, 0.0, 0.0))
+        .collect();
+    let (m, texels) = matrix(&sewn_plane(true), res, F32, 0);
+    let (_, unsewn) = matrix(&sewn_plane(false), res, F32, 0);
+    let gpu = warp_gpu(m, &detail, s, places.clone());
+    let nv = detail.positions.len();
+    let mut outside_seam = 0;
+    for (k, &u) in us.iter().enumerate() {
+        let frame =
+            texels.lookup(Vec2::new(u, 0.5), 0.5).unwrap_or_else(|| panic!("u = {u}: outlier despite the seam"));
+        // The same flat frame on both sides: B's turned tangents were turned back.
+        assert!(
+            frame.tu.dot(Vec3::X) > 0.9999 && frame.n.dot(Vec3::Y) > 0.9999 && frame.tv.dot(Vec3::Z) > 0.9999,
+            "u = {u}: {frame:?}"
+        );
+        // Positions continue across the seam: x = (u - 0.05) / 0.4 - 1.
+        let x = (u - 0.05) / 0.4 - 1.0;
+        assert!((frame.p.x - x).abs() < 0.25 / res as f32 * 2.5, "u = {u}: x {} vs {x}", frame.p.x);
+        // The GPU agrees with the CPU reference.
+        let g = &gpu[k * nv];
+        let c = werkstatt::warp::warp_vertex_cpu(&texels, &s, &places[k], detail.positions[0], detail.normals[0]);
+        assert!(g.valid && (g.position - c.position).length() < 1e-4, "u = {u}: {:?} vs {:?}", g.position, c.position);
+        if unsewn.lookup(Vec2::new(u, 0.5), 0.5).is_none() {
+            outside_seam += 1;
+        }
+    }
+    assert!(outside_seam >= 3, "without the seam, lookups past the edge must be outliers ({outside_seam})");
+}

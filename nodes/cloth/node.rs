@@ -83,7 +83,7 @@ impl Node for ClothSimNode {
         }
         let frame = cloth.surface();
         let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
-        let mesh = Mesh::from_parts(
+        let mut mesh = Mesh::from_parts(
             v3(&frame.positions),
             Some(v3(&frame.normals)),
             frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
@@ -91,6 +91,7 @@ impl Node for ClothSimNode {
             frame.piece_ids,
         )
         .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
+        mesh.seams = cloth.pattern().seam_pairs().to_vec();
         let strain = cloth.max_strain() as f64;
         if self.colliders.as_ref().is_none_or(|(k, _)| *k != key) {
             self.colliders = Some((key, Arc::new(collider_items(cloth.colliders())?)));
