@@ -50,6 +50,7 @@ struct ObjectUniform {
     normal_matrix: [[f32; 4]; 4],
     base_color: [f32; 4],
     params: [f32; 4],
+    extra: [f32; 4],
 }
 
 pub struct Pipelines {
@@ -249,6 +250,7 @@ impl Pipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                texture_entry(3, wgpu::ShaderStages::FRAGMENT, true),
             ],
         });
         let warp_layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
@@ -334,7 +336,13 @@ impl Pipelines {
             model: item.model.to_cols_array_2d(),
             normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
             base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
-            params: [m.uv_scale, f32::from(u8::from(m.texture.is_some())), f32::from(u8::from(item.detail)), 0.0],
+            params: [
+                m.uv_scale,
+                f32::from(u8::from(m.texture.is_some())),
+                f32::from(u8::from(item.detail)),
+                f32::from(u8::from(m.gloss_map.is_some())),
+            ],
+            extra: [m.gloss_min, 0.0, 0.0, 0.0],
         };
         let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("gbuffer object"),
@@ -342,6 +350,7 @@ impl Pipelines {
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
+        let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
         gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("gbuffer object"),
             layout: &self.object_layout,
@@ -349,6 +358,7 @@ impl Pipelines {
                 wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&tex.view) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&gloss.view) },
             ],
         })
     }

@@ -34,6 +34,21 @@ pub static MATERIAL: NodeSpec = NodeSpec {
             ParamKind::Float { default: 8.0, min: 1e-3, max: 1e4 },
             "Texture repeats per UV unit.",
         ),
+        ParamSpec::new(
+            "gloss_map",
+            ParamKind::Choice { default: "none", options: &["none", "stripes", "file"] },
+            "Glossiness parameter map (Fig. 5.23): satin stripes, or an image whose red channel blends gloss_min..glossiness.",
+        ),
+        ParamSpec::new(
+            "gloss_map_path",
+            ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] },
+            "Image for gloss_map = file (read as data, not colour).",
+        ),
+        ParamSpec::new(
+            "gloss_min",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
+            "Glossiness where the map is 0.",
+        ),
     ],
     is_output: false,
     create: || Box::new(MaterialNode),
@@ -53,6 +68,18 @@ impl Node for MaterialNode {
             }
             _ => None,
         };
+        let gloss_map = match cx.str("gloss_map") {
+            "stripes" => Some(Arc::new(stripes())),
+            "file" => {
+                if cx.str("gloss_map_path").is_empty() {
+                    return Err(NodeError::msg("gloss_map = \"file\" but parameter \"gloss_map_path\" is empty"));
+                }
+                let path = cx.path("gloss_map_path");
+                let img = cx.load(&path, load_image)?;
+                Some(Arc::new(Image8::new_linear(img.width, img.height, img.rgba.clone())))
+            }
+            _ => None,
+        };
         cx.set(
             "material",
             Value::Material(Arc::new(Material {
@@ -60,6 +87,8 @@ impl Node for MaterialNode {
                 glossiness: cx.f32("glossiness"),
                 texture,
                 uv_scale: cx.f32("uv_scale"),
+                gloss_map,
+                gloss_min: cx.f32("gloss_min"),
             })),
         );
         Ok(())
@@ -79,6 +108,19 @@ fn checker(dark: Vec3) -> Image8 {
         }
     }
     Image8::new(n, n, rgba)
+}
+
+/// Satin stripes: 8 glossy (1) and 8 matte (0) bands along u, a data map.
+fn stripes() -> Image8 {
+    let n = 64u32;
+    let mut rgba = Vec::with_capacity((n * n * 4) as usize);
+    for _y in 0..n {
+        for x in 0..n {
+            let v = if (x / 4) % 2 == 0 { 255 } else { 0 };
+            rgba.extend_from_slice(&[v, v, v, 255]);
+        }
+    }
+    Image8::new_linear(n, n, rgba)
 }
 
 pub fn linear_to_srgb(c: f32) -> f32 {

@@ -12,14 +12,18 @@ struct Object {
     normal_matrix: mat4x4<f32>,
     // rgb: linear base colour, a: glossiness.
     base_color: vec4<f32>,
-    // x: uv scale, y: 1 if a texture is bound, z: detail flag, w: unused.
+    // x: uv scale, y: 1 if a texture is bound, z: detail flag, w: 1 if a gloss map is bound.
     params: vec4<f32>,
+    // x: glossiness where the gloss map is 0.
+    extra: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(1) @binding(0) var<uniform> object: Object;
 @group(1) @binding(1) var base_map: texture_2d<f32>;
 @group(1) @binding(2) var base_sampler: sampler;
+// Glossiness parameter map (dissertation Fig. 5.23), red channel.
+@group(1) @binding(3) var gloss_map: texture_2d<f32>;
 
 // #include "vertex_in.wgsl"
 
@@ -39,8 +43,12 @@ fn write_gbuffer(world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front:
     if !front {
         n = -n;
     }
+    var gloss = object.base_color.a;
+    if object.params.w > 0.5 {
+        gloss = mix(object.extra.x, gloss, textureSample(gloss_map, base_sampler, uv * object.params.x).r);
+    }
     var out: GBufferOut;
-    out.color = vec4<f32>(albedo, object.base_color.a);
+    out.color = vec4<f32>(albedo, gloss);
     out.normal = vec4<f32>(n, object.params.z);
     out.depth = view_depth;
     return out;

@@ -32,23 +32,32 @@ pub struct Image8 {
     pub width: u32,
     pub height: u32,
     pub rgba: Vec<u8>,
+    /// Colour (sRGB-encoded, decoded when sampled) or data such as a parameter map (as stored).
+    pub srgb: bool,
     gpu: OnceLock<GpuImage>,
 }
 
 impl Image8 {
+    /// A colour image, sRGB-encoded.
     pub fn new(width: u32, height: u32, rgba: Vec<u8>) -> Image8 {
-        Image8 { width, height, rgba, gpu: OnceLock::new() }
+        Image8 { width, height, rgba, srgb: true, gpu: OnceLock::new() }
     }
 
-    /// Uploads on first use; sampled as sRGB so shaders see linear values.
+    /// A data image (a parameter map): shaders see the stored values.
+    pub fn new_linear(width: u32, height: u32, rgba: Vec<u8>) -> Image8 {
+        Image8 { width, height, rgba, srgb: false, gpu: OnceLock::new() }
+    }
+
+    /// Uploads on first use; colour images are sampled as sRGB so shaders see linear values.
     pub fn gpu(&self, gpu: &GpuContext) -> &GpuImage {
         self.gpu.get_or_init(|| {
+            let format = if self.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm };
             let img = GpuImage::new(
                 gpu,
                 "image",
                 self.width,
                 self.height,
-                wgpu::TextureFormat::Rgba8UnormSrgb,
+                format,
                 wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             );
             gpu.queue.write_texture(
@@ -78,11 +87,22 @@ pub struct Material {
     pub glossiness: f32,
     pub texture: Option<Arc<Image8>>,
     pub uv_scale: f32,
+    /// A parameter map (dissertation Fig. 5.23): its red channel blends glossiness from
+    /// `gloss_min` (0) to `glossiness` (1) within one material.
+    pub gloss_map: Option<Arc<Image8>>,
+    pub gloss_min: f32,
 }
 
 impl Default for Material {
     fn default() -> Self {
-        Material { base_color: Vec3::splat(0.8), glossiness: 0.2, texture: None, uv_scale: 1.0 }
+        Material {
+            base_color: Vec3::splat(0.8),
+            glossiness: 0.2,
+            texture: None,
+            uv_scale: 1.0,
+            gloss_map: None,
+            gloss_min: 0.0,
+        }
     }
 }
 

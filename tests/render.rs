@@ -113,3 +113,23 @@ fn dump_of_a_non_texture_port_is_refused() {
     let err = render_graph(&default_graph(), &out, (0, 0), (32, 24), &[], &["gbuffer.nope"]).unwrap_err();
     assert!(format!("{err:#}").contains("its outputs are: gbuffer, color, normal, depth"), "{err:#}");
 }
+
+/// A glossiness parameter map (Fig. 5.23) varies glossiness within one material: the
+/// G-buffer's gloss channel holds both the map's 0 level (gloss_min) and its 1 level.
+#[test]
+fn gloss_map_sets_two_gloss_levels_in_the_gbuffer() {
+    let out = out_dir("gloss-map");
+    let sets = [
+        "cloth.gloss_map=stripes",
+        "cloth.gloss_min=0.1",
+        "cloth.glossiness=0.9",
+        "cloth.uv_scale=2",
+        "cloth.texture=none",
+    ];
+    render_graph(&default_graph(), &out, (0, 0), (160, 120), &sets, &["gbuffer.color"]).unwrap();
+    let color = read_exr(&out.join("gbuffer.color_0000.exr"));
+    let near = |g: f32| color.rgba.chunks_exact(4).filter(|p| p[0] > 0.5 && (p[3] - g).abs() < 0.01).count();
+    // The torus (red channel > 0.5) shows both levels, each on a good share of its pixels.
+    let (low, high) = (near(0.1), near(0.9));
+    assert!(low > 200 && high > 200, "gloss levels: {low} pixels at 0.1, {high} at 0.9");
+}
