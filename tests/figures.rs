@@ -69,3 +69,22 @@ fn placement_file_errors_name_file_and_line() {
     std::fs::write(&ron, "[(0, 0.25, 0.5, 45.0, 2.0)]").unwrap();
     assert_eq!(werkstatt::nodes::placements::load_placements(&ron).unwrap()[0].angle, 45.0);
 }
+
+#[test]
+fn cloth_presets_animate_deterministically() {
+    for (graph, sets) in [
+        ("tablecloth", vec![]),
+        ("fig1a_fur", vec!["scatter.count=10", "cloth.warmup=0"]),
+        ("fig1e_stickers", vec!["cloth.warmup=0"]),
+    ] {
+        let path = root().join(format!("graphs/{graph}.ron"));
+        let (a, b) = (out_dir(&format!("preset-{graph}-a")), out_dir(&format!("preset-{graph}-b")));
+        render_graph(&path, &a, (0, 6), (64, 48), &sets, &[]).unwrap_or_else(|e| panic!("{graph}: {e:#}"));
+        render_graph(&path, &b, (0, 6), (64, 48), &sets, &[]).unwrap();
+        let frame = |dir: &std::path::Path, f: i64| std::fs::read(dir.join(format!("image_{f:04}.png"))).unwrap();
+        assert_ne!(frame(&a, 0), frame(&a, 6), "{graph}: the cloth does not move");
+        for f in 0..=6 {
+            assert!(frame(&a, f) == frame(&b, f), "{graph}: frame {f} differs between two runs");
+        }
+    }
+}
