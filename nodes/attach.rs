@@ -63,7 +63,8 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
 /// M_tan of a point placement: lift along the normal, turn about it, scale (normal axis extra).
 pub fn point_tangent_matrix(angle_deg: f32, scale: f32, normal_scale: f32, lift: f32) -> Mat4 {
     Mat4::from_translation(Vec3::new(0.0, lift, 0.0))
-        * Mat4::from_quat(Quat::from_rotation_y(angle_deg.to_radians()))
+        // Positive angles turn the u axis towards +v, as in M_tex (decals) and placement files.
+        * Mat4::from_quat(Quat::from_rotation_y(-angle_deg.to_radians()))
         * Mat4::from_scale(Vec3::new(scale, scale * normal_scale, scale))
 }
 

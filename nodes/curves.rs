@@ -14,7 +14,7 @@ use crate::warp::Curves;
 pub static SVG_CURVES: NodeSpec = NodeSpec {
     kind: "SvgCurves",
     category: Category::Attachment,
-    doc: "Every path of an SVG file (with its transforms) as cubic Bezier curves in UV space: the document's size maps to [0,1]^2, then scale and offset apply. Lines and quadratics become exact cubics.",
+    doc: "Every path of an SVG file (with its transforms) as cubic Bezier curves in UV space: the document's width maps to 1 UV unit (aspect kept), then scale and offset apply. Lines and quadratics become exact cubics; zero-length segments are dropped.",
     inputs: &[],
     outputs: &[PortSpec::output("curves", PortType::Curves, "The curves.")],
     params: &[
@@ -73,6 +73,7 @@ fn collect(group: &usvg::Group, width: f32, out: &mut Curves) {
                 for seg in p.data().segments() {
                     match seg {
                         PathSegment::MoveTo(a) => {
+                            current.retain(|seg| seg.iter().any(|p| p.distance(seg[0]) > 1e-9));
                             if !current.is_empty() {
                                 out.paths.push(std::mem::take(&mut current));
                             }
@@ -102,6 +103,7 @@ fn collect(group: &usvg::Group, width: f32, out: &mut Curves) {
                         }
                     }
                 }
+                current.retain(|seg| seg.iter().any(|p| p.distance(seg[0]) > 1e-9));
                 if !current.is_empty() {
                     out.paths.push(current);
                 }

@@ -55,7 +55,9 @@ impl Node for ExportNode {
         };
         let items = items.clone();
         let wanted = cx.int("frame");
-        let frame = cx.time().frame;
+        // Only a batch render writes files, and only then does the frame matter: while editing
+        // the node does not read the time, so it does not re-run every frame.
+        let frame = if cx.settings.out_dir.is_some() { cx.time().frame } else { 0 };
         if self.warper.is_none() {
             self.warper = Some(GpuWarper::new(gpu)?);
         }
@@ -105,7 +107,10 @@ impl GpuWarper {
         let resolved = draw.per_instance_frames();
         let instances: Vec<InstanceData> = if resolved {
             let buffer = draw.draw_buffer(gpu, |raw| self.resolver.resolve(gpu, raw, draw))?;
-            read_buffer(gpu, buffer)?
+            // An empty draw uploads one placeholder instance; keep only the real ones.
+            let mut all: Vec<InstanceData> = read_buffer(gpu, buffer)?;
+            all.truncate(draw.instances.len());
+            all
         } else {
             draw.instances.to_vec()
         };

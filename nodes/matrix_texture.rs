@@ -38,7 +38,7 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "filter_radius",
-            ParamKind::Int { default: 0, min: 0, max: 32 },
+            ParamKind::Int { default: 0, min: 0, max: 8 },
             "Low-pass filter of the orientation field in texels (0 = off), against self-intersections of tall details.",
         ),
     ],
@@ -60,6 +60,7 @@ pub const SEAM_GUTTER_TEXELS: f32 = 2.0;
 fn topology_key(mesh: &Mesh, resolution: u32) -> u64 {
     let mut h = crate::render::fnv1a(bytemuck::cast_slice(&mesh.uvs));
     h ^= crate::render::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
+    h ^= crate::render::fnv1a(bytemuck::cast_slice(&mesh.indices)).rotate_left(29);
     h ^ (resolution as u64).rotate_left(41)
 }
 
@@ -247,12 +248,17 @@ pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<Matrix
 }
 
 fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {
-    let data = crate::warp::seam_map(mesh, resolution, SEAM_GUTTER_TEXELS);
+    // Without seams a 1x1 placeholder (the shader checks its size) saves res^2 x 16 bytes.
+    let (data, size) = if mesh.seams.is_empty() {
+        (vec![[0.0f32; 4]], 1)
+    } else {
+        (crate::warp::seam_map(mesh, resolution, SEAM_GUTTER_TEXELS), resolution)
+    };
     let img = GpuImage::new(
         gpu,
         "seam map",
-        resolution,
-        resolution,
+        size,
+        size,
         wgpu::TextureFormat::Rgba32Float,
         wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
     );
@@ -264,12 +270,8 @@ fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {
             aspect: wgpu::TextureAspect::All,
         },
         bytemuck::cast_slice(&data),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(16 * resolution),
-            rows_per_image: Some(resolution),
-        },
-        wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 },
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size), rows_per_image: Some(size) },
+        wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
     );
     img
 }

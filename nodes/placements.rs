@@ -270,8 +270,8 @@ impl Node for CurvePlacementNode {
                 let (seg, t) = table.at(i as f32 * spacing);
                 let p = bezier(&path[seg], t);
                 let d = bezier_tangent(&path[seg], t);
-                // Angle about the normal from +u towards +v, matching M_tan's rotation.
-                let angle = -d.y.atan2(d.x).to_degrees() + cx.f32("angle");
+                // Angle about the normal from +u towards +v, as point attachments read it.
+                let angle = d.y.atan2(d.x).to_degrees() + cx.f32("angle");
                 out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
             }
         }
@@ -313,6 +313,7 @@ pub fn load_placements(path: &Path) -> anyhow::Result<Vec<Placement>> {
         let mut rows = Vec::new();
         for (i, line) in text.lines().enumerate() {
             let line = line.trim();
+            let line = line.trim_start_matches('\u{feff}');
             if line.is_empty() || line.starts_with('#') || (i == 0 && line.starts_with("piece")) {
                 continue;
             }
@@ -335,6 +336,13 @@ pub fn load_placements(path: &Path) -> anyhow::Result<Vec<Placement>> {
     rows.into_iter()
         .enumerate()
         .map(|(i, (piece, u, v, angle, scale))| {
+            if !angle.is_finite() || !(scale.is_finite() && scale > 0.0) {
+                bail!(
+                    "{}: placement {} needs a finite angle and a positive scale (found {angle}, {scale})",
+                    path.display(),
+                    i + 1
+                );
+            }
             if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) {
                 bail!("{}: placement {} has (u, v) = ({u}, {v}) outside [0, 1]", path.display(), i + 1);
             }

@@ -1,6 +1,7 @@
 // Low-pass filter of the matrix texture's orientation field (paper section 6, "Flexibility"):
-// a separable box filter over valid texels of the same piece neighbourhood, positions left
-// as they are, frames re-orthonormalized. It smooths sudden orientation changes that make
+// a separable box filter over the covered texels within the radius (at most 8 texels, less
+// than the atlas gutter between pieces at common resolutions), positions left as they are,
+// frames re-orthonormalized. It smooths sudden orientation changes that make
 // tall attached geometry intersect itself.
 
 // #include "fullscreen.wgsl"

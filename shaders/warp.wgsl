@@ -66,6 +66,10 @@ fn texel_or_partner(q: vec2<i32>, dims: vec2<i32>) -> Texel {
     if own.valid {
         return own;
     }
+    // A surface without seams binds a 1x1 placeholder.
+    if textureDimensions(seam_map).x == 1u {
+        return own;
+    }
     let seam = textureLoad(seam_map, q, 0);
     if seam.w == 0.0 {
         return own;
@@ -148,13 +152,30 @@ struct Warped {
     valid: bool,
 };
 
-// The inverse transpose of a 3x3 matrix by cross products (WGSL has no inverse).
-fn inverse_transpose(m: mat3x3<f32>) -> mat3x3<f32> {
+// The normal transform of a 3x3 matrix: its cofactor matrix (the inverse transpose times the
+// determinant) with the determinant's sign, so a flattened M_tan (height 0) still maps the
+// normal to n instead of dividing by zero. Normals are normalized afterwards.
+fn normal_matrix(m: mat3x3<f32>) -> mat3x3<f32> {
     let c0 = cross(m[1], m[2]);
     let c1 = cross(m[2], m[0]);
     let c2 = cross(m[0], m[1]);
-    let det = dot(m[0], c0);
-    return mat3x3<f32>(c0, c1, c2) * (1.0 / det);
+    return mat3x3<f32>(c0, c1, c2) * select(1.0, -1.0, dot(m[0], c0) < 0.0);
+}
+
+// A curve's direction in UV at t; where the control polygon is degenerate (c1 = c0 or
+// c2 = c3, common in SVG), the chord towards the far control points.
+fn curve_direction(inst: Instance, t: f32) -> vec2<f32> {
+    var d = bezier_tangent(inst, t);
+    if dot(d, d) < 1e-16 {
+        d = inst.curve23.xy - inst.curve01.xy;
+    }
+    if dot(d, d) < 1e-16 {
+        d = inst.curve23.zw - inst.curve01.xy;
+    }
+    if dot(d, d) < 1e-16 {
+        return vec2<f32>(0.0, 1.0);
+    }
+    return normalize(d);
 }
 
 fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
@@ -171,8 +192,9 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
         uv_in = bezier(inst, t);                        // eq. (8)
         f_map = vec4<f32>(p.x, p.y, 0.0, 1.0);          // eq. (9)
         if mode == 3 {
-            let d = normalize(bezier_tangent(inst, t));
-            let nc = vec2<f32>(-d.y, d.x);              // curve normal in UV space
+            let d = curve_direction(inst, t);
+            // The curve normal in UV, turned so that a curve along +v gives eq. (9) (x on +u).
+            let nc = vec2<f32>(d.y, -d.x);
             f_map = vec4<f32>(nc.x * p.x, p.y, nc.y * p.x, 1.0);   // eq. (10)
             // The same rotation for the normal: x -> n_c, z -> curve direction.
             n_local = normal.x * vec3<f32>(nc.x, 0.0, nc.y) + vec3<f32>(0.0, normal.y, 0.0)
@@ -196,18 +218,22 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
     var out: Warped;
     out.position = frame.tu * q.x + frame.n * q.y + frame.tv * q.z + frame.p;
     out.anchor = frame.p;
-    let nt = inverse_transpose(mat3x3<f32>(inst.m_tan0.xyz, inst.m_tan1.xyz, inst.m_tan2.xyz)) * n_local;
+    let nt = normal_matrix(mat3x3<f32>(inst.m_tan0.xyz, inst.m_tan1.xyz, inst.m_tan2.xyz)) * n_local;
     out.normal = normalize(frame.tu * nt.x + frame.n * nt.y + frame.tv * nt.z);
     out.valid = frame.valid;
-    // Fur gravity (eqs. 11-12): pull down by c * height^2, then restore the distance to the anchor.
+    // Fur gravity (eqs. 11-12): pull down by c * height^2, then restore the distance to the
+    // surface point p_s below the vertex (its foot on the tangent plane), so every hair of a
+    // patch keeps its length.
     let c = warp.params.y;
     if c > 0.0 {
+        let foot = frame.p + frame.tu * q.x + frame.tv * q.z;
         let bent = out.position - vec3<f32>(0.0, c * q.y * q.y, 0.0);
-        let len = length(out.position - frame.p);
-        let dir = bent - frame.p;
+        let len = length(out.position - foot);
+        let dir = bent - foot;
         if dot(dir, dir) > 1e-20 {
-            out.position = frame.p + len * normalize(dir);
+            out.position = foot + len * normalize(dir);
         }
+        out.anchor = foot;
     }
     return out;
 }

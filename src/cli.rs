@@ -140,11 +140,11 @@ fn parse_frames(text: &str) -> anyhow::Result<(i64, i64)> {
     let (a, b) = match text.split_once("..") {
         Some((a, b)) => (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?),
         None => {
-            let n = text.trim().parse().map_err(|_| bad())?;
+            let n: i64 = text.trim().parse().map_err(|_| bad())?;
             (n, n)
         }
     };
-    if a > b {
+    if a > b || b.checked_sub(a).is_none_or(|n| n >= 10_000_000) {
         return Err(bad());
     }
     Ok((a, b))

@@ -254,6 +254,8 @@ pub struct Evaluator {
     state: Vec<NodeState>,
     scratch_inputs: Vec<Option<Value>>,
     next_version: u64,
+    /// Hash of the frame settings of the last evaluation: a new size or folder re-runs everything.
+    settings_hash: u64,
 }
 
 /// Counts of one frame's evaluation.
@@ -298,6 +300,7 @@ impl Evaluator {
             state: Vec::new(),
             scratch_inputs: Vec::new(),
             next_version: 1,
+            settings_hash: 0,
         };
         ev.rebuild(graph, extra_roots, HashMap::new())?;
         Ok(ev)
@@ -306,6 +309,14 @@ impl Evaluator {
     /// Recompiles after an edit, keeping the caches (and node instances) of nodes whose
     /// kind is unchanged: only what the edit touched re-runs.
     pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
+        // Check everything `rebuild` could fail on first, so a bad edit leaves the evaluator
+        // (and its caches) as it was.
+        if let Some(p) = graph.validate().first() {
+            return Err(p.message.clone());
+        }
+        if let Some(id) = extra_roots.iter().find(|id| !graph.nodes.contains_key(*id)) {
+            return Err(format!("there is no node \"{id}\""));
+        }
         let mut old = HashMap::new();
         let ids = std::mem::take(&mut self.ids);
         for (id, (state, spec)) in
@@ -422,6 +433,14 @@ impl Evaluator {
         settings: &FrameSettings,
     ) -> FrameSummary {
         let mut summary = FrameSummary::default();
+        self.settings_hash = {
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            std::hash::Hash::hash(
+                &(settings.width, settings.height, &settings.base_dir, &settings.out_dir, gpu.is_some()),
+                &mut h,
+            );
+            std::hash::Hasher::finish(&h)
+        };
         for oi in 0..self.order.len() {
             let n = self.order[oi];
             let blocked = self.sources[n]
@@ -473,10 +492,11 @@ impl Evaluator {
     /// The fingerprint of node `n` from its current sources, time use, resources and signals;
     /// `as_seen`: with the resource and signal versions its last run observed, not the current ones.
     fn recompute(&self, n: usize, time: FrameTime, as_seen: bool) -> u64 {
-        let mut h = self.param_hash[n];
+        let mut h = mix(self.param_hash[n], self.settings_hash);
         for src in &self.sources[n] {
             h = match src {
-                Some((s, _)) => mix(h, self.state[*s].version),
+                // The output index too: re-pointing a link to another port of the same node is a change.
+                Some((s, o)) => mix(mix(h, self.state[*s].version), *o as u64),
                 None => mix(h, u64::MAX),
             };
         }

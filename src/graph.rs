@@ -330,9 +330,15 @@ impl Graph {
 
     /// Parses and validates `source`; `path` is used in messages only.
     pub fn load_str(source: &str, path: &Path) -> Result<Graph, LoadError> {
-        let (graph, mut problems) = Graph::parse_unvalidated(source)
+        let (graph, mut problems, link_rows) = Graph::parse_unvalidated(source)
             .map_err(|d| LoadError { diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }] })?;
-        problems.extend(graph.validate());
+        // validate() numbers the well-formed links; point back at their rows in the file.
+        problems.extend(graph.validate().into_iter().map(|mut p| {
+            if let Place::Link(i) = p.place {
+                p.place = Place::Link(link_rows.get(i).copied().unwrap_or(i));
+            }
+            p
+        }));
         if problems.is_empty() {
             Ok(graph)
         } else {
@@ -351,7 +357,8 @@ impl Graph {
     /// Parses without validating the nodes against the registry; returns the problems
     /// (duplicates, bad link syntax) that the document model cannot hold.
     #[allow(clippy::result_large_err)] // built once per load, on the error path only
-    fn parse_unvalidated(source: &str) -> Result<(Graph, Vec<Problem>), Diagnostic> {
+    /// Also returns, for each kept link, its index among the file's links.
+    fn parse_unvalidated(source: &str) -> Result<(Graph, Vec<Problem>, Vec<usize>), Diagnostic> {
         let syntax = |e: ron::error::SpannedError| Diagnostic {
             file: PathBuf::new(),
             line: e.span.start.line,
@@ -400,9 +407,13 @@ impl Graph {
             }
         }
         let mut links = Vec::new();
+        let mut link_rows = Vec::new();
         for (i, (from, to)) in raw.links.into_iter().enumerate() {
             match (PortRef::parse(&from), PortRef::parse(&to)) {
-                (Some(from), Some(to)) => links.push(Link { from, to }),
+                (Some(from), Some(to)) => {
+                    links.push(Link { from, to });
+                    link_rows.push(i);
+                }
                 _ => problems.push(
                     Problem::new(
                         ProblemKind::BadLinkSyntax,
@@ -420,7 +431,7 @@ impl Graph {
             col: 1,
             problem: Problem::new(ProblemKind::VersionTooNew, Place::File, message),
         })?;
-        Ok((graph, problems))
+        Ok((graph, problems, link_rows))
     }
 
     /// Checks the document against the node registry: kinds, parameters, ports, link
@@ -505,7 +516,10 @@ impl Graph {
                     Problem::new(
                         ProblemKind::InputLinkedTwice,
                         place,
-                        format!("input {} is fed by two links (links #{} and #{})", link.to, first + 1, i + 1),
+                        format!(
+                            "input {} is fed by two links (from {} and {})",
+                            link.to, self.links[first].from, link.from
+                        ),
                     )
                     .port(&link.to.node, &link.to.port)
                     .help("an input takes one link; remove one of them"),
@@ -629,7 +643,8 @@ impl Graph {
         for (id, node) in &self.nodes {
             let _ = writeln!(out, "        {}: (", quote(id));
             let _ = writeln!(out, "            kind: {},", quote(&node.kind));
-            let _ = writeln!(out, "            pos: ({}, {}),", float(node.pos[0] as f64), float(node.pos[1] as f64));
+            // Positions are f32: print them as f32 so 0.1 stays 0.1.
+            let _ = writeln!(out, "            pos: ({:?}, {:?}),", node.pos[0], node.pos[1]);
             if node.params.is_empty() {
                 out.push_str("            params: {},\n");
             } else {
@@ -774,7 +789,7 @@ impl<'a> SourceMap<'a> {
             .filter_map(|id| self.node_offset(id))
             .filter(|&o| o > start)
             .min()
-            .or_else(|| self.source[start..].find("links").map(|o| o + start))
+            .or_else(|| self.links_key().filter(|&o| o > start))
             .unwrap_or(self.source.len())
     }
 
@@ -793,9 +808,14 @@ impl<'a> SourceMap<'a> {
         None
     }
 
+    /// The offset of the top-level `links:` key (ids are quoted, so `links:` is not in one).
+    fn links_key(&self) -> Option<usize> {
+        self.source.rfind("links:").or_else(|| self.source.rfind("links"))
+    }
+
     /// The offset of the i-th entry of the links list.
     fn link_offset(&self, index: usize) -> Option<usize> {
-        let links = self.source.rfind("links")?;
+        let links = self.links_key()?;
         let open = links + self.source[links..].find('[')?;
         let mut depth = 0;
         let mut count = 0;

@@ -61,6 +61,9 @@ pub struct Stats {
     pub files: Vec<String>,
 }
 
+/// How long batch rendering waits for one frame's pending nodes before failing.
+const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+
 pub fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
 }
@@ -106,7 +109,7 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     };
     let (first, last) = opts.frames;
     let bar = opts.progress.then(|| {
-        let bar = indicatif::ProgressBar::new((last - first + 1) as u64);
+        let bar = indicatif::ProgressBar::new(last.saturating_sub(first).saturating_add(1) as u64);
         bar.set_style(
             indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {elapsed} (eta {eta})")
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
@@ -131,7 +134,18 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
             if resources.in_flight() == 0 && summary.ran == 0 {
                 bail!("frame {frame}: nodes are pending but nothing is loading");
             }
+            // A node waiting on an external source (a live link with no sender) never settles.
+            if start.elapsed() > PENDING_LIMIT {
+                bail!(
+                    "frame {frame}: still pending after {} s: {}",
+                    PENDING_LIMIT.as_secs(),
+                    failures(&evaluator).join("; ")
+                );
+            }
             resources.wait_idle();
+            if resources.in_flight() == 0 {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
         }
         for (node, ms) in gpu.collect_timings() {
             if let Some(t) = nodes.get_mut(&*node) {

@@ -53,7 +53,7 @@ impl MatrixTexels {
         if t.n.length_squared() >= 0.25 {
             return Some(t);
         }
-        let [pu, pv, angle, sigma] = self.seams[(y * res + x) as usize];
+        let Some(&[pu, pv, angle, sigma]) = self.seams.get((y * res + x) as usize) else { return None };
         if sigma == 0.0 {
             return None;
         }
@@ -87,11 +87,12 @@ impl MatrixTexels {
             sp += w * t.p;
             weight += w;
         }
-        if weight < min_weight.max(1e-6) {
+        // Written as the shader's positive tests, so NaN is an outlier on both.
+        if !(weight >= min_weight.max(1e-6)) {
             return None;
         }
         let (u, n, v) = (su / weight, sn / weight, sv / weight);
-        if (n.length() - 1.0).abs() >= 0.25 || (u.length() - 1.0).abs() >= 0.25 {
+        if !((n.length() - 1.0).abs() < 0.25 && (u.length() - 1.0).abs() < 0.25) {
             return None;
         }
         let n = n.normalize();
@@ -453,8 +454,8 @@ pub fn warp_vertex_cpu(
             uv_in = bezier(&c, t);
             f_map = Vec4::new(p.x, p.y, 0.0, 1.0);
             if s.mode == WarpMode::CurveAligned {
-                let d = bezier_tangent(&c, t).normalize();
-                let nc = Vec2::new(-d.y, d.x);
+                let d = curve_direction(&c, t);
+                let nc = Vec2::new(d.y, -d.x);
                 f_map = Vec4::new(nc.x * p.x, p.y, nc.y * p.x, 1.0);
                 n_local = normal.x * Vec3::new(nc.x, 0.0, nc.y)
                     + Vec3::new(0.0, normal.y, 0.0)
@@ -475,17 +476,33 @@ pub fn warp_vertex_cpu(
     let m_tan = Mat4::from_cols_array_2d(&inst.m_tan);
     let q = m_tan * f_map;
     let mut position = f.tu * q.x + f.n * q.y + f.tv * q.z + f.p;
-    let nt = Mat3::from_mat4(m_tan).inverse().transpose() * n_local;
+    let nt = normal_matrix(Mat3::from_mat4(m_tan)) * n_local;
     let normal = (f.tu * nt.x + f.n * nt.y + f.tv * nt.z).normalize();
     if s.gravity > 0.0 {
+        let foot = f.p + f.tu * q.x + f.tv * q.z;
         let bent = position - Vec3::new(0.0, s.gravity * q.y * q.y, 0.0);
-        let len = (position - f.p).length();
-        let dir = bent - f.p;
+        let len = (position - foot).length();
+        let dir = bent - foot;
         if dir.length_squared() > 1e-20 {
-            position = f.p + len * dir.normalize();
+            position = foot + len * dir.normalize();
         }
     }
     WarpedVertex { position, normal, valid: true }
+}
+
+/// The CPU twin of `normal_matrix` in shaders/warp.wgsl: cofactors with the determinant's sign.
+pub fn normal_matrix(m: Mat3) -> Mat3 {
+    let (c0, c1, c2) = (m.y_axis.cross(m.z_axis), m.z_axis.cross(m.x_axis), m.x_axis.cross(m.y_axis));
+    let sign = if m.x_axis.dot(c0) < 0.0 { -1.0 } else { 1.0 };
+    Mat3::from_cols(c0, c1, c2) * sign
+}
+
+/// The CPU twin of `curve_direction` in shaders/warp.wgsl.
+pub fn curve_direction(c: &[Vec2; 4], t: f32) -> Vec2 {
+    [bezier_tangent(c, t), c[2] - c[0], c[3] - c[0]]
+        .into_iter()
+        .find(|d| d.length_squared() >= 1e-16)
+        .map_or(Vec2::Y, Vec2::normalize)
 }
 
 /// Warps every instance of `mesh` on the CPU with all threads: the classic path the paper
@@ -498,6 +515,9 @@ pub fn warp_all_cpu(
 ) -> Vec<WarpedVertex> {
     let n = mesh.positions.len();
     let mut out = vec![WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false }; n * instances.len()];
+    if n == 0 || instances.is_empty() {
+        return out;
+    }
     let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).max(1);
     let chunk = instances.len().div_ceil(threads).max(1);
     std::thread::scope(|scope| {

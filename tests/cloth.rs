@@ -136,11 +136,12 @@ fn uv_atlas_is_disjoint_in_unit_square_and_keeps_aspect() {
     let pms = mesh.piece_meshes();
     for (i, a) in pms.iter().enumerate() {
         // Same scale for every piece: UV distances are pattern distances
-        // times one factor (relative error at f32 precision).
+        // times one factor (relative error at f32 precision), with v mirrored
+        // (pattern y up, texture v down) so the frame is right-handed.
         let v0 = a.vertices.start as usize;
         for v in a.vertices.clone() {
             let (du, dr) = (uv[v as usize] - uv[v0], r[v as usize] - r[v0]);
-            assert!((du - dr * s).length() < 1e-5, "piece {i} is not a uniform scale");
+            assert!((du - Vec2::new(dr.x, -dr.y) * s).length() < 1e-5, "piece {i} is not a uniform scale");
         }
         for b in &pms[i + 1..] {
             let apart = a.uv_max.x < b.uv_min.x

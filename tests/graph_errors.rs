@@ -168,3 +168,25 @@ fn cli_set_errors_name_node_and_param() {
     g.set_from_cli("camera.distance=5").unwrap();
     assert_eq!(g.param("camera", "distance"), Some(werkstatt::spec::ParamValue::Float(5.0)));
 }
+
+#[test]
+fn link_errors_after_a_malformed_link_point_at_their_own_row() {
+    let text = r#"(
+    version: 1,
+    nodes: {
+        "cam": (kind: "OrbitCamera"),
+        "shape": (kind: "Primitive"),
+        "draw": (kind: "Draw"),
+    },
+    links: [
+        ("nonsense", "draw.mesh"),
+        ("shape.mesh", "draw.mesh"),
+        ("cam.camera", "draw.material"),
+    ],
+)"#;
+    let err = Graph::load_str(text, "rows.ron".as_ref()).unwrap_err();
+    let mismatch = err.diagnostics.iter().find(|d| d.problem.kind == ProblemKind::LinkTypeMismatch).unwrap();
+    assert_eq!(mismatch.line, 11, "{mismatch}");
+    let bad = err.diagnostics.iter().find(|d| d.problem.kind == ProblemKind::BadLinkSyntax).unwrap();
+    assert_eq!(bad.line, 9, "{bad}");
+}

@@ -346,3 +346,31 @@ fn lookups_past_a_seam_blend_into_the_partner_piece() {
     }
     assert!(outside_seam >= 3, "without the seam, lookups past the edge must be outliers ({outside_seam})");
 }
+
+/// Deferred warping needs right-handed frames ((t_u x n) . t_v > 0) or attached geometry is
+/// mirrored: check the built-in cloth's parametrization, piece by piece.
+#[test]
+fn cloth_matrix_frames_are_right_handed() {
+    use werkstatt::nodes::cloth::{FlagParams, Preset, SkirtParams};
+    for preset in [
+        Preset::Skirt(SkirtParams { triangles: 1500, ..Default::default() }),
+        Preset::Flag(FlagParams { triangles: 800, ..Default::default() }),
+    ] {
+        let f = preset.build().surface();
+        let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
+        let mesh = Mesh::from_parts(
+            v3(&f.positions),
+            Some(v3(&f.normals)),
+            f.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
+            f.indices,
+            f.piece_ids,
+        )
+        .unwrap();
+        let (_, texels) = matrix(&mesh, 128, F32, 0);
+        let (mut right, mut left) = (0, 0);
+        for t in texels.frames.iter().filter(|t| t.n.length_squared() > 0.25) {
+            if t.tu.cross(t.n).dot(t.tv) > 0.0 { right += 1 } else { left += 1 }
+        }
+        assert!(right > 1000 && left * 100 < right, "{preset:?}: {right} right-handed texels, {left} left-handed");
+    }
+}

@@ -278,7 +278,12 @@ impl PatternMesh {
         for (pi, pm) in self.piece_meshes.iter_mut().enumerate() {
             let origin = (Vec2::splat(gutter) + offsets[pi]) * scale;
             for v in pm.vertices.clone() {
-                let uv = origin + (self.rest[v as usize] - boxes[pi].0) * scale;
+                // Pattern y points up, texture v down (as OBJ's v is flipped on load): mirror
+                // within the piece's box so (t_u, n, t_v) is right-handed with n = t_v x t_u,
+                // the frame deferred warping needs to attach geometry unmirrored.
+                let r = self.rest[v as usize];
+                let local = Vec2::new(r.x - boxes[pi].0.x, boxes[pi].1.y - r.y);
+                let uv = origin + local * scale;
                 // Guard against the last ulp of rounding at the atlas border.
                 self.uvs[v as usize] = uv.clamp(Vec2::ZERO, Vec2::ONE);
             }
