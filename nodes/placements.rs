@@ -336,7 +336,7 @@ pub fn load_placements(path: &Path) -> anyhow::Result<Vec<Placement>> {
     rows.into_iter()
         .enumerate()
         .map(|(i, (piece, u, v, angle, scale))| {
-            if !angle.is_finite() || !(scale.is_finite() && scale > 0.0) {
+            if !(angle.is_finite() && scale.is_finite() && scale > 0.0) {
                 bail!(
                     "{}: placement {} needs a finite angle and a positive scale (found {angle}, {scale})",
                     path.display(),

@@ -53,7 +53,7 @@ impl MatrixTexels {
         if t.n.length_squared() >= 0.25 {
             return Some(t);
         }
-        let Some(&[pu, pv, angle, sigma]) = self.seams.get((y * res + x) as usize) else { return None };
+        let &[pu, pv, angle, sigma] = self.seams.get((y * res + x) as usize)?;
         if sigma == 0.0 {
             return None;
         }
@@ -88,11 +88,12 @@ impl MatrixTexels {
             weight += w;
         }
         // Written as the shader's positive tests, so NaN is an outlier on both.
-        if !(weight >= min_weight.max(1e-6)) {
+        if weight.is_nan() || weight < min_weight.max(1e-6) {
             return None;
         }
         let (u, n, v) = (su / weight, sn / weight, sv / weight);
-        if !((n.length() - 1.0).abs() < 0.25 && (u.length() - 1.0).abs() < 0.25) {
+        let unit = |x: f32| (x - 1.0).abs() < 0.25;
+        if !(unit(n.length()) && unit(u.length())) {
             return None;
         }
         let n = n.normalize();
