@@ -257,7 +257,15 @@ impl Evaluator {
 
     /// Recompiles after an edit, keeping the caches (and node instances) of nodes whose
     /// kind is unchanged: only what the edit touched re-runs.
+    /// On an error the evaluator is left as it was.
     pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
+        // Check first: `rebuild` starts from emptied tables, which must not be left half-built.
+        if let Some(p) = graph.validate().first() {
+            return Err(p.message.clone());
+        }
+        if let Some(id) = extra_roots.iter().find(|id| !graph.nodes.contains_key(*id)) {
+            return Err(format!("there is no node \"{id}\""));
+        }
         let mut old = HashMap::new();
         let ids = std::mem::take(&mut self.ids);
         for (id, (state, spec)) in

@@ -348,6 +348,25 @@ impl Graph {
         }
     }
 
+    /// Parses `source` like [`Graph::load_str`], but returns the graph together with its
+    /// problems instead of refusing it, so that the editor can open a graph with, say, an
+    /// unconnected input and let the user fix it. Only text that is not a graph (syntax errors,
+    /// a newer format version) is an error.
+    pub fn load_lenient(source: &str, path: &Path) -> Result<(Graph, Vec<Diagnostic>), LoadError> {
+        let (graph, mut problems) = Graph::parse_unvalidated(source)
+            .map_err(|d| LoadError { diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }] })?;
+        problems.extend(graph.validate());
+        let map = SourceMap::new(source);
+        let diagnostics = problems
+            .into_iter()
+            .map(|problem| {
+                let (line, col) = map.locate(&problem.place, &graph);
+                Diagnostic { file: path.to_path_buf(), line, col, problem }
+            })
+            .collect();
+        Ok((graph, diagnostics))
+    }
+
     /// Parses without validating the nodes against the registry; returns the problems
     /// (duplicates, bad link syntax) that the document model cannot hold.
     #[allow(clippy::result_large_err)] // built once per load, on the error path only

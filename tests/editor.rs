@@ -1,0 +1,302 @@
+//! Headless tests of the node editor: the real `EditorApp` in an egui_kittest harness,
+//! rendering with wgpu on the software adapter (lavapipe), driven by pointer and keyboard
+//! events like a user.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use egui::accesskit::Role;
+use egui::{Modifiers, Pos2, Vec2};
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use werkstatt::editor::{EditorApp, Options};
+use werkstatt::graph::{Graph, PortRef};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = root().join("target/test-out/editor").join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn options() -> Options {
+    Options { file_dialogs: false, autosave: false, watch_files: false }
+}
+
+/// The editor on `graph`, in a 1400x900 window with a wgpu renderer.
+fn editor(graph: &Path) -> Harness<'static, EditorApp> {
+    let graph = graph.to_path_buf();
+    let mut h = Harness::builder()
+        .with_size(Vec2::new(1400.0, 900.0))
+        .with_max_steps(200)
+        .wgpu()
+        .build_eframe(move |cc| EditorApp::new(cc, Some(graph), options()));
+    settle(&mut h);
+    h
+}
+
+/// Runs frames until the canvas has laid out and the evaluation has settled.
+fn settle(h: &mut Harness<'_, EditorApp>) {
+    for _ in 0..6 {
+        h.step();
+    }
+}
+
+fn p(s: &str) -> PortRef {
+    PortRef::parse(s).unwrap()
+}
+
+fn pin(h: &Harness<'_, EditorApp>, port: &str, input: bool) -> Pos2 {
+    let app = h.state();
+    app.canvas
+        .pin_screen_pos(&p(port), &app.state.graph, input)
+        .unwrap_or_else(|| panic!("pin {port} was not drawn"))
+}
+
+/// Drags the pointer from `a` to `b` in small steps, like a hand would.
+fn drag(h: &mut Harness<'_, EditorApp>, a: Pos2, b: Pos2) {
+    h.hover_at(a);
+    h.step();
+    h.drag_at(a);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(a + (b - a) * (i as f32 / 6.0));
+        h.step();
+    }
+    h.drop_at(b);
+    h.step();
+    h.step();
+}
+
+fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
+    h.hover_at(pos);
+    h.step();
+    h.drag_at(pos);
+    h.step();
+    h.drop_at(pos);
+    h.step();
+    h.step();
+}
+
+fn copy_default(dir: &Path) -> PathBuf {
+    let path = dir.join("default.ron");
+    std::fs::copy(root().join("graphs/default.ron"), &path).unwrap();
+    path
+}
+
+#[test]
+fn add_connect_edit_undo_redo_and_save() {
+    let dir = temp_dir("session");
+    let path = copy_default(&dir);
+    let original = std::fs::read_to_string(&path).unwrap();
+    let mut h = editor(&path);
+    assert!(!h.state().state.is_dirty());
+    assert!(h.state().gpu().is_some(), "the engine shares the window's wgpu device");
+
+    // Add a Preview node from the Add menu, through its search field.
+    h.get_by_role_and_label(Role::Button, "Add").click();
+    h.step();
+    h.step();
+    h.get_by_role(Role::TextInput).type_text("Preview");
+    h.step();
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Preview").click();
+    settle(&mut h);
+    let pos = {
+        let g = &h.state().state.graph;
+        assert!(g.nodes.contains_key("preview"), "nodes: {:?}", g.nodes.keys().collect::<Vec<_>>());
+        assert_eq!(g.nodes["preview"].kind, "Preview");
+        g.nodes["preview"].pos
+    };
+    assert!(h.state().state.is_dirty());
+    assert!(h.state().state.title().starts_with("* "), "unsaved changes are marked in the title");
+
+    // Connect tonemap.image to preview.image by dragging a wire between the pins.
+    let from = pin(&h, "tonemap.image", false);
+    let to = pin(&h, "preview.image", true);
+    drag(&mut h, from, to);
+    settle(&mut h);
+    let linked = h.state().state.graph.links.iter().any(|l| l.from == p("tonemap.image") && l.to == p("preview.image"));
+    assert!(linked, "links: {:?}", h.state().state.graph.links);
+    // The viewport now shows the preview, rendered live.
+    assert!(h.query_by_label("showing preview.image").is_some());
+    assert!(h.state().live.output(&p("preview.image")).is_some(), "the preview was evaluated");
+
+    // Change a parameter in the inspector: select the tonemap node, pick another operator.
+    let header = h.state().canvas.node_screen_rect("tonemap").expect("tonemap is on screen");
+    click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["tonemap"]);
+    h.get_by_role_and_label(Role::ComboBox, "aces").click();
+    h.step();
+    h.step();
+    h.get_by_label("reinhard").click();
+    settle(&mut h);
+    let op = |h: &Harness<'_, EditorApp>| h.state().state.graph.nodes["tonemap"].params.get("operator").cloned();
+    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+
+    // Undo the parameter, then redo it (keyboard and buttons).
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(op(&h), None, "undo restores the default operator");
+    assert!(h.state().state.graph.links.iter().any(|l| l.to == p("preview.image")), "only one step was undone");
+    h.get_by_label("⟳ Redo").click();
+    settle(&mut h);
+    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+
+    // Save with Ctrl+S and compare with the expected canonical file.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
+    settle(&mut h);
+    assert!(!h.state().state.is_dirty());
+    let saved = std::fs::read_to_string(&path).unwrap();
+    let preview = format!(
+        "        \"preview\": (\n            kind: \"Preview\",\n            pos: ({:?}, {:?}),\n            params: {{}},\n        ),\n",
+        pos[0] as f64, pos[1] as f64
+    );
+    let expected = original
+        .replace(
+            "        \"scene\": (",
+            &format!("{preview}        \"scene\": ("),
+        )
+        .replace(
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {},",
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {\n                \"operator\": \"reinhard\",\n            },",
+        )
+        .replace(
+            "        (\"tonemap.image\", \"image.image\"),\n",
+            "        (\"tonemap.image\", \"image.image\"),\n        (\"tonemap.image\", \"preview.image\"),\n",
+        );
+    assert_eq!(saved, expected);
+    // The saved file is a valid graph in canonical form.
+    let reloaded = Graph::load(&path).unwrap();
+    assert_eq!(reloaded.to_ron(), saved);
+}
+
+#[test]
+fn an_incompatible_link_is_refused_with_a_message() {
+    let dir = temp_dir("refused");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let links = h.state().state.graph.links.clone();
+    let from = pin(&h, "camera.camera", false);
+    let to = pin(&h, "tonemap.image", true);
+    drag(&mut h, from, to);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.links, links, "nothing changed");
+    assert!(!h.state().state.is_dirty());
+    let msg = "cannot connect camera.camera (Camera) to tonemap.image (Texture): a Texture input does not accept Camera";
+    assert_eq!(h.state().state.last_message().map(|m| m.text.as_str()), Some(msg));
+    assert!(h.query_by_label(msg).is_some(), "the message is shown in the status bar");
+}
+
+#[test]
+fn a_failing_node_shows_its_error_on_the_node() {
+    let dir = temp_dir("failing");
+    let path = dir.join("failing.ron");
+    std::fs::write(
+        &path,
+        r#"(
+    version: 1,
+    nodes: {
+        "divide": (kind: "Math", pos: (0.0, 0.0), params: {"op": "divide", "a": 1.0}),
+        "watch": (kind: "Watch", pos: (300.0, 0.0), params: {}),
+        "tonemap": (kind: "Tonemap", pos: (0.0, 300.0), params: {}),
+    },
+    links: [("divide.result", "watch.value")],
+)
+"#,
+    )
+    .unwrap();
+    let mut h = editor(&path);
+    settle(&mut h);
+    // A node that fails while running, and one that cannot run (unconnected required input).
+    assert!(h.query_by_label("error: division by zero (input b is 0)").is_some());
+    assert!(h.query_by_label_contains("required input \"image\" (Texture) is not connected").is_some());
+    assert!(h.query_by_label_contains("waiting for input from \"divide\"").is_some());
+    // Fixing the parameter clears the error.
+    click_at(&mut h, h.state().canvas.node_screen_rect("divide").unwrap().left_top() + Vec2::new(30.0, 12.0));
+    h.state_mut().state.set_param("divide", "b", werkstatt::spec::ParamValue::Float(4.0)).unwrap();
+    settle(&mut h);
+    assert!(h.query_by_label("error: division by zero (input b is 0)").is_none());
+    assert_eq!(h.state().live.output(&p("divide.result")).map(|v| v.summary()), Some("0.25".into()));
+}
+
+/// UI frame times while editing a 200-node chain. Prints the figures; the bound is loose
+/// because debug builds and a shared machine are slow.
+#[test]
+fn a_200_node_graph_stays_responsive() {
+    let dir = temp_dir("big");
+    let path = dir.join("chain.ron");
+    werkstatt::bench::chain_graph(200).save(&path).unwrap();
+    let mut h = editor(&path);
+    let mut measure = |h: &mut Harness<'_, EditorApp>, what: &str, f: &mut dyn FnMut(&mut Harness<'_, EditorApp>, usize)| {
+        let mut times = Vec::new();
+        for i in 0..30 {
+            f(h, i);
+            let t = Instant::now();
+            h.step();
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        let (median, p95) = (times[times.len() / 2], times[(times.len() * 95) / 100]);
+        eprintln!("200-node graph, {what}: median {median:.1} ms, p95 {p95:.1} ms per UI frame (harness step)");
+        median
+    };
+    let idle = measure(&mut h, "idle", &mut |_, _| {});
+    let param = measure(&mut h, "changing a parameter every frame", &mut |h, i| {
+        h.state_mut().state.set_param("m0000", "b", werkstatt::spec::ParamValue::Float(i as f64)).unwrap();
+    });
+    let start = h.state().canvas.node_screen_rect("m0100").map(|r| r.left_top() + Vec2::new(20.0, 10.0));
+    let drag_median = match start {
+        Some(start) => {
+            h.hover_at(start);
+            h.step();
+            h.drag_at(start);
+            let m = measure(&mut h, "dragging a node", &mut |h, i| h.hover_at(start + Vec2::new(i as f32 * 3.0, 0.0)));
+            h.drop_at(start + Vec2::new(90.0, 0.0));
+            h.step();
+            m
+        }
+        None => 0.0,
+    };
+    let (m, p95, _) = h.state().frame_times.stats().unwrap();
+    eprintln!("200-node graph, inside EditorApp::ui (evaluation and layout): median {m:.1} ms, p95 {p95:.1} ms");
+    for t in [idle, param, drag_median] {
+        assert!(t < 250.0, "a UI frame took {t:.1} ms");
+    }
+    // The last value is 1 + 199 more additions of 1, plus the b the loop set on the first node.
+    assert_eq!(h.state().live.output(&p("m0199.result")).map(|v| v.summary()), Some("228".into()));
+}
+
+/// Renders the editor on the default graph; with `WERKSTATT_EDITOR_SCREENSHOT=path` the
+/// picture is written there (docs/editor.png is made this way).
+#[test]
+fn the_viewport_shows_the_rendered_graph() {
+    let dir = temp_dir("screenshot");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    // Show the timings overlay and select a node, as a user would while working.
+    h.get_by_label("⏱ Timings").click();
+    settle(&mut h);
+    let header = h.state().canvas.node_screen_rect("light").unwrap();
+    click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
+    settle(&mut h);
+    assert!(h.query_by_label("showing image.image").is_some());
+    let image = h.render().expect("the harness renders with wgpu");
+    if let Some(out) = std::env::var_os("WERKSTATT_EDITOR_SCREENSHOT") {
+        image.save(&out).unwrap();
+    }
+    // The viewport (top right) holds the rendered picture, not the empty background.
+    let (w, hgt) = image.dimensions();
+    let mut colours = std::collections::BTreeSet::new();
+    for y in (hgt / 10..hgt / 2).step_by(7) {
+        for x in (w * 3 / 4..w - 10).step_by(7) {
+            let p = image.get_pixel(x, y).0;
+            colours.insert((p[0] / 16, p[1] / 16, p[2] / 16));
+        }
+    }
+    assert!(colours.len() > 20, "the viewport shows a picture ({} colours)", colours.len());
+}
