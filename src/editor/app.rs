@@ -210,8 +210,8 @@ impl EditorApp {
         }
     }
 
-    /// Saves to the graph's file, or asks for one. Returns whether it was saved.
-    pub fn save(&mut self, then: Option<Then>, ctx: &egui::Context) -> bool {
+    /// Saves to the graph's file, or asks for one, then does `then`. Returns whether it saved.
+    fn save(&mut self, then: Option<Then>, ctx: &egui::Context) -> bool {
         match self.state.path.clone() {
             Some(p) => self.save_to(&p, then, ctx),
             None => {
@@ -335,6 +335,9 @@ impl EditorApp {
         if shortcut(cmd, Key::A) {
             self.state.selection = self.state.graph.nodes.keys().cloned().collect();
         }
+        if shortcut(Modifiers::NONE, Key::F) {
+            self.canvas.request_fit();
+        }
         if shortcut(Modifiers::NONE, Key::Delete) || shortcut(Modifiers::NONE, Key::Backspace) {
             self.state.delete_selected();
         }
@@ -399,11 +402,11 @@ impl EditorApp {
                 }
             });
             ui.menu_button("Edit", |ui| {
-                let undo = self.state.history.undo_label().map(|l| format!("Undo {l}")).unwrap_or("Undo".into());
+                let undo = self.state.history.undo_label().map(|l| format!("Undo: {l}")).unwrap_or("Undo: nothing".into());
                 if ui.add_enabled(self.state.history.can_undo(), egui::Button::new(undo)).clicked() {
                     self.state.undo();
                 }
-                let redo = self.state.history.redo_label().map(|l| format!("Redo {l}")).unwrap_or("Redo".into());
+                let redo = self.state.history.redo_label().map(|l| format!("Redo: {l}")).unwrap_or("Redo: nothing".into());
                 if ui.add_enabled(self.state.history.can_redo(), egui::Button::new(redo)).clicked() {
                     self.state.redo();
                 }
@@ -437,6 +440,10 @@ impl EditorApp {
             });
             ui.menu_button("View", |ui| {
                 ui.checkbox(&mut self.canvas.show_timings, "Node timings");
+                if ui.button("Frame all nodes (F)").clicked() {
+                    self.canvas.request_fit();
+                    ui.close();
+                }
                 if ui.button("Reset viewport camera").clicked() {
                     self.live.camera = None;
                     ui.close();
@@ -444,14 +451,14 @@ impl EditorApp {
             });
             ui.separator();
             if ui
-                .add_enabled(self.state.history.can_undo(), egui::Button::new("⟲ Undo"))
+                .add_enabled(self.state.history.can_undo(), egui::Button::new("Undo"))
                 .on_hover_text(self.state.history.undo_label().unwrap_or("nothing to undo"))
                 .clicked()
             {
                 self.state.undo();
             }
             if ui
-                .add_enabled(self.state.history.can_redo(), egui::Button::new("⟳ Redo"))
+                .add_enabled(self.state.history.can_redo(), egui::Button::new("Redo"))
                 .on_hover_text(self.state.history.redo_label().unwrap_or("nothing to redo"))
                 .clicked()
             {

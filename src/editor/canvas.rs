@@ -9,7 +9,7 @@ use std::collections::{BTreeSet, HashMap};
 use std::rc::Rc;
 
 use egui::emath::TSTransform;
-use egui::{Color32, Id, Pos2, Rect, RichText, Sense, Stroke, Ui, Vec2, pos2, vec2};
+use egui::{Color32, Id, Pos2, Rect, RichText, Sense, Stroke, Ui, pos2, vec2};
 use egui_snarl::ui::{
     AnyPins, BackgroundPattern, NodeLayout, PinInfo, PinPlacement, PinShape, PinWireInfo, SelectionStyle, SnarlPin,
     SnarlStyle, SnarlViewer, SnarlWidget,
@@ -98,6 +98,9 @@ pub struct Canvas {
     pub show_timings: bool,
     pub search: String,
     id: Id,
+    /// Frames drawn since the view was reset; the first frames measure the nodes.
+    frames: u32,
+    fit_pending: bool,
 }
 
 impl Default for Canvas {
@@ -120,6 +123,8 @@ impl Canvas {
             show_timings: false,
             search: String::new(),
             id: Id::new("werkstatt-canvas"),
+            frames: 0,
+            fit_pending: true,
         }
     }
 
@@ -176,6 +181,29 @@ impl Canvas {
         *self = Canvas { show_timings: self.show_timings, ..Canvas::new() };
     }
 
+    /// Frames all nodes in the view (once their sizes are known).
+    pub fn request_fit(&mut self) {
+        self.fit_pending = true;
+    }
+
+    /// The view transform that shows every node, if the nodes have been measured.
+    fn fit_transform(&self, graph: &Graph) -> Option<TSTransform> {
+        if !self.canvas_rect.is_finite() || self.canvas_rect.width() < 10.0 || self.frames < 2 {
+            return None;
+        }
+        let mut bb = Rect::NOTHING;
+        for id in graph.nodes.keys() {
+            bb = bb.union(*self.node_rects.get(id)?);
+        }
+        if !bb.is_finite() {
+            return Some(TSTransform::new(self.canvas_rect.center().to_vec2(), 1.0));
+        }
+        let bb = bb.expand(30.0);
+        let area = self.canvas_rect.shrink(10.0);
+        let s = (area.width() / bb.width()).min(area.height() / bb.height()).clamp(0.2, 1.0);
+        Some(TSTransform::new(area.center().to_vec2() - bb.center().to_vec2() * s, s))
+    }
+
     /// A point in graph space for new nodes: `screen` if it is on the canvas, else the
     /// middle of the visible canvas.
     pub fn graph_pos(&self, screen: Option<Pos2>) -> [f32; 2] {
@@ -211,6 +239,11 @@ impl Canvas {
         inspected: Option<&PortRef>,
     ) -> Vec<Action> {
         self.pins.borrow_mut().clear();
+        self.frames += 1;
+        let fit_to = if self.fit_pending { self.fit_transform(graph) } else { None };
+        if fit_to.is_some() {
+            self.fit_pending = false;
+        }
         let style = SnarlStyle {
             node_layout: Some(NodeLayout::coil()),
             pin_placement: Some(PinPlacement::Edge),
@@ -239,8 +272,11 @@ impl Canvas {
             node_rects: &mut self.node_rects,
             search: &mut self.search,
             to_global: self.to_global,
+            fit_to,
             pressed_node: None,
         };
+        // Labels must not take drags (text selection) from the nodes they sit on.
+        ui.style_mut().interaction.selectable_labels = false;
         let response = SnarlWidget::new().id(self.id).style(style).show(&mut self.snarl, &mut viewer, ui);
         self.to_global = viewer.to_global;
         self.canvas_rect = response.rect;
@@ -335,6 +371,7 @@ struct Viewer<'a> {
     node_rects: &'a mut HashMap<String, Rect>,
     search: &'a mut String,
     to_global: TSTransform,
+    fit_to: Option<TSTransform>,
     pressed_node: Option<String>,
 }
 
@@ -395,6 +432,9 @@ impl SnarlViewer<String> for Viewer<'_> {
     }
 
     fn current_transform(&mut self, to_global: &mut TSTransform, _snarl: &mut Snarl<String>) {
+        if let Some(t) = self.fit_to.take() {
+            *to_global = t;
+        }
         self.to_global = *to_global;
     }
 
@@ -717,5 +757,3 @@ pub fn node_menu(
     picked
 }
 
-/// Size hint for the first layout of nodes that snarl has not measured yet.
-pub const NODE_SIZE: Vec2 = vec2(160.0, 90.0);

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use egui::{Color32, RichText, Ui};
+use egui::{RichText, Ui};
 
 use super::canvas::{ERROR_COLOR, PENDING_COLOR, port_color};
 use super::live::{Live, NodeState};
@@ -250,6 +250,3 @@ fn describe(kind: &ParamKind) -> String {
         ParamKind::Choice { default, options } => format!("one of {}, default {default}", options.join(", ")),
     }
 }
-
-#[allow(dead_code)]
-const _: Color32 = Color32::WHITE;
