@@ -118,6 +118,10 @@ fn add_connect_edit_undo_redo_and_save() {
     // Connect tonemap.image to preview.image by dragging a wire between the pins.
     let from = pin(&h, "tonemap.image", false);
     let to = pin(&h, "preview.image", true);
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        eprintln!("from {from:?} to {to:?} preview {:?}", h.state().canvas.node_screen_rect("preview"));
+        h.render().unwrap().save(dir.join("debug.png")).unwrap();
+    }
     drag(&mut h, from, to);
     settle(&mut h);
     let linked = h.state().state.graph.links.iter().any(|l| l.from == p("tonemap.image") && l.to == p("preview.image"));

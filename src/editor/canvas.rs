@@ -188,7 +188,7 @@ impl Canvas {
 
     /// The view transform that shows every node, if the nodes have been measured.
     fn fit_transform(&self, graph: &Graph) -> Option<TSTransform> {
-        if !self.canvas_rect.is_finite() || self.canvas_rect.width() < 10.0 || self.frames < 2 {
+        if !self.canvas_rect.is_finite() || self.canvas_rect.width() < 10.0 || self.frames < 5 {
             return None;
         }
         let mut bb = Rect::NOTHING;
@@ -277,9 +277,10 @@ impl Canvas {
         };
         // Labels must not take drags (text selection) from the nodes they sit on.
         ui.style_mut().interaction.selectable_labels = false;
+        let canvas_rect = ui.available_rect_before_wrap();
         let response = SnarlWidget::new().id(self.id).style(style).show(&mut self.snarl, &mut viewer, ui);
         self.to_global = viewer.to_global;
-        self.canvas_rect = response.rect;
+        self.canvas_rect = canvas_rect;
         let pressed_node = viewer.pressed_node.take();
         let mut actions = std::mem::take(&mut viewer.actions);
 
@@ -588,10 +589,14 @@ impl SnarlViewer<String> for Viewer<'_> {
         let Some(id) = snarl.get_node(node).cloned() else { return };
         self.node_rects.insert(id.clone(), rect);
         let (pressed, pos) = ui.input(|i| (i.pointer.primary_pressed(), i.pointer.interact_pos()));
+        // Only presses on the canvas itself: not on a menu or popup above it, not where the
+        // node is clipped away under a side panel.
+        let on_canvas = |pos: Pos2| ui.ctx().layer_id_at(pos).is_none_or(|l| l.order == egui::Order::Background);
         if pressed
             && let Some(pos) = pos
-            && ui.ctx().layer_id_at(pos) == Some(ui.layer_id())
+            && on_canvas(pos)
             && rect.contains(self.to_global.inverse() * pos)
+            && ui.clip_rect().contains(self.to_global.inverse() * pos)
         {
             // Later nodes are drawn on top, so the last hit wins.
             self.pressed_node = Some(id);
