@@ -52,9 +52,7 @@ fn p(s: &str) -> PortRef {
 
 fn pin(h: &Harness<'_, EditorApp>, port: &str, input: bool) -> Pos2 {
     let app = h.state();
-    app.canvas
-        .pin_screen_pos(&p(port), &app.state.graph, input)
-        .unwrap_or_else(|| panic!("pin {port} was not drawn"))
+    app.canvas.pin_screen_pos(&p(port), &app.state.graph, input).unwrap_or_else(|| panic!("pin {port} was not drawn"))
 }
 
 /// Drags the pointer from `a` to `b` in small steps, like a hand would.
@@ -67,7 +65,13 @@ fn drag(h: &mut Harness<'_, EditorApp>, a: Pos2, b: Pos2) {
         h.hover_at(a + (b - a) * (i as f32 / 6.0));
         h.step();
     }
-    h.drop_at(b);
+    // Release without taking the pointer away (menus opened by the drop need it).
+    h.event(egui::Event::PointerButton {
+        pos: b,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: Modifiers::NONE,
+    });
     h.step();
     h.step();
 }
@@ -191,7 +195,8 @@ fn an_incompatible_link_is_refused_with_a_message() {
     settle(&mut h);
     assert_eq!(h.state().state.graph.links, links, "nothing changed");
     assert!(!h.state().state.is_dirty());
-    let msg = "cannot connect camera.camera (Camera) to tonemap.image (Texture): a Texture input does not accept Camera";
+    let msg =
+        "cannot connect camera.camera (Camera) to tonemap.image (Texture): a Texture input does not accept Camera";
     assert_eq!(h.state().state.last_message().map(|m| m.text.as_str()), Some(msg));
     assert!(h.query_by_label(msg).is_some(), "the message is shown in the status bar");
 }
@@ -237,19 +242,20 @@ fn a_200_node_graph_stays_responsive() {
     let path = dir.join("chain.ron");
     werkstatt::bench::chain_graph(200).save(&path).unwrap();
     let mut h = editor(&path);
-    let measure = |h: &mut Harness<'_, EditorApp>, what: &str, f: &mut dyn FnMut(&mut Harness<'_, EditorApp>, usize)| {
-        let mut times = Vec::new();
-        for i in 0..30 {
-            f(h, i);
-            let t = Instant::now();
-            h.step();
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        times.sort_by(f64::total_cmp);
-        let (median, p95) = (times[times.len() / 2], times[(times.len() * 95) / 100]);
-        eprintln!("200-node graph, {what}: median {median:.1} ms, p95 {p95:.1} ms per UI frame (harness step)");
-        median
-    };
+    let measure =
+        |h: &mut Harness<'_, EditorApp>, what: &str, f: &mut dyn FnMut(&mut Harness<'_, EditorApp>, usize)| {
+            let mut times = Vec::new();
+            for i in 0..30 {
+                f(h, i);
+                let t = Instant::now();
+                h.step();
+                times.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            times.sort_by(f64::total_cmp);
+            let (median, p95) = (times[times.len() / 2], times[(times.len() * 95) / 100]);
+            eprintln!("200-node graph, {what}: median {median:.1} ms, p95 {p95:.1} ms per UI frame (harness step)");
+            median
+        };
     let idle = measure(&mut h, "idle", &mut |_, _| {});
     let param = measure(&mut h, "changing a parameter every frame", &mut |h, i| {
         h.state_mut().state.set_param("m0000", "b", werkstatt::spec::ParamValue::Float(i as f64)).unwrap();
@@ -304,4 +310,141 @@ fn the_viewport_shows_the_rendered_graph() {
         }
     }
     assert!(colours.len() > 20, "the viewport shows a picture ({} colours)", colours.len());
+}
+
+fn header_point(h: &Harness<'_, EditorApp>, id: &str) -> Pos2 {
+    let r = h.state().canvas.node_screen_rect(id).unwrap_or_else(|| panic!("node {id} is not drawn"));
+    r.left_top() + Vec2::new(r.width() * 0.5, 8.0)
+}
+
+#[test]
+fn select_move_copy_paste_duplicate_delete_and_undo() {
+    let dir = temp_dir("clipboard");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let before = h.state().state.graph.clone();
+
+    // Drag the camera node by its header: one undo step, position rounded.
+    let at = header_point(&h, "camera");
+    drag(&mut h, at, at + Vec2::new(60.0, 40.0));
+    settle(&mut h);
+    let moved = h.state().state.graph.nodes["camera"].pos;
+    assert_ne!(moved, before.nodes["camera"].pos, "the node moved");
+    assert!(moved.iter().all(|c| c.fract() == 0.0), "positions are whole units: {moved:?}");
+    assert_eq!(h.state().state.history.undo_label(), Some("move camera"));
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["camera"]);
+
+    // Copy and paste keep the parameters; duplicate keeps them too; new ids are readable.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::C);
+    settle(&mut h);
+    h.hover_at(h.state().canvas.node_screen_rect("camera").unwrap().center() + Vec2::new(0.0, 150.0));
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::V);
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.nodes.contains_key("camera_2"), "{:?}", g.nodes.keys().collect::<Vec<_>>());
+    assert_eq!(g.nodes["camera_2"].params, g.nodes["camera"].params);
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["camera_2"]);
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::D);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.nodes["camera_3"].params, h.state().state.graph.nodes["camera"].params);
+
+    // Shift-click adds to the selection; Delete removes the selected nodes and their links.
+    let tonemap = header_point(&h, "tonemap");
+    click_at(&mut h, tonemap);
+    let image = header_point(&h, "image");
+    h.hover_at(image);
+    h.step();
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: image,
+            button: egui::PointerButton::Primary,
+            pressed: true,
+            modifiers: Modifiers::SHIFT,
+        },
+        Modifiers::SHIFT,
+    );
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: image,
+            button: egui::PointerButton::Primary,
+            pressed: false,
+            modifiers: Modifiers::SHIFT,
+        },
+        Modifiers::SHIFT,
+    );
+    settle(&mut h);
+    let sel: Vec<String> = h.state().state.selection.iter().cloned().collect();
+    assert!(sel.contains(&"image".to_string()), "shift-click selects: {sel:?}");
+    h.key_press(egui::Key::Delete);
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    for id in &sel {
+        assert!(!g.nodes.contains_key(id), "{id} was deleted");
+        assert!(g.links.iter().all(|l| &l.from.node != id && &l.to.node != id));
+    }
+
+    // Undo everything, back to the file as it was opened.
+    while h.state().state.history.can_undo() {
+        h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+        h.step();
+        h.step();
+    }
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, before);
+    assert!(!h.state().state.is_dirty());
+}
+
+#[test]
+fn a_wire_dropped_on_empty_space_offers_compatible_nodes() {
+    let dir = temp_dir("dropped");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let from = pin(&h, "tonemap.image", false);
+    let empty = from + Vec2::new(20.0, 260.0);
+    drag(&mut h, from, empty);
+    settle(&mut h);
+    assert!(h.query_by_label_contains("Add node for tonemap.image (Texture)").is_some(), "the menu is open");
+    // Only nodes with a Texture input are offered.
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        h.render().unwrap().save(dir.join("debug.png")).unwrap();
+        for n in h.query_all_by_label_contains("put") {
+            eprintln!("{n:?}");
+        }
+    }
+    assert!(h.query_by_role_and_label(Role::Button, "Output ⏵").is_some());
+    assert!(h.query_by_role_and_label(Role::Button, "Render ⏵").is_some());
+    assert!(h.query_by_role_and_label(Role::Button, "Input ⏵").is_none(), "no Input-category node takes a Texture");
+    h.get_by_role(Role::TextInput).type_text("prev");
+    h.step();
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Preview").click();
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.links.iter().any(|l| l.from == p("tonemap.image") && l.to == p("preview.image")), "{:?}", g.links);
+}
+
+#[test]
+fn a_node_dropped_on_a_wire_is_inserted() {
+    let dir = temp_dir("insert");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    // A free Tonemap below the light -> tonemap wire, then dragged onto it.
+    let below = {
+        let app = h.state();
+        let r = app.canvas.node_screen_rect("light").unwrap();
+        app.canvas.graph_pos(Some(r.left_bottom() + Vec2::new(0.0, 200.0)))
+    };
+    h.state_mut().state.add_node("Tonemap", below).unwrap();
+    settle(&mut h);
+    let a = pin(&h, "light.image", false);
+    let b = pin(&h, "tonemap.image", true);
+    let rect = h.state().canvas.node_screen_rect("tonemap_2").unwrap();
+    let grab = rect.left_top() + Vec2::new(rect.width() * 0.5, 8.0);
+    let target = a + (b - a) * 0.5;
+    drag(&mut h, grab, grab + (target - rect.center()));
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap_2.image")), "{:?}", g.links);
+    assert!(g.links.iter().any(|l| l.from == p("tonemap_2.image") && l.to == p("tonemap.image")));
+    assert!(!g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap.image")));
 }

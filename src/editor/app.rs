@@ -101,9 +101,9 @@ impl EditorApp {
     /// Creates the editor on eframe's wgpu device (shared with the engine), opening `path`.
     pub fn new(cc: &eframe::CreationContext<'_>, path: Option<PathBuf>, options: Options) -> Self {
         let render_state = cc.wgpu_render_state.clone();
-        let gpu = render_state.as_ref().map(|rs| {
-            Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info()))
-        });
+        let gpu = render_state
+            .as_ref()
+            .map(|rs| Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info())));
         let mut app = EditorApp {
             state: EditorState::default(),
             live: Live::new(PathBuf::from("."), options.watch_files),
@@ -193,7 +193,9 @@ impl EditorApp {
             Then::Open(None) => {
                 if self.options.file_dialogs {
                     let mut d = rfd::FileDialog::new().add_filter("werkstatt graph", &["ron"]).set_title("Open graph");
-                    if let Some(dir) = self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok()) {
+                    if let Some(dir) =
+                        self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok())
+                    {
                         d = d.set_directory(dir);
                     }
                     if let Some(p) = d.pick_file() {
@@ -249,7 +251,9 @@ impl EditorApp {
                 .add_filter("werkstatt graph", &["ron"])
                 .set_title("Save graph as")
                 .set_file_name(self.state.file_name());
-            if let Some(dir) = self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok()) {
+            if let Some(dir) =
+                self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok())
+            {
                 d = d.set_directory(dir);
             }
             if let Some(mut p) = d.save_file() {
@@ -402,11 +406,13 @@ impl EditorApp {
                 }
             });
             ui.menu_button("Edit", |ui| {
-                let undo = self.state.history.undo_label().map(|l| format!("Undo: {l}")).unwrap_or("Undo: nothing".into());
+                let undo =
+                    self.state.history.undo_label().map(|l| format!("Undo: {l}")).unwrap_or("Undo: nothing".into());
                 if ui.add_enabled(self.state.history.can_undo(), egui::Button::new(undo)).clicked() {
                     self.state.undo();
                 }
-                let redo = self.state.history.redo_label().map(|l| format!("Redo: {l}")).unwrap_or("Redo: nothing".into());
+                let redo =
+                    self.state.history.redo_label().map(|l| format!("Redo: {l}")).unwrap_or("Redo: nothing".into());
                 if ui.add_enabled(self.state.history.can_redo(), egui::Button::new(redo)).clicked() {
                     self.state.redo();
                 }
@@ -545,7 +551,8 @@ impl EditorApp {
                 Dialog::Path { save, text, then } => {
                     let save = *save;
                     ui.heading(if save { "Save graph as" } else { "Open graph" });
-                    let r = ui.add(egui::TextEdit::singleline(text).hint_text("path/to/graph.ron").desired_width(380.0));
+                    let r =
+                        ui.add(egui::TextEdit::singleline(text).hint_text("path/to/graph.ron").desired_width(380.0));
                     let enter = r.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter));
                     ui.horizontal(|ui| {
                         let go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;
@@ -593,7 +600,10 @@ impl EditorApp {
 }
 
 fn base_dir(path: Option<&Path>) -> PathBuf {
-    path.and_then(Path::parent).filter(|p| !p.as_os_str().is_empty()).map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
+    path.and_then(Path::parent)
+        .filter(|p| !p.as_os_str().is_empty())
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
 }
 
 impl eframe::App for EditorApp {
@@ -628,7 +638,14 @@ impl eframe::App for EditorApp {
         egui::Panel::right("side").resizable(true).default_size(420.0).min_size(280.0).show(ui, |ui| {
             let h = (ui.available_height() * 0.5).max(200.0);
             ui.allocate_ui(egui::vec2(ui.available_width(), h), |ui| {
-                self.viewport.show(ui, &mut self.state, &mut self.live, self.gpu.as_ref(), self.render_state.as_ref(), self.eval_count);
+                self.viewport.show(
+                    ui,
+                    &mut self.state,
+                    &mut self.live,
+                    self.gpu.as_ref(),
+                    self.render_state.as_ref(),
+                    self.eval_count,
+                );
             });
             ui.separator();
             egui::ScrollArea::vertical().show(ui, |ui| self.inspector.show(ui, &mut self.state, &self.live));
@@ -636,7 +653,13 @@ impl eframe::App for EditorApp {
         let actions = egui::CentralPanel::default()
             .frame(egui::Frame::NONE)
             .show(ui, |ui| {
-                self.canvas.show(ui, &self.state.graph, &self.live, &self.state.selection, self.state.inspected.as_ref())
+                self.canvas.show(
+                    ui,
+                    &self.state.graph,
+                    &self.live,
+                    &self.state.selection,
+                    self.state.inspected.as_ref(),
+                )
             })
             .inner;
         self.apply(actions, &ctx);

@@ -56,9 +56,18 @@ pub enum Action {
     RemoveLink(Link),
     DisconnectInput(PortRef),
     DisconnectOutput(PortRef),
-    Add { kind: &'static str, pos: [f32; 2] },
+    Add {
+        kind: &'static str,
+        pos: [f32; 2],
+    },
     /// A wire dropped on empty space: add `kind` and connect its `new_port` to `port`.
-    AddConnected { kind: &'static str, pos: [f32; 2], port: PortRef, from_output: bool, new_port: &'static str },
+    AddConnected {
+        kind: &'static str,
+        pos: [f32; 2],
+        port: PortRef,
+        from_output: bool,
+        new_port: &'static str,
+    },
     Inspect(Option<PortRef>),
     SelectOnly(String),
     SetSelection(BTreeSet<String>),
@@ -92,6 +101,8 @@ pub struct Canvas {
     synced: u64,
     pins: Rc<RefCell<PinRects>>,
     node_rects: HashMap<String, Rect>,
+    /// Width of each node's header content, which the node must be at least as wide as.
+    header_widths: HashMap<String, f32>,
     snarl_selection: Vec<NodeId>,
     to_global: TSTransform,
     canvas_rect: Rect,
@@ -117,6 +128,7 @@ impl Canvas {
             synced: 0,
             pins: Rc::default(),
             node_rects: HashMap::new(),
+            header_widths: HashMap::new(),
             snarl_selection: Vec::new(),
             to_global: TSTransform::IDENTITY,
             canvas_rect: Rect::NOTHING,
@@ -270,6 +282,7 @@ impl Canvas {
             actions: Vec::new(),
             pins: self.pins.clone(),
             node_rects: &mut self.node_rects,
+            header_widths: &mut self.header_widths,
             search: &mut self.search,
             to_global: self.to_global,
             fit_to,
@@ -353,7 +366,10 @@ impl Canvas {
 
 fn bezier(a: Pos2, b: Pos2, c: Pos2, d: Pos2, t: f32) -> Pos2 {
     let u = 1.0 - t;
-    let v = a.to_vec2() * (u * u * u) + b.to_vec2() * (3.0 * u * u * t) + c.to_vec2() * (3.0 * u * t * t) + d.to_vec2() * (t * t * t);
+    let v = a.to_vec2() * (u * u * u)
+        + b.to_vec2() * (3.0 * u * u * t)
+        + c.to_vec2() * (3.0 * u * t * t)
+        + d.to_vec2() * (t * t * t);
     v.to_pos2()
 }
 
@@ -370,6 +386,7 @@ struct Viewer<'a> {
     actions: Vec<Action>,
     pins: Rc<RefCell<PinRects>>,
     node_rects: &'a mut HashMap<String, Rect>,
+    header_widths: &'a mut HashMap<String, f32>,
     search: &'a mut String,
     to_global: TSTransform,
     fit_to: Option<TSTransform>,
@@ -396,7 +413,11 @@ impl Viewer<'_> {
     fn pin(&self, ty: PortType, key: (String, bool, usize), connected: bool) -> TypedPin {
         let color = port_color(ty);
         let info = PinInfo::default()
-            .with_shape(if ty == PortType::Texture || ty == PortType::GBuffer { PinShape::Square } else { PinShape::Circle })
+            .with_shape(if ty == PortType::Texture || ty == PortType::GBuffer {
+                PinShape::Square
+            } else {
+                PinShape::Circle
+            })
             .with_fill(if connected { color } else { color.gamma_multiply(0.55) })
             .with_stroke(Stroke::new(1.0, Color32::from_gray(20)))
             .with_wire_color(color);
@@ -408,7 +429,8 @@ impl Viewer<'_> {
         let Some(spec) = self.spec(&port.node) else { return String::new() };
         let p = if input { spec.input(&port.port) } else { spec.output(&port.port) };
         let Some((_, p)) = p else { return String::new() };
-        let mut text = format!("{}: {}{}\n{}", p.name, p.ty, if input && p.required { " (required)" } else { "" }, p.doc);
+        let mut text =
+            format!("{}: {}{}\n{}", p.name, p.ty, if input && p.required { " (required)" } else { "" }, p.doc);
         let value = if input { self.live.input(port) } else { self.live.output(port) };
         match value {
             Some(v) => text.push_str(&format!("\nvalue: {}", v.summary())),
@@ -489,13 +511,16 @@ impl SnarlViewer<String> for Viewer<'_> {
     ) {
         let Some(id) = snarl.get_node(node).cloned() else { return };
         let kind = self.graph.nodes.get(&id).map(|n| n.kind.clone()).unwrap_or_default();
-        ui.horizontal(|ui| {
-            ui.label(RichText::new(&id).strong());
-            let r = ui.label(RichText::new(&kind).small().weak());
-            if let Some(spec) = spec::find(&kind) {
-                r.on_hover_text(spec.doc);
-            }
-        });
+        // The header is already a left-to-right row.
+        let a = ui.label(RichText::new(&id).strong());
+        let b = ui.label(RichText::new(&kind).small().weak());
+        // Snarl sizes a node by its pins and footer; remember the header's width so the
+        // footer can make room for it (else a long title is clipped).
+        let width = a.rect.width() + b.rect.width() + ui.spacing().item_spacing.x + ui.spacing().icon_width + 8.0;
+        self.header_widths.insert(id, width);
+        if let Some(spec) = spec::find(&kind) {
+            b.on_hover_text(spec.doc);
+        }
     }
 
     fn inputs(&mut self, node: &String) -> usize {
@@ -509,9 +534,8 @@ impl SnarlViewer<String> for Viewer<'_> {
     #[allow(refining_impl_trait)]
     fn show_input(&mut self, pin: &InPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> TypedPin {
         let id = snarl.get_node(pin.id.node).cloned().unwrap_or_default();
-        let (port, ty) = self
-            .in_ref(snarl, pin.id)
-            .unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
+        let (port, ty) =
+            self.in_ref(snarl, pin.id).unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
         let required = self.spec(&id).and_then(|s| s.inputs.get(pin.id.input)).is_some_and(|p| p.required);
         let mut text = RichText::new(&port.port).small();
         if required && pin.remotes.is_empty() {
@@ -526,9 +550,8 @@ impl SnarlViewer<String> for Viewer<'_> {
     #[allow(refining_impl_trait)]
     fn show_output(&mut self, pin: &OutPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> TypedPin {
         let id = snarl.get_node(pin.id.node).cloned().unwrap_or_default();
-        let (port, ty) = self
-            .out_ref(snarl, pin.id)
-            .unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
+        let (port, ty) =
+            self.out_ref(snarl, pin.id).unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
         let texture = matches!(ty, PortType::Texture | PortType::GBuffer);
         let shown = self.inspected == Some(&port);
         let mut text = RichText::new(if shown { format!("👁 {}", port.port) } else { port.port.clone() }).small();
@@ -544,8 +567,9 @@ impl SnarlViewer<String> for Viewer<'_> {
         self.pin(ty, (id, false, pin.id.output), !pin.remotes.is_empty())
     }
 
-    fn has_footer(&mut self, node: &String) -> bool {
-        self.show_timings || !matches!(self.live.state(node), NodeState::Ok | NodeState::Idle) || !self.live.warnings(node).is_empty()
+    fn has_footer(&mut self, _node: &String) -> bool {
+        // Always: the footer also keeps the node as wide as its header.
+        true
     }
 
     fn show_footer(
@@ -557,14 +581,18 @@ impl SnarlViewer<String> for Viewer<'_> {
         snarl: &mut Snarl<String>,
     ) {
         let Some(id) = snarl.get_node(node).cloned() else { return };
+        let min_width = self.header_widths.get(&id).copied().unwrap_or(0.0);
         ui.vertical(|ui| {
-            ui.set_max_width(240.0);
+            ui.set_max_width(min_width.max(240.0));
+            ui.set_min_width(min_width);
             match self.live.state(&id) {
                 NodeState::Failed(m) => {
                     ui.add(egui::Label::new(RichText::new(format!("error: {m}")).small().color(ERROR_COLOR)).wrap());
                 }
                 NodeState::Pending(m) => {
-                    ui.add(egui::Label::new(RichText::new(format!("pending: {m}")).small().color(PENDING_COLOR)).wrap());
+                    ui.add(
+                        egui::Label::new(RichText::new(format!("pending: {m}")).small().color(PENDING_COLOR)).wrap(),
+                    );
                 }
                 NodeState::Blocked(m) => {
                     ui.add(egui::Label::new(RichText::new(m).small().color(PENDING_COLOR)).wrap());
@@ -761,4 +789,3 @@ pub fn node_menu(
     }
     picked
 }
-

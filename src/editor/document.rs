@@ -406,7 +406,10 @@ mod tests {
         let before = g.clone();
         let err = connect(&mut g, &p(&format!("{cam}.camera")), &p("math.b")).unwrap_err();
         assert!(matches!(err, EditError::IncompatibleTypes { .. }));
-        assert_eq!(err.to_string(), "cannot connect orbit_camera.camera (Camera) to math.b (Scalar): a Scalar input does not accept Camera");
+        assert_eq!(
+            err.to_string(),
+            "cannot connect orbit_camera.camera (Camera) to math.b (Scalar): a Scalar input does not accept Camera"
+        );
         assert_eq!(g, before, "a refused link changes nothing");
         let n2 = add_node(&mut g, "Number", [0.0, 100.0]).unwrap();
         let old = connect(&mut g, &p(&format!("{n2}.value")), &p("math.a")).unwrap();

@@ -59,7 +59,9 @@ impl Inspector {
             _ => {}
         }
         if let Some((t, _)) = live.timing(&id) {
-            ui.label(RichText::new(format!("last run {:.2} ms, {} runs", t.as_secs_f64() * 1e3, live.runs(&id))).small());
+            ui.label(
+                RichText::new(format!("last run {:.2} ms, {} runs", t.as_secs_f64() * 1e3, live.runs(&id))).small(),
+            );
         }
         ui.separator();
         if spec.params.is_empty() {
@@ -163,7 +165,13 @@ impl Inspector {
                     }
                 }
                 for (i, ch) in ["r", "g", "b"].iter().enumerate() {
-                    let r = ui.add(egui::DragValue::new(&mut out[i]).speed(0.005).range(0.0..=1e4).prefix(format!("{ch} ")).max_decimals(3));
+                    let r = ui.add(
+                        egui::DragValue::new(&mut out[i])
+                            .speed(0.005)
+                            .range(0.0..=1e4)
+                            .prefix(format!("{ch} "))
+                            .max_decimals(3),
+                    );
                     changed |= r.on_hover_text(tip).changed();
                 }
                 changed.then(|| ParamValue::Vec(out.to_vec()))

@@ -83,7 +83,9 @@ pub fn runnable(graph: &Graph) -> (Graph, BTreeMap<String, StaticError>) {
                 }
                 _ => {
                     if let Some(node) = p.node.clone() {
-                        errors.entry(node.clone()).or_insert(StaticError { message: p.message.clone(), blocked: false });
+                        errors
+                            .entry(node.clone())
+                            .or_insert(StaticError { message: p.message.clone(), blocked: false });
                         drop_nodes.insert(node);
                     }
                 }
@@ -284,7 +286,8 @@ impl Live {
         if let Some(cam) = &self.camera {
             cam.apply(&mut run);
         }
-        self.extra_roots = inspected.filter(|p| run.nodes.contains_key(&p.node)).map(|p| vec![p.node.clone()]).unwrap_or_default();
+        self.extra_roots =
+            inspected.filter(|p| run.nodes.contains_key(&p.node)).map(|p| vec![p.node.clone()]).unwrap_or_default();
         self.static_errors = errors;
         let result = match &mut self.evaluator {
             Some(ev) => ev.update(&run, &self.extra_roots),
@@ -385,7 +388,11 @@ impl Live {
     /// What node `id` shows: its problem in the document, else its last evaluation.
     pub fn state(&self, id: &str) -> NodeState {
         if let Some(e) = self.static_errors.get(id) {
-            return if e.blocked { NodeState::Blocked(e.message.clone()) } else { NodeState::Failed(e.message.clone()) };
+            return if e.blocked {
+                NodeState::Blocked(e.message.clone())
+            } else {
+                NodeState::Failed(e.message.clone())
+            };
         }
         if let Some(e) = &self.shader_error
             && let Some(line) = e.lines().find(|l| l.starts_with(&format!("{id}: ")))

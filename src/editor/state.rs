@@ -85,7 +85,9 @@ impl EditorState {
 
     pub fn file_name(&self) -> String {
         match &self.path {
-            Some(p) => p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string()),
+            Some(p) => {
+                p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
+            }
             None => "untitled".into(),
         }
     }
@@ -309,9 +311,8 @@ impl EditorState {
                 }
             },
         };
-        let ids = self.edit(&format!("paste {} node(s)", fragment.nodes.len()), None, |g| {
-            document::paste(g, &fragment, at)
-        })?;
+        let ids =
+            self.edit(&format!("paste {} node(s)", fragment.nodes.len()), None, |g| document::paste(g, &fragment, at))?;
         self.selection = ids.iter().cloned().collect();
         Ok(ids)
     }
@@ -321,9 +322,8 @@ impl EditorState {
         if ids.is_empty() {
             return Ok(Vec::new());
         }
-        let new = self.edit(&format!("duplicate {} node(s)", ids.len()), None, |g| {
-            document::duplicate(g, &ids, [40.0, 40.0])
-        })?;
+        let new = self
+            .edit(&format!("duplicate {} node(s)", ids.len()), None, |g| document::duplicate(g, &ids, [40.0, 40.0]))?;
         self.selection = new.iter().cloned().collect();
         Ok(new)
     }

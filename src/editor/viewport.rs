@@ -165,7 +165,10 @@ impl Converter {
                     view: &dst.view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })],
                 depth_stencil_attachment: None,
                 timestamp_writes: None,
@@ -267,7 +270,10 @@ impl Viewport {
             let label = format!("{}x{}", live.settings.width, live.settings.height);
             egui::ComboBox::from_id_salt("render size").selected_text(label).width(90.0).show_ui(ui, |ui| {
                 for &(w, h) in SIZES {
-                    if ui.selectable_label((w, h) == (live.settings.width, live.settings.height), format!("{w}x{h}")).clicked() {
+                    if ui
+                        .selectable_label((w, h) == (live.settings.width, live.settings.height), format!("{w}x{h}"))
+                        .clicked()
+                    {
                         live.set_size(w, h);
                     }
                 }
@@ -285,7 +291,9 @@ impl Viewport {
         let image = value.and_then(|v| v.as_texture());
         let shown = match (image, gpu, render_state) {
             (Some(img), Some(gpu), Some(rs)) => match self.update_texture(gpu, rs, img, eval_count) {
-                Ok(()) => self.texture_id.zip(self.display.as_ref().map(|d| Vec2::new(d.width as f32, d.height as f32))),
+                Ok(()) => {
+                    self.texture_id.zip(self.display.as_ref().map(|d| Vec2::new(d.width as f32, d.height as f32)))
+                }
                 Err(e) => {
                     self.message = Some(e);
                     None
@@ -319,7 +327,8 @@ impl Viewport {
                 ui.add(img)
             }
             None => {
-                let (rect, response) = ui.allocate_exact_size(avail.max(Vec2::new(50.0, 50.0)), Sense::click_and_drag());
+                let (rect, response) =
+                    ui.allocate_exact_size(avail.max(Vec2::new(50.0, 50.0)), Sense::click_and_drag());
                 ui.painter().rect_filled(rect, 4.0, Color32::from_gray(25));
                 if let Some(m) = &self.message {
                     ui.painter().text(
