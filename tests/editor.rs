@@ -27,14 +27,31 @@ fn options() -> Options {
     Options { file_dialogs: false, autosave: false, watch_files: false }
 }
 
+/// The software adapter the other GPU tests use (Vulkan, or GL with WERKSTATT_BACKEND=gl),
+/// opened as the editor opens its window's device.
+fn wgpu_setup() -> egui_wgpu::WgpuSetup {
+    let mut setup = egui_wgpu::WgpuSetupCreateNew::without_display_handle();
+    setup.instance_descriptor.backends = match werkstatt::gpu::Backend::from_env() {
+        Ok(werkstatt::gpu::Backend::Gl) => wgpu::Backends::GL,
+        _ => wgpu::Backends::VULKAN,
+    };
+    setup.device_descriptor = std::sync::Arc::new(werkstatt::gpu::GpuContext::device_descriptor);
+    egui_wgpu::WgpuSetup::CreateNew(setup)
+}
+
 /// The editor on `graph`, in a 1400x900 window with a wgpu renderer.
 fn editor(graph: &Path) -> Harness<'static, EditorApp> {
+    editor_with(graph, Vec2::new(1400.0, 900.0), 1.0, options())
+}
+
+fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options) -> Harness<'static, EditorApp> {
     let graph = graph.to_path_buf();
     let mut h = Harness::builder()
-        .with_size(Vec2::new(1400.0, 900.0))
+        .with_size(size)
+        .with_pixels_per_point(pixels_per_point)
         .with_max_steps(200)
-        .wgpu()
-        .build_eframe(move |cc| EditorApp::new(cc, Some(graph), options()));
+        .wgpu_setup(wgpu_setup())
+        .build_eframe(move |cc| EditorApp::new(cc, Some(graph), options));
     settle(&mut h);
     h
 }
@@ -282,25 +299,88 @@ fn a_200_node_graph_stays_responsive() {
     assert_eq!(h.state().live.output(&p("m0199.result")).map(|v| v.summary()), Some("228".into()));
 }
 
-/// Renders the editor on the default graph; with `WERKSTATT_EDITOR_SCREENSHOT=path` the
-/// picture is written there (docs/editor.png is made this way).
+/// The viewport shows the rendered graph; dragging on it orbits the camera without touching
+/// the document, and clicking a texture output shows that texture.
 #[test]
-fn the_viewport_shows_the_rendered_graph() {
-    let dir = temp_dir("screenshot");
+fn the_viewport_shows_the_rendered_graph_and_orbits() {
+    let dir = temp_dir("viewport");
     let path = copy_default(&dir);
     let mut h = editor(&path);
-    // Show the timings overlay and select a node, as a user would while working.
-    h.get_by_label("⏱ Timings").click();
-    settle(&mut h);
-    let header = h.state().canvas.node_screen_rect("light").unwrap();
-    click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
-    settle(&mut h);
     assert!(h.query_by_label("showing image.image").is_some());
     let image = h.render().expect("the harness renders with wgpu");
+    assert!(viewport_colours(&image) > 20, "the viewport shows a picture");
+
+    // Orbit: drag on the picture.
+    let runs = h.state().live.runs("camera");
+    let centre = viewport_centre(&h);
+    drag(&mut h, centre, centre + Vec2::new(80.0, -20.0));
+    settle(&mut h);
+    let cam = h.state().live.camera.clone().expect("the drag overrides the camera");
+    assert_eq!(cam.node, "camera");
+    assert_ne!(cam.yaw, 35.0);
+    assert!(h.state().live.runs("camera") > runs, "the camera re-ran with the new view");
+    assert!(!h.state().state.is_dirty(), "orbiting does not edit the graph");
+    h.get_by_role_and_label(Role::Button, "apply to graph").click();
+    settle(&mut h);
+    let yaw = h.state().state.graph.param("camera", "yaw").and_then(|v| v.as_f64()).unwrap();
+    assert!((yaw - cam.yaw).abs() < 1e-9, "applied view: yaw {yaw}");
+    assert!(h.state().state.is_dirty());
+
+    // Inspect an intermediate texture: click the G-buffer output of the gbuffer node.
+    let port = h.state().canvas.to_screen(lowest(&h, "gbuffer").rect()).center();
+    click_at(&mut h, port);
+    settle(&mut h);
+    assert_eq!(h.state().state.inspected, Some(p("gbuffer.gbuffer")));
+    assert!(h.query_by_label("showing gbuffer.gbuffer").is_some());
+    let image = h.render().unwrap();
+    assert!(viewport_colours(&image) > 8, "the G-buffer colour is shown");
+    h.get_by_role_and_label(Role::Button, "back to preview").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.inspected, None);
+}
+
+/// Hovering a port shows its type and current value.
+#[test]
+fn hovering_a_port_shows_its_value() {
+    let dir = temp_dir("hover");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let port = h.state().canvas.to_screen(lowest(&h, "camera").rect()).center();
+    h.hover_at(port);
+    // Tooltips wait for the pointer to rest.
+    for _ in 0..60 {
+        h.step();
+    }
+    assert!(h.query_by_label_contains("value: camera at").is_some(), "the camera output's summary is shown");
+}
+
+/// Renders the editor on the default graph as in docs/editor.png; with
+/// `WERKSTATT_EDITOR_SCREENSHOT=path` the picture is written there.
+#[test]
+fn screenshot() {
+    let dir = temp_dir("screenshot");
+    let path = copy_default(&dir);
+    let mut h = editor_with(&path, Vec2::new(1360.0, 820.0), 1.5, options());
+    h.get_by_label("⏱ Timings").click();
+    settle(&mut h);
+    // The timings made the nodes wider: frame them again.
+    h.hover_at(Pos2::new(400.0, 400.0));
+    h.key_press(egui::Key::F);
+    settle(&mut h);
+    let light = header_point(&h, "light");
+    click_at(&mut h, light);
+    h.hover_at(Pos2::new(5.0, 700.0));
+    settle(&mut h);
+    let image = h.render().expect("the harness renders with wgpu");
+    assert_eq!(image.dimensions(), (2040, 1230));
+    assert!(viewport_colours(&image) > 20);
     if let Some(out) = std::env::var_os("WERKSTATT_EDITOR_SCREENSHOT") {
         image.save(&out).unwrap();
     }
-    // The viewport (top right) holds the rendered picture, not the empty background.
+}
+
+/// How many distinct colours the top of the side panel (the viewport) holds.
+fn viewport_colours(image: &image::RgbaImage) -> usize {
     let (w, hgt) = image.dimensions();
     let mut colours = std::collections::BTreeSet::new();
     for y in (hgt / 10..hgt / 2).step_by(7) {
@@ -309,7 +389,18 @@ fn the_viewport_shows_the_rendered_graph() {
             colours.insert((p[0] / 16, p[1] / 16, p[2] / 16));
         }
     }
-    assert!(colours.len() > 20, "the viewport shows a picture ({} colours)", colours.len());
+    colours.len()
+}
+
+/// Of the widgets labelled `label`, the lowest on screen (a node's port row, below the
+/// header with the same name).
+fn lowest<'a>(h: &'a Harness<'_, EditorApp>, label: &'a str) -> egui_kittest::Node<'a> {
+    h.get_all_by_label(label).max_by(|a, b| a.rect().top().total_cmp(&b.rect().top())).unwrap()
+}
+
+fn viewport_centre(h: &Harness<'_, EditorApp>) -> Pos2 {
+    let r = h.get_by_label_contains("showing ").rect();
+    Pos2::new(r.left() + 200.0, r.bottom() + 150.0)
 }
 
 fn header_point(h: &Harness<'_, EditorApp>, id: &str) -> Pos2 {
@@ -447,4 +538,48 @@ fn a_node_dropped_on_a_wire_is_inserted() {
     assert!(g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap_2.image")), "{:?}", g.links);
     assert!(g.links.iter().any(|l| l.from == p("tonemap_2.image") && l.to == p("tonemap.image")));
     assert!(!g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap.image")));
+}
+
+#[test]
+fn autosave_recovery_unsaved_close_and_reload_from_disk() {
+    let dir = temp_dir("recovery");
+    let path = copy_default(&dir);
+    // A session that ended without saving left an autosave with one more node.
+    let mut crashed = Graph::load(&path).unwrap();
+    werkstatt::editor::document::add_node(&mut crashed, "Number", [0.0, 960.0]).unwrap();
+    std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
+
+    let opts = Options { watch_files: true, ..options() };
+    let mut h = editor_with(&path, Vec2::new(1400.0, 900.0), 1.0, opts);
+    assert!(h.query_by_label("Recover unsaved changes?").is_some(), "the autosave is offered");
+    h.get_by_role_and_label(Role::Button, "Recover").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, crashed);
+    assert!(h.state().state.is_dirty(), "recovered changes are unsaved");
+    assert!(h.state().state.title().starts_with("* default.ron"));
+
+    // Closing the window with unsaved changes asks first.
+    h.input_mut().viewports.entry(egui::ViewportId::ROOT).or_default().events.push(egui::ViewportEvent::Close);
+    h.step();
+    h.step();
+    assert!(h.query_by_label("Unsaved changes").is_some());
+    h.get_by_role_and_label(Role::Button, "Cancel").click();
+    settle(&mut h);
+    assert!(h.query_by_label("Unsaved changes").is_none());
+
+    // Another program rewrites the file: the editor offers to reload it (one undo step).
+    let mut other = Graph::load(&path).unwrap();
+    werkstatt::editor::document::set_param(&mut other, "tonemap", "exposure", werkstatt::spec::ParamValue::Float(1.5))
+        .unwrap();
+    other.save(&path).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1100));
+    settle(&mut h);
+    assert!(h.query_by_label("default.ron changed on disk.").is_some());
+    h.get_by_role_and_label(Role::Button, "Reload").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, other);
+    assert!(!h.state().state.is_dirty());
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, crashed, "the reload can be undone");
 }

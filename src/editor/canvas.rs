@@ -228,6 +228,11 @@ impl Canvas {
         [g.x.round(), g.y.round()]
     }
 
+    /// A rectangle on the canvas (in graph space, as widgets inside nodes report it) on screen.
+    pub fn to_screen(&self, graph_rect: Rect) -> Rect {
+        self.to_global * graph_rect
+    }
+
     /// The screen rectangle of a node as drawn last frame, if visible.
     pub fn node_screen_rect(&self, id: &str) -> Option<Rect> {
         self.node_rects.get(id).map(|r| self.to_global * *r)
