@@ -158,8 +158,12 @@ fn add_connect_edit_undo_redo_and_save() {
     h.get_by_value("aces").click();
     h.step();
     h.step();
+    let runs = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.runs(id);
+    let (gbuffer_runs, tonemap_runs) = (runs(&h, "gbuffer"), runs(&h, "tonemap"));
     h.get_by_label("reinhard").click();
     settle(&mut h);
+    assert_eq!(runs(&h, "gbuffer"), gbuffer_runs, "nodes upstream of the change are not re-run");
+    assert_eq!(runs(&h, "tonemap"), tonemap_runs + 1, "the changed node re-ran once");
     let op = |h: &Harness<'_, EditorApp>| h.state().state.graph.nodes["tonemap"].params.get("operator").cloned();
     assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
 
@@ -257,7 +261,12 @@ fn a_failing_node_shows_its_error_on_the_node() {
 fn a_200_node_graph_stays_responsive() {
     let dir = temp_dir("big");
     let path = dir.join("chain.ron");
-    werkstatt::bench::chain_graph(200).save(&path).unwrap();
+    // The benchmark chain, laid out as a user would: rows of 20 nodes.
+    let mut chain = werkstatt::bench::chain_graph(200);
+    for (i, node) in chain.nodes.values_mut().enumerate() {
+        node.pos = [(i % 20) as f32 * 180.0, (i / 20) as f32 * 110.0];
+    }
+    chain.save(&path).unwrap();
     let mut h = editor(&path);
     let measure =
         |h: &mut Harness<'_, EditorApp>, what: &str, f: &mut dyn FnMut(&mut Harness<'_, EditorApp>, usize)| {

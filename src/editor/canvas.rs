@@ -103,6 +103,8 @@ pub struct Canvas {
     node_rects: HashMap<String, Rect>,
     /// Width of each node's header content, which the node must be at least as wide as.
     header_widths: HashMap<String, f32>,
+    /// Each node's spec, looked up once per document revision.
+    specs: HashMap<String, &'static NodeSpec>,
     snarl_selection: Vec<NodeId>,
     to_global: TSTransform,
     canvas_rect: Rect,
@@ -129,6 +131,7 @@ impl Canvas {
             pins: Rc::default(),
             node_rects: HashMap::new(),
             header_widths: HashMap::new(),
+            specs: HashMap::new(),
             snarl_selection: Vec::new(),
             to_global: TSTransform::IDENTITY,
             canvas_rect: Rect::NOTHING,
@@ -147,6 +150,7 @@ impl Canvas {
             return;
         }
         self.synced = revision;
+        self.specs = graph.nodes.iter().filter_map(|(id, n)| Some((id.clone(), spec::find(&n.kind)?))).collect();
         let gone: Vec<String> = self.ids.keys().filter(|id| !graph.nodes.contains_key(*id)).cloned().collect();
         for id in gone {
             if let Some(n) = self.ids.remove(&id) {
@@ -288,6 +292,8 @@ impl Canvas {
             pins: self.pins.clone(),
             node_rects: &mut self.node_rects,
             header_widths: &mut self.header_widths,
+            specs: &self.specs,
+            states: graph.nodes.keys().map(|id| (id.clone(), live.state(id))).collect(),
             search: &mut self.search,
             to_global: self.to_global,
             fit_to,
@@ -392,6 +398,9 @@ struct Viewer<'a> {
     pins: Rc<RefCell<PinRects>>,
     node_rects: &'a mut HashMap<String, Rect>,
     header_widths: &'a mut HashMap<String, f32>,
+    specs: &'a HashMap<String, &'static NodeSpec>,
+    /// Each node's state, computed once per frame.
+    states: HashMap<String, NodeState>,
     search: &'a mut String,
     to_global: TSTransform,
     fit_to: Option<TSTransform>,
@@ -400,7 +409,11 @@ struct Viewer<'a> {
 
 impl Viewer<'_> {
     fn spec(&self, id: &str) -> Option<&'static NodeSpec> {
-        spec_of(self.graph, id)
+        self.specs.get(id).copied()
+    }
+
+    fn state(&self, id: &str) -> &NodeState {
+        self.states.get(id).unwrap_or(&NodeState::Idle)
     }
 
     fn out_ref(&self, snarl: &Snarl<String>, pin: OutPinId) -> Option<(PortRef, PortType)> {
@@ -439,7 +452,7 @@ impl Viewer<'_> {
         let value = if input { self.live.input(port) } else { self.live.output(port) };
         match value {
             Some(v) => text.push_str(&format!("\nvalue: {}", v.summary())),
-            None => match self.live.state(&port.node) {
+            None => match self.state(&port.node) {
                 NodeState::Pending(m) => text.push_str(&format!("\nresource: {m}")),
                 NodeState::Failed(_) | NodeState::Blocked(_) => text.push_str("\nno value (the node has an error)"),
                 NodeState::Idle if !input => text.push_str("\nno value (not needed by any output)"),
@@ -479,7 +492,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         if self.selection.contains(id) {
             frame.stroke = Stroke::new(2.0, SELECT_COLOR);
         }
-        match self.live.state(id) {
+        match self.state(id) {
             NodeState::Failed(_) => frame.stroke = Stroke::new(2.0, ERROR_COLOR),
             NodeState::Pending(_) | NodeState::Blocked(_) if !self.selection.contains(id) => {
                 frame.stroke = Stroke::new(1.5, PENDING_COLOR.gamma_multiply(0.7))
@@ -498,7 +511,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         snarl: &Snarl<String>,
     ) -> egui::Frame {
         let Some(id) = snarl.get_node(node) else { return default };
-        match self.live.state(id) {
+        match self.state(id) {
             NodeState::Failed(_) => default.fill(Color32::from_rgb(120, 30, 30)),
             NodeState::Pending(_) => default.fill(Color32::from_rgb(110, 85, 20)),
             NodeState::Blocked(_) => default.fill(Color32::from_rgb(70, 60, 40)),
@@ -547,8 +560,9 @@ impl SnarlViewer<String> for Viewer<'_> {
             text = text.color(ERROR_COLOR);
         }
         let r = ui.add(egui::Label::new(text).sense(Sense::hover()));
-        let tip = self.port_tooltip(&port, true);
-        r.on_hover_text(tip);
+        if r.hovered() {
+            r.on_hover_text(self.port_tooltip(&port, true));
+        }
         self.pin(ty, (id, true, pin.id.input), !pin.remotes.is_empty())
     }
 
@@ -567,8 +581,9 @@ impl SnarlViewer<String> for Viewer<'_> {
         if texture && r.clicked() {
             self.actions.push(Action::Inspect(if shown { None } else { Some(port.clone()) }));
         }
-        let tip = self.port_tooltip(&port, false);
-        r.on_hover_text(tip);
+        if r.hovered() {
+            r.on_hover_text(self.port_tooltip(&port, false));
+        }
         self.pin(ty, (id, false, pin.id.output), !pin.remotes.is_empty())
     }
 
@@ -590,7 +605,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         ui.vertical(|ui| {
             ui.set_max_width(min_width.max(240.0));
             ui.set_min_width(min_width);
-            match self.live.state(&id) {
+            match self.state(&id) {
                 NodeState::Failed(m) => {
                     ui.add(egui::Label::new(RichText::new(format!("error: {m}")).small().color(ERROR_COLOR)).wrap());
                 }
