@@ -234,6 +234,7 @@ fn a_failing_node_shows_its_error_on_the_node() {
         "divide": (kind: "Math", pos: (0.0, 0.0), params: {"op": "divide", "a": 1.0}),
         "watch": (kind: "Watch", pos: (300.0, 0.0), params: {}),
         "tonemap": (kind: "Tonemap", pos: (0.0, 300.0), params: {}),
+        "mystery": (kind: "Mystery", pos: (300.0, 300.0), params: {"x": 1}),
     },
     links: [("divide.result", "watch.value")],
 )
@@ -246,6 +247,9 @@ fn a_failing_node_shows_its_error_on_the_node() {
     assert!(h.query_by_label("error: division by zero (input b is 0)").is_some());
     assert!(h.query_by_label_contains("required input \"image\" (Texture) is not connected").is_some());
     assert!(h.query_by_label_contains("waiting for input from \"divide\"").is_some());
+    // A kind this build does not know still opens, shown with its problem, and is kept.
+    assert!(h.query_by_label_contains("unknown node kind \"Mystery\"").is_some());
+    assert_eq!(h.state().state.graph.nodes["mystery"].params.len(), 1);
     // Fixing the parameter clears the error.
     let header = h.state().canvas.node_screen_rect("divide").unwrap();
     click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));

@@ -159,7 +159,6 @@ impl EditorApp {
                 self.state = state;
                 self.live = Live::new(base_dir(Some(path)), self.options.watch_files);
                 self.canvas.reset();
-                self.viewport = Viewport::new();
                 self.files.track(Some(path));
                 if let Some(rec) = rec {
                     self.dialog = Some(Dialog::Recover(rec));
@@ -173,7 +172,6 @@ impl EditorApp {
         self.state = EditorState::default();
         self.live = Live::new(PathBuf::from("."), self.options.watch_files);
         self.canvas.reset();
-        self.viewport = Viewport::new();
         self.files.track(None);
     }
 
@@ -230,8 +228,10 @@ impl EditorApp {
                 self.files.discard_autosave(old.as_deref());
                 self.files.discard_autosave(Some(path));
                 self.files.track(Some(path));
-                if old.as_deref() != Some(path) {
+                if base_dir(old.as_deref()) != base_dir(Some(path)) {
+                    // Relative file parameters now mean other files: evaluate afresh.
                     self.live.settings.base_dir = base_dir(Some(path));
+                    self.live.reset();
                 }
                 if let Some(t) = then {
                     self.proceed(t, ctx);
@@ -626,6 +626,7 @@ impl eframe::App for EditorApp {
             self.eval_count += 1;
         }
         self.canvas.sync(&self.state.graph, self.state.revision);
+        let synced = (self.state.revision, self.state.inspected.clone(), self.live.camera.clone());
 
         egui::Panel::top("menu").show(ui, |ui| {
             self.menu_bar(ui);
@@ -682,7 +683,9 @@ impl eframe::App for EditorApp {
             ctx.send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
             self.title = title;
         }
-        if self.live.animating {
+        // An edit made this frame is evaluated in the next one: ask for it now.
+        let changed = synced != (self.state.revision, self.state.inspected.clone(), self.live.camera.clone());
+        if self.live.animating || changed {
             ctx.request_repaint();
         } else {
             // Poll files (autosave, disk changes, shader edits) now and then.

@@ -47,7 +47,8 @@ pub fn run(graph: Option<PathBuf>, backend: Backend) -> anyhow::Result<()> {
     )
     .map_err(|e| {
         anyhow::anyhow!(
-            "cannot open the editor window: {e}\n  help: `werkstatt edit` needs a display (X11 or Wayland) and a Vulkan or OpenGL driver; {}",
+            "cannot open the editor window: {e}\n  help: `werkstatt edit` needs a display (X11 or Wayland; \
+             on a machine without one, run it under Xvfb); {}",
             crate::gpu::NO_ADAPTER_HELP
         )
     })
