@@ -438,7 +438,7 @@ impl EditorApp {
             });
             ui.menu_button("Add", |ui| {
                 if let Some((spec, _)) = node_menu(ui, &mut self.canvas.search, None) {
-                    let pos = self.canvas.graph_pos(None);
+                    let pos = self.canvas.free_spot(self.canvas.graph_pos(None));
                     let _ = self.state.add_node(spec.kind, pos);
                     self.canvas.search.clear();
                     ui.close();

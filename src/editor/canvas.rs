@@ -237,6 +237,18 @@ impl Canvas {
         self.to_global * graph_rect
     }
 
+    /// A spot for a new node near `at` (graph space) that no node covers.
+    pub fn free_spot(&self, at: [f32; 2]) -> [f32; 2] {
+        let mut p = pos2(at[0], at[1]);
+        for _ in 0..60 {
+            if !self.node_rects.values().any(|r| r.expand(12.0).contains(p)) {
+                break;
+            }
+            p.y += 40.0;
+        }
+        [p.x, p.y]
+    }
+
     /// The screen rectangle of a node as drawn last frame, if visible.
     pub fn node_screen_rect(&self, id: &str) -> Option<Rect> {
         self.node_rects.get(id).map(|r| self.to_global * *r)
@@ -313,8 +325,16 @@ impl Canvas {
         // press on a node selects it; a click on empty canvas clears.
         let snarl_sel = egui_snarl::ui::get_selected_nodes(self.id, ui.ctx());
         if snarl_sel != self.snarl_selection {
-            self.snarl_selection = snarl_sel.clone();
-            let ids = snarl_sel.iter().filter_map(|n| self.snarl.get_node(*n).cloned()).collect();
+            // Apply what changed in snarl's selection to ours, which clicks also change.
+            let mut ids = selection.clone();
+            let id_of = |n: &NodeId| self.snarl.get_node(*n).cloned();
+            for n in self.snarl_selection.iter().filter(|n| !snarl_sel.contains(n)) {
+                if let Some(id) = id_of(n) {
+                    ids.remove(&id);
+                }
+            }
+            ids.extend(snarl_sel.iter().filter(|n| !self.snarl_selection.contains(n)).filter_map(id_of));
+            self.snarl_selection = snarl_sel;
             actions.push(Action::SetSelection(ids));
         } else if let Some(id) = pressed_node {
             if !modifiers.shift && !modifiers.command && !selection.contains(&id) {
