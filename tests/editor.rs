@@ -340,7 +340,7 @@ fn the_viewport_shows_the_rendered_graph_and_orbits() {
     assert!(h.state().state.is_dirty());
 
     // Inspect an intermediate texture: click the G-buffer output of the gbuffer node.
-    let port = h.state().canvas.to_screen(lowest(&h, "gbuffer").rect()).center();
+    let port = port_label(&h, "gbuffer.gbuffer", false);
     click_at(&mut h, port);
     settle(&mut h);
     assert_eq!(h.state().state.inspected, Some(p("gbuffer.gbuffer")));
@@ -358,7 +358,7 @@ fn hovering_a_port_shows_its_value() {
     let dir = temp_dir("hover");
     let path = copy_default(&dir);
     let mut h = editor(&path);
-    let port = h.state().canvas.to_screen(lowest(&h, "camera").rect()).center();
+    let port = port_label(&h, "camera.camera", false);
     h.hover_at(port);
     // Tooltips wait for the pointer to rest.
     for _ in 0..60 {
@@ -405,10 +405,16 @@ fn viewport_colours(image: &image::RgbaImage) -> usize {
     colours.len()
 }
 
-/// Of the widgets labelled `label`, the lowest on screen (a node's port row, below the
-/// header with the same name).
-fn lowest<'a>(h: &'a Harness<'_, EditorApp>, label: &'a str) -> egui_kittest::Node<'a> {
-    h.get_all_by_label(label).max_by(|a, b| a.rect().top().total_cmp(&b.rect().top())).unwrap()
+/// The screen centre of a port's label: of the widgets named like the port, the one
+/// nearest to the port's pin (widgets inside nodes report graph-space rectangles).
+fn port_label(h: &Harness<'_, EditorApp>, port: &str, input: bool) -> Pos2 {
+    let pin = pin(h, port, input);
+    let name = port.split_once('.').unwrap().1;
+    let canvas = &h.state().canvas;
+    h.get_all_by_label(name)
+        .map(|n| canvas.to_screen(n.rect()).center())
+        .min_by(|a, b| a.distance(pin).total_cmp(&b.distance(pin)))
+        .unwrap()
 }
 
 fn viewport_centre(h: &Harness<'_, EditorApp>) -> Pos2 {

@@ -381,21 +381,24 @@ impl EditorApp {
 
     fn menu_bar(&mut self, ui: &mut egui::Ui) {
         let ctx = ui.ctx().clone();
+        let keys = |m: Modifiers, k: Key| ctx.format_shortcut(&KeyboardShortcut::new(m, k));
+        let item = |text: &str, m: Modifiers, k: Key| egui::Button::new(text.to_string()).shortcut_text(keys(m, k));
+        let cmd = Modifiers::COMMAND;
         egui::MenuBar::new().ui(ui, |ui| {
             ui.menu_button("File", |ui| {
-                if ui.button("New").clicked() {
+                if ui.add(item("New", cmd, Key::N)).clicked() {
                     self.request(Then::New, &ctx);
                     ui.close();
                 }
-                if ui.button("Open…").clicked() {
+                if ui.add(item("Open…", cmd, Key::O)).clicked() {
                     self.request(Then::Open(None), &ctx);
                     ui.close();
                 }
-                if ui.button("Save").clicked() {
+                if ui.add(item("Save", cmd, Key::S)).clicked() {
                     self.save(None, &ctx);
                     ui.close();
                 }
-                if ui.button("Save As…").clicked() {
+                if ui.add(item("Save As…", cmd | Modifiers::SHIFT, Key::S)).clicked() {
                     self.save_as(None, &ctx);
                     ui.close();
                 }
@@ -408,30 +411,42 @@ impl EditorApp {
             ui.menu_button("Edit", |ui| {
                 let undo =
                     self.state.history.undo_label().map(|l| format!("Undo: {l}")).unwrap_or("Undo: nothing".into());
-                if ui.add_enabled(self.state.history.can_undo(), egui::Button::new(undo)).clicked() {
+                if ui
+                    .add_enabled(
+                        self.state.history.can_undo(),
+                        egui::Button::new(undo).shortcut_text(keys(cmd, Key::Z)),
+                    )
+                    .clicked()
+                {
                     self.state.undo();
                 }
                 let redo =
                     self.state.history.redo_label().map(|l| format!("Redo: {l}")).unwrap_or("Redo: nothing".into());
-                if ui.add_enabled(self.state.history.can_redo(), egui::Button::new(redo)).clicked() {
+                if ui
+                    .add_enabled(
+                        self.state.history.can_redo(),
+                        egui::Button::new(redo).shortcut_text(keys(cmd | Modifiers::SHIFT, Key::Z)),
+                    )
+                    .clicked()
+                {
                     self.state.redo();
                 }
                 ui.separator();
                 let any = !self.state.selection.is_empty();
-                if ui.add_enabled(any, egui::Button::new("Copy")).clicked() {
+                if ui.add_enabled(any, item("Copy", cmd, Key::C)).clicked() {
                     self.copy(&ctx);
                     ui.close();
                 }
-                if ui.add_enabled(self.state.clipboard.is_some(), egui::Button::new("Paste")).clicked() {
-                    let at = self.canvas.graph_pos(None);
+                if ui.add_enabled(self.state.clipboard.is_some(), item("Paste", cmd, Key::V)).clicked() {
+                    let at = self.canvas.free_spot(self.canvas.graph_pos(None));
                     let _ = self.state.paste(None, at);
                     ui.close();
                 }
-                if ui.add_enabled(any, egui::Button::new("Duplicate")).clicked() {
+                if ui.add_enabled(any, item("Duplicate", cmd, Key::D)).clicked() {
                     let _ = self.state.duplicate_selected();
                     ui.close();
                 }
-                if ui.add_enabled(any, egui::Button::new("Delete")).clicked() {
+                if ui.add_enabled(any, item("Delete", Modifiers::NONE, Key::Delete)).clicked() {
                     self.state.delete_selected();
                     ui.close();
                 }
