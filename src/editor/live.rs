@@ -432,15 +432,6 @@ impl Live {
     pub fn input(&self, port: &PortRef) -> Option<&Value> {
         self.evaluator.as_ref()?.input(&port.node, &port.port)
     }
-
-    /// Whether node `id` is part of what runs.
-    pub fn is_planned(&self, id: &str) -> bool {
-        self.evaluator.as_ref().is_some_and(|ev| ev.planned().any(|p| p == id))
-    }
-
-    pub fn has_evaluator(&self) -> bool {
-        self.evaluator.is_some()
-    }
 }
 
 #[cfg(test)]

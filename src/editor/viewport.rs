@@ -11,7 +11,6 @@ use egui::{Color32, RichText, Sense, Ui, Vec2};
 use super::live::{CameraOverride, Live, camera_for, viewed_port};
 use super::state::EditorState;
 use crate::gpu::{GpuContext, GpuImage};
-use crate::graph::PortRef;
 
 const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
@@ -391,11 +390,5 @@ impl Viewport {
                 }
             });
         }
-    }
-
-    /// The port a click on `p` shows (texture-typed outputs only).
-    pub fn can_show(port: &PortRef, graph: &crate::graph::Graph) -> bool {
-        super::document::port_type(graph, port, false)
-            .is_ok_and(|t| matches!(t, crate::spec::PortType::Texture | crate::spec::PortType::GBuffer))
     }
 }
