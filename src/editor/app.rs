@@ -91,6 +91,8 @@ pub struct EditorApp {
     options: Options,
     /// Time spent in each UI frame (layout, evaluation, canvas), newest last.
     pub frame_times: FrameTimes,
+    /// Whole frames as eframe measures them (UI, tessellation, painting), in a window.
+    pub window_frames: FrameTimes,
     eval_count: u64,
     title: String,
     quitting: bool,
@@ -116,6 +118,7 @@ impl EditorApp {
             dialog: None,
             options,
             frame_times: FrameTimes::default(),
+            window_frames: FrameTimes::default(),
             eval_count: 0,
             title: String::new(),
             quitting: false,
@@ -491,8 +494,13 @@ impl EditorApp {
 
     fn status_bar(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
+            if let Some((median, p95, _)) = self.window_frames.stats() {
+                ui.label(RichText::new(format!("frame {median:.1} ms (p95 {p95:.1})")).small().monospace())
+                    .on_hover_text("whole frames: UI, tessellation and painting, median of the last 240");
+            }
             if let Some((median, p95, _)) = self.frame_times.stats() {
-                ui.label(RichText::new(format!("ui {median:.1} ms (p95 {p95:.1})")).small().monospace());
+                ui.label(RichText::new(format!("ui {median:.1} ms (p95 {p95:.1})")).small().monospace())
+                    .on_hover_text("inside the editor's update: evaluation, canvas, panels");
             }
             let s = self.live.last_summary;
             ui.label(
@@ -622,8 +630,11 @@ fn base_dir(path: Option<&Path>) -> PathBuf {
 }
 
 impl eframe::App for EditorApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let start = Instant::now();
+        if let Some(cpu) = frame.info().cpu_usage {
+            self.window_frames.push(Duration::from_secs_f32(cpu.max(0.0)));
+        }
         let ctx = ui.ctx().clone();
         let dt = self.last_frame.map_or(0.0, |t| t.elapsed().as_secs_f64());
         self.last_frame = Some(start);

@@ -158,8 +158,9 @@ pub fn camera_for(graph: &Graph, node: Option<&str>) -> Option<String> {
     graph.nodes.keys().find(|id| is_cam(id)).cloned()
 }
 
-/// The texture port the viewport shows: the inspected port, else the first Preview node's
-/// image, else the first output node with a texture output.
+/// The port the viewport shows: the inspected port, else the first Preview node's image,
+/// else the first output node with a texture output, else the first output node's value
+/// (a Watch), shown as text.
 pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef> {
     if let Some(p) = inspected {
         return Some(p.clone());
@@ -179,7 +180,12 @@ pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef
             texture_out(&n.kind).map(|port| PortRef { node: id.clone(), port: port.into() })
         })
     };
-    pick(true).or_else(|| pick(false))
+    pick(true).or_else(|| pick(false)).or_else(|| {
+        graph.nodes.iter().find_map(|(id, n)| {
+            let s = spec::find(&n.kind).filter(|s| s.is_output)?;
+            s.outputs.first().map(|p| PortRef { node: id.clone(), port: p.name.into() })
+        })
+    })
 }
 
 struct ShaderWatch {
@@ -489,6 +495,8 @@ mod tests {
     fn the_viewport_prefers_preview_then_outputs() {
         let g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
         assert_eq!(viewed_port(&g, None), Some(p("image.image")));
+        assert_eq!(viewed_port(&crate::bench::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
+        assert_eq!(viewed_port(&Graph::new(), None), None);
         assert_eq!(camera_for(&g, Some("image")), Some("camera".into()));
         let mut cam = CameraOverride::from_graph(&g, "camera").unwrap();
         assert_eq!((cam.yaw, cam.pitch, cam.distance), (35.0, 25.0, 4.0));

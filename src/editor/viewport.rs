@@ -308,7 +308,7 @@ impl Viewport {
                     super::live::NodeState::Pending(m) => format!("{}: {m}", port.node),
                     super::live::NodeState::Blocked(m) => format!("{}: {m}", port.node),
                     _ => match value {
-                        Some(v) => format!("{port} holds a {}, not a texture: {}", v.type_name(), v.summary()),
+                        Some(v) => format!("{port} = {} ({})", v.summary(), v.type_name()),
                         None => format!("{port} has no value yet"),
                     },
                 });
@@ -330,12 +330,15 @@ impl Viewport {
                     ui.allocate_exact_size(avail.max(Vec2::new(50.0, 50.0)), Sense::click_and_drag());
                 ui.painter().rect_filled(rect, 4.0, Color32::from_gray(25));
                 if let Some(m) = &self.message {
+                    // A value (a Watch node's number) is news, anything else a problem.
+                    let color =
+                        if value.is_some() { ui.visuals().strong_text_color() } else { super::canvas::ERROR_COLOR };
                     ui.painter().text(
                         rect.center(),
                         egui::Align2::CENTER_CENTER,
                         m,
                         egui::FontId::proportional(13.0),
-                        super::canvas::ERROR_COLOR,
+                        color,
                     );
                 }
                 response
