@@ -150,7 +150,17 @@ impl Canvas {
             return;
         }
         self.synced = revision;
+        let old_specs = std::mem::take(&mut self.specs);
         self.specs = graph.nodes.iter().filter_map(|(id, n)| Some((id.clone(), spec::find(&n.kind)?))).collect();
+        // A node whose kind changed (a reload from disk) gets a fresh snarl node: its pin
+        // rows differ.
+        for (id, spec) in &old_specs {
+            if self.specs.get(id).is_some_and(|s| s.kind != spec.kind)
+                && let Some(n) = self.ids.remove(id)
+            {
+                self.snarl.remove_node(n);
+            }
+        }
         let gone: Vec<String> = self.ids.keys().filter(|id| !graph.nodes.contains_key(*id)).cloned().collect();
         for id in gone {
             if let Some(n) = self.ids.remove(&id) {
