@@ -602,3 +602,28 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     settle(&mut h);
     assert_eq!(h.state().state.graph, crashed, "the reload can be undone");
 }
+
+#[test]
+fn a_slider_drag_is_one_undo_step_and_only_dependents_rerun() {
+    let dir = temp_dir("slider");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let tonemap = header_point(&h, "tonemap");
+    click_at(&mut h, tonemap);
+    let steps = h.state().state.history.len();
+    let runs = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.runs(id);
+    let (light, tm) = (runs(&h, "light"), runs(&h, "tonemap"));
+    // The inspector's exposure slider is the lowest slider (the frame slider is above it).
+    let slider = h.get_all_by_role(Role::Slider).map(|n| n.rect()).max_by(|a, b| a.top().total_cmp(&b.top())).unwrap();
+    let a = slider.center();
+    drag(&mut h, a, a + Vec2::new(slider.width() * 0.3, 0.0));
+    settle(&mut h);
+    let exposure = h.state().state.graph.param("tonemap", "exposure").and_then(|v| v.as_f64()).unwrap();
+    assert!(exposure > 1.0, "the drag raised the exposure: {exposure}");
+    assert_eq!(h.state().state.history.len(), steps + 1, "the whole drag is one undo step");
+    assert_eq!(runs(&h, "light"), light, "upstream nodes did not re-run");
+    assert!(runs(&h, "tonemap") > tm, "the tone mapper re-ran");
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.nodes["tonemap"].params.get("exposure"), None);
+}
