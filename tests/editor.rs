@@ -235,6 +235,7 @@ fn a_failing_node_shows_its_error_on_the_node() {
         "watch": (kind: "Watch", pos: (300.0, 0.0), params: {}),
         "tonemap": (kind: "Tonemap", pos: (0.0, 300.0), params: {}),
         "mystery": (kind: "Mystery", pos: (300.0, 300.0), params: {"x": 1}),
+        "far": (kind: "Number", pos: (inf, NaN), params: {}),
     },
     links: [("divide.result", "watch.value")],
 )
@@ -250,6 +251,8 @@ fn a_failing_node_shows_its_error_on_the_node() {
     // A kind this build does not know still opens, shown with its problem, and is kept.
     assert!(h.query_by_label_contains("unknown node kind \"Mystery\"").is_some());
     assert_eq!(h.state().state.graph.nodes["mystery"].params.len(), 1);
+    // Positions that are not numbers are drawn at the origin, and are not an edit.
+    assert!(!h.state().state.is_dirty());
     // Fixing the parameter clears the error.
     let header = h.state().canvas.node_screen_rect("divide").unwrap();
     click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
@@ -626,4 +629,35 @@ fn a_slider_drag_is_one_undo_step_and_only_dependents_rerun() {
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
     settle(&mut h);
     assert_eq!(h.state().state.graph.nodes["tonemap"].params.get("exposure"), None);
+}
+
+#[test]
+fn a_new_graph_is_saved_through_save_as() {
+    let dir = temp_dir("new");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    // File > New asks nothing while there are no changes.
+    h.get_by_role_and_label(Role::Button, "File").click();
+    h.step();
+    h.step();
+    h.get_by(|n| n.role() == Role::Button && n.label().is_some_and(|l| l.starts_with("New"))).click();
+    settle(&mut h);
+    assert!(h.state().state.graph.nodes.is_empty());
+    assert_eq!(h.state().state.title(), "untitled - werkstatt");
+    h.state_mut().state.add_node("Number", [0.0, 0.0]).unwrap();
+    settle(&mut h);
+    // Ctrl+S on a graph without a file asks for one.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
+    settle(&mut h);
+    assert!(h.query_by_label("Save graph as").is_some());
+    let target = dir.join("fresh");
+    h.get_by_role(Role::TextInput).type_text(&target.display().to_string());
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Save").click();
+    settle(&mut h);
+    let saved = dir.join("fresh.ron");
+    assert_eq!(h.state().state.path.as_deref(), Some(saved.as_path()));
+    assert!(!h.state().state.is_dirty());
+    assert_eq!(std::fs::read_to_string(&saved).unwrap(), h.state().state.graph.to_ron());
+    assert_eq!(h.state().state.title(), "fresh.ron - werkstatt");
 }

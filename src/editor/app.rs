@@ -576,6 +576,9 @@ impl EditorApp {
                     ui.heading(if save { "Save graph as" } else { "Open graph" });
                     let r =
                         ui.add(egui::TextEdit::singleline(text).hint_text("path/to/graph.ron").desired_width(380.0));
+                    if !r.has_focus() && ui.ctx().memory(|m| m.focused().is_none()) {
+                        r.request_focus();
+                    }
                     let enter = r.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter));
                     ui.horizontal(|ui| {
                         let go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;

@@ -169,7 +169,7 @@ impl Canvas {
             self.node_rects.remove(&id);
         }
         for (id, doc) in &graph.nodes {
-            let pos = pos2(doc.pos[0], doc.pos[1]);
+            let pos = canvas_pos(doc.pos);
             match self.ids.get(id) {
                 Some(&n) => {
                     if let Some(info) = self.snarl.get_node_info_mut(n) {
@@ -361,7 +361,7 @@ impl Canvas {
                 .nodes_pos_ids()
                 .filter_map(|(_, pos, id)| {
                     let doc = graph.nodes.get(id)?;
-                    let moved = (doc.pos[0] - pos.x).abs() > 0.5 || (doc.pos[1] - pos.y).abs() > 0.5;
+                    let moved = canvas_pos(doc.pos).distance(pos) > 0.5;
                     moved.then(|| (id.clone(), [pos.x, pos.y]))
                 })
                 .collect();
@@ -403,6 +403,13 @@ impl Canvas {
             .max_by_key(|(hits, _)| *hits)
             .map(|(_, l)| l)
     }
+}
+
+/// Where a document position goes on the canvas: a file may hold any number, the canvas
+/// takes finite, moderate ones.
+fn canvas_pos(p: [f32; 2]) -> Pos2 {
+    let coord = |c: f32| if c.is_finite() { c.clamp(-1e7, 1e7) } else { 0.0 };
+    pos2(coord(p[0]), coord(p[1]))
 }
 
 fn bezier(a: Pos2, b: Pos2, c: Pos2, d: Pos2, t: f32) -> Pos2 {

@@ -70,7 +70,7 @@ impl EditorState {
     }
 
     pub fn is_dirty(&self) -> bool {
-        self.graph != self.saved
+        !same_graph(&self.graph, &self.saved)
     }
 
     /// The graph as last saved or loaded.
@@ -129,7 +129,7 @@ impl EditorState {
         let before = self.graph.clone();
         match f(&mut self.graph) {
             Ok(v) => {
-                if self.graph != before {
+                if !same_graph(&self.graph, &before) {
                     self.history.record(before, label, coalesce);
                     self.changed();
                 }
@@ -349,6 +349,12 @@ impl EditorState {
         let path = self.path.clone().ok_or_else(|| "the graph has no file yet: use Save As".to_string())?;
         self.save_as(&path)
     }
+}
+
+/// Whether two graphs are the same document. Equal graphs compare fast; graphs holding a
+/// NaN (a file may) are never `==`, so those compare by their canonical text.
+fn same_graph(a: &Graph, b: &Graph) -> bool {
+    a == b || a.to_ron() == b.to_ron()
 }
 
 #[cfg(test)]
