@@ -554,7 +554,28 @@ fn a_node_dropped_on_a_wire_is_inserted() {
     let rect = h.state().canvas.node_screen_rect("tonemap_2").unwrap();
     let grab = rect.left_top() + Vec2::new(rect.width() * 0.5, 8.0);
     let target = a + (b - a) * 0.5;
-    drag(&mut h, grab, grab + (target - rect.center()));
+    let end = grab + (target - rect.center());
+    h.hover_at(grab);
+    h.step();
+    h.drag_at(grab);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(grab + (end - grab) * (i as f32 / 6.0));
+        h.step();
+    }
+    // Snarl moves a node after drawing it: one more frame shows where it is, and the wire
+    // it would go into is marked.
+    h.step();
+    assert!(h.state().canvas.shows_insert_hint());
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        h.render().unwrap().save(dir.join("dragging.png")).unwrap();
+    }
+    h.event(egui::Event::PointerButton {
+        pos: end,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: Modifiers::NONE,
+    });
     settle(&mut h);
     let g = &h.state().state.graph;
     assert!(g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap_2.image")), "{:?}", g.links);

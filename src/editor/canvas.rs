@@ -114,6 +114,8 @@ pub struct Canvas {
     /// Frames drawn since the view was reset; the first frames measure the nodes.
     frames: u32,
     fit_pending: bool,
+    /// The wire a dragged node would be inserted into (graph space), drawn under the nodes.
+    insert_hint: Option<Vec<Pos2>>,
 }
 
 impl Default for Canvas {
@@ -140,6 +142,7 @@ impl Canvas {
             id: Id::new("werkstatt-canvas"),
             frames: 0,
             fit_pending: true,
+            insert_hint: None,
         }
     }
 
@@ -207,6 +210,11 @@ impl Canvas {
         *self = Canvas { show_timings: self.show_timings, ..Canvas::new() };
     }
 
+    /// Whether a dragged node is over a wire it would be inserted into.
+    pub fn shows_insert_hint(&self) -> bool {
+        self.insert_hint.is_some()
+    }
+
     /// Frames all nodes in the view (once their sizes are known).
     pub fn request_fit(&mut self) {
         self.fit_pending = true;
@@ -272,7 +280,6 @@ impl Canvas {
     }
 
     /// Draws the canvas and returns what the user did.
-    #[allow(clippy::too_many_arguments)]
     pub fn show(
         &mut self,
         ui: &mut Ui,
@@ -319,6 +326,7 @@ impl Canvas {
             search: &mut self.search,
             to_global: self.to_global,
             fit_to,
+            insert_hint: self.insert_hint.as_deref(),
             pressed_node: None,
         };
         // Labels must not take drags (text selection) from the nodes they sit on.
@@ -355,16 +363,26 @@ impl Canvas {
         }
 
         // Moves are written to the document when the drag ends (one undo step).
-        if !pointer_down {
-            let moves: Vec<(String, [f32; 2])> = self
-                .snarl
-                .nodes_pos_ids()
-                .filter_map(|(_, pos, id)| {
-                    let doc = graph.nodes.get(id)?;
-                    let moved = canvas_pos(doc.pos).distance(pos) > 0.5;
-                    moved.then(|| (id.clone(), [pos.x, pos.y]))
-                })
-                .collect();
+        let moves: Vec<(String, [f32; 2])> = self
+            .snarl
+            .nodes_pos_ids()
+            .filter_map(|(_, pos, id)| {
+                let doc = graph.nodes.get(id)?;
+                let moved = canvas_pos(doc.pos).distance(pos) > 0.5;
+                moved.then(|| (id.clone(), [pos.x, pos.y]))
+            })
+            .collect();
+        self.insert_hint = None;
+        if pointer_down {
+            // While a free node is dragged over a wire, show (next frame, under the nodes)
+            // that dropping it inserts it there.
+            if let [(id, _)] = moves.as_slice()
+                && let Some(link) = self.link_under(graph, id)
+            {
+                self.insert_hint = self.wire_points(graph, &link);
+                ui.ctx().request_repaint();
+            }
+        } else {
             if let [(id, _)] = moves.as_slice()
                 && let Some(link) = self.link_under(graph, id)
             {
@@ -377,6 +395,20 @@ impl Canvas {
         actions
     }
 
+    /// Points along the wire of `link` (graph space), as last drawn.
+    fn wire_points(&self, graph: &Graph, link: &Link) -> Option<Vec<Pos2>> {
+        let pins = self.pins.borrow();
+        let pin = |port: &PortRef, input: bool| {
+            let spec = spec_of(graph, &port.node)?;
+            let index = if input { spec.input(&port.port)?.0 } else { spec.output(&port.port)?.0 };
+            pins.get(&(port.node.clone(), input, index)).copied()
+        };
+        let (a, b) = (pin(&link.from, false)?, pin(&link.to, true)?);
+        let d = ((b.x - a.x).abs() * 0.5).max(40.0);
+        let (c1, c2) = (a + vec2(d, 0.0), b - vec2(d, 0.0));
+        Some((0..=32).map(|i| bezier(a, c1, c2, b, i as f32 / 32.0)).collect())
+    }
+
     /// A link whose wire passes under node `id`, if the node has no links yet: dropping a
     /// free node onto a wire inserts it there.
     fn link_under(&self, graph: &Graph, id: &str) -> Option<Link> {
@@ -384,20 +416,11 @@ impl Canvas {
             return None;
         }
         let rect = self.node_rects.get(id)?.shrink(4.0);
-        let pins = self.pins.borrow();
-        let pin = |port: &PortRef, input: bool| {
-            let spec = spec_of(graph, &port.node)?;
-            let index = if input { spec.input(&port.port)?.0 } else { spec.output(&port.port)?.0 };
-            pins.get(&(port.node.clone(), input, index)).copied()
-        };
         graph
             .links
             .iter()
             .filter_map(|l| {
-                let (a, b) = (pin(&l.from, false)?, pin(&l.to, true)?);
-                let d = ((b.x - a.x).abs() * 0.5).max(40.0);
-                let (c1, c2) = (a + vec2(d, 0.0), b - vec2(d, 0.0));
-                let hits = (0..=32).filter(|i| rect.contains(bezier(a, c1, c2, b, *i as f32 / 32.0))).count();
+                let hits = self.wire_points(graph, l)?.into_iter().filter(|p| rect.contains(*p)).count();
                 (hits > 0).then(|| (hits, l.clone()))
             })
             .max_by_key(|(hits, _)| *hits)
@@ -441,6 +464,7 @@ struct Viewer<'a> {
     search: &'a mut String,
     to_global: TSTransform,
     fit_to: Option<TSTransform>,
+    insert_hint: Option<&'a [Pos2]>,
     pressed_node: Option<String>,
 }
 
@@ -507,6 +531,23 @@ impl Viewer<'_> {
 impl SnarlViewer<String> for Viewer<'_> {
     fn title(&mut self, node: &String) -> String {
         node.clone()
+    }
+
+    fn draw_background(
+        &mut self,
+        background: Option<&BackgroundPattern>,
+        viewport: &Rect,
+        snarl_style: &SnarlStyle,
+        style: &egui::Style,
+        painter: &egui::Painter,
+        _snarl: &Snarl<String>,
+    ) {
+        if let Some(background) = background {
+            background.draw(viewport, snarl_style, style, painter);
+        }
+        if let Some(points) = self.insert_hint {
+            painter.add(egui::Shape::line(points.to_vec(), Stroke::new(8.0, SELECT_COLOR.gamma_multiply(0.5))));
+        }
     }
 
     fn current_transform(&mut self, to_global: &mut TSTransform, _snarl: &mut Snarl<String>) {
@@ -586,8 +627,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         self.spec(node).map_or(0, |s| s.outputs.len())
     }
 
-    #[allow(refining_impl_trait)]
-    fn show_input(&mut self, pin: &InPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> TypedPin {
+    fn show_input(&mut self, pin: &InPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> impl SnarlPin + 'static {
         let id = snarl.get_node(pin.id.node).cloned().unwrap_or_default();
         let (port, ty) =
             self.in_ref(snarl, pin.id).unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
@@ -603,8 +643,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         self.pin(ty, (id, true, pin.id.input), !pin.remotes.is_empty())
     }
 
-    #[allow(refining_impl_trait)]
-    fn show_output(&mut self, pin: &OutPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> TypedPin {
+    fn show_output(&mut self, pin: &OutPin, ui: &mut Ui, snarl: &mut Snarl<String>) -> impl SnarlPin + 'static {
         let id = snarl.get_node(pin.id.node).cloned().unwrap_or_default();
         let (port, ty) =
             self.out_ref(snarl, pin.id).unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
