@@ -258,8 +258,15 @@ impl Viewport {
         let viewed = viewed_port(&state.graph, state.inspected.as_ref());
         ui.horizontal(|ui| {
             match &viewed {
-                Some(p) => ui.label(RichText::new(format!("showing {p}")).strong()),
-                None => ui.label("nothing to show: add a Preview node"),
+                Some(p) => {
+                    ui.label(RichText::new(format!("showing {p}")).strong());
+                    if let Some(v) = live.output(p) {
+                        ui.label(RichText::new(v.summary()).small().weak());
+                    }
+                }
+                None => {
+                    ui.label("nothing to show: add a Preview node");
+                }
             };
             if state.inspected.is_some() && ui.small_button("back to preview").clicked() {
                 state.inspected = None;
