@@ -192,19 +192,9 @@ impl EditorApp {
             Then::New => self.new_graph(),
             Then::Open(Some(p)) => self.open(&p),
             Then::Open(None) => {
-                if self.options.file_dialogs {
-                    let mut d = rfd::FileDialog::new().add_filter("werkstatt graph", &["ron"]).set_title("Open graph");
-                    if let Some(dir) =
-                        self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok())
-                    {
-                        d = d.set_directory(dir);
-                    }
-                    if let Some(p) = d.pick_file() {
-                        self.open(&p);
-                    }
-                } else {
-                    self.dialog = Some(Dialog::Path { save: false, text: String::new(), then: None });
-                }
+                // A path field always works; "Browse…" adds the system dialog where there is one.
+                let text = self.state.path.as_deref().map(|p| base_dir(Some(p)).join("").display().to_string());
+                self.dialog = Some(Dialog::Path { save: false, text: text.unwrap_or_default(), then: None });
             }
             Then::Quit => {
                 self.quitting = true;
@@ -248,27 +238,25 @@ impl EditorApp {
         }
     }
 
-    fn save_as(&mut self, then: Option<Then>, ctx: &egui::Context) {
-        if self.options.file_dialogs {
-            let mut d = rfd::FileDialog::new()
-                .add_filter("werkstatt graph", &["ron"])
-                .set_title("Save graph as")
-                .set_file_name(self.state.file_name());
-            if let Some(dir) =
-                self.state.path.as_deref().and_then(Path::parent).and_then(|d| std::path::absolute(d).ok())
-            {
-                d = d.set_directory(dir);
-            }
-            if let Some(mut p) = d.save_file() {
-                if p.extension().is_none() {
-                    p.set_extension("ron");
-                }
-                self.save_to(&p, then, ctx);
-            }
+    fn save_as(&mut self, then: Option<Then>, _ctx: &egui::Context) {
+        let text = self.state.path.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
+        self.dialog = Some(Dialog::Path { save: true, text, then });
+    }
+
+    /// The system file dialog (rfd) for the path prompt; `None` when cancelled or when the
+    /// desktop offers no dialog (then the path field is still there).
+    fn browse(&self, save: bool, current: &str) -> Option<PathBuf> {
+        let mut d = rfd::FileDialog::new().add_filter("werkstatt graph", &["ron"]).set_title(if save {
+            "Save graph as"
         } else {
-            let text = self.state.path.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
-            self.dialog = Some(Dialog::Path { save: true, text, then });
+            "Open graph"
+        });
+        let current = Path::new(current);
+        let dir = if current.is_dir() { Some(current) } else { current.parent() };
+        if let Some(dir) = dir.filter(|d| !d.as_os_str().is_empty()).and_then(|d| std::path::absolute(d).ok()) {
+            d = d.set_directory(dir);
         }
+        if save { d.set_file_name(self.state.file_name()).save_file() } else { d.pick_file() }
     }
 
     fn apply(&mut self, actions: Vec<Action>, ctx: &egui::Context) {
@@ -581,7 +569,14 @@ impl EditorApp {
                     }
                     let enter = r.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter));
                     ui.horizontal(|ui| {
-                        let go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;
+                        let mut go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;
+                        if self.options.file_dialogs
+                            && ui.button("Browse…").clicked()
+                            && let Some(p) = self.browse(save, text)
+                        {
+                            *text = p.display().to_string();
+                            go = true;
+                        }
                         if go && !text.trim().is_empty() {
                             close = true;
                             let mut p = PathBuf::from(text.trim());
