@@ -1,4 +1,4 @@
-//! The command line: render, check, fmt, nodes, info, bench.
+//! The command line: render, edit, check, fmt, nodes, info, bench.
 
 use std::io::IsTerminal as _;
 use std::path::PathBuf;
@@ -13,7 +13,7 @@ use crate::graph::Graph;
 #[command(
     name = "werkstatt",
     version,
-    about = "A real-time garment renderer as a node graph: render, check and format .ron graphs"
+    about = "A real-time garment renderer as a node graph: render, edit, check and format .ron graphs"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -44,6 +44,15 @@ enum Command {
         /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
         #[arg(long = "dump", value_name = "NODE.PORT")]
         dumps: Vec<String>,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Open the node editor on a graph (created on save if it does not exist yet).
+    #[cfg(feature = "editor")]
+    Edit {
+        /// The graph file (.ron); without it the editor starts with a new graph.
+        graph: Option<PathBuf>,
         /// GPU backend (or WERKSTATT_BACKEND).
         #[arg(long, value_enum)]
         backend: Option<Backend>,
@@ -191,6 +200,11 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 stats.files.len(),
                 out.display()
             );
+            Ok(ExitCode::SUCCESS)
+        }
+        #[cfg(feature = "editor")]
+        Command::Edit { graph, backend } => {
+            crate::editor::run(graph, pick_backend(backend)?)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Check { graphs } => {

@@ -308,6 +308,7 @@ impl Evaluator {
 
     /// Recompiles after an edit, keeping the caches (and node instances) of nodes whose
     /// kind is unchanged: only what the edit touched re-runs.
+    /// On an error the evaluator is left as it was.
     pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
         // Check everything `rebuild` could fail on first, so a bad edit leaves the evaluator
         // (and its caches) as it was.

@@ -111,20 +111,34 @@ impl GpuContext {
         bail!("no GPU adapter found ({})\n  help: {NO_ADAPTER_HELP}", reasons.join("; "))
     }
 
-    pub fn from_adapter(adapter: &wgpu::Adapter) -> anyhow::Result<GpuContext> {
-        let info = adapter.get_info();
+    /// What werkstatt asks of a device: the adapter's limits and the optional features it
+    /// can use (timestamps, filterable 32-bit floats). The editor passes this to eframe so
+    /// that the window's device is one the nodes can render with.
+    pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
         let wanted = wgpu::Features::TIMESTAMP_QUERY
             | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS
             | wgpu::Features::FLOAT32_FILTERABLE;
-        let features = adapter.features() & wanted;
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        wgpu::DeviceDescriptor {
             label: Some("werkstatt"),
-            required_features: features,
-            required_limits: limits.clone(),
+            required_features: adapter.features() & wanted,
+            required_limits: adapter.limits(),
             ..Default::default()
-        }))
-        .with_context(|| format!("cannot open a device on adapter {}", info.name))?;
+        }
+    }
+
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> anyhow::Result<GpuContext> {
+        let info = adapter.get_info();
+        let (device, queue) = pollster::block_on(adapter.request_device(&GpuContext::device_descriptor(adapter)))
+            .with_context(|| format!("cannot open a device on adapter {}", info.name))?;
+        Ok(GpuContext::from_device(device, queue, info))
+    }
+
+    /// Wraps a device opened elsewhere, e.g. the editor window's (eframe's render state), so
+    /// the nodes render into textures the window can show without copies. Its features and
+    /// limits are whatever that device was opened with.
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> GpuContext {
+        let features = device.features();
+        let limits = device.limits();
         let errors: Arc<Mutex<Vec<String>>> = Arc::default();
         let sink = errors.clone();
         // The default handler panics; a bad shader or pass must become a node error instead.
@@ -156,7 +170,7 @@ impl GpuContext {
                 current_node: Mutex::default(),
             }
         });
-        Ok(GpuContext { device, queue, info, features, limits, shaders: Mutex::default(), errors, timer })
+        GpuContext { device, queue, info, features, limits, shaders: Mutex::default(), errors, timer }
     }
 
     pub fn adapter_name(&self) -> String {

@@ -330,6 +330,15 @@ impl Graph {
 
     /// Parses and validates `source`; `path` is used in messages only.
     pub fn load_str(source: &str, path: &Path) -> Result<Graph, LoadError> {
+        let (graph, diagnostics) = Graph::load_lenient(source, path)?;
+        if diagnostics.is_empty() { Ok(graph) } else { Err(LoadError { diagnostics }) }
+    }
+
+    /// Parses `source` like [`Graph::load_str`], but returns the graph together with its
+    /// problems instead of refusing it, so that the editor can open a graph with, say, an
+    /// unconnected input and let the user fix it. Only text that is not a graph (syntax errors,
+    /// a newer format version) is an error.
+    pub fn load_lenient(source: &str, path: &Path) -> Result<(Graph, Vec<Diagnostic>), LoadError> {
         let (graph, mut problems, link_rows) = Graph::parse_unvalidated(source)
             .map_err(|d| LoadError { diagnostics: vec![Diagnostic { file: path.to_path_buf(), ..d }] })?;
         // validate() numbers the well-formed links; point back at their rows in the file.
@@ -339,25 +348,21 @@ impl Graph {
             }
             p
         }));
-        if problems.is_empty() {
-            Ok(graph)
-        } else {
-            let map = SourceMap::new(source);
-            let diagnostics = problems
-                .into_iter()
-                .map(|problem| {
-                    let (line, col) = map.locate(&problem.place, &graph);
-                    Diagnostic { file: path.to_path_buf(), line, col, problem }
-                })
-                .collect();
-            Err(LoadError { diagnostics })
-        }
+        let map = SourceMap::new(source);
+        let diagnostics = problems
+            .into_iter()
+            .map(|problem| {
+                let (line, col) = map.locate(&problem.place, &graph);
+                Diagnostic { file: path.to_path_buf(), line, col, problem }
+            })
+            .collect();
+        Ok((graph, diagnostics))
     }
 
     /// Parses without validating the nodes against the registry; returns the problems
     /// (duplicates, bad link syntax) that the document model cannot hold.
-    #[allow(clippy::result_large_err)] // built once per load, on the error path only
     /// Also returns, for each kept link, its index among the file's links.
+    #[allow(clippy::result_large_err)] // built once per load, on the error path only
     fn parse_unvalidated(source: &str) -> Result<(Graph, Vec<Problem>, Vec<usize>), Diagnostic> {
         let syntax = |e: ron::error::SpannedError| Diagnostic {
             file: PathBuf::new(),

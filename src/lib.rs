@@ -7,6 +7,8 @@
 pub mod bench;
 pub mod cli;
 pub mod docs;
+#[cfg(feature = "editor")]
+pub mod editor;
 pub mod eval;
 pub mod gpu;
 pub mod graph;

@@ -277,3 +277,22 @@ fn idle_frames_of_a_large_graph_run_nothing() {
         assert_eq!(ev.evaluate(frame(f), None, &res, &s).ran, 0);
     }
 }
+
+#[test]
+fn a_refused_update_leaves_the_evaluator_working() {
+    let g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let settings = FrameSettings::default();
+    ev.evaluate(frame(0), None, &res, &settings);
+    let before = runs(&ev, "sum");
+    // An unconnected required input: the update is refused...
+    let mut broken = g.clone();
+    broken.links.retain(|l| l.to.node != "out");
+    assert!(ev.update(&broken, &[]).is_err());
+    assert!(ev.update(&g, &["nope".to_string()]).is_err());
+    // ...and the evaluator still runs the graph it had, with its caches.
+    ev.evaluate(frame(1), None, &res, &settings);
+    assert_eq!(runs(&ev, "sum"), before);
+    assert_eq!(ev.report("out").map(|r| r.status.clone()), Some(NodeStatus::Ok));
+}

@@ -1,0 +1,684 @@
+//! Headless tests of the node editor: the real `EditorApp` in an egui_kittest harness,
+//! rendering with wgpu on the software adapter (lavapipe), driven by pointer and keyboard
+//! events like a user.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use egui::accesskit::Role;
+use egui::{Modifiers, Pos2, Vec2};
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use werkstatt::editor::{EditorApp, Options};
+use werkstatt::graph::{Graph, PortRef};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = root().join("target/test-out/editor").join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn options() -> Options {
+    Options { file_dialogs: false, autosave: false, watch_files: false }
+}
+
+/// The software adapter the other GPU tests use (Vulkan, or GL with WERKSTATT_BACKEND=gl),
+/// opened as the editor opens its window's device.
+fn wgpu_setup() -> egui_wgpu::WgpuSetup {
+    let mut setup = egui_wgpu::WgpuSetupCreateNew::without_display_handle();
+    setup.instance_descriptor.backends = match werkstatt::gpu::Backend::from_env() {
+        Ok(werkstatt::gpu::Backend::Gl) => wgpu::Backends::GL,
+        _ => wgpu::Backends::VULKAN,
+    };
+    setup.device_descriptor = std::sync::Arc::new(werkstatt::gpu::GpuContext::device_descriptor);
+    egui_wgpu::WgpuSetup::CreateNew(setup)
+}
+
+/// The editor on `graph`, in a 1400x900 window with a wgpu renderer.
+fn editor(graph: &Path) -> Harness<'static, EditorApp> {
+    editor_with(graph, Vec2::new(1400.0, 900.0), 1.0, options())
+}
+
+fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options) -> Harness<'static, EditorApp> {
+    let graph = graph.to_path_buf();
+    let mut h = Harness::builder()
+        .with_size(size)
+        .with_pixels_per_point(pixels_per_point)
+        .with_max_steps(200)
+        .wgpu_setup(wgpu_setup())
+        .build_eframe(move |cc| EditorApp::new(cc, Some(graph), options));
+    settle(&mut h);
+    h
+}
+
+/// Runs frames until the canvas has laid out and the evaluation has settled.
+fn settle(h: &mut Harness<'_, EditorApp>) {
+    for _ in 0..6 {
+        h.step();
+    }
+}
+
+fn p(s: &str) -> PortRef {
+    PortRef::parse(s).unwrap()
+}
+
+fn pin(h: &Harness<'_, EditorApp>, port: &str, input: bool) -> Pos2 {
+    let app = h.state();
+    app.canvas.pin_screen_pos(&p(port), &app.state.graph, input).unwrap_or_else(|| panic!("pin {port} was not drawn"))
+}
+
+/// Drags the pointer from `a` to `b` in small steps, like a hand would.
+fn drag(h: &mut Harness<'_, EditorApp>, a: Pos2, b: Pos2) {
+    h.hover_at(a);
+    h.step();
+    h.drag_at(a);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(a + (b - a) * (i as f32 / 6.0));
+        h.step();
+    }
+    // Release without taking the pointer away (menus opened by the drop need it).
+    h.event(egui::Event::PointerButton {
+        pos: b,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: Modifiers::NONE,
+    });
+    h.step();
+    h.step();
+}
+
+fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
+    h.hover_at(pos);
+    h.step();
+    h.drag_at(pos);
+    h.step();
+    h.drop_at(pos);
+    h.step();
+    h.step();
+}
+
+fn copy_default(dir: &Path) -> PathBuf {
+    let path = dir.join("default.ron");
+    std::fs::copy(root().join("graphs/default.ron"), &path).unwrap();
+    path
+}
+
+#[test]
+fn add_connect_edit_undo_redo_and_save() {
+    let dir = temp_dir("session");
+    let path = copy_default(&dir);
+    let original = std::fs::read_to_string(&path).unwrap();
+    let mut h = editor(&path);
+    assert!(!h.state().state.is_dirty());
+    assert!(h.state().gpu().is_some(), "the engine shares the window's wgpu device");
+
+    // Add a Preview node from the Add menu, through its search field.
+    h.get_by_role_and_label(Role::Button, "Add").click();
+    h.step();
+    h.step();
+    h.get_by_role(Role::TextInput).type_text("Preview");
+    h.step();
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Preview").click();
+    settle(&mut h);
+    let pos = {
+        let g = &h.state().state.graph;
+        assert!(g.nodes.contains_key("preview"), "nodes: {:?}", g.nodes.keys().collect::<Vec<_>>());
+        assert_eq!(g.nodes["preview"].kind, "Preview");
+        g.nodes["preview"].pos
+    };
+    assert!(h.state().state.is_dirty());
+    assert!(h.state().state.title().starts_with("* "), "unsaved changes are marked in the title");
+
+    // Connect tonemap.image to preview.image by dragging a wire between the pins.
+    let from = pin(&h, "tonemap.image", false);
+    let to = pin(&h, "preview.image", true);
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        eprintln!("from {from:?} to {to:?} preview {:?}", h.state().canvas.node_screen_rect("preview"));
+        h.render().unwrap().save(dir.join("debug.png")).unwrap();
+    }
+    drag(&mut h, from, to);
+    settle(&mut h);
+    let linked = h.state().state.graph.links.iter().any(|l| l.from == p("tonemap.image") && l.to == p("preview.image"));
+    assert!(linked, "links: {:?}", h.state().state.graph.links);
+    // The viewport now shows the preview, rendered live.
+    assert!(h.query_by_label("showing preview.image").is_some());
+    assert!(h.state().live.output(&p("preview.image")).is_some(), "the preview was evaluated");
+
+    // Change a parameter in the inspector: select the tonemap node, pick another operator.
+    let header = h.state().canvas.node_screen_rect("tonemap").expect("tonemap is on screen");
+    click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["tonemap"]);
+    h.get_by_value("aces").click();
+    h.step();
+    h.step();
+    let runs = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.runs(id);
+    let (gbuffer_runs, tonemap_runs) = (runs(&h, "gbuffer"), runs(&h, "tonemap"));
+    h.get_by_label("reinhard").click();
+    settle(&mut h);
+    assert_eq!(runs(&h, "gbuffer"), gbuffer_runs, "nodes upstream of the change are not re-run");
+    assert_eq!(runs(&h, "tonemap"), tonemap_runs + 1, "the changed node re-ran once");
+    let op = |h: &Harness<'_, EditorApp>| h.state().state.graph.nodes["tonemap"].params.get("operator").cloned();
+    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+
+    // Undo the parameter, then redo it (keyboard and buttons).
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(op(&h), None, "undo restores the default operator");
+    assert!(h.state().state.graph.links.iter().any(|l| l.to == p("preview.image")), "only one step was undone");
+    h.get_by_role_and_label(Role::Button, "Redo").click();
+    settle(&mut h);
+    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+
+    // Save with Ctrl+S and compare with the expected canonical file.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
+    settle(&mut h);
+    assert!(!h.state().state.is_dirty());
+    let saved = std::fs::read_to_string(&path).unwrap();
+    let preview = format!(
+        "        \"preview\": (\n            kind: \"Preview\",\n            pos: ({:?}, {:?}),\n            params: {{}},\n        ),\n",
+        pos[0] as f64, pos[1] as f64
+    );
+    let expected = original
+        .replace(
+            "        \"scene\": (",
+            &format!("{preview}        \"scene\": ("),
+        )
+        .replace(
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {},",
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {\n                \"operator\": \"reinhard\",\n            },",
+        )
+        .replace(
+            "        (\"tonemap.image\", \"image.image\"),\n",
+            "        (\"tonemap.image\", \"image.image\"),\n        (\"tonemap.image\", \"preview.image\"),\n",
+        );
+    assert_eq!(saved, expected);
+    // The saved file is a valid graph in canonical form.
+    let reloaded = Graph::load(&path).unwrap();
+    assert_eq!(reloaded.to_ron(), saved);
+}
+
+#[test]
+fn an_incompatible_link_is_refused_with_a_message() {
+    let dir = temp_dir("refused");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let links = h.state().state.graph.links.clone();
+    let from = pin(&h, "camera.camera", false);
+    let to = pin(&h, "tonemap.image", true);
+    drag(&mut h, from, to);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.links, links, "nothing changed");
+    assert!(!h.state().state.is_dirty());
+    let msg =
+        "cannot connect camera.camera (Camera) to tonemap.image (Texture): a Texture input does not accept Camera";
+    assert_eq!(h.state().state.last_message().map(|m| m.text.as_str()), Some(msg));
+    assert!(h.query_by_label(msg).is_some(), "the message is shown in the status bar");
+}
+
+#[test]
+fn a_failing_node_shows_its_error_on_the_node() {
+    let dir = temp_dir("failing");
+    let path = dir.join("failing.ron");
+    std::fs::write(
+        &path,
+        r#"(
+    version: 1,
+    nodes: {
+        "divide": (kind: "Math", pos: (0.0, 0.0), params: {"op": "divide", "a": 1.0}),
+        "watch": (kind: "Watch", pos: (300.0, 0.0), params: {}),
+        "tonemap": (kind: "Tonemap", pos: (0.0, 300.0), params: {}),
+        "mystery": (kind: "Mystery", pos: (300.0, 300.0), params: {"x": 1}),
+        "far": (kind: "Number", pos: (inf, NaN), params: {}),
+    },
+    links: [("divide.result", "watch.value")],
+)
+"#,
+    )
+    .unwrap();
+    let mut h = editor(&path);
+    settle(&mut h);
+    // A node that fails while running, and one that cannot run (unconnected required input).
+    assert!(h.query_by_label("error: division by zero (input b is 0)").is_some());
+    assert!(h.query_by_label_contains("required input \"image\" (Texture) is not connected").is_some());
+    assert!(h.query_by_label_contains("waiting for input from \"divide\"").is_some());
+    // A kind this build does not know still opens, shown with its problem, and is kept.
+    assert!(h.query_by_label_contains("unknown node kind \"Mystery\"").is_some());
+    assert_eq!(h.state().state.graph.nodes["mystery"].params.len(), 1);
+    // Positions that are not numbers are drawn at the origin, and are not an edit.
+    assert!(!h.state().state.is_dirty());
+    // Fixing the parameter clears the error.
+    let header = h.state().canvas.node_screen_rect("divide").unwrap();
+    click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
+    h.state_mut().state.set_param("divide", "b", werkstatt::spec::ParamValue::Float(4.0)).unwrap();
+    settle(&mut h);
+    assert!(h.query_by_label("error: division by zero (input b is 0)").is_none());
+    assert_eq!(h.state().live.output(&p("divide.result")).map(|v| v.summary()), Some("0.25".into()));
+}
+
+/// UI frame times while editing a 200-node chain. Prints the figures; the bound is loose
+/// because debug builds and a shared machine are slow.
+#[test]
+fn a_200_node_graph_stays_responsive() {
+    let dir = temp_dir("big");
+    let path = dir.join("chain.ron");
+    // The benchmark chain, laid out as a user would: rows of 20 nodes.
+    let mut chain = werkstatt::bench::chain_graph(200);
+    for (i, node) in chain.nodes.values_mut().enumerate() {
+        node.pos = [(i % 20) as f32 * 180.0, (i / 20) as f32 * 110.0];
+    }
+    chain.save(&path).unwrap();
+    let mut h = editor(&path);
+    let measure =
+        |h: &mut Harness<'_, EditorApp>, what: &str, f: &mut dyn FnMut(&mut Harness<'_, EditorApp>, usize)| {
+            let mut times = Vec::new();
+            for i in 0..30 {
+                f(h, i);
+                let t = Instant::now();
+                h.step();
+                times.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            times.sort_by(f64::total_cmp);
+            let (median, p95) = (times[times.len() / 2], times[(times.len() * 95) / 100]);
+            eprintln!("200-node graph, {what}: median {median:.1} ms, p95 {p95:.1} ms per UI frame (harness step)");
+            median
+        };
+    let idle = measure(&mut h, "idle", &mut |_, _| {});
+    let param = measure(&mut h, "changing a parameter every frame", &mut |h, i| {
+        h.state_mut().state.set_param("m0000", "b", werkstatt::spec::ParamValue::Float(i as f64)).unwrap();
+    });
+    let start = h.state().canvas.node_screen_rect("m0100").map(|r| r.left_top() + Vec2::new(20.0, 10.0));
+    let drag_median = match start {
+        Some(start) => {
+            h.hover_at(start);
+            h.step();
+            h.drag_at(start);
+            let m = measure(&mut h, "dragging a node", &mut |h, i| h.hover_at(start + Vec2::new(i as f32 * 3.0, 0.0)));
+            h.drop_at(start + Vec2::new(90.0, 0.0));
+            h.step();
+            m
+        }
+        None => 0.0,
+    };
+    let (m, p95, _) = h.state().frame_times.stats().unwrap();
+    eprintln!("200-node graph, inside EditorApp::ui (evaluation and layout): median {m:.1} ms, p95 {p95:.1} ms");
+    for t in [idle, param, drag_median] {
+        assert!(t < 250.0, "a UI frame took {t:.1} ms");
+    }
+    // The last value is 1 + 199 more additions of 1, plus the b the loop set on the first node.
+    assert_eq!(h.state().live.output(&p("m0199.result")).map(|v| v.summary()), Some("228".into()));
+}
+
+/// The viewport shows the rendered graph; dragging on it orbits the camera without touching
+/// the document, and clicking a texture output shows that texture.
+#[test]
+fn the_viewport_shows_the_rendered_graph_and_orbits() {
+    let dir = temp_dir("viewport");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    assert!(h.query_by_label("showing image.image").is_some());
+    let image = h.render().expect("the harness renders with wgpu");
+    assert!(viewport_colours(&image) > 20, "the viewport shows a picture");
+
+    // Orbit: drag on the picture.
+    let runs = h.state().live.runs("camera");
+    let centre = viewport_centre(&h);
+    drag(&mut h, centre, centre + Vec2::new(80.0, -20.0));
+    settle(&mut h);
+    let cam = h.state().live.camera.clone().expect("the drag overrides the camera");
+    assert_eq!(cam.node, "camera");
+    assert_ne!(cam.yaw, 35.0);
+    assert!(h.state().live.runs("camera") > runs, "the camera re-ran with the new view");
+    assert!(!h.state().state.is_dirty(), "orbiting does not edit the graph");
+    h.get_by_role_and_label(Role::Button, "apply to graph").click();
+    settle(&mut h);
+    let yaw = h.state().state.graph.param("camera", "yaw").and_then(|v| v.as_f64()).unwrap();
+    assert!((yaw - cam.yaw).abs() < 1e-9, "applied view: yaw {yaw}");
+    assert!(h.state().state.is_dirty());
+
+    // Inspect an intermediate texture: click the G-buffer output of the gbuffer node.
+    let port = port_label(&h, "gbuffer.gbuffer", false);
+    click_at(&mut h, port);
+    settle(&mut h);
+    assert_eq!(h.state().state.inspected, Some(p("gbuffer.gbuffer")));
+    assert!(h.query_by_label("showing gbuffer.gbuffer").is_some());
+    let image = h.render().unwrap();
+    assert!(viewport_colours(&image) > 8, "the G-buffer colour is shown");
+    h.get_by_role_and_label(Role::Button, "back to preview").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.inspected, None);
+}
+
+/// Hovering a port shows its type and current value.
+#[test]
+fn hovering_a_port_shows_its_value() {
+    let dir = temp_dir("hover");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let port = port_label(&h, "camera.camera", false);
+    h.hover_at(port);
+    // Tooltips wait for the pointer to rest.
+    for _ in 0..60 {
+        h.step();
+    }
+    assert!(h.query_by_label_contains("value: camera at").is_some(), "the camera output's summary is shown");
+}
+
+/// Renders the editor on the default graph as in docs/editor.png; with
+/// `WERKSTATT_EDITOR_SCREENSHOT=path` the picture is written there.
+#[test]
+fn screenshot() {
+    let dir = temp_dir("screenshot");
+    let path = copy_default(&dir);
+    let mut h = editor_with(&path, Vec2::new(1360.0, 820.0), 1.5, options());
+    h.get_by_label("⏱ Timings").click();
+    settle(&mut h);
+    // The timings made the nodes wider: frame them again.
+    h.hover_at(Pos2::new(400.0, 400.0));
+    h.key_press(egui::Key::F);
+    settle(&mut h);
+    let light = header_point(&h, "light");
+    click_at(&mut h, light);
+    h.hover_at(Pos2::new(5.0, 700.0));
+    settle(&mut h);
+    let image = h.render().expect("the harness renders with wgpu");
+    assert_eq!(image.dimensions(), (2040, 1230));
+    assert!(viewport_colours(&image) > 20);
+    if let Some(out) = std::env::var_os("WERKSTATT_EDITOR_SCREENSHOT") {
+        image.save(&out).unwrap();
+    }
+}
+
+/// How many distinct colours the top of the side panel (the viewport) holds.
+fn viewport_colours(image: &image::RgbaImage) -> usize {
+    let (w, hgt) = image.dimensions();
+    let mut colours = std::collections::BTreeSet::new();
+    for y in (hgt / 10..hgt / 2).step_by(7) {
+        for x in (w * 3 / 4..w - 10).step_by(7) {
+            let p = image.get_pixel(x, y).0;
+            colours.insert((p[0] / 16, p[1] / 16, p[2] / 16));
+        }
+    }
+    colours.len()
+}
+
+/// The screen centre of a port's label: of the widgets named like the port, the one
+/// nearest to the port's pin (widgets inside nodes report graph-space rectangles).
+fn port_label(h: &Harness<'_, EditorApp>, port: &str, input: bool) -> Pos2 {
+    let pin = pin(h, port, input);
+    let name = port.split_once('.').unwrap().1;
+    let canvas = &h.state().canvas;
+    h.get_all_by_label(name)
+        .map(|n| canvas.to_screen(n.rect()).center())
+        .min_by(|a, b| a.distance(pin).total_cmp(&b.distance(pin)))
+        .unwrap()
+}
+
+fn viewport_centre(h: &Harness<'_, EditorApp>) -> Pos2 {
+    let r = h.get_by_label_contains("showing ").rect();
+    Pos2::new(r.left() + 200.0, r.bottom() + 150.0)
+}
+
+fn header_point(h: &Harness<'_, EditorApp>, id: &str) -> Pos2 {
+    let r = h.state().canvas.node_screen_rect(id).unwrap_or_else(|| panic!("node {id} is not drawn"));
+    r.left_top() + Vec2::new(r.width() * 0.5, 8.0)
+}
+
+#[test]
+fn select_move_copy_paste_duplicate_delete_and_undo() {
+    let dir = temp_dir("clipboard");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let before = h.state().state.graph.clone();
+
+    // Drag the camera node by its header: one undo step, position rounded.
+    let at = header_point(&h, "camera");
+    drag(&mut h, at, at + Vec2::new(60.0, 40.0));
+    settle(&mut h);
+    let moved = h.state().state.graph.nodes["camera"].pos;
+    assert_ne!(moved, before.nodes["camera"].pos, "the node moved");
+    assert!(moved.iter().all(|c| c.fract() == 0.0), "positions are whole units: {moved:?}");
+    assert_eq!(h.state().state.history.undo_label(), Some("move camera"));
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["camera"]);
+
+    // Copy and paste keep the parameters; duplicate keeps them too; new ids are readable.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::C);
+    settle(&mut h);
+    h.hover_at(h.state().canvas.node_screen_rect("camera").unwrap().center() + Vec2::new(0.0, 150.0));
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::V);
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.nodes.contains_key("camera_2"), "{:?}", g.nodes.keys().collect::<Vec<_>>());
+    assert_eq!(g.nodes["camera_2"].params, g.nodes["camera"].params);
+    assert_eq!(h.state().state.selection.iter().collect::<Vec<_>>(), vec!["camera_2"]);
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::D);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.nodes["camera_3"].params, h.state().state.graph.nodes["camera"].params);
+
+    // Shift-click adds to the selection; Delete removes the selected nodes and their links.
+    let tonemap = header_point(&h, "tonemap");
+    click_at(&mut h, tonemap);
+    let image = header_point(&h, "image");
+    h.hover_at(image);
+    h.step();
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: image,
+            button: egui::PointerButton::Primary,
+            pressed: true,
+            modifiers: Modifiers::SHIFT,
+        },
+        Modifiers::SHIFT,
+    );
+    h.event_modifiers(
+        egui::Event::PointerButton {
+            pos: image,
+            button: egui::PointerButton::Primary,
+            pressed: false,
+            modifiers: Modifiers::SHIFT,
+        },
+        Modifiers::SHIFT,
+    );
+    settle(&mut h);
+    let sel: Vec<String> = h.state().state.selection.iter().cloned().collect();
+    assert_eq!(sel, vec!["image".to_string(), "tonemap".to_string()], "shift-click adds to the selection");
+    h.key_press(egui::Key::Delete);
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    for id in &sel {
+        assert!(!g.nodes.contains_key(id), "{id} was deleted");
+        assert!(g.links.iter().all(|l| &l.from.node != id && &l.to.node != id));
+    }
+
+    // Undo everything, back to the file as it was opened.
+    while h.state().state.history.can_undo() {
+        h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+        h.step();
+        h.step();
+    }
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, before);
+    assert!(!h.state().state.is_dirty());
+}
+
+#[test]
+fn a_wire_dropped_on_empty_space_offers_compatible_nodes() {
+    let dir = temp_dir("dropped");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let from = pin(&h, "tonemap.image", false);
+    let empty = from + Vec2::new(20.0, 260.0);
+    drag(&mut h, from, empty);
+    settle(&mut h);
+    assert!(h.query_by_label_contains("Add node for tonemap.image (Texture)").is_some(), "the menu is open");
+    // Only nodes with a Texture input are offered.
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        h.render().unwrap().save(dir.join("debug.png")).unwrap();
+        for n in h.query_all_by_label_contains("put") {
+            eprintln!("{n:?}");
+        }
+    }
+    assert!(h.query_by_role_and_label(Role::Button, "Output ⏵").is_some());
+    assert!(h.query_by_role_and_label(Role::Button, "Render ⏵").is_some());
+    assert!(h.query_by_role_and_label(Role::Button, "Input ⏵").is_none(), "no Input-category node takes a Texture");
+    h.get_by_role(Role::TextInput).type_text("prev");
+    h.step();
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Preview").click();
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.links.iter().any(|l| l.from == p("tonemap.image") && l.to == p("preview.image")), "{:?}", g.links);
+}
+
+#[test]
+fn a_node_dropped_on_a_wire_is_inserted() {
+    let dir = temp_dir("insert");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    // A free Tonemap below the light -> tonemap wire, then dragged onto it.
+    let below = {
+        let app = h.state();
+        let r = app.canvas.node_screen_rect("light").unwrap();
+        app.canvas.graph_pos(Some(r.left_bottom() + Vec2::new(0.0, 200.0)))
+    };
+    h.state_mut().state.add_node("Tonemap", below).unwrap();
+    settle(&mut h);
+    let a = pin(&h, "light.image", false);
+    let b = pin(&h, "tonemap.image", true);
+    let rect = h.state().canvas.node_screen_rect("tonemap_2").unwrap();
+    let grab = rect.left_top() + Vec2::new(rect.width() * 0.5, 8.0);
+    let target = a + (b - a) * 0.5;
+    let end = grab + (target - rect.center());
+    h.hover_at(grab);
+    h.step();
+    h.drag_at(grab);
+    h.step();
+    for i in 1..=6 {
+        h.hover_at(grab + (end - grab) * (i as f32 / 6.0));
+        h.step();
+    }
+    // Snarl moves a node after drawing it: one more frame shows where it is, and the wire
+    // it would go into is marked.
+    h.step();
+    assert!(h.state().canvas.shows_insert_hint());
+    if std::env::var_os("EDITOR_DEBUG").is_some() {
+        h.render().unwrap().save(dir.join("dragging.png")).unwrap();
+    }
+    h.event(egui::Event::PointerButton {
+        pos: end,
+        button: egui::PointerButton::Primary,
+        pressed: false,
+        modifiers: Modifiers::NONE,
+    });
+    settle(&mut h);
+    let g = &h.state().state.graph;
+    assert!(g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap_2.image")), "{:?}", g.links);
+    assert!(g.links.iter().any(|l| l.from == p("tonemap_2.image") && l.to == p("tonemap.image")));
+    assert!(!g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap.image")));
+}
+
+#[test]
+fn autosave_recovery_unsaved_close_and_reload_from_disk() {
+    let dir = temp_dir("recovery");
+    let path = copy_default(&dir);
+    // A session that ended without saving left an autosave with one more node.
+    let mut crashed = Graph::load(&path).unwrap();
+    werkstatt::editor::document::add_node(&mut crashed, "Number", [0.0, 960.0]).unwrap();
+    std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
+
+    let opts = Options { watch_files: true, ..options() };
+    let mut h = editor_with(&path, Vec2::new(1400.0, 900.0), 1.0, opts);
+    assert!(h.query_by_label("Recover unsaved changes?").is_some(), "the autosave is offered");
+    h.get_by_role_and_label(Role::Button, "Recover").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, crashed);
+    assert!(h.state().state.is_dirty(), "recovered changes are unsaved");
+    assert!(h.state().state.title().starts_with("* default.ron"));
+
+    // Closing the window with unsaved changes asks first.
+    h.input_mut().viewports.entry(egui::ViewportId::ROOT).or_default().events.push(egui::ViewportEvent::Close);
+    h.step();
+    h.step();
+    assert!(h.query_by_label("Unsaved changes").is_some());
+    h.get_by_role_and_label(Role::Button, "Cancel").click();
+    settle(&mut h);
+    assert!(h.query_by_label("Unsaved changes").is_none());
+
+    // Another program rewrites the file: the editor offers to reload it (one undo step).
+    let mut other = Graph::load(&path).unwrap();
+    werkstatt::editor::document::set_param(&mut other, "tonemap", "exposure", werkstatt::spec::ParamValue::Float(1.5))
+        .unwrap();
+    other.save(&path).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1100));
+    settle(&mut h);
+    assert!(h.query_by_label("default.ron changed on disk.").is_some());
+    h.get_by_role_and_label(Role::Button, "Reload").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, other);
+    assert!(!h.state().state.is_dirty());
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph, crashed, "the reload can be undone");
+}
+
+#[test]
+fn a_slider_drag_is_one_undo_step_and_only_dependents_rerun() {
+    let dir = temp_dir("slider");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let tonemap = header_point(&h, "tonemap");
+    click_at(&mut h, tonemap);
+    let steps = h.state().state.history.len();
+    let runs = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.runs(id);
+    let (light, tm) = (runs(&h, "light"), runs(&h, "tonemap"));
+    // The inspector's exposure slider is the lowest slider (the frame slider is above it).
+    let slider = h.get_all_by_role(Role::Slider).map(|n| n.rect()).max_by(|a, b| a.top().total_cmp(&b.top())).unwrap();
+    let a = slider.center();
+    drag(&mut h, a, a + Vec2::new(slider.width() * 0.3, 0.0));
+    settle(&mut h);
+    let exposure = h.state().state.graph.param("tonemap", "exposure").and_then(|v| v.as_f64()).unwrap();
+    assert!(exposure > 1.0, "the drag raised the exposure: {exposure}");
+    assert_eq!(h.state().state.history.len(), steps + 1, "the whole drag is one undo step");
+    assert_eq!(runs(&h, "light"), light, "upstream nodes did not re-run");
+    assert!(runs(&h, "tonemap") > tm, "the tone mapper re-ran");
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    settle(&mut h);
+    assert_eq!(h.state().state.graph.nodes["tonemap"].params.get("exposure"), None);
+}
+
+#[test]
+fn a_new_graph_is_saved_through_save_as() {
+    let dir = temp_dir("new");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    // File > New asks nothing while there are no changes.
+    h.get_by_role_and_label(Role::Button, "File").click();
+    h.step();
+    h.step();
+    h.get_by(|n| n.role() == Role::Button && n.label().is_some_and(|l| l.starts_with("New"))).click();
+    settle(&mut h);
+    assert!(h.state().state.graph.nodes.is_empty());
+    assert_eq!(h.state().state.title(), "untitled - werkstatt");
+    h.state_mut().state.add_node("Number", [0.0, 0.0]).unwrap();
+    settle(&mut h);
+    // Ctrl+S on a graph without a file asks for one.
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
+    settle(&mut h);
+    assert!(h.query_by_label("Save graph as").is_some());
+    let target = dir.join("fresh");
+    h.get_by_role(Role::TextInput).type_text(&target.display().to_string());
+    h.step();
+    h.get_by_role_and_label(Role::Button, "Save").click();
+    settle(&mut h);
+    let saved = dir.join("fresh.ron");
+    assert_eq!(h.state().state.path.as_deref(), Some(saved.as_path()));
+    assert!(!h.state().state.is_dirty());
+    assert_eq!(std::fs::read_to_string(&saved).unwrap(), h.state().state.graph.to_ron());
+    assert_eq!(h.state().state.title(), "fresh.ron - werkstatt");
+}

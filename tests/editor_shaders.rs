@@ -1,0 +1,82 @@
+//! Shader hot reload in the editor's live evaluation (`WERKSTATT_SHADER_DIR`): a saved shader
+//! is picked up; one that does not compile keeps the last good pipeline and reports the error.
+//! A test binary of its own, because it sets the environment variable for the process.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use werkstatt::editor::live::{Live, NodeState};
+use werkstatt::gpu::{Backend, GpuContext, read_back};
+use werkstatt::graph::{Graph, PortRef};
+use werkstatt::spec::ParamValue;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn settle(live: &mut Live, gpu: &GpuContext) {
+    for _ in 0..200 {
+        let s = live.evaluate(Some(gpu));
+        if s.pending == 0 && live.resources.in_flight() == 0 {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("evaluation did not settle");
+}
+
+/// The centre pixel of the graph's output image.
+fn centre(live: &Live, gpu: &GpuContext) -> [f32; 4] {
+    let value = live.output(&PortRef::parse("image.image").unwrap()).expect("the image was rendered");
+    let px = read_back(gpu, value.as_texture().unwrap()).unwrap();
+    let i = ((px.height / 2 * px.width + px.width / 2) * 4) as usize;
+    [px.rgba[i], px.rgba[i + 1], px.rgba[i + 2], px.rgba[i + 3]]
+}
+
+#[test]
+fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
+    let dir = root().join("target/test-out/editor-shaders");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for name in werkstatt::shaders::names() {
+        std::fs::copy(root().join("shaders").join(name), dir.join(name)).unwrap();
+    }
+    // SAFETY: the only test of this binary; set before any thread reads the environment.
+    unsafe { std::env::set_var("WERKSTATT_SHADER_DIR", &dir) };
+    let gpu = GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)");
+    let mut graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let mut live = Live::new(root().join("graphs"), false);
+    live.set_size(64, 48);
+    live.sync(&graph, 1, None);
+    settle(&mut live, &gpu);
+    assert_eq!(live.state("tonemap"), NodeState::Ok);
+    let original = std::fs::read_to_string(dir.join("tonemap.wgsl")).unwrap();
+
+    // A broken shader: the error is reported, the last good pipeline keeps rendering.
+    std::fs::write(dir.join("tonemap.wgsl"), original.replace("fn aces(", "fn aces( this is not wgsl")).unwrap();
+    live.reload_shaders(&gpu);
+    let err = live.shader_error.clone().expect("the compile error is kept");
+    assert!(err.contains("tonemap.wgsl"), "{err}");
+    assert!(matches!(live.state("tonemap"), NodeState::Failed(ref m) if m.contains("last good pipeline kept")));
+    let runs = live.runs("tonemap");
+    werkstatt::editor::document::set_param(&mut graph, "tonemap", "exposure", ParamValue::Float(0.5)).unwrap();
+    live.sync(&graph, 2, None);
+    settle(&mut live, &gpu);
+    assert_eq!(live.runs("tonemap"), runs + 1, "the old node re-ran with its pipeline");
+    assert!(centre(&live, &gpu)[3] > 0.0);
+
+    // A fixed shader that paints everything red, picked up by the file poll.
+    let red = original.replace(
+        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+    );
+    assert_ne!(red, original, "the test edits a line that exists");
+    std::thread::sleep(Duration::from_millis(20));
+    std::fs::write(dir.join("tonemap.wgsl"), red).unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    settle(&mut live, &gpu);
+    assert_eq!(live.shader_error, None);
+    assert_eq!(live.state("tonemap"), NodeState::Ok);
+    let px = centre(&live, &gpu);
+    assert!(px[0] > 0.5 && px[1] < 0.1 && px[2] < 0.1, "the new shader runs: {px:?}");
+}
