@@ -67,6 +67,14 @@ impl<'a> UvCoverage<'a> {
     }
 }
 
+/// The piece under `uv`, or piece 0 everywhere when no surface restricts placements.
+fn piece_at(coverage: &Option<UvCoverage<'_>>, uv: Vec2) -> Option<u32> {
+    match coverage {
+        Some(c) => c.piece_at(uv),
+        None => Some(0),
+    }
+}
+
 fn region(cx: &EvalCx<'_>) -> Result<(Vec2, Vec2), NodeError> {
     let lo = Vec2::new(cx.f32("u_min"), cx.f32("v_min"));
     let hi = Vec2::new(cx.f32("u_max"), cx.f32("v_max"));
@@ -138,13 +146,7 @@ impl Node for ScatterNode {
             }
             let uv = lo + (hi - lo) * Vec2::new(rng.next_f32(), rng.next_f32());
             let (angle, scale) = (rng.next_f32() * 360.0, smin + (smax - smin) * rng.next_f32());
-            let piece = match &coverage {
-                Some(c) => match c.piece_at(uv) {
-                    Some(p) => p,
-                    None => continue,
-                },
-                None => 0,
-            };
+            let Some(piece) = piece_at(&coverage, uv) else { continue };
             if spacing > 0.0 {
                 let key = ((uv.x / cell).floor() as i32, (uv.y / cell).floor() as i32);
                 let near = (-1..=1).any(|dy| {
@@ -216,13 +218,7 @@ impl Node for GridNode {
         for r in 0..rows {
             for c in 0..cols {
                 let uv = lo + (hi - lo) * Vec2::new((c as f32 + 0.5) / cols as f32, (r as f32 + 0.5) / rows as f32);
-                let piece = match &coverage {
-                    Some(cov) => match cov.piece_at(uv) {
-                        Some(p) => p,
-                        None => continue,
-                    },
-                    None => 0,
-                };
+                let Some(piece) = piece_at(&coverage, uv) else { continue };
                 out.push(Placement { piece, u: uv.x, v: uv.y, angle: cx.f32("angle"), scale: cx.f32("scale") });
             }
         }
