@@ -133,20 +133,9 @@ impl MatrixTextureNode {
         let mut enc =
             gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matrix texture") });
         {
-            let clear = |view| {
-                Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })
-            };
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("matrix texture"),
-                color_attachments: &[clear(&col_u.view), clear(&col_n.view), clear(&col_v.view)],
+                color_attachments: &[col_u.clear_attachment(), col_n.clear_attachment(), col_v.clear_attachment()],
                 depth_stencil_attachment: None,
                 timestamp_writes: gpu.pass_timestamps(),
                 occlusion_query_set: None,
@@ -254,24 +243,5 @@ fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {
     } else {
         (crate::warp::seam_map(mesh, resolution, SEAM_GUTTER_TEXELS), resolution)
     };
-    let img = GpuImage::new(
-        gpu,
-        "seam map",
-        size,
-        size,
-        wgpu::TextureFormat::Rgba32Float,
-        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    );
-    gpu.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &img.texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytemuck::cast_slice(&data),
-        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size), rows_per_image: Some(size) },
-        wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
-    );
-    img
+    GpuImage::upload(gpu, "seam map", size, size, wgpu::TextureFormat::Rgba32Float, 16, bytemuck::cast_slice(&data))
 }

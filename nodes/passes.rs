@@ -119,20 +119,7 @@ impl FullscreenPass {
                 entries: &entries,
             })
         })?;
-        let attachments: Vec<_> = targets
-            .iter()
-            .map(|t| {
-                Some(wgpu::RenderPassColorAttachment {
-                    view: &t.view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })
-            })
-            .collect();
+        let attachments: Vec<_> = targets.iter().map(|t| t.clear_attachment()).collect();
         let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name) });
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {

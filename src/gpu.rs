@@ -328,6 +328,52 @@ impl GpuImage {
         }
     }
 
+    /// A sampled texture filled with `bytes` (tightly packed rows of `bytes_per_texel`).
+    pub fn upload(
+        gpu: &GpuContext,
+        label: &str,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        bytes_per_texel: u32,
+        bytes: &[u8],
+    ) -> GpuImage {
+        let img = GpuImage::new(
+            gpu,
+            label,
+            width,
+            height,
+            format,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        gpu.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &img.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(bytes_per_texel * width),
+                rows_per_image: Some(height),
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        img
+    }
+
+    /// A colour attachment that clears to transparent black and stores.
+    pub fn clear_attachment(&self) -> Option<wgpu::RenderPassColorAttachment<'_>> {
+        Some(wgpu::RenderPassColorAttachment {
+            view: &self.view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+        })
+    }
+
     /// A render target that can also be sampled and read back.
     pub fn target(gpu: &GpuContext, label: &str, width: u32, height: u32, format: wgpu::TextureFormat) -> GpuImage {
         GpuImage::new(

@@ -52,30 +52,7 @@ impl Image8 {
     pub fn gpu(&self, gpu: &GpuContext) -> &GpuImage {
         self.gpu.get_or_init(|| {
             let format = if self.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm };
-            let img = GpuImage::new(
-                gpu,
-                "image",
-                self.width,
-                self.height,
-                format,
-                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            );
-            gpu.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &img.texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                &self.rgba,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * self.width),
-                    rows_per_image: Some(self.height),
-                },
-                wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
-            );
-            img
+            GpuImage::upload(gpu, "image", self.width, self.height, format, 4, &self.rgba)
         })
     }
 }
