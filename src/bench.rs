@@ -108,19 +108,23 @@ pub fn attachments(
     };
     let material = Arc::new(Material::default());
     let mut pipelines = None;
-    let mut rows = Vec::new();
-    let time_frames = |items: &[DrawItem], pipelines: &mut Option<_>| -> anyhow::Result<f64> {
-        render_gbuffer(gpu, pipelines, items, camera, size.0, size.1)?;
-        gpu.wait_idle();
+    // One untimed frame (pipelines, uploads), then the median of `frames` timed ones.
+    let median_ms = |work: &mut dyn FnMut() -> anyhow::Result<()>| -> anyhow::Result<f64> {
+        work()?;
         let mut samples = Vec::new();
         for _ in 0..frames.max(1) {
             let t = Instant::now();
-            render_gbuffer(gpu, pipelines, items, camera, size.0, size.1)?;
-            gpu.wait_idle();
+            work()?;
             samples.push(t.elapsed().as_secs_f64() * 1e3);
         }
         samples.sort_by(f64::total_cmp);
         Ok(samples[samples.len() / 2])
+    };
+    let mut rows = Vec::new();
+    let mut push = |path: &'static str, instances: usize, triangles: usize, ms: f64| {
+        let row = AttachRow { path, instances, triangles, ms_per_frame: ms, mtri_per_s: triangles as f64 / ms / 1e3 };
+        report(&row);
+        rows.push(row);
     };
     for &count in counts {
         let side = (count as f64).sqrt().ceil() as usize;
@@ -188,16 +192,12 @@ pub fn attachments(
                 detail: true,
                 attached: Some(Arc::new(draw)),
             };
-            let ms = time_frames(std::slice::from_ref(&item), &mut pipelines)?;
-            let row = AttachRow {
-                path: name,
-                instances: count,
-                triangles: tris,
-                ms_per_frame: ms,
-                mtri_per_s: tris as f64 / ms / 1e3,
-            };
-            report(&row);
-            rows.push(row);
+            let ms = median_ms(&mut || {
+                render_gbuffer(gpu, &mut pipelines, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                gpu.wait_idle();
+                Ok(())
+            })?;
+            push(name, count, tris, ms);
         }
         if cpu_path {
             let settings = WarpSettings { mode: WarpMode::Point, gravity: 0.0, min_weight: 0.5 };
@@ -205,9 +205,7 @@ pub fn attachments(
             let indices: Vec<u32> =
                 (0..count as u32).flat_map(|i| button.indices.iter().map(move |&k| k + i * nv as u32)).collect();
             let uvs: Vec<Vec2> = (0..count).flat_map(|_| button.uvs.iter().copied()).collect();
-            let mut samples = Vec::new();
-            for _ in 0..frames.max(1) + 1 {
-                let t = Instant::now();
+            let ms = median_ms(&mut || {
                 let warped = warp_all_cpu(&texels, &settings, &button, &point);
                 let normals: Vec<Vec3> = warped.iter().map(|w| w.normal).collect();
                 let positions = warped.iter().map(|w| w.position).collect();
@@ -228,20 +226,9 @@ pub fn attachments(
                 };
                 render_gbuffer(gpu, &mut pipelines, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.wait_idle();
-                samples.push(t.elapsed().as_secs_f64() * 1e3);
-            }
-            samples.remove(0);
-            samples.sort_by(f64::total_cmp);
-            let ms = samples[samples.len() / 2];
-            let row = AttachRow {
-                path: "cpu warp + upload",
-                instances: count,
-                triangles: tris,
-                ms_per_frame: ms,
-                mtri_per_s: tris as f64 / ms / 1e3,
-            };
-            report(&row);
-            rows.push(row);
+                Ok(())
+            })?;
+            push("cpu warp + upload", count, tris, ms);
         }
     }
     Ok(rows)

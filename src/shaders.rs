@@ -11,6 +11,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
     ("tonemap.wgsl", include_str!("../shaders/tonemap.wgsl")),
+    ("display.wgsl", include_str!("../shaders/display.wgsl")),
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),

@@ -11,122 +11,18 @@ use egui::{Color32, RichText, Sense, Ui, Vec2};
 use super::live::{CameraOverride, Live, camera_for, viewed_port};
 use super::state::EditorState;
 use crate::gpu::{GpuContext, GpuImage};
+use crate::nodes::passes::FullscreenPass;
 
 const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
-const DISPLAY_WGSL: &str = r#"
-struct Settings { mode: u32, pad0: u32, pad1: u32, pad2: u32 };
-@group(0) @binding(0) var<uniform> settings: Settings;
-@group(0) @binding(1) var src: texture_2d<f32>;
-
-@vertex
-fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
-    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
-}
-
-fn gamma(c: vec3<f32>) -> vec3<f32> {
-    let x = clamp(c, vec3<f32>(0.0), vec3<f32>(1.0));
-    let lo = x * 12.92;
-    let hi = 1.055 * pow(x, vec3<f32>(1.0 / 2.4)) - 0.055;
-    return select(hi, lo, x <= vec3<f32>(0.0031308));
-}
-
-@fragment
-fn fs_main(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
-    let t = textureLoad(src, vec2<i32>(p.xy), 0);
-    switch settings.mode {
-        // Linear colour (sRGB textures read as linear, HDR floats): encode for display.
-        case 0u: { return vec4<f32>(gamma(t.rgb), 1.0); }
-        // Already display-encoded.
-        case 1u: { return vec4<f32>(t.rgb, 1.0); }
-        // One channel of distances: map [0, inf) to [0, 1).
-        default: {
-            let v = max(t.r, 0.0);
-            return vec4<f32>(gamma(vec3<f32>(v / (v + 1.0))), 1.0);
-        }
-    }
-}
-"#;
-
+/// The display conversion: a full-screen pass over shaders/display.wgsl.
 struct Converter {
-    pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
-    uniform: wgpu::Buffer,
+    pass: FullscreenPass,
 }
 
 impl Converter {
     fn new(gpu: &GpuContext) -> anyhow::Result<Converter> {
-        let module = gpu.checked("viewport display shader", || {
-            gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("viewport display"),
-                source: wgpu::ShaderSource::Wgsl(DISPLAY_WGSL.into()),
-            })
-        })?;
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("viewport display"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("viewport display"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.checked("viewport display pipeline", || {
-            gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("viewport display"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    buffers: &[],
-                    compilation_options: Default::default(),
-                },
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: DISPLAY_FORMAT,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                    compilation_options: Default::default(),
-                }),
-                primitive: Default::default(),
-                depth_stencil: None,
-                multisample: Default::default(),
-                multiview_mask: None,
-                cache: None,
-            })
-        })?;
-        let uniform = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("viewport display settings"),
-            size: 16,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        Ok(Converter { pipeline, layout, uniform })
+        Ok(Converter { pass: FullscreenPass::new(gpu, "display.wgsl", 1, &[DISPLAY_FORMAT])? })
     }
 
     /// The display mode for a source format, or why it cannot be shown.
@@ -144,42 +40,7 @@ impl Converter {
     }
 
     fn run(&self, gpu: &GpuContext, src: &GpuImage, dst: &GpuImage, mode: u32) -> anyhow::Result<()> {
-        gpu.queue.write_buffer(&self.uniform, 0, bytemuck::cast_slice(&[mode, 0u32, 0, 0]));
-        let bind_group = gpu.checked("viewport display", || {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("viewport display"),
-                layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.uniform.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&src.view) },
-                ],
-            })
-        })?;
-        let mut enc =
-            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("viewport display") });
-        {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("viewport display"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &dst.view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.draw(0..3, 0..1);
-        }
-        gpu.queue.submit([enc.finish()]);
-        Ok(())
+        self.pass.run(gpu, bytemuck::cast_slice(&[mode, 0u32, 0, 0]), &[src], dst)
     }
 }
 
