@@ -7,7 +7,7 @@ use crate::gpu::GpuImage;
 use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 
-use super::passes::FullscreenPass;
+use crate::gpu::FullscreenPass;
 
 pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
@@ -65,7 +65,7 @@ impl Node for DirectLightNode {
         let dir =
             cx.vec3("sun_direction").try_normalize().ok_or_else(|| NodeError::msg("sun_direction must not be zero"))?;
         if self.pass.is_none() {
-            self.pass = Some(FullscreenPass::new(gpu, "direct_light.wgsl", 3, &[HDR_FORMAT])?);
+            self.pass = Some(FullscreenPass::new(gpu, "direct_light.wgsl", 3, &[gpu.formats().hdr])?);
         }
         let (w, h) = (g.width(), g.height());
         let view_proj = g.camera.projection(w as f32 / h as f32) * g.camera.view();
@@ -80,8 +80,8 @@ impl Node for DirectLightNode {
             background: rgb(cx.vec3("background")),
             size: [0.0, w as f32, h as f32, 0.0],
         };
-        let out = GpuImage::target(gpu, "direct light", w, h, HDR_FORMAT);
-        let pass = self.pass.as_ref().expect("created above");
+        let out = GpuImage::target(gpu, "direct light", w, h, gpu.formats().hdr);
+        let pass = self.pass.as_mut().expect("created above");
         pass.run(gpu, bytemuck::bytes_of(&uniform), &[&g.color, &g.normal, &g.depth], &out)?;
         cx.set("image", Value::Texture(Arc::new(out)));
         Ok(())

@@ -8,17 +8,17 @@ use std::sync::Arc;
 
 use anyhow::Context as _;
 use glam::Vec3;
-use wgpu::util::DeviceExt;
 
 use crate::eval::{EvalCx, Node, NodeError};
-use crate::gpu::GpuContext;
+use crate::gpu::readback::read_buffer_range;
+use crate::gpu::{Bind, BufferRing, ComputePass, GpuContext, read_buffer};
 use crate::mesh::{GpuMesh, Mesh};
 use crate::scene::DrawItem;
 use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
 
-use super::gbuffer::{InstanceResolver, storage_entry, uniform_entry, warp_bind_group, warp_compute_pipeline};
+use super::gbuffer::{InstanceResolver, warp_binds};
 
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
@@ -61,7 +61,7 @@ impl Node for ExportNode {
         if self.warper.is_none() {
             self.warper = Some(GpuWarper::new(gpu)?);
         }
-        let warper = self.warper.as_ref().expect("created above");
+        let warper = self.warper.as_mut().expect("created above");
         let mesh = Arc::new(flatten(gpu, warper, &items)?);
         if (wanted < 0 || wanted == frame)
             && let Some(dir) = &cx.settings.out_dir
@@ -78,27 +78,26 @@ impl Node for ExportNode {
 
 /// The warp as a compute pass.
 pub struct GpuWarper {
-    pipeline: wgpu::ComputePipeline,
-    io_layout: wgpu::BindGroupLayout,
-    warp_layout: wgpu::BindGroupLayout,
+    pass: ComputePass,
     resolver: InstanceResolver,
+    /// Per-chunk instances and counts, written each run.
+    instances: BufferRing,
+    /// The warped vertices, grown as needed.
+    output: Option<wgpu::Buffer>,
 }
 
 impl GpuWarper {
     pub fn new(gpu: &GpuContext) -> anyhow::Result<GpuWarper> {
-        let io = [
-            storage_entry(0, true),
-            storage_entry(1, true),
-            storage_entry(2, false),
-            uniform_entry(3, wgpu::ShaderStages::COMPUTE),
-        ];
-        let (pipeline, io_layout, warp_layout) = warp_compute_pipeline(gpu, "attach_export.wgsl", &io)?;
-        Ok(GpuWarper { pipeline, io_layout, warp_layout, resolver: InstanceResolver::new(gpu)? })
+        Ok(GpuWarper {
+            pass: ComputePass::new("attach_export.wgsl", "main"),
+            resolver: InstanceResolver::new(gpu)?,
+            instances: BufferRing::new("export instances", wgpu::BufferUsages::STORAGE),
+            output: None,
+        })
     }
 
     /// Warps every instance of `mesh`; the result is instance-major.
-    pub fn warp(&self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<Vec<WarpedVertex>> {
-        let gm: &GpuMesh = mesh.gpu(gpu);
+    pub fn warp(&mut self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<Vec<WarpedVertex>> {
         let nv = mesh.positions.len();
         let per_instance = (nv * 32) as u64;
         let max_binding = gpu.limits.max_storage_buffer_binding_size.min(gpu.limits.max_buffer_size);
@@ -106,7 +105,8 @@ impl GpuWarper {
         // The same instance data as rendering: point frames resolved once per instance.
         let resolved = draw.per_instance_frames();
         let instances: Vec<InstanceData> = if resolved {
-            let buffer = draw.draw_buffer(gpu, |raw| self.resolver.resolve(gpu, raw, draw))?;
+            let resolver = &mut self.resolver;
+            let buffer = draw.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, draw))?;
             // An empty draw uploads one placeholder instance; keep only the real ones.
             let mut all: Vec<InstanceData> = read_buffer(gpu, buffer)?;
             all.truncate(draw.instances.len());
@@ -114,134 +114,54 @@ impl GpuWarper {
         } else {
             draw.instances.to_vec()
         };
-        let warp_bg = warp_bind_group(gpu, &self.warp_layout, draw, resolved);
+        let uniform = draw.settings.uniform(resolved);
         let mut out = Vec::with_capacity(nv * instances.len());
         for insts in instances.chunks(chunk) {
-            out.extend(self.warp_chunk(gpu, gm, nv, insts, &warp_bg)?);
+            out.extend(self.warp_chunk(gpu, mesh, insts, &warp_binds(&draw.matrix, &uniform))?);
         }
         Ok(out)
     }
 
     fn warp_chunk(
-        &self,
+        &mut self,
         gpu: &GpuContext,
-        gm: &GpuMesh,
-        nv: usize,
+        mesh: &Mesh,
         insts: &[InstanceData],
-        warp_bg: &wgpu::BindGroup,
+        warp: &[Bind<'_>],
     ) -> anyhow::Result<Vec<WarpedVertex>> {
+        let gm: &GpuMesh = mesh.gpu(gpu);
+        let nv = mesh.positions.len();
         let total = nv * insts.len();
-        let instances = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("export instances"),
-            contents: bytemuck::cast_slice(insts),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
         let size = (total * 32) as u64;
-        let output = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("export output"),
-            size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("export read"),
-            size,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let counts = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("export counts"),
-            contents: bytemuck::cast_slice(&[nv as u32, insts.len() as u32, 0, 0]),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let io = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("warp export io"),
-            layout: &self.io_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: gm.vertices.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: instances.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: output.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: counts.as_entire_binding() },
-            ],
-        });
-        let groups = total.div_ceil(64) as u32;
-        let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("warp export") });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("warp export"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &io, &[]);
-            pass.set_bind_group(2, warp_bg, &[]);
-            // The shader folds y into the index in steps of 65535 workgroups.
-            pass.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
+        if self.output.as_ref().is_none_or(|b| b.size() < size) {
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            self.output = Some(gpu.create_buffer("export output", size.next_power_of_two(), usage));
         }
-        enc.copy_buffer_to_buffer(&output, 0, &read, 0, size);
-        gpu.queue.submit([enc.finish()]);
-        let slice = read.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        gpu.wait_idle();
-        rx.recv().context("read-back was cancelled")?.context("cannot map the export buffer")?;
-        let errors = gpu.take_errors();
-        if !errors.is_empty() {
-            anyhow::bail!("GPU error: {}", errors.join("; "));
-        }
-        let data = slice.get_mapped_range().map_err(|e| anyhow::anyhow!("{e}"))?;
-        let floats: &[f32] = bytemuck::cast_slice(&data);
-        let out = floats
+        let output = self.output.as_ref().expect("made above");
+        let instances = self.instances.write(gpu, bytemuck::cast_slice(insts)).clone();
+        let counts = [nv as u32, insts.len() as u32, 0, 0];
+        let io = [
+            Bind::Storage(&gm.vertices),
+            Bind::Storage(&instances),
+            Bind::StorageRw(output),
+            Bind::Uniform(bytemuck::cast_slice(&counts)),
+        ];
+        self.pass.dispatch(gpu, &[&io, &[], warp], ComputePass::groups_for(total, 64))?;
+        let floats: Vec<f32> = read_buffer_range(gpu, output, size)?;
+        Ok(floats
             .chunks_exact(8)
             .map(|v| WarpedVertex {
                 position: Vec3::new(v[0], v[1], v[2]),
                 normal: Vec3::new(v[4], v[5], v[6]),
                 valid: v[3] > 0.5,
             })
-            .collect();
-        drop(data);
-        read.unmap();
-        Ok(out)
+            .collect())
     }
-}
-
-/// Copies a GPU buffer of plain-old-data values to the CPU.
-fn read_buffer<T: bytemuck::Pod>(gpu: &GpuContext, buffer: &wgpu::Buffer) -> anyhow::Result<Vec<T>> {
-    let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("read back"),
-        size: buffer.size(),
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read back") });
-    enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
-    gpu.queue.submit([enc.finish()]);
-    map_read(gpu, &read)
-}
-
-fn map_read<T: bytemuck::Pod>(gpu: &GpuContext, read: &wgpu::Buffer) -> anyhow::Result<Vec<T>> {
-    let slice = read.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.wait_idle();
-    rx.recv().context("read-back was cancelled")?.context("cannot map a read-back buffer")?;
-    let errors = gpu.take_errors();
-    if !errors.is_empty() {
-        anyhow::bail!("GPU error: {}", errors.join("; "));
-    }
-    let data = slice.get_mapped_range().map_err(|e| anyhow::anyhow!("{e}"))?;
-    let out = bytemuck::cast_slice(&data).to_vec();
-    drop(data);
-    read.unmap();
-    Ok(out)
 }
 
 /// One mesh of everything the scene draws: plain items transformed by their model matrix,
 /// attached items warped per instance; triangles touching an outlier vertex are left out.
-pub fn flatten(gpu: &GpuContext, warper: &GpuWarper, items: &[DrawItem]) -> anyhow::Result<Mesh> {
+pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> anyhow::Result<Mesh> {
     let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for item in items {
         let m = &item.mesh;

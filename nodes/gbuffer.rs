@@ -3,19 +3,14 @@
 
 use std::sync::Arc;
 
-use wgpu::util::DeviceExt;
-
 use crate::eval::{EvalCx, Node, NodeError};
-use crate::gpu::{GpuContext, GpuImage};
+use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
+use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
 use crate::mesh::Vertex;
 use crate::scene::{DrawItem, GBuffer, Image8};
 use crate::spec::{Category, NodeSpec, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 use crate::warp::InstanceData;
-
-pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
 
 pub static GBUFFER_PASS: NodeSpec = NodeSpec {
     kind: "GBufferPass",
@@ -53,13 +48,12 @@ struct ObjectUniform {
     extra: [f32; 4],
 }
 
+/// What the G-buffer pass keeps between frames: per group and item, its uniform buffers and
+/// cached bind groups (the pipelines live in the context's cache).
 pub struct Pipelines {
-    plain: wgpu::RenderPipeline,
-    attached: wgpu::RenderPipeline,
-    frame_layout: wgpu::BindGroupLayout,
-    object_layout: wgpu::BindGroupLayout,
-    warp_layout: wgpu::BindGroupLayout,
-    sampler: wgpu::Sampler,
+    frame: Bindings,
+    objects: Vec<Bindings>,
+    warps: Vec<Bindings>,
     white: Image8,
     resolver: InstanceResolver,
 }
@@ -69,302 +63,95 @@ pub struct GBufferPassNode {
     pipelines: Option<Pipelines>,
 }
 
-pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
+/// Group 2 of shaders/warp.wgsl: the matrix texture's three columns, the warp settings
+/// (`uniform`, from `WarpSettings::uniform`) and the seam map.
+pub fn warp_binds<'a>(m: &'a crate::warp::MatrixTexture, uniform: &'a [f32; 4]) -> [Bind<'a>; 5] {
+    [
+        Bind::Texture(&m.col_u),
+        Bind::Texture(&m.col_n),
+        Bind::Texture(&m.col_v),
+        Bind::Uniform(bytemuck::cast_slice(uniform)),
+        Bind::Texture(&m.seams),
+    ]
 }
 
-pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages, filterable: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-/// Group 2 of shaders/warp.wgsl: the matrix texture's three columns and the warp settings.
+/// The layout of [`warp_binds`], as seen from `visibility`.
 pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayout {
-    gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("warp"),
-        entries: &[
-            texture_entry(0, visibility, false),
-            texture_entry(1, visibility, false),
-            texture_entry(2, visibility, false),
-            uniform_entry(3, visibility),
-            texture_entry(4, visibility, false),
-        ],
-    })
-}
-
-/// `resolved`: the instances carry per-instance frames (see `InstanceResolver`).
-pub fn warp_bind_group(
-    gpu: &GpuContext,
-    layout: &wgpu::BindGroupLayout,
-    draw: &crate::warp::AttachedDraw,
-    resolved: bool,
-) -> wgpu::BindGroup {
-    let uniform = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("warp settings"),
-        contents: bytemuck::cast_slice(&draw.settings.uniform(resolved)),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let m = &draw.matrix;
-    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("warp"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&m.col_u.view) },
-            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&m.col_n.view) },
-            wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&m.col_v.view) },
-            wgpu::BindGroupEntry { binding: 3, resource: uniform.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&m.seams.view) },
-        ],
-    })
+    gpu.bind_group_layout(&[
+        texture_entry(0, visibility, false),
+        texture_entry(1, visibility, false),
+        texture_entry(2, visibility, false),
+        uniform_entry(3, visibility),
+        texture_entry(4, visibility, false),
+    ])
 }
 
 /// Looks up point attachments' frames once per instance (shaders/attach_resolve.wgsl).
 pub struct InstanceResolver {
-    pipeline: wgpu::ComputePipeline,
-    io_layout: wgpu::BindGroupLayout,
-    warp_layout: wgpu::BindGroupLayout,
+    pass: ComputePass,
 }
 
-pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
+impl Default for InstanceResolver {
+    fn default() -> Self {
+        InstanceResolver { pass: ComputePass::new("attach_resolve.wgsl", "main") }
     }
 }
 
-/// A compute pipeline over the warp (shaders/warp.wgsl): its own buffers in group 0, the
-/// matrix texture and warp settings in group 2. Returns the pipeline and both layouts.
-pub fn warp_compute_pipeline(
-    gpu: &GpuContext,
-    shader: &'static str,
-    io_entries: &[wgpu::BindGroupLayoutEntry],
-) -> anyhow::Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout, wgpu::BindGroupLayout)> {
-    let module = gpu.shader(shader)?;
-    let io_layout = gpu
-        .device
-        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(shader), entries: io_entries });
-    let warp_layout = warp_layout(gpu, wgpu::ShaderStages::COMPUTE);
-    let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(shader),
-        bind_group_layouts: &[Some(&io_layout), None, Some(&warp_layout)],
-        immediate_size: 0,
-    });
-    let pipeline = gpu.checked(shader, || {
-        gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(shader),
-            layout: Some(&layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    })?;
-    Ok((pipeline, io_layout, warp_layout))
-}
-
 impl InstanceResolver {
-    pub fn new(gpu: &GpuContext) -> anyhow::Result<Self> {
-        let (pipeline, io_layout, warp_layout) =
-            warp_compute_pipeline(gpu, "attach_resolve.wgsl", &[storage_entry(0, true), storage_entry(1, false)])?;
-        Ok(InstanceResolver { pipeline, io_layout, warp_layout })
+    pub fn new(_gpu: &GpuContext) -> anyhow::Result<Self> {
+        Ok(InstanceResolver::default())
     }
 
     /// A new instance buffer with each instance's frame filled in.
     pub fn resolve(
-        &self,
+        &mut self,
         gpu: &GpuContext,
         raw: &wgpu::Buffer,
         draw: &crate::warp::AttachedDraw,
     ) -> anyhow::Result<wgpu::Buffer> {
-        let out = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("resolved instances"),
-            size: raw.size(),
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let io = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("instance resolve io"),
-            layout: &self.io_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: raw.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: out.as_entire_binding() },
-            ],
-        });
-        let warp = warp_bind_group(gpu, &self.warp_layout, draw, false);
-        let groups = draw.instances.len().div_ceil(64).max(1) as u32;
-        let mut enc =
-            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("instance resolve") });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("instance resolve"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &io, &[]);
-            pass.set_bind_group(2, &warp, &[]);
-            pass.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
-        }
-        gpu.queue.submit([enc.finish()]);
+        let out = gpu.create_buffer(
+            "resolved instances",
+            raw.size(),
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let uniform = draw.settings.uniform(false);
+        let warp = warp_binds(&draw.matrix, &uniform);
+        let io = [Bind::Storage(raw), Bind::StorageRw(&out)];
+        self.pass.dispatch(gpu, &[&io, &[], &warp], ComputePass::groups_for(draw.instances.len(), 64))?;
         Ok(out)
     }
 }
 
 impl Pipelines {
     fn new(gpu: &GpuContext) -> anyhow::Result<Pipelines> {
-        let device = &gpu.device;
-        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer frame"),
-            entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX)],
-        });
-        let object_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer object"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                texture_entry(1, wgpu::ShaderStages::FRAGMENT, true),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                texture_entry(3, wgpu::ShaderStages::FRAGMENT, true),
-            ],
-        });
-        let warp_layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
-        let plain = Self::pipeline(
-            gpu,
-            "gbuffer.wgsl",
-            &[Some(&frame_layout), Some(&object_layout)],
-            &[Some(Vertex::layout())],
-        )?;
-        let attached = Self::pipeline(
-            gpu,
-            "attach.wgsl",
-            &[Some(&frame_layout), Some(&object_layout), Some(&warp_layout)],
-            &[Some(Vertex::layout()), Some(InstanceData::layout())],
-        )?;
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("base map"),
-            address_mode_u: wgpu::AddressMode::Repeat,
-            address_mode_v: wgpu::AddressMode::Repeat,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
         Ok(Pipelines {
-            plain,
-            attached,
-            frame_layout,
-            object_layout,
-            warp_layout,
-            sampler,
+            frame: Bindings::new(wgpu::ShaderStages::VERTEX),
+            objects: Vec::new(),
+            warps: Vec::new(),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::new(gpu)?,
         })
     }
+}
 
-    fn pipeline(
-        gpu: &GpuContext,
-        shader: &'static str,
-        groups: &[Option<&wgpu::BindGroupLayout>],
-        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-    ) -> anyhow::Result<wgpu::RenderPipeline> {
-        let module = gpu.shader(shader)?;
-        let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(shader),
-            bind_group_layouts: groups,
-            immediate_size: 0,
-        });
-        let target = |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
-        gpu.checked(shader, || {
-            gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(shader),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    buffers,
-                    compilation_options: Default::default(),
-                },
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    targets: &[target(COLOR_FORMAT), target(NORMAL_FORMAT), target(DEPTH_FORMAT)],
-                    compilation_options: Default::default(),
-                }),
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: wgpu::TextureFormat::Depth32Float,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                multiview_mask: None,
-                cache: None,
-            })
-        })
-    }
-
-    fn object_bind_group(&self, gpu: &GpuContext, item: &DrawItem) -> wgpu::BindGroup {
-        let m = &item.material;
-        let uniform = ObjectUniform {
-            model: item.model.to_cols_array_2d(),
-            normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
-            base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
-            params: [
-                m.uv_scale,
-                f32::from(u8::from(m.texture.is_some())),
-                f32::from(u8::from(item.detail)),
-                f32::from(u8::from(m.gloss_map.is_some())),
-            ],
-            extra: [m.gloss_min, 0.0, 0.0, 0.0],
-        };
-        let buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("gbuffer object"),
-            contents: bytemuck::bytes_of(&uniform),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
-        let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
-        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer object"),
-            layout: &self.object_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&tex.view) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&gloss.view) },
-            ],
-        })
+fn object_uniform(item: &DrawItem) -> ObjectUniform {
+    let m = &item.material;
+    ObjectUniform {
+        model: item.model.to_cols_array_2d(),
+        normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
+        base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
+        params: [
+            m.uv_scale,
+            f32::from(u8::from(m.texture.is_some())),
+            f32::from(u8::from(item.detail)),
+            f32::from(u8::from(m.gloss_map.is_some())),
+        ],
+        extra: [m.gloss_min, 0.0, 0.0, 0.0],
     }
 }
 
-/// Renders `items` into a new G-buffer of `w` x `h`. Shared by the node and the benchmarks.
+/// Renders `items` into a new G-buffer of `w` x `h` (pooled targets; recorded, submitted
+/// with the frame). Shared by the node and the benchmarks.
 pub fn render_gbuffer(
     gpu: &GpuContext,
     pipelines: &mut Option<Pipelines>,
@@ -376,41 +163,79 @@ pub fn render_gbuffer(
     if pipelines.is_none() {
         *pipelines = Some(Pipelines::new(gpu)?);
     }
-    let p = pipelines.as_ref().expect("created above");
-    let color = GpuImage::target(gpu, "gbuffer color", w, h, COLOR_FORMAT);
-    let normal = GpuImage::target(gpu, "gbuffer normal", w, h, NORMAL_FORMAT);
-    let depth = GpuImage::target(gpu, "gbuffer depth", w, h, DEPTH_FORMAT);
-    let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, wgpu::TextureFormat::Depth32Float);
+    let p = pipelines.as_mut().expect("created above");
+    let formats = *gpu.formats();
+    let color = GpuImage::target(gpu, "gbuffer color", w, h, formats.hdr);
+    let normal = GpuImage::target(gpu, "gbuffer normal", w, h, formats.hdr);
+    let depth = GpuImage::target(gpu, "gbuffer depth", w, h, formats.linear_depth);
+    let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, formats.depth);
 
     let view = camera.view();
     let view_proj = camera.projection(w as f32 / h as f32) * view;
-    let frame_buf = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("gbuffer frame"),
-        contents: bytemuck::bytes_of(&FrameUniform {
-            view_proj: view_proj.to_cols_array_2d(),
-            view: view.to_cols_array_2d(),
-        }),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let frame_bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("gbuffer frame"),
-        layout: &p.frame_layout,
-        entries: &[wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() }],
-    });
-    let object_bgs: Vec<wgpu::BindGroup> = items.iter().map(|item| p.object_bind_group(gpu, item)).collect();
-    let mut warp_bgs: Vec<Option<(wgpu::BindGroup, &wgpu::Buffer)>> = Vec::with_capacity(items.len());
-    for item in items {
-        warp_bgs.push(match &item.attached {
-            Some(a) => {
-                let buffer = a.draw_buffer(gpu, |raw| p.resolver.resolve(gpu, raw, a))?;
-                Some((warp_bind_group(gpu, &p.warp_layout, a, a.per_instance_frames()), buffer))
+    let frame_uniform = FrameUniform { view_proj: view_proj.to_cols_array_2d(), view: view.to_cols_array_2d() };
+    let frame_binds = [Bind::Uniform(bytemuck::bytes_of(&frame_uniform))];
+    let frame_layout = p.frame.layout(gpu, &frame_binds);
+    let frame_bg = p.frame.bind_group(gpu, &frame_layout, &frame_binds);
+
+    let sampler = SamplerKind::LinearRepeat;
+    let object_shape = {
+        let white = p.white.gpu(gpu);
+        [Bind::Uniform(&[]), Bind::Texture(white), Bind::Sampler(sampler), Bind::Texture(white)]
+    };
+    let objects = Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT);
+    let object_layout = objects.layout(gpu, &object_shape);
+    // The attached pipeline only where something is attached: the node then depends on attach.wgsl.
+    let warp_layout = items.iter().any(|i| i.attached.is_some()).then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
+    let targets = [formats.hdr, formats.hdr, formats.linear_depth];
+    let depth_test = Some((formats.depth, wgpu::CompareFunction::Less));
+    let vertex = [Some(Vertex::layout())];
+    let plain = gpu.render_pipeline(&RenderPipelineDesc {
+        depth: depth_test,
+        ..RenderPipelineDesc::new("gbuffer.wgsl", &[Some(&frame_layout), Some(&object_layout)], &vertex, &targets)
+    })?;
+    let attached = match &warp_layout {
+        Some(warp_layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+            depth: depth_test,
+            ..RenderPipelineDesc::new(
+                "attach.wgsl",
+                &[Some(&frame_layout), Some(&object_layout), Some(warp_layout)],
+                &[Some(Vertex::layout()), Some(InstanceData::layout())],
+                &targets,
+            )
+        })?),
+        None => None,
+    };
+
+    while p.objects.len() < items.len() {
+        p.objects.push(Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT));
+        p.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
+    }
+    let mut object_bgs = Vec::with_capacity(items.len());
+    let mut warp_bgs: Vec<Option<(wgpu::BindGroup, wgpu::Buffer)>> = Vec::with_capacity(items.len());
+    for (i, item) in items.iter().enumerate() {
+        let m = &item.material;
+        let uniform = object_uniform(item);
+        let tex = m.texture.as_deref().unwrap_or(&p.white).gpu(gpu);
+        let gloss = m.gloss_map.as_deref().unwrap_or(&p.white).gpu(gpu);
+        let binds = [
+            Bind::Uniform(bytemuck::bytes_of(&uniform)),
+            Bind::Texture(tex),
+            Bind::Sampler(sampler),
+            Bind::Texture(gloss),
+        ];
+        object_bgs.push(p.objects[i].bind_group(gpu, &object_layout, &binds));
+        warp_bgs.push(match (&item.attached, &warp_layout) {
+            (Some(a), Some(layout)) => {
+                let resolver = &mut p.resolver;
+                let buffer = a.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, a))?.clone();
+                let uniform = a.settings.uniform(a.per_instance_frames());
+                Some((p.warps[i].bind_group(gpu, layout, &warp_binds(&a.matrix, &uniform)), buffer))
             }
-            None => None,
+            _ => None,
         });
     }
 
-    let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gbuffer") });
-    {
+    gpu.record(|enc| {
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer"),
             color_attachments: &[color.clear_attachment(), normal.clear_attachment(), depth.clear_attachment()],
@@ -429,28 +254,23 @@ pub fn render_gbuffer(
             pass.set_bind_group(1, bg, &[]);
             pass.set_vertex_buffer(0, mesh.vertices.slice(..));
             pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-            match (&item.attached, warp_bg) {
-                (Some(a), Some((wbg, buffer))) => {
+            match (&item.attached, warp_bg, &attached) {
+                (Some(a), Some((wbg, buffer)), Some(pipeline)) => {
                     if a.instances.is_empty() {
                         continue;
                     }
-                    pass.set_pipeline(&p.attached);
+                    pass.set_pipeline(pipeline);
                     pass.set_bind_group(2, wbg, &[]);
                     pass.set_vertex_buffer(1, buffer.slice(..));
                     pass.draw_indexed(0..mesh.index_count, 0, 0..a.instances.len() as u32);
                 }
                 _ => {
-                    pass.set_pipeline(&p.plain);
+                    pass.set_pipeline(&plain);
                     pass.draw_indexed(0..mesh.index_count, 0, 0..1);
                 }
             }
         }
-    }
-    gpu.queue.submit([enc.finish()]);
-    let errors = gpu.take_errors();
-    if !errors.is_empty() {
-        anyhow::bail!("GPU error: {}", errors.join("; "));
-    }
+    });
     Ok(GBuffer { color, normal, depth, depth_buffer, camera })
 }
 

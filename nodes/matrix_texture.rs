@@ -3,13 +3,11 @@
 use std::sync::Arc;
 
 use crate::eval::{EvalCx, Node, NodeError};
-use crate::gpu::{GpuContext, GpuImage, read_back};
+use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, read_back};
 use crate::mesh::{Mesh, Vertex};
 use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
-
-use super::passes::FullscreenPass;
 
 pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
     kind: "MatrixTexture",
@@ -48,8 +46,7 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
 
 #[derive(Default)]
 pub struct MatrixTextureNode {
-    pipeline: Option<(wgpu::RenderPipeline, wgpu::TextureFormat)>,
-    filter: Option<(FullscreenPass, wgpu::TextureFormat)>,
+    filter: Option<FullscreenPass>,
     /// The seam map depends only on UVs, seams and resolution, not on positions: kept across frames.
     seam_map: Option<(u64, GpuImage)>,
 }
@@ -80,44 +77,8 @@ pub fn min_resolution(mesh: &Mesh) -> f64 {
 }
 
 impl MatrixTextureNode {
-    fn pipeline(&mut self, gpu: &GpuContext, format: wgpu::TextureFormat) -> anyhow::Result<&wgpu::RenderPipeline> {
-        if self.pipeline.as_ref().is_none_or(|(_, f)| *f != format) {
-            let module = gpu.shader("matrix_texture.wgsl")?;
-            let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("matrix texture"),
-                bind_group_layouts: &[],
-                immediate_size: 0,
-            });
-            let target = Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
-            let pipeline = gpu.checked("matrix_texture.wgsl", || {
-                gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some("matrix texture"),
-                    layout: Some(&layout),
-                    vertex: wgpu::VertexState {
-                        module: &module,
-                        entry_point: Some("vs_main"),
-                        buffers: &[Some(Vertex::layout())],
-                        compilation_options: Default::default(),
-                    },
-                    fragment: Some(wgpu::FragmentState {
-                        module: &module,
-                        entry_point: Some("fs_main"),
-                        targets: &[target.clone(), target.clone(), target],
-                        compilation_options: Default::default(),
-                    }),
-                    primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                    depth_stencil: None,
-                    multisample: Default::default(),
-                    multiview_mask: None,
-                    cache: None,
-                })
-            })?;
-            self.pipeline = Some((pipeline, format));
-        }
-        Ok(&self.pipeline.as_ref().expect("created above").0)
-    }
-
-    /// Renders the matrix texture of `mesh`; used by the node and by benchmarks.
+    /// Renders the matrix texture of `mesh` (pooled targets, recorded into the frame); used
+    /// by the node and by benchmarks.
     pub fn render(
         &mut self,
         gpu: &GpuContext,
@@ -129,10 +90,14 @@ impl MatrixTextureNode {
         let make = |name| GpuImage::target(gpu, name, resolution, resolution, format);
         let (col_u, col_n, col_v) = (make("matrix t_u"), make("matrix n"), make("matrix t_v"));
         let gpu_mesh = mesh.gpu(gpu);
-        let pipeline = self.pipeline(gpu, format)?;
-        let mut enc =
-            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("matrix texture") });
-        {
+        let formats = [format; 3];
+        let pipeline = gpu.render_pipeline(&RenderPipelineDesc::new(
+            "matrix_texture.wgsl",
+            &[],
+            &[Some(Vertex::layout())],
+            &formats,
+        ))?;
+        gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("matrix texture"),
                 color_attachments: &[col_u.clear_attachment(), col_n.clear_attachment(), col_v.clear_attachment()],
@@ -141,12 +106,11 @@ impl MatrixTextureNode {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(pipeline);
+            pass.set_pipeline(&pipeline);
             pass.set_vertex_buffer(0, gpu_mesh.vertices.slice(..));
             pass.set_index_buffer(gpu_mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
-        }
-        gpu.queue.submit([enc.finish()]);
+        });
         let key = topology_key(mesh, resolution);
         if self.seam_map.as_ref().is_none_or(|(k, _)| *k != key) {
             self.seam_map = Some((key, upload_seam_map(gpu, mesh, resolution)));
@@ -154,10 +118,10 @@ impl MatrixTextureNode {
         let seams = self.seam_map.as_ref().expect("set above").1.share();
         let mut m = MatrixTexture { col_u, col_n, col_v, seams, resolution };
         if filter_radius > 0 {
-            if self.filter.as_ref().is_none_or(|(_, f)| *f != format) {
-                self.filter = Some((FullscreenPass::new(gpu, "matrix_filter.wgsl", 3, &[format; 3])?, format));
+            if self.filter.is_none() {
+                self.filter = Some(FullscreenPass::new(gpu, "matrix_filter.wgsl", 3, &formats)?);
             }
-            let (pass, _) = self.filter.as_ref().expect("created above");
+            let pass = self.filter.as_mut().expect("created above");
             for dir in [[1.0f32, 0.0], [0.0, 1.0]] {
                 let out = MatrixTexture {
                     seams: m.seams.share(),
@@ -175,10 +139,6 @@ impl MatrixTextureNode {
                 )?;
                 m = out;
             }
-        }
-        let errors = gpu.take_errors();
-        if !errors.is_empty() {
-            anyhow::bail!("GPU error: {}", errors.join("; "));
         }
         Ok(m)
     }
@@ -207,11 +167,7 @@ impl Node for MatrixTextureNode {
         if mesh.uvs.iter().any(|uv| uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0) {
             cx.warn("some UVs lie outside [0,1]^2; those parts of the surface are not in the matrix texture");
         }
-        let format = if cx.str("precision") == "f16" {
-            wgpu::TextureFormat::Rgba16Float
-        } else {
-            wgpu::TextureFormat::Rgba32Float
-        };
+        let format = if cx.str("precision") == "f16" { gpu.formats().matrix_f16 } else { gpu.formats().matrix_f32 };
         let m = self.render(gpu, &mesh, resolution, format, cx.int("filter_radius") as u32)?;
         cx.set("normal", Value::Texture(Arc::new(m.col_n.share())));
         cx.set("matrix", Value::MatrixTexture(Arc::new(m)));

@@ -13,7 +13,6 @@ pub mod live_link;
 pub mod matrix_texture;
 pub mod mesh_sequence;
 pub mod output;
-pub mod passes;
 pub mod placements;
 pub mod scene;
 pub mod tonemap;

@@ -7,7 +7,7 @@ use crate::gpu::GpuImage;
 use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
 use crate::value::Value;
 
-use super::passes::FullscreenPass;
+use crate::gpu::FullscreenPass;
 
 pub const LDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const OPERATORS: &[&str] = &["none", "reinhard", "aces", "filmic"];
@@ -48,7 +48,7 @@ impl Node for TonemapNode {
         let op = OPERATORS.iter().position(|o| *o == cx.str("operator")).unwrap_or(2);
         let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];
         let out = GpuImage::target(gpu, "tonemapped", input.width, input.height, LDR_FORMAT);
-        self.pass.as_ref().expect("created above").run(gpu, bytemuck::bytes_of(&settings), &[&input], &out)?;
+        self.pass.as_mut().expect("created above").run(gpu, bytemuck::bytes_of(&settings), &[&input], &out)?;
         cx.set("image", Value::Texture(Arc::new(out)));
         Ok(())
     }

@@ -263,6 +263,20 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             for a in adapters {
                 println!("{a}");
             }
+            // What the nodes render into on the adapter `render` would pick.
+            if let Ok(gpu) = GpuContext::headless(backend) {
+                let f = gpu.formats();
+                println!(
+                    "formats on {}: linear depth {:?}, HDR {:?}, matrix {:?}/{:?}, depth {:?}, float32 filterable: {}",
+                    gpu.adapter_name(),
+                    f.linear_depth,
+                    f.hdr,
+                    f.matrix_f32,
+                    f.matrix_f16,
+                    f.depth,
+                    f.float32_filterable
+                );
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Attachments { counts, frames, size, no_cpu, json, backend } } => {

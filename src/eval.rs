@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, ShaderError};
 use crate::graph::Graph;
 use crate::resources::{Resources, SlotRef};
 use crate::spec::{self, NodeSpec, ParamValue};
@@ -234,6 +234,8 @@ struct NodeState {
     touched: Vec<(SlotRef, u64)>,
     signals: Vec<(ChangeSignal, u64)>,
     warnings: Vec<String>,
+    /// Shaders of its last run that failed to compile (it ran on the last good pipelines, or failed).
+    shader_errors: Vec<ShaderError>,
     last_cpu: Duration,
     ran_last_frame: bool,
     runs: u64,
@@ -250,6 +252,11 @@ pub struct Evaluator {
     sources: Vec<Vec<Option<(usize, usize)>>>,
     /// Nodes that feed a root, sources first.
     order: Vec<usize>,
+    /// Per node: the nodes its outputs feed, and whether it is in `order`.
+    consumers: Vec<Vec<usize>>,
+    planned: Vec<bool>,
+    /// Per node: whether its outputs were released this frame (see `release_outputs`).
+    released: Vec<bool>,
     roots: Vec<usize>,
     state: Vec<NodeState>,
     scratch_inputs: Vec<Option<Value>>,
@@ -276,6 +283,9 @@ pub struct NodeReport<'a> {
     pub cpu: Duration,
     pub status: &'a NodeStatus,
     pub warnings: &'a [String],
+    /// Shader files that failed to compile when it last ran: with status `Ok` it rendered
+    /// with the last good pipeline.
+    pub shader_errors: &'a [ShaderError],
     pub runs: u64,
 }
 
@@ -296,6 +306,9 @@ impl Evaluator {
             param_hash: Vec::new(),
             sources: Vec::new(),
             order: Vec::new(),
+            consumers: Vec::new(),
+            planned: Vec::new(),
+            released: Vec::new(),
             roots: Vec::new(),
             state: Vec::new(),
             scratch_inputs: Vec::new(),
@@ -370,6 +383,7 @@ impl Evaluator {
                     touched: Vec::new(),
                     signals: Vec::new(),
                     warnings: Vec::new(),
+                    shader_errors: Vec::new(),
                     last_cpu: Duration::ZERO,
                     ran_last_frame: false,
                     runs: 0,
@@ -422,7 +436,35 @@ impl Evaluator {
                 }
             }
         }
+        self.consumers = vec![Vec::new(); self.ids.len()];
+        for (to, srcs) in self.sources.iter().enumerate() {
+            for (from, _) in srcs.iter().flatten() {
+                if !self.consumers[*from].contains(&to) {
+                    self.consumers[*from].push(to);
+                }
+            }
+        }
+        self.planned = vec![false; self.ids.len()];
+        for &n in &self.order {
+            self.planned[n] = true;
+        }
+        self.released = vec![false; self.ids.len()];
         Ok(())
+    }
+
+    /// Drops the outputs of `n`, which is about to run, and of the planned nodes downstream of
+    /// it: each of them re-runs later in this frame (its input changes) or is blocked, so their
+    /// values are stale. Pooled textures they held can then serve the runs in between, and a
+    /// steady animation needs one set of textures instead of one per frame in flight.
+    fn release_outputs(&mut self, n: usize) {
+        let mut stack = vec![n];
+        while let Some(i) = stack.pop() {
+            if std::mem::replace(&mut self.released[i], true) {
+                continue;
+            }
+            self.state[i].outputs.iter_mut().for_each(|o| *o = None);
+            stack.extend(self.consumers[i].iter().copied().filter(|&c| self.planned[c]));
+        }
     }
 
     /// Evaluates one frame. Nodes whose fingerprint is unchanged are skipped.
@@ -442,6 +484,7 @@ impl Evaluator {
             );
             std::hash::Hasher::finish(&h)
         };
+        self.released.iter_mut().for_each(|r| *r = false);
         for oi in 0..self.order.len() {
             let n = self.order[oi];
             let blocked = self.sources[n]
@@ -476,6 +519,7 @@ impl Evaluator {
                 }
                 continue;
             }
+            self.release_outputs(n);
             self.run_node(n, time, gpu, resources, settings);
             // Hash again: the run may have started or stopped reading the time, or touched resources.
             // Versions as the run saw them: a load or signal that changed during the run re-runs it.
@@ -486,6 +530,10 @@ impl Evaluator {
                 NodeStatus::Failed(_) => summary.failed += 1,
                 _ => {}
             }
+        }
+        // One submit for the whole frame's GPU work.
+        if let Some(gpu) = gpu {
+            gpu.flush();
         }
         summary
     }
@@ -532,9 +580,8 @@ impl Evaluator {
         state.touched.clear();
         state.signals.clear();
         state.warnings.clear();
-        if let Some(gpu) = gpu {
-            gpu.set_current_node(Some(&self.ids[n]));
-        }
+        // The node's GPU work runs in its own validation error scope.
+        let scope = gpu.map(|g| g.begin_node(&self.ids[n]));
         let start = Instant::now();
         let (result, used_time) = {
             let mut cx = EvalCx {
@@ -564,8 +611,20 @@ impl Evaluator {
             (r, cx.used_time)
         };
         state.last_cpu = start.elapsed();
-        if let Some(gpu) = gpu {
-            gpu.set_current_node(None);
+        let mut result = result;
+        state.shader_errors.clear();
+        if let Some(done) = scope.map(|s| s.end()) {
+            // A changed shader file it used re-runs it, like a reloaded resource.
+            state.signals.extend(done.shaders);
+            state.shader_errors = done.shader_errors;
+            if let Some(e) = done.error {
+                let e = format!("GPU validation error: {e}");
+                result = match result {
+                    Ok(()) => Err(NodeError::Failed(e)),
+                    Err(NodeError::Failed(m)) => Err(NodeError::Failed(format!("{m}; {e}"))),
+                    Err(pending) => Err(pending),
+                };
+            }
         }
         state.ran_last_frame = true;
         state.runs += 1;
@@ -624,6 +683,7 @@ impl Evaluator {
             cpu: s.last_cpu,
             status: &s.status,
             warnings: &s.warnings,
+            shader_errors: &s.shader_errors,
             runs: s.runs,
         }
     }

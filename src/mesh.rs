@@ -248,7 +248,6 @@ impl Mesh {
     }
 
     pub fn gpu(&self, gpu: &crate::gpu::GpuContext) -> &GpuMesh {
-        use wgpu::util::DeviceExt;
         self.gpu.get_or_init(|| {
             let verts: Vec<Vertex> = (0..self.positions.len())
                 .map(|i| Vertex {
@@ -259,16 +258,16 @@ impl Mesh {
                     tangent_v: self.tangents_v[i].to_array(),
                 })
                 .collect();
-            let vertices = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("mesh vertices"),
-                contents: bytemuck::cast_slice(&verts),
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
-            });
-            let indices = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("mesh indices"),
-                contents: bytemuck::cast_slice(&self.indices),
-                usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
-            });
+            let vertices = gpu.create_buffer_init(
+                "mesh vertices",
+                bytemuck::cast_slice(&verts),
+                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
+            );
+            let indices = gpu.create_buffer_init(
+                "mesh indices",
+                bytemuck::cast_slice(&self.indices),
+                wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
+            );
             GpuMesh { vertices, indices, index_count: self.indices.len() as u32 }
         })
     }

@@ -44,6 +44,9 @@ pub struct FrameStats {
     pub frame: i64,
     pub wall_ms: f64,
     pub nodes: BTreeMap<String, NodeTiming>,
+    /// GPU textures and buffers created during the frame (evaluation and writing outputs);
+    /// a steady animation creates none after its first frame.
+    pub gpu_created: gpu::Created,
 }
 
 #[derive(Serialize, Debug)]
@@ -119,6 +122,7 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     for frame in first..=last {
         let time = FrameTime { frame, fps: opts.fps };
         let start = Instant::now();
+        let created_before = gpu.created();
         let mut nodes = BTreeMap::new();
         // Batch mode waits for loads: evaluate, wait for resources, repeat until settled.
         loop {
@@ -159,7 +163,8 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
                 b.abandon();
             }
             // Keep the statistics of the frames that worked: CI wants them most when a frame fails.
-            stats.frames.push(FrameStats { frame, wall_ms, nodes });
+            let gpu_created = gpu.created().since(created_before);
+            stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
             let _ = write_stats(&opts.out_dir, &stats);
             bail!("frame {frame}: {}", failures.join("\n  "));
         }
@@ -193,7 +198,8 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
             write_image(gpu, img, &opts.out_dir.join(&name), exr)?;
             stats.files.push(name);
         }
-        stats.frames.push(FrameStats { frame, wall_ms, nodes });
+        let gpu_created = gpu.created().since(created_before);
+        stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
         if let Some(b) = &bar {
             b.inc(1);
         }

@@ -27,11 +27,14 @@ pub fn names() -> impl Iterator<Item = &'static str> {
 /// The source of `shaders/NAME` with includes expanded: read from `WERKSTATT_SHADER_DIR` when
 /// set (live editing), otherwise the copy embedded at build time.
 pub fn source(name: &str) -> anyhow::Result<String> {
-    expand(name, 0)
+    let dir = crate::gpu::shader_dir();
+    Ok(expand(name, &mut |n| read(dir.as_deref(), n))?.0)
 }
 
-fn raw(name: &str) -> anyhow::Result<String> {
-    if let Some(dir) = crate::gpu::shader_dir() {
+/// The text of one file, `shaders/NAME`, without expanding includes: from `dir` if given,
+/// else the embedded copy.
+pub fn read(dir: Option<&std::path::Path>, name: &str) -> anyhow::Result<String> {
+    if let Some(dir) = dir {
         let path = dir.join(name);
         return std::fs::read_to_string(&path).with_context(|| format!("cannot read shader {}", path.display()));
     }
@@ -42,17 +45,38 @@ fn raw(name: &str) -> anyhow::Result<String> {
         .with_context(|| format!("no shader named {name} is embedded"))
 }
 
-fn expand(name: &str, depth: usize) -> anyhow::Result<String> {
+/// `name` with its includes expanded, reading files with `read`; also returns every file
+/// the result was made from (`name` first), so a change to any of them can be noticed.
+pub fn expand(
+    name: &str,
+    read: &mut dyn FnMut(&str) -> anyhow::Result<String>,
+) -> anyhow::Result<(String, Vec<String>)> {
+    let mut files = Vec::new();
+    let text = expand_into(name, 0, read, &mut files)?;
+    Ok((text, files))
+}
+
+fn expand_into(
+    name: &str,
+    depth: usize,
+    read: &mut dyn FnMut(&str) -> anyhow::Result<String>,
+    files: &mut Vec<String>,
+) -> anyhow::Result<String> {
     if depth > 8 {
         bail!("shader includes nest too deeply at {name} (a cycle?)");
     }
-    let text = raw(name)?;
+    if !files.iter().any(|f| f == name) {
+        files.push(name.to_string());
+    }
+    let text = read(name)?;
     let mut out = String::with_capacity(text.len());
     for line in text.lines() {
         match line.trim().strip_prefix("// #include ") {
             Some(inc) => {
                 let inc = inc.trim().trim_matches('"');
-                out.push_str(&expand(inc, depth + 1).with_context(|| format!("included from {name}"))?);
+                out.push_str(
+                    &expand_into(inc, depth + 1, read, files).with_context(|| format!("included from {name}"))?,
+                );
             }
             None => out.push_str(line),
         }

@@ -382,18 +382,17 @@ impl AttachedDraw {
     }
 
     pub fn instance_buffer(&self, gpu: &crate::gpu::GpuContext) -> &wgpu::Buffer {
-        use wgpu::util::DeviceExt;
         self.instance_buffer.get_or_init(|| {
             let bytes: &[u8] = if self.instances.is_empty() {
                 &[0u8; std::mem::size_of::<InstanceData>()]
             } else {
                 bytemuck::cast_slice(&self.instances)
             };
-            gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("attachment instances"),
-                contents: bytes,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
-            })
+            gpu.create_buffer_init(
+                "attachment instances",
+                bytes,
+                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            )
         })
     }
 }

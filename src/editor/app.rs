@@ -105,7 +105,7 @@ impl EditorApp {
         let render_state = cc.wgpu_render_state.clone();
         let gpu = render_state
             .as_ref()
-            .map(|rs| Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info())));
+            .map(|rs| Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), &rs.adapter)));
         let mut app = EditorApp {
             state: EditorState::default(),
             live: Live::new(PathBuf::from("."), options.watch_files),

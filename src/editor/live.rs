@@ -353,8 +353,12 @@ impl Live {
         if let (Some(gpu), Some(w)) = (gpu, &mut self.shaders)
             && w.changed()
         {
-            self.reload_shaders(gpu);
+            gpu.reload_shaders();
         }
+        self.run(gpu)
+    }
+
+    fn run(&mut self, gpu: Option<&GpuContext>) -> FrameSummary {
         let Some(ev) = &mut self.evaluator else { return FrameSummary::default() };
         let start = Instant::now();
         let summary = ev.evaluate(FrameTime { frame: self.frame, fps: self.fps }, gpu, &self.resources, &self.settings);
@@ -364,31 +368,21 @@ impl Live {
                 self.last_cpu.insert(r.id.to_string(), r.cpu);
             }
         }
+        let errors: Vec<String> =
+            ev.reports().flat_map(|r| r.shader_errors.iter().map(move |e| format!("{}: {e}", r.id))).collect();
+        self.shader_error = (!errors.is_empty()).then(|| errors.join("\n"));
         self.animating = self.playing || summary.pending > 0 || self.resources.in_flight() > 0;
         self.last_summary = summary;
         summary
     }
 
-    /// Re-reads the shader files: a fresh evaluator (new pipelines) replaces the current one
-    /// only if no shader fails to compile; otherwise the last good pipelines stay and the
-    /// error is kept in `shader_error`.
+    /// Re-reads the shader files and evaluates: only the nodes whose pipelines used a changed
+    /// file re-run (with rebuilt pipelines), the rest keep their results and state. A shader
+    /// that fails to compile keeps the last good pipeline; its error is on the nodes that use
+    /// it and in `shader_error`.
     pub fn reload_shaders(&mut self, gpu: &GpuContext) {
-        gpu.clear_shader_cache();
-        let Ok(mut fresh) = Evaluator::new(&self.runnable, &self.extra_roots) else { return };
-        fresh.evaluate(self.time(), Some(gpu), &self.resources, &self.settings);
-        let errors: Vec<String> = fresh
-            .reports()
-            .filter_map(|r| match r.status {
-                NodeStatus::Failed(m) if m.contains(".wgsl") => Some(format!("{}: {m}", r.id)),
-                _ => None,
-            })
-            .collect();
-        if errors.is_empty() {
-            self.evaluator = Some(fresh);
-            self.shader_error = None;
-        } else {
-            self.shader_error = Some(errors.join("\n"));
-        }
+        gpu.reload_shaders();
+        self.run(Some(gpu));
     }
 
     /// What node `id` shows: its problem in the document, else its last evaluation.
@@ -400,12 +394,11 @@ impl Live {
                 NodeState::Failed(e.message.clone())
             };
         }
-        if let Some(e) = &self.shader_error
-            && let Some(line) = e.lines().find(|l| l.starts_with(&format!("{id}: ")))
-        {
-            return NodeState::Failed(format!("shader reload failed, last good pipeline kept: {line}"));
-        }
         let Some(r) = self.evaluator.as_ref().and_then(|ev| ev.report(id)) else { return NodeState::Idle };
+        if *r.status == NodeStatus::Ok && !r.shader_errors.is_empty() {
+            let errors: Vec<String> = r.shader_errors.iter().map(|e| e.to_string()).collect();
+            return NodeState::Failed(format!("shader reload failed, last good pipeline kept: {}", errors.join("; ")));
+        }
         match r.status {
             NodeStatus::NotRun => NodeState::Idle,
             NodeStatus::Ok => NodeState::Ok,

@@ -10,8 +10,7 @@ use egui::{Color32, RichText, Sense, Ui, Vec2};
 
 use super::live::{CameraOverride, Live, camera_for, viewed_port};
 use super::state::EditorState;
-use crate::gpu::{GpuContext, GpuImage};
-use crate::nodes::passes::FullscreenPass;
+use crate::gpu::{FullscreenPass, GpuContext, GpuImage};
 
 const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
@@ -39,8 +38,13 @@ impl Converter {
         }
     }
 
-    fn run(&self, gpu: &GpuContext, src: &GpuImage, dst: &GpuImage, mode: u32) -> anyhow::Result<()> {
-        self.pass.run(gpu, bytemuck::cast_slice(&[mode, 0u32, 0, 0]), &[src], dst)
+    /// Converts and submits, so egui's renderer samples the result.
+    fn run(&mut self, gpu: &GpuContext, src: &GpuImage, dst: &GpuImage, mode: u32) -> anyhow::Result<()> {
+        gpu.checked("viewport display", || {
+            let r = self.pass.run(gpu, bytemuck::cast_slice(&[mode, 0u32, 0, 0]), &[src], dst);
+            gpu.flush();
+            r
+        })?
     }
 }
 

@@ -1,0 +1,177 @@
+//! The second software backend: every graph in graphs/ renders on OpenGL ES through EGL
+//! (Mesa's llvmpipe), with the formats the context picks for what that driver can render
+//! (llvmpipe's GLES renders no 32-bit float targets), and the default graph stays close to
+//! its golden image there.
+//!
+//! Skipped, with a message, only where no EGL driver is installed at all
+//! (`apt-get install libegl1 libegl-mesa0 libgles2`).
+
+mod common;
+
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+use common::*;
+use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::gpu::{Backend, GpuContext, read_back};
+use werkstatt::graph::Graph;
+use werkstatt::nodes::live_link::{encode_frame, encode_topology};
+use werkstatt::render::{RenderOptions, render};
+use werkstatt::resources::Resources;
+use werkstatt::spec::ParamValue;
+
+/// The GL context, or `None` (test skipped) where the machine has no EGL library.
+fn gl() -> Option<GpuContext> {
+    match GpuContext::headless(Backend::Gl) {
+        Ok(gpu) => {
+            assert_eq!(gpu.info.backend, wgpu::Backend::Gl);
+            Some(gpu)
+        }
+        Err(e) => {
+            let egl = [
+                "/usr/lib/x86_64-linux-gnu/libEGL.so.1",
+                "/usr/lib/aarch64-linux-gnu/libEGL.so.1",
+                "/usr/lib/libEGL.so.1",
+            ]
+            .iter()
+            .any(|p| std::path::Path::new(p).exists());
+            assert!(!egl, "EGL is installed, but no GL adapter opened: {e:#}");
+            eprintln!("skipping: no EGL driver on this machine (apt-get install libegl1 libegl-mesa0 libgles2): {e:#}");
+            None
+        }
+    }
+}
+
+fn render_on(
+    gpu: &GpuContext,
+    graph: &str,
+    out: &std::path::Path,
+    frames: (i64, i64),
+    dumps: &[&str],
+) -> anyhow::Result<()> {
+    let opts = RenderOptions {
+        graph_path: root().join("graphs").join(graph),
+        frames,
+        fps: 30.0,
+        width: 160,
+        height: 120,
+        out_dir: out.to_path_buf(),
+        sets: Vec::new(),
+        dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        progress: false,
+    };
+    render(&opts, gpu).map(|_| ())
+}
+
+#[test]
+fn gl_formats_are_renderable_where_lavapipe_uses_r32float() {
+    let Some(gpu) = gl() else { return };
+    let f = gpu.formats();
+    // Whatever llvmpipe offers, every role has a format the device renders and samples.
+    for format in [f.linear_depth, f.hdr, f.matrix_f32, f.matrix_f16, f.ldr] {
+        let desc = werkstatt::gpu::TextureDesc::target(4, 4, format);
+        let img = gpu.acquire("probe", desc);
+        gpu.checked("probe", || {
+            gpu.record(|enc| {
+                enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: None,
+                    color_attachments: &[img.clear_attachment()],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+            });
+            gpu.flush();
+        })
+        .unwrap_or_else(|e| panic!("{format:?}: {e:#}"));
+    }
+}
+
+#[test]
+fn every_graph_renders_on_gl() {
+    let Some(gpu) = gl() else { return };
+    let mut graphs: Vec<String> = std::fs::read_dir(root().join("graphs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".ron") && !n.contains(".autosave"))
+        .collect();
+    graphs.sort();
+    assert!(graphs.len() >= 10, "{graphs:?}");
+    for name in &graphs {
+        if name == "livelink.ron" {
+            render_livelink(&gpu);
+            continue;
+        }
+        let out = out_dir(&format!("gl-{name}"));
+        render_on(&gpu, name, &out, (0, 1), &[]).unwrap_or_else(|e| panic!("{name} on GL: {e:#}"));
+        let images: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "png"))
+            .collect();
+        for p in &images {
+            let img = read_png(p);
+            let lum: f64 = img.pixels().map(|p| (p[0] as f64 + p[1] as f64 + p[2] as f64) / 3.0).sum::<f64>()
+                / img.pixels().len() as f64;
+            assert!(lum > 5.0, "{name}: {} is black on GL", p.display());
+        }
+    }
+}
+
+/// livelink.ron waits for a simulator: send it one frame over loopback, then render.
+fn render_livelink(gpu: &GpuContext) {
+    let mut graph = Graph::load(&root().join("graphs/livelink.ron")).unwrap();
+    graph.nodes.get_mut("simulator").unwrap().params.insert("address".into(), ParamValue::Str("127.0.0.1:0".into()));
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = Resources::new(false);
+    let settings = FrameSettings { width: 160, height: 120, base_dir: root().join("graphs"), out_dir: None };
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut sender: Option<TcpStream> = None;
+    let mut frame = 0;
+    loop {
+        frame += 1;
+        ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), &res, &settings);
+        if ev.report("preview").unwrap().status == &NodeStatus::Ok {
+            break;
+        }
+        if sender.is_none()
+            && let NodeStatus::Pending(p) = ev.report("simulator").unwrap().status
+            && let Some(addr) = p.display().to_string().rsplit("tcp://").next().and_then(|a| a.parse().ok())
+            && let Ok(mut s) = TcpStream::connect_timeout(&addr, Duration::from_secs(5))
+        {
+            use std::io::Write;
+            let n = 8;
+            let uvs: Vec<glam::Vec2> =
+                (0..n * n).map(|i| glam::Vec2::new((i % n) as f32, (i / n) as f32) / (n - 1) as f32).collect();
+            let mut indices = Vec::new();
+            for j in 0..n - 1 {
+                for i in 0..n - 1 {
+                    let a = (j * n + i) as u32;
+                    indices.extend_from_slice(&[a, a + n as u32, a + 1, a + 1, a + n as u32, a + n as u32 + 1]);
+                }
+            }
+            let positions: Vec<glam::Vec3> =
+                uvs.iter().map(|uv| glam::Vec3::new(uv.x - 0.5, 0.0, uv.y - 0.5)).collect();
+            s.write_all(&encode_topology(&indices, &uvs, None)).unwrap();
+            s.write_all(&encode_frame(1, indices.len() as u32, &positions, None)).unwrap();
+            sender = Some(s);
+        }
+        assert!(Instant::now() < deadline, "livelink.ron on GL: {:?}", ev.report("simulator").unwrap().status);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let px = read_back(gpu, ev.output("preview", "image").unwrap().as_texture().unwrap()).unwrap();
+    assert!(px.rgba.chunks_exact(4).any(|p| p[0] + p[1] + p[2] > 0.1), "livelink.ron is black on GL");
+}
+
+/// The same golden image as on lavapipe, within a GL tolerance: llvmpipe's GL rasterizes
+/// and interpolates a little differently (edges, the sphere's silhouette), and where it
+/// cannot render 32-bit floats the linear depth is stored as 16-bit floats.
+#[test]
+fn default_graph_matches_its_golden_image_on_gl() {
+    let Some(gpu) = gl() else { return };
+    let out = out_dir("gl-golden");
+    render_on(&gpu, "default.ron", &out, (0, 0), &[]).unwrap();
+    const GL: Tolerance = Tolerance { min_psnr: 30.0, level: 8, max_differing: 0.02 };
+    assert_golden("default_image", &read_png(&out.join("image_0000.png")), GL);
+}

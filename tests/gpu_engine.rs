@@ -1,0 +1,244 @@
+//! The engine's GPU side (src/gpu/): pooled textures and persistent buffers (a steady orbit
+//! creates nothing after its first frame, counted in stats.json), the pipeline cache (a shader
+//! edit re-runs only the nodes that used it, simulation state survives, a broken shader keeps
+//! the last good pipeline and reports a typed error), and error scopes per node (a validation
+//! error lands on the node that caused it).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::*;
+use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::gpu::{Backend, GpuContext, read_back};
+use werkstatt::graph::Graph;
+use werkstatt::render::{RenderOptions, render};
+use werkstatt::resources::Resources;
+
+fn fresh_gpu() -> GpuContext {
+    GpuContext::headless(Backend::from_env().unwrap())
+        .expect("a software adapter (apt-get install mesa-vulkan-drivers)")
+}
+
+fn settings(width: u32, height: u32) -> FrameSettings {
+    FrameSettings { width, height, base_dir: root().join("graphs"), out_dir: None }
+}
+
+/// Evaluates `frame` until nothing is pending.
+fn settle(ev: &mut Evaluator, gpu: &GpuContext, res: &Resources, frame: i64, s: &FrameSettings) {
+    for _ in 0..2000 {
+        let summary = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), res, s);
+        if summary.pending == 0 {
+            return;
+        }
+        res.wait_idle();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    panic!("frame {frame} did not settle");
+}
+
+/// The nodes that ran in the last evaluation, sorted.
+fn ran(ev: &Evaluator) -> Vec<String> {
+    let mut v: Vec<String> = ev.reports().filter(|r| r.ran).map(|r| r.id.to_string()).collect();
+    v.sort();
+    v
+}
+
+/// A copy of shaders/ that a test may edit, read by `gpu` instead of the embedded sources.
+fn shader_copy(gpu: &GpuContext, name: &str) -> PathBuf {
+    let dir = out_dir(name).join("shaders");
+    std::fs::create_dir_all(&dir).unwrap();
+    for s in werkstatt::shaders::names() {
+        std::fs::copy(root().join("shaders").join(s), dir.join(s)).unwrap();
+    }
+    gpu.set_shader_dir(Some(dir.clone()));
+    dir
+}
+
+fn edit(path: &Path, from: &str, to: &str) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.contains(from), "{} has no line {from:?}", path.display());
+    std::fs::write(path, text.replacen(from, to, 1)).unwrap();
+}
+
+fn centre(gpu: &GpuContext, ev: &Evaluator, node: &str) -> [f32; 4] {
+    let value = ev.output(node, "image").expect("the image was rendered");
+    let px = read_back(gpu, value.as_texture().unwrap()).unwrap();
+    let i = ((px.height / 2 * px.width + px.width / 2) * 4) as usize;
+    [px.rgba[i], px.rgba[i + 1], px.rgba[i + 2], px.rgba[i + 3]]
+}
+
+#[test]
+fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
+    let gpu = fresh_gpu();
+    let out = out_dir("gpu-created");
+    let opts = RenderOptions {
+        graph_path: root().join("graphs/default.ron"),
+        frames: (0, 23),
+        fps: 30.0,
+        width: 160,
+        height: 120,
+        out_dir: out.clone(),
+        sets: Vec::new(),
+        dumps: Vec::new(),
+        progress: false,
+    };
+    render(&opts, &gpu).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stats.json")).unwrap()).unwrap();
+    let frames = json["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 24);
+    let created = |f: &serde_json::Value, what: &str| f["gpu_created"][what].as_u64().unwrap();
+    assert!(created(&frames[0], "textures") >= 5, "the first frame makes the targets: {}", frames[0]["gpu_created"]);
+    assert!(created(&frames[0], "buffers") >= 1, "the first frame makes the uniform buffers");
+    for f in &frames[1..] {
+        // The camera orbits: the G-buffer and everything after it re-render every frame.
+        assert!(f["nodes"]["gbuffer"]["ran"].as_bool().unwrap(), "frame {} did not re-render", f["frame"]);
+        assert_eq!(
+            (created(f, "textures"), created(f, "buffers")),
+            (0, 0),
+            "frame {} created GPU resources: {}",
+            f["frame"],
+            f["gpu_created"]
+        );
+    }
+}
+
+#[test]
+fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
+    let gpu = fresh_gpu();
+    let dir = shader_copy(&gpu, "gpu-shader-edit");
+    let graph = Graph::load(&root().join("graphs/tablecloth.ron")).unwrap();
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = settings(64, 48);
+    for frame in 0..4 {
+        settle(&mut ev, &gpu, &res, frame, &s);
+    }
+    assert_eq!(ev.report("cloth").unwrap().status, &NodeStatus::Ok);
+    let cloth_runs = ev.report("cloth").unwrap().runs;
+    let before = centre(&gpu, &ev, "image");
+
+    // Nothing changed: nothing re-runs, not even with a reload.
+    assert!(gpu.reload_shaders().is_empty());
+    settle(&mut ev, &gpu, &res, 3, &s);
+    assert_eq!(ran(&ev), Vec::<String>::new());
+
+    // fullscreen.wgsl is included by the lighting and tone-mapping shaders only.
+    edit(
+        &dir.join("fullscreen.wgsl"),
+        "return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);",
+        "return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0) ;",
+    );
+    assert_eq!(gpu.reload_shaders(), ["fullscreen.wgsl"]);
+    settle(&mut ev, &gpu, &res, 3, &s);
+    assert_eq!(ran(&ev), ["image", "light", "tonemap"], "only users of the file and what follows them re-run");
+    assert_eq!(ev.report("cloth").unwrap().runs, cloth_runs, "the simulation did not re-run");
+    assert_eq!(centre(&gpu, &ev, "image"), before);
+
+    // A real change to the tone mapper: only it and the output re-run, and it shows.
+    edit(
+        &dir.join("tonemap.wgsl"),
+        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+    );
+    assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
+    settle(&mut ev, &gpu, &res, 3, &s);
+    assert_eq!(ran(&ev), ["image", "tonemap"]);
+    let red = centre(&gpu, &ev, "image");
+    assert!(red[0] > 0.9 && red[1] < 0.1 && red[2] < 0.1, "the edited shader runs: {red:?}");
+
+    // The simulation continues from where it was: one more run for one more frame.
+    settle(&mut ev, &gpu, &res, 4, &s);
+    assert_eq!(ev.report("cloth").unwrap().runs, cloth_runs + 1, "the cloth steps on, it does not replay");
+    assert!(ran(&ev).contains(&"gbuffer".to_string()));
+}
+
+#[test]
+fn a_broken_shader_keeps_the_last_good_pipeline_and_reports_a_typed_error() {
+    let gpu = fresh_gpu();
+    let dir = shader_copy(&gpu, "gpu-shader-broken");
+    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = settings(64, 48);
+    settle(&mut ev, &gpu, &res, 0, &s);
+    let good = centre(&gpu, &ev, "image");
+
+    edit(&dir.join("tonemap.wgsl"), "fn aces(", "fn aces( this is not wgsl");
+    assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
+    settle(&mut ev, &gpu, &res, 0, &s);
+    let r = ev.report("tonemap").unwrap();
+    assert_eq!(r.status, &NodeStatus::Ok, "it ran on the last good pipeline");
+    assert_eq!(r.shader_errors.len(), 1, "{:?}", r.shader_errors);
+    assert_eq!(r.shader_errors[0].file, "tonemap.wgsl");
+    assert!(r.shader_errors[0].to_string().contains("shaders/tonemap.wgsl"), "{}", r.shader_errors[0]);
+    assert_eq!(centre(&gpu, &ev, "image"), good, "the old pipeline renders as before");
+    assert!(ev.report("light").unwrap().shader_errors.is_empty(), "the error is on the node that uses the shader");
+
+    // The error stays on the node while it is skipped, and the next frame still renders.
+    settle(&mut ev, &gpu, &res, 1, &s);
+    assert_eq!(ev.report("tonemap").unwrap().shader_errors.len(), 1);
+    assert_eq!(ev.report("image").unwrap().status, &NodeStatus::Ok);
+
+    // A graph that never had a good pipeline fails on that node, with the same typed error.
+    let mut fresh = Evaluator::new(&graph, &[]).unwrap();
+    gpu.clear_shader_cache();
+    settle(&mut fresh, &gpu, &res, 0, &s);
+    let r = fresh.report("tonemap").unwrap();
+    assert!(matches!(r.status, NodeStatus::Failed(m) if m.contains("tonemap.wgsl")), "{:?}", r.status);
+    assert_eq!(r.shader_errors[0].file, "tonemap.wgsl");
+    assert_eq!(fresh.report("light").unwrap().status, &NodeStatus::Ok);
+
+    // Fixed: the node recovers.
+    edit(&dir.join("tonemap.wgsl"), "fn aces( this is not wgsl", "fn aces(");
+    assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
+    settle(&mut ev, &gpu, &res, 1, &s);
+    assert!(ev.report("tonemap").unwrap().shader_errors.is_empty());
+}
+
+#[test]
+fn a_validation_error_lands_on_the_node_that_caused_it() {
+    let gpu = fresh_gpu();
+    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = Resources::new(false);
+    // A zero-sized frame: the G-buffer pass is the first to make textures of the frame size.
+    settle(&mut ev, &gpu, &res, 0, &settings(0, 48));
+    let status = |ev: &Evaluator, id: &str| ev.report(id).unwrap().status.clone();
+    assert!(
+        matches!(status(&ev, "gbuffer"), NodeStatus::Failed(ref m) if m.contains("GPU validation error")),
+        "{:?}",
+        status(&ev, "gbuffer")
+    );
+    assert_eq!(status(&ev, "camera"), NodeStatus::Ok);
+    assert_eq!(status(&ev, "scene"), NodeStatus::Ok);
+    assert!(matches!(status(&ev, "light"), NodeStatus::Blocked(_)), "{:?}", status(&ev, "light"));
+    assert!(gpu.take_errors().is_empty(), "nothing escaped the node's scope");
+
+    // At a real size the same evaluator renders: the failed commands were never submitted.
+    settle(&mut ev, &gpu, &res, 0, &settings(64, 48));
+    for id in ["gbuffer", "light", "tonemap", "image"] {
+        assert_eq!(status(&ev, id), NodeStatus::Ok, "{id}");
+    }
+    assert!(centre(&gpu, &ev, "image")[3] > 0.0);
+    assert!(gpu.take_errors().is_empty());
+}
+
+#[test]
+fn node_scopes_keep_errors_apart() {
+    let gpu = fresh_gpu();
+    let small = gpu.create_buffer("small", 16, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
+    let other = gpu.create_buffer("other", 16, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
+    let bad = gpu.begin_node("bad");
+    // 64 bytes out of a 16-byte buffer.
+    gpu.record(|enc| enc.copy_buffer_to_buffer(&small, 0, &other, 0, 64));
+    let bad = bad.end();
+    let good = gpu.begin_node("good");
+    gpu.record(|enc| enc.clear_buffer(&small, 0, None));
+    let good = good.end();
+    assert!(bad.error.as_deref().is_some_and(|e| e.contains("Validation")), "{:?}", bad.error);
+    assert_eq!(good.error, None);
+    gpu.submit_checked().expect("the bad commands were dropped, the good ones submit");
+}
