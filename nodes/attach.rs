@@ -6,12 +6,10 @@ use std::sync::Arc;
 
 use glam::{Affine2, Mat4, Quat, Vec2, Vec3};
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::mesh::Mesh;
+use crate::node::prelude::*;
 use crate::scene::{DrawItem, Material};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
-use crate::warp::{ArcTable, AttachedDraw, InstanceData, MatrixTexture, Placement, WarpMode, WarpSettings};
+use crate::warp::{ArcTable, AttachedDraw, Curves, InstanceData, MatrixTexture, Placement, WarpMode, WarpSettings};
 
 const MATRIX: PortSpec = PortSpec::required("matrix", PortType::MatrixTexture, "The surface's matrix texture.");
 const DETAIL: PortSpec =
@@ -29,6 +27,13 @@ const MIN_WEIGHT: ParamSpec = ParamSpec::new(
     "Outlier test: a vertex whose bilinear lookup has less weight on covered texels is discarded.",
 );
 
+crate::choice!(
+    enum AreaMode {
+        Tile = "tile",
+        Decal = "decal",
+    }
+);
+
 struct Common {
     matrix: Arc<MatrixTexture>,
     mesh: Arc<Mesh>,
@@ -36,15 +41,8 @@ struct Common {
 }
 
 fn common(cx: &EvalCx<'_>) -> Result<Common, NodeError> {
-    let Value::MatrixTexture(matrix) = cx.required("matrix")? else {
-        return Err(NodeError::msg("matrix input is not a matrix texture"));
-    };
-    let Value::Mesh(mesh) = cx.required("mesh")? else { return Err(NodeError::msg("mesh input is not a mesh")) };
-    let material = match cx.input("material") {
-        Some(Value::Material(m)) => m.clone(),
-        _ => Arc::new(Material::default()),
-    };
-    Ok(Common { matrix: matrix.clone(), mesh: mesh.clone(), material })
+    let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
+    Ok(Common { matrix: cx.input("matrix")?, mesh: cx.input("mesh")?, material })
 }
 
 fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceData>) {
@@ -57,7 +55,7 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
         detail: true,
         attached: Some(Arc::new(attached)),
     };
-    cx.set("scene", Value::Scene(Arc::new(vec![item])));
+    cx.set("scene", Arc::new(vec![item]));
 }
 
 /// M_tan of a point placement: lift along the normal, turn about it, scale (normal axis extra).
@@ -116,10 +114,7 @@ struct PointAttachmentNode;
 impl Node for PointAttachmentNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let c = common(cx)?;
-        let Value::Instances(places) = cx.required("placements")? else {
-            return Err(NodeError::msg("placements input is not placements"));
-        };
-        let places = places.clone();
+        let places: Arc<Vec<Placement>> = cx.input("placements")?;
         let spin = cx.f32("spin");
         let extra = if spin != 0.0 { spin * cx.time().seconds() as f32 } else { 0.0 };
         let (scale, ns, lift) = (cx.f32("scale"), cx.f32("normal_scale"), cx.f32("lift"));
@@ -138,7 +133,7 @@ pub static AREA_ATTACHMENT: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "mode",
-            ParamKind::Choice { default: "tile", options: &["tile", "decal"] },
+            ParamKind::Choice { default: "tile", options: AreaMode::OPTIONS },
             "Tile the UV square, or one decal.",
         ),
         ParamSpec::new(
@@ -198,7 +193,7 @@ impl Node for AreaAttachmentNode {
                 * centred;
             InstanceData::identity().with_tex(placed).with_tan(m_tan)
         };
-        let instances = if cx.str("mode") == "decal" {
+        let instances = if cx.choice::<AreaMode>("mode") == AreaMode::Decal {
             let spin = cx.f32("spin");
             let angle = cx.f32("angle") + if spin != 0.0 { spin * cx.time().seconds() as f32 } else { 0.0 };
             vec![tile(cx.vec3("center").truncate(), cx.f32("size"), angle)]
@@ -257,10 +252,7 @@ struct CurveAttachmentNode;
 impl Node for CurveAttachmentNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let c = common(cx)?;
-        let Value::Curves(curves) = cx.required("curves")? else {
-            return Err(NodeError::msg("curves input is not curves"));
-        };
-        let curves = curves.clone();
+        let curves: Arc<Curves> = cx.input("curves")?;
         let (lo, hi) = c.mesh.bounds();
         if hi.z - lo.z <= 0.0 {
             return Err(NodeError::msg(

@@ -1,9 +1,7 @@
 //! Scalars: constants, arithmetic, the frame time, and `Watch`, which reports a number
 //! in `stats.json` so CI can check values, not just pictures.
 
-use crate::eval::{EvalCx, Node, NodeError};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 
 pub static NUMBER: NodeSpec = NodeSpec {
     kind: "Number",
@@ -20,7 +18,7 @@ struct NumberNode;
 impl Node for NumberNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let v = cx.f64("value");
-        cx.set("value", Value::Scalar(v));
+        cx.set("value", v);
         Ok(())
     }
 }
@@ -37,10 +35,7 @@ pub static MATH: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "op",
-            ParamKind::Choice {
-                default: "add",
-                options: &["add", "subtract", "multiply", "divide", "min", "max", "power", "sin"],
-            },
+            ParamKind::Choice { default: "add", options: MathOp::OPTIONS },
             "The operation (sin uses a only: sin(a) * b).",
         ),
         ParamSpec::new(
@@ -58,29 +53,40 @@ pub static MATH: NodeSpec = NodeSpec {
     create: || Box::new(MathNode),
 };
 
+crate::choice!(
+    enum MathOp {
+        Add = "add",
+        Subtract = "subtract",
+        Multiply = "multiply",
+        Divide = "divide",
+        Min = "min",
+        Max = "max",
+        Power = "power",
+        Sin = "sin",
+    }
+);
+
 struct MathNode;
 impl Node for MathNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let operand = |cx: &EvalCx<'_>, name: &str| match cx.input(name) {
-            Some(Value::Scalar(v)) => *v,
-            _ => cx.f64(name),
-        };
+        let operand = |cx: &EvalCx<'_>, name: &str| cx.optional::<f64>(name).unwrap_or_else(|| cx.f64(name));
         let (a, b) = (operand(cx, "a"), operand(cx, "b"));
-        let r = match cx.str("op") {
-            "add" => a + b,
-            "subtract" => a - b,
-            "multiply" => a * b,
-            "divide" if b == 0.0 => return Err(NodeError::msg("division by zero (input b is 0)")),
-            "divide" => a / b,
-            "min" => a.min(b),
-            "max" => a.max(b),
-            "power" => a.powf(b),
-            _ => a.sin() * b,
+        let op: MathOp = cx.choice("op");
+        let r = match op {
+            MathOp::Add => a + b,
+            MathOp::Subtract => a - b,
+            MathOp::Multiply => a * b,
+            MathOp::Divide if b == 0.0 => return Err(NodeError::msg("division by zero (input b is 0)")),
+            MathOp::Divide => a / b,
+            MathOp::Min => a.min(b),
+            MathOp::Max => a.max(b),
+            MathOp::Power => a.powf(b),
+            MathOp::Sin => a.sin() * b,
         };
         if !r.is_finite() {
-            return Err(NodeError::msg(format!("the result of {} on {a} and {b} is not finite", cx.str("op"))));
+            return Err(NodeError::msg(format!("the result of {} on {a} and {b} is not finite", op.name())));
         }
-        cx.set("result", Value::Scalar(r));
+        cx.set("result", r);
         Ok(())
     }
 }
@@ -103,8 +109,8 @@ struct TimeNode;
 impl Node for TimeNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let t = cx.time();
-        cx.set("seconds", Value::Scalar(t.seconds()));
-        cx.set("frame", Value::Scalar(t.frame as f64));
+        cx.set("seconds", t.seconds());
+        cx.set("frame", t.frame as f64);
         Ok(())
     }
 }
@@ -126,13 +132,13 @@ pub static WATCH: NodeSpec = NodeSpec {
 struct WatchNode;
 impl Node for WatchNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let Value::Scalar(v) = cx.required("value")? else { return Err(NodeError::msg("value is not a scalar")) };
-        let v = *v;
+        let v: f64 = cx.input("value")?;
         let (lo, hi) = (cx.f64("min"), cx.f64("max"));
         if v < lo || v > hi {
             return Err(NodeError::msg(format!("value {v} is outside the accepted range [{lo}, {hi}]")));
         }
-        cx.set("value", Value::Scalar(v));
+        cx.emit(Product::Value(v));
+        cx.set("value", v);
         Ok(())
     }
 }

@@ -2,10 +2,8 @@
 
 use glam::Vec3;
 
-use crate::eval::{EvalCx, Node, NodeError};
+use crate::node::prelude::*;
 use crate::scene::Camera;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
 
 pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
     kind: "OrbitCamera",

@@ -6,9 +6,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use glam::Vec2;
 
-use crate::eval::{EvalCx, Node, NodeError};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 use crate::warp::Curves;
 
 pub static SVG_CURVES: NodeSpec = NodeSpec {
@@ -36,7 +34,7 @@ impl Node for SvgCurvesNode {
         let doc = cx.load(&path, load_svg)?;
         let (scale, offset) = (cx.f32("scale"), cx.vec3("offset").truncate());
         let paths = doc.paths.iter().map(|p| p.iter().map(|seg| seg.map(|q| q * scale + offset)).collect()).collect();
-        cx.set("curves", Value::Curves(Arc::new(Curves { paths })));
+        cx.set("curves", Arc::new(Curves { paths }));
         Ok(())
     }
 }

@@ -2,10 +2,9 @@
 
 use std::sync::Arc;
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::gpu::GpuImage;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
+use crate::scene::GBuffer;
 
 use crate::gpu::FullscreenPass;
 
@@ -58,10 +57,7 @@ struct DirectLightNode {
 impl Node for DirectLightNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::GBuffer(g) = cx.required("gbuffer")? else {
-            return Err(NodeError::msg("gbuffer input is not a G-buffer"));
-        };
-        let g = g.clone();
+        let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let dir =
             cx.vec3("sun_direction").try_normalize().ok_or_else(|| NodeError::msg("sun_direction must not be zero"))?;
         if self.pass.is_none() {
@@ -83,7 +79,7 @@ impl Node for DirectLightNode {
         let out = GpuImage::target(gpu, "direct light", w, h, gpu.formats().hdr);
         let pass = self.pass.as_mut().expect("created above");
         pass.run(gpu, bytemuck::bytes_of(&uniform), &[&g.color, &g.normal, &g.depth], &out)?;
-        cx.set("image", Value::Texture(Arc::new(out)));
+        cx.set("image", Arc::new(out));
         Ok(())
     }
 }

@@ -2,20 +2,16 @@
 //! warp code as rendering (shaders/warp.wgsl, run as a compute pass): "the geometry can be
 //! post-processed or even exported without rendering output" (paper section 6).
 
-use std::io::Write as _;
-use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::Context as _;
 use glam::Vec3;
 
-use crate::eval::{EvalCx, Node, NodeError};
+use crate::geometry_io::GeometryFormat;
 use crate::gpu::readback::read_buffer_range;
 use crate::gpu::{Bind, BufferRing, ComputePass, GpuContext, read_buffer};
 use crate::mesh::{GpuMesh, Mesh};
+use crate::node::prelude::*;
 use crate::scene::DrawItem;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
 use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
 
 use super::gbuffer::{InstanceResolver, warp_binds};
@@ -29,7 +25,7 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "format",
-            ParamKind::Choice { default: "obj", options: &["obj", "ply"] },
+            ParamKind::Choice { default: "obj", options: GeometryFormat::OPTIONS },
             "File format (PLY is binary little-endian).",
         ),
         ParamSpec::new(
@@ -50,28 +46,19 @@ struct ExportNode {
 impl Node for ExportNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Scene(items) = cx.required("scene")? else {
-            return Err(NodeError::msg("scene input is not a scene"));
-        };
-        let items = items.clone();
+        let items: Arc<Vec<DrawItem>> = cx.input("scene")?;
         let wanted = cx.int("frame");
-        // Only a batch render writes files, and only then does the frame matter: while editing
-        // the node does not read the time, so it does not re-run every frame.
-        let frame = if cx.settings.out_dir.is_some() { cx.time().frame } else { 0 };
+        // Only a chosen frame makes the node read the time (and re-run every frame).
+        let export = wanted < 0 || cx.time().frame == wanted;
         if self.warper.is_none() {
             self.warper = Some(GpuWarper::new(gpu)?);
         }
         let warper = self.warper.as_mut().expect("created above");
         let mesh = Arc::new(flatten(gpu, warper, &items)?);
-        if (wanted < 0 || wanted == frame)
-            && let Some(dir) = &cx.settings.out_dir
-        {
-            let ext = cx.str("format").to_string();
-            let path = dir.join(format!("{}_{frame:04}.{ext}", cx.node_id));
-            if ext == "ply" { write_ply(&path, &mesh) } else { write_obj(&path, &mesh) }
-                .map_err(|e| NodeError::msg(format!("{e:#}")))?;
+        if export {
+            cx.emit(Product::Geometry { mesh: mesh.clone(), format: cx.choice("format") });
         }
-        cx.set("mesh", Value::Mesh(mesh));
+        cx.set("mesh", mesh);
         Ok(())
     }
 }
@@ -195,52 +182,4 @@ pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> 
         anyhow::bail!("nothing to export: the scene has no visible triangles");
     }
     Mesh::build(positions, Some(uvs), Some(normals), indices)
-}
-
-pub fn write_obj(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
-    let mut out = std::io::BufWriter::new(Vec::new());
-    writeln!(out, "# werkstatt export: {} vertices, {} triangles", mesh.positions.len(), mesh.triangle_count())?;
-    for p in &mesh.positions {
-        writeln!(out, "v {} {} {}", p.x, p.y, p.z)?;
-    }
-    for t in &mesh.uvs {
-        // OBJ's v points up.
-        writeln!(out, "vt {} {}", t.x, 1.0 - t.y)?;
-    }
-    for n in &mesh.normals {
-        writeln!(out, "vn {} {} {}", n.x, n.y, n.z)?;
-    }
-    for t in mesh.indices.chunks_exact(3) {
-        let [a, b, c] = [t[0] + 1, t[1] + 1, t[2] + 1];
-        writeln!(out, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
-    }
-    let bytes = out.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
-    crate::graph::write_atomic(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
-}
-
-pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
-    let mut out = Vec::new();
-    write!(
-        out,
-        "ply\nformat binary_little_endian 1.0\ncomment werkstatt export\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float s\nproperty float t\nelement face {}\nproperty list uchar uint vertex_indices\nend_header\n",
-        mesh.positions.len(),
-        mesh.triangle_count()
-    )?;
-    for i in 0..mesh.positions.len() {
-        for f in mesh.positions[i]
-            .to_array()
-            .into_iter()
-            .chain(mesh.normals[i].to_array())
-            .chain([mesh.uvs[i].x, 1.0 - mesh.uvs[i].y])
-        {
-            out.extend_from_slice(&f.to_le_bytes());
-        }
-    }
-    for t in mesh.indices.chunks_exact(3) {
-        out.push(3);
-        for i in t {
-            out.extend_from_slice(&i.to_le_bytes());
-        }
-    }
-    crate::graph::write_atomic(path, &out).with_context(|| format!("cannot write {}", path.display()))
 }

@@ -3,13 +3,11 @@
 
 use std::sync::Arc;
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
 use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
 use crate::mesh::Vertex;
-use crate::scene::{DrawItem, GBuffer, Image8};
-use crate::spec::{Category, NodeSpec, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
+use crate::scene::{Camera, DrawItem, GBuffer, Image8};
 use crate::warp::InstanceData;
 
 pub static GBUFFER_PASS: NodeSpec = NodeSpec {
@@ -277,20 +275,15 @@ pub fn render_gbuffer(
 impl Node for GBufferPassNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Scene(items) = cx.required("scene")? else {
-            return Err(NodeError::msg("scene input is not a scene"));
-        };
-        let Value::Camera(camera) = cx.required("camera")? else {
-            return Err(NodeError::msg("camera input is not a camera"));
-        };
-        let (items, camera) = (items.clone(), *camera);
+        let items: Arc<Vec<DrawItem>> = cx.input("scene")?;
+        let camera: Camera = cx.input("camera")?;
         let gbuffer =
             Arc::new(render_gbuffer(gpu, &mut self.pipelines, &items, camera, cx.settings.width, cx.settings.height)?);
         // The per-channel ports are further handles to the same textures.
-        cx.set("color", Value::Texture(Arc::new(gbuffer.color.share())));
-        cx.set("normal", Value::Texture(Arc::new(gbuffer.normal.share())));
-        cx.set("depth", Value::Texture(Arc::new(gbuffer.depth.share())));
-        cx.set("gbuffer", Value::GBuffer(gbuffer));
+        cx.set("color", Arc::new(gbuffer.color.share()));
+        cx.set("normal", Arc::new(gbuffer.normal.share()));
+        cx.set("depth", Arc::new(gbuffer.depth.share()));
+        cx.set("gbuffer", gbuffer);
         Ok(())
     }
 }

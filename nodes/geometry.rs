@@ -5,10 +5,8 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::mesh::{self, Mesh};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 
 pub static PRIMITIVE: NodeSpec = NodeSpec {
     kind: "Primitive",
@@ -19,7 +17,7 @@ pub static PRIMITIVE: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "shape",
-            ParamKind::Choice { default: "sphere", options: &["plane", "cylinder", "sphere", "torus", "disc", "box"] },
+            ParamKind::Choice { default: "sphere", options: Shape::OPTIONS },
             "plane: size x size in XZ; cylinder: radius, height along Y (open); sphere: radius; torus: radius, minor_radius; disc: a button of radius and height; box: size cube.",
         ),
         ParamSpec::new("size", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Edge length of plane and box."),
@@ -49,19 +47,30 @@ pub static PRIMITIVE: NodeSpec = NodeSpec {
     create: || Box::new(PrimitiveNode),
 };
 
+crate::choice!(
+    enum Shape {
+        Plane = "plane",
+        Cylinder = "cylinder",
+        Sphere = "sphere",
+        Torus = "torus",
+        Disc = "disc",
+        Box = "box",
+    }
+);
+
 struct PrimitiveNode;
 impl Node for PrimitiveNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let (su, sv) = (cx.int("segments_u") as u32, cx.int("segments_v") as u32);
-        let mesh = match cx.str("shape") {
-            "plane" => plane(cx.f32("size"), su, sv),
-            "cylinder" => cylinder(cx.f32("radius"), cx.f32("height"), su.max(3), sv),
-            "torus" => torus(cx.f32("radius"), cx.f32("minor_radius"), su.max(3), sv.max(3)),
-            "disc" => disc(cx.f32("radius"), cx.f32("height"), su.max(3)),
-            "box" => cube(cx.f32("size")),
-            _ => sphere(cx.f32("radius"), su.max(3), sv.max(2)),
+        let mesh = match cx.choice::<Shape>("shape") {
+            Shape::Plane => plane(cx.f32("size"), su, sv),
+            Shape::Cylinder => cylinder(cx.f32("radius"), cx.f32("height"), su.max(3), sv),
+            Shape::Torus => torus(cx.f32("radius"), cx.f32("minor_radius"), su.max(3), sv.max(3)),
+            Shape::Disc => disc(cx.f32("radius"), cx.f32("height"), su.max(3)),
+            Shape::Box => cube(cx.f32("size")),
+            Shape::Sphere => sphere(cx.f32("radius"), su.max(3), sv.max(2)),
         }?;
-        cx.set("mesh", Value::Mesh(Arc::new(mesh)));
+        cx.set("mesh", Arc::new(mesh));
         Ok(())
     }
 }
@@ -205,7 +214,7 @@ impl Node for MeshFileNode {
         } else {
             loaded
         };
-        cx.set("mesh", Value::Mesh(mesh));
+        cx.set("mesh", mesh);
         Ok(())
     }
 }
@@ -228,8 +237,7 @@ pub static TRANSFORM_MESH: NodeSpec = NodeSpec {
 struct TransformMeshNode;
 impl Node for TransformMeshNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let Value::Mesh(mesh) = cx.required("mesh")? else { return Err(NodeError::msg("mesh input is not a mesh")) };
-        let mesh = mesh.clone();
+        let mesh: Arc<Mesh> = cx.input("mesh")?;
         let r = cx.vec3("rotate");
         let rotation =
             glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
@@ -244,7 +252,7 @@ impl Node for TransformMeshNode {
         out.normals.iter_mut().for_each(|n| *n = (normal_matrix * *n).normalize_or_zero());
         out.tangents_u.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
         out.tangents_v.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
-        cx.set("mesh", Value::Mesh(Arc::new(out)));
+        cx.set("mesh", Arc::new(out));
         Ok(())
     }
 }

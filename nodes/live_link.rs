@@ -18,10 +18,9 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
 
-use crate::eval::{ChangeSignal, EvalCx, Node, NodeError};
 use crate::mesh::Mesh;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::ChangeSignal;
+use crate::node::prelude::*;
 
 pub static LIVE_LINK: NodeSpec = NodeSpec {
     kind: "LiveLink",
@@ -286,8 +285,8 @@ impl Node for LiveLinkNode {
                 if let Some(e) = listen_error {
                     cx.warn(e.clone());
                 }
-                cx.set("surface", Value::Mesh(mesh));
-                cx.set("frame", Value::Scalar(frame as f64));
+                cx.set("surface", mesh);
+                cx.set("frame", frame as f64);
                 Ok(())
             }
             (None, Some(e)) => Err(NodeError::msg(e.clone())),

@@ -2,11 +2,9 @@
 
 use std::sync::Arc;
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, read_back};
 use crate::mesh::{Mesh, Vertex};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
 
 pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
@@ -31,7 +29,7 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "precision",
-            ParamKind::Choice { default: "f32", options: &["f32", "f16"] },
+            ParamKind::Choice { default: "f32", options: Precision::OPTIONS },
             "Texel format: Rgba32Float, or Rgba16Float (half the memory, about 1e-3 relative position error).",
         ),
         ParamSpec::new(
@@ -55,9 +53,9 @@ pub struct MatrixTextureNode {
 pub const SEAM_GUTTER_TEXELS: f32 = 2.0;
 
 fn topology_key(mesh: &Mesh, resolution: u32) -> u64 {
-    let mut h = crate::render::fnv1a(bytemuck::cast_slice(&mesh.uvs));
-    h ^= crate::render::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
-    h ^= crate::render::fnv1a(bytemuck::cast_slice(&mesh.indices)).rotate_left(29);
+    let mut h = crate::hash::fnv1a(bytemuck::cast_slice(&mesh.uvs));
+    h ^= crate::hash::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
+    h ^= crate::hash::fnv1a(bytemuck::cast_slice(&mesh.indices)).rotate_left(29);
     h ^ (resolution as u64).rotate_left(41)
 }
 
@@ -144,13 +142,17 @@ impl MatrixTextureNode {
     }
 }
 
+crate::choice!(
+    enum Precision {
+        F32 = "f32",
+        F16 = "f16",
+    }
+);
+
 impl Node for MatrixTextureNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Mesh(mesh) = cx.required("surface")? else {
-            return Err(NodeError::msg("surface input is not a surface"));
-        };
-        let mesh = mesh.clone();
+        let mesh: Arc<Mesh> = cx.input("surface")?;
         let resolution = cx.int("resolution") as u32;
         if resolution > gpu.limits.max_texture_dimension_2d {
             return Err(NodeError::msg(format!(
@@ -167,11 +169,14 @@ impl Node for MatrixTextureNode {
         if mesh.uvs.iter().any(|uv| uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0) {
             cx.warn("some UVs lie outside [0,1]^2; those parts of the surface are not in the matrix texture");
         }
-        let format = if cx.str("precision") == "f16" { gpu.formats().matrix_f16 } else { gpu.formats().matrix_f32 };
+        let format = match cx.choice::<Precision>("precision") {
+            Precision::F16 => gpu.formats().matrix_f16,
+            Precision::F32 => gpu.formats().matrix_f32,
+        };
         let m = self.render(gpu, &mesh, resolution, format, cx.int("filter_radius") as u32)?;
-        cx.set("normal", Value::Texture(Arc::new(m.col_n.share())));
-        cx.set("matrix", Value::MatrixTexture(Arc::new(m)));
-        cx.set("min_resolution", Value::Scalar(min_res));
+        cx.set("normal", Arc::new(m.col_n.share()));
+        cx.set("matrix", Arc::new(m));
+        cx.set("min_resolution", min_res);
         Ok(())
     }
 }

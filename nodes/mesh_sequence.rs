@@ -14,11 +14,9 @@ use std::sync::Arc;
 use anyhow::{Context as _, bail};
 use glam::{Vec2, Vec3};
 
-use crate::eval::{EvalCx, Node, NodeError};
+use crate::hash::fnv1a;
 use crate::mesh::{self, Mesh};
-use crate::render::fnv1a;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
@@ -48,7 +46,7 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "mode",
-            ParamKind::Choice { default: "clamp", options: &["clamp", "loop", "hold"] },
+            ParamKind::Choice { default: "clamp", options: Mode::OPTIONS },
             "Outside the files' range: clamp shows the first or last file; loop repeats the sequence (blending the last file into the first over one file spacing); hold shows start_frame as a still and does not follow the time.",
         ),
         ParamSpec::new(
@@ -112,23 +110,14 @@ impl Topology {
     }
 }
 
-/// How time maps to frames outside (and, for hold, inside) the files' range.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    Clamp,
-    Loop,
-    Hold,
-}
-
-impl Mode {
-    pub fn parse(s: &str) -> Mode {
-        match s {
-            "loop" => Mode::Loop,
-            "hold" => Mode::Hold,
-            _ => Mode::Clamp,
-        }
+crate::choice!(
+    /// How time maps to frames outside (and, for hold, inside) the files' range.
+    pub enum Mode {
+        Clamp = "clamp",
+        Loop = "loop",
+        Hold = "hold",
     }
-}
+);
 
 /// The two files to blend at sequence frame `s` (fractional) and the weight of the second:
 /// indices into `numbers` (sorted, distinct frame numbers of the files). Gaps in the
@@ -198,7 +187,7 @@ impl Node for MeshSequenceNode {
         }
         let index = cx.load(&cx.path("path"), load_index)?;
         let numbers: Vec<i64> = index.frames.iter().map(|(n, _)| *n).collect();
-        let mode = Mode::parse(cx.str("mode"));
+        let mode: Mode = cx.choice("mode");
         let start = match cx.int("start_frame") {
             -1 => numbers[0],
             s => s,
@@ -267,7 +256,7 @@ impl Node for MeshSequenceNode {
             _ => Arc::new(blend(&fa.mesh, &fb.mesh, w as f32)),
         };
         self.last = Some((fa, fb, w, mesh.clone()));
-        cx.set("surface", Value::Mesh(mesh));
+        cx.set("surface", mesh);
         Ok(())
     }
 }

@@ -17,7 +17,7 @@ pub mod placements;
 pub mod scene;
 pub mod tonemap;
 
-use crate::spec::NodeSpec;
+use crate::node::prelude::*;
 
 /// Every node kind, in the order `werkstatt nodes` and the docs list them.
 pub static ALL: &[&NodeSpec] = &[

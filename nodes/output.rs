@@ -1,8 +1,10 @@
 //! Output nodes: the roots that evaluation pulls from. `werkstatt render` writes their images.
 
-use crate::eval::{EvalCx, Node, NodeError};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use std::sync::Arc;
+
+use crate::gpu::GpuImage;
+use crate::image_io::ImageFormat;
+use crate::node::prelude::*;
 
 pub static IMAGE_WRITE: NodeSpec = NodeSpec {
     kind: "ImageWrite",
@@ -10,9 +12,13 @@ pub static IMAGE_WRITE: NodeSpec = NodeSpec {
     doc: "Writes its image each frame as <out>/<node id>_<frame>.png (8-bit) or .exr (float, for HDR intermediates).",
     inputs: &[PortSpec::required("image", PortType::Texture, "The image to write.")],
     outputs: &[PortSpec::output("image", PortType::Texture, "The same image.")],
-    params: &[ParamSpec::new("format", ParamKind::Choice { default: "png", options: &["png", "exr"] }, "File format.")],
+    params: &[ParamSpec::new(
+        "format",
+        ParamKind::Choice { default: "png", options: ImageFormat::OPTIONS },
+        "File format.",
+    )],
     is_output: true,
-    create: || Box::new(PassThrough),
+    create: || Box::new(ImageWriteNode),
 };
 
 pub static PREVIEW: NodeSpec = NodeSpec {
@@ -23,17 +29,26 @@ pub static PREVIEW: NodeSpec = NodeSpec {
     outputs: &[PortSpec::output("image", PortType::Texture, "The same image.")],
     params: &[],
     is_output: true,
-    create: || Box::new(PassThrough),
+    create: || Box::new(PreviewNode),
 };
 
-struct PassThrough;
-impl Node for PassThrough {
+struct ImageWriteNode;
+impl Node for ImageWriteNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let image = cx.required("image")?.clone();
-        if !matches!(image, Value::Texture(_)) {
-            return Err(NodeError::msg("image input is not a texture"));
-        }
-        cx.set("image", image);
-        Ok(())
+        pass_image(cx, cx.choice("format"))
     }
+}
+
+struct PreviewNode;
+impl Node for PreviewNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        pass_image(cx, ImageFormat::Png)
+    }
+}
+
+fn pass_image(cx: &mut EvalCx<'_>, format: ImageFormat) -> Result<(), NodeError> {
+    let image: Arc<GpuImage> = cx.input("image")?;
+    cx.emit(Product::Image { image: image.clone(), format });
+    cx.set("image", image);
+    Ok(())
 }

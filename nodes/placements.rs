@@ -7,11 +7,9 @@ use std::sync::Arc;
 use anyhow::{Context as _, bail};
 use glam::Vec2;
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::mesh::Mesh;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
-use crate::warp::{ArcTable, Placement, bezier, bezier_tangent};
+use crate::node::prelude::*;
+use crate::warp::{ArcTable, Curves, Placement, bezier, bezier_tangent};
 
 const REGION: [ParamSpec; 4] = [
     ParamSpec::new("u_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest u."),
@@ -85,10 +83,7 @@ fn region(cx: &EvalCx<'_>) -> Result<(Vec2, Vec2), NodeError> {
 }
 
 fn surface_input(cx: &EvalCx<'_>) -> Option<Arc<Mesh>> {
-    match cx.input("surface") {
-        Some(Value::Mesh(m)) => Some(m.clone()),
-        _ => None,
-    }
+    cx.optional("surface")
 }
 
 pub static SCATTER: NodeSpec = NodeSpec {
@@ -171,7 +166,7 @@ impl Node for ScatterNode {
         if out.len() < count {
             cx.warn(format!("placed {} of {count}: the region is full at this spacing or coverage", out.len()));
         }
-        cx.set("placements", Value::Instances(Arc::new(out)));
+        cx.set("placements", Arc::new(out));
         Ok(())
     }
 }
@@ -222,7 +217,7 @@ impl Node for GridNode {
                 out.push(Placement { piece, u: uv.x, v: uv.y, angle: cx.f32("angle"), scale: cx.f32("scale") });
             }
         }
-        cx.set("placements", Value::Instances(Arc::new(out)));
+        cx.set("placements", Arc::new(out));
         Ok(())
     }
 }
@@ -253,10 +248,7 @@ pub static CURVE_PLACEMENT: NodeSpec = NodeSpec {
 struct CurvePlacementNode;
 impl Node for CurvePlacementNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let Value::Curves(curves) = cx.required("curves")? else {
-            return Err(NodeError::msg("curves input is not curves"));
-        };
-        let curves = curves.clone();
+        let curves: Arc<Curves> = cx.input("curves")?;
         let spacing = cx.f32("spacing");
         let mut out = Vec::new();
         for path in &curves.paths {
@@ -271,7 +263,7 @@ impl Node for CurvePlacementNode {
                 out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
             }
         }
-        cx.set("placements", Value::Instances(Arc::new(out)));
+        cx.set("placements", Arc::new(out));
         Ok(())
     }
 }
@@ -295,7 +287,7 @@ impl Node for PlacementFileNode {
         }
         let path = cx.path("path");
         let placements = cx.load(&path, load_placements)?;
-        cx.set("placements", Value::Instances(Arc::new((*placements).clone())));
+        cx.set("placements", Arc::new((*placements).clone()));
         Ok(())
     }
 }

@@ -4,10 +4,9 @@ use std::sync::Arc;
 
 use glam::{EulerRot, Mat4, Quat, Vec3};
 
-use crate::eval::{EvalCx, Node, NodeError};
+use crate::mesh::Mesh;
+use crate::node::prelude::*;
 use crate::scene::{DrawItem, Image8, Material};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
 
 pub static MATERIAL: NodeSpec = NodeSpec {
     kind: "Material",
@@ -18,11 +17,7 @@ pub static MATERIAL: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new("base_color", ParamKind::Color { default: [0.8, 0.8, 0.8] }, "Linear RGB base colour."),
         ParamSpec::new("glossiness", ParamKind::Float { default: 0.2, min: 0.0, max: 1.0 }, "0 rough, 1 mirror-like."),
-        ParamSpec::new(
-            "texture",
-            ParamKind::Choice { default: "none", options: &["none", "checker", "file"] },
-            "Base-colour map.",
-        ),
+        ParamSpec::new("texture", ParamKind::Choice { default: "none", options: BaseMap::OPTIONS }, "Base-colour map."),
         ParamSpec::new(
             "texture_path",
             ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] },
@@ -36,7 +31,7 @@ pub static MATERIAL: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "gloss_map",
-            ParamKind::Choice { default: "none", options: &["none", "stripes", "file"] },
+            ParamKind::Choice { default: "none", options: GlossMap::OPTIONS },
             "Glossiness parameter map (Fig. 5.23): satin stripes, or an image whose red channel blends gloss_min..glossiness.",
         ),
         ParamSpec::new(
@@ -54,23 +49,39 @@ pub static MATERIAL: NodeSpec = NodeSpec {
     create: || Box::new(MaterialNode),
 };
 
+crate::choice!(
+    enum BaseMap {
+        None = "none",
+        Checker = "checker",
+        File = "file",
+    }
+);
+
+crate::choice!(
+    enum GlossMap {
+        None = "none",
+        Stripes = "stripes",
+        File = "file",
+    }
+);
+
 struct MaterialNode;
 impl Node for MaterialNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let texture = match cx.str("texture") {
-            "checker" => Some(Arc::new(checker(cx.vec3("checker_color")))),
-            "file" => {
+        let texture = match cx.choice::<BaseMap>("texture") {
+            BaseMap::Checker => Some(Arc::new(checker(cx.vec3("checker_color")))),
+            BaseMap::File => {
                 if cx.str("texture_path").is_empty() {
                     return Err(NodeError::msg("texture = \"file\" but parameter \"texture_path\" is empty"));
                 }
                 let path = cx.path("texture_path");
                 Some(cx.load(&path, load_image)?)
             }
-            _ => None,
+            BaseMap::None => None,
         };
-        let gloss_map = match cx.str("gloss_map") {
-            "stripes" => Some(Arc::new(stripes())),
-            "file" => {
+        let gloss_map = match cx.choice::<GlossMap>("gloss_map") {
+            GlossMap::Stripes => Some(Arc::new(stripes())),
+            GlossMap::File => {
                 if cx.str("gloss_map_path").is_empty() {
                     return Err(NodeError::msg("gloss_map = \"file\" but parameter \"gloss_map_path\" is empty"));
                 }
@@ -78,7 +89,7 @@ impl Node for MaterialNode {
                 let img = cx.load(&path, load_image)?;
                 Some(Arc::new(Image8::new_linear(img.width, img.height, img.rgba.clone())))
             }
-            _ => None,
+            GlossMap::None => None,
         };
         cx.set(
             "material",
@@ -98,7 +109,7 @@ impl Node for MaterialNode {
 /// An 8x8 checker of white and `dark` (linear), stored sRGB-encoded.
 fn checker(dark: Vec3) -> Image8 {
     let n = 64u32;
-    let encode = |c: f32| (255.0 * linear_to_srgb(c.clamp(0.0, 1.0))).round() as u8;
+    let encode = |c: f32| (255.0 * crate::color::linear_to_srgb(c.clamp(0.0, 1.0))).round() as u8;
     let dark = [encode(dark.x), encode(dark.y), encode(dark.z), 255];
     let mut rgba = Vec::with_capacity((n * n * 4) as usize);
     for y in 0..n {
@@ -121,10 +132,6 @@ fn stripes() -> Image8 {
         }
     }
     Image8::new_linear(n, n, rgba)
-}
-
-pub fn linear_to_srgb(c: f32) -> f32 {
-    if c <= 0.0031308 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
 }
 
 fn load_image(path: &std::path::Path) -> anyhow::Result<Image8> {
@@ -158,12 +165,8 @@ pub static DRAW: NodeSpec = NodeSpec {
 struct DrawNode;
 impl Node for DrawNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
-        let Value::Mesh(mesh) = cx.required("mesh")? else { return Err(NodeError::msg("mesh input is not a mesh")) };
-        let mesh = mesh.clone();
-        let material = match cx.input("material") {
-            Some(Value::Material(m)) => m.clone(),
-            _ => Arc::new(Material::default()),
-        };
+        let mesh: Arc<Mesh> = cx.input("mesh")?;
+        let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
         let r = cx.vec3("rotate");
         let rotation = Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
         let model = Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
@@ -171,7 +174,7 @@ impl Node for DrawNode {
             return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
         }
         let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None };
-        cx.set("scene", Value::Scene(Arc::new(vec![item])));
+        cx.set("scene", Arc::new(vec![item]));
         Ok(())
     }
 }
@@ -197,11 +200,11 @@ impl Node for MergeNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let mut items = Vec::new();
         for port in ["a", "b", "c", "d"] {
-            if let Some(Value::Scene(s)) = cx.input(port) {
+            if let Some(s) = cx.optional::<Arc<Vec<DrawItem>>>(port) {
                 items.extend(s.iter().cloned());
             }
         }
-        cx.set("scene", Value::Scene(Arc::new(items)));
+        cx.set("scene", Arc::new(items));
         Ok(())
     }
 }

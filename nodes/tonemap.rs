@@ -2,15 +2,21 @@
 
 use std::sync::Arc;
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::gpu::GpuImage;
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
+use crate::node::prelude::*;
 
 use crate::gpu::FullscreenPass;
 
 pub const LDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-const OPERATORS: &[&str] = &["none", "reinhard", "aces", "filmic"];
+crate::choice!(
+    /// The tone curves; the index is what shaders/tonemap.wgsl switches on.
+    enum ToneCurve {
+        None = "none",
+        Reinhard = "reinhard",
+        Aces = "aces",
+        Filmic = "filmic",
+    }
+);
 
 pub static TONEMAP: NodeSpec = NodeSpec {
     kind: "Tonemap",
@@ -24,7 +30,11 @@ pub static TONEMAP: NodeSpec = NodeSpec {
             ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 },
             "Exposure in stops (multiplies by 2^exposure).",
         ),
-        ParamSpec::new("operator", ParamKind::Choice { default: "aces", options: OPERATORS }, "The tone curve."),
+        ParamSpec::new(
+            "operator",
+            ParamKind::Choice { default: "aces", options: ToneCurve::OPTIONS },
+            "The tone curve.",
+        ),
     ],
     is_output: false,
     create: || Box::new(TonemapNode::default()),
@@ -38,18 +48,15 @@ struct TonemapNode {
 impl Node for TonemapNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let Value::Texture(input) = cx.required("image")? else {
-            return Err(NodeError::msg("image input is not a texture"));
-        };
-        let input = input.clone();
+        let input: Arc<GpuImage> = cx.input("image")?;
         if self.pass.is_none() {
             self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, &[LDR_FORMAT])?);
         }
-        let op = OPERATORS.iter().position(|o| *o == cx.str("operator")).unwrap_or(2);
+        let op = cx.choice::<ToneCurve>("operator") as u32;
         let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];
         let out = GpuImage::target(gpu, "tonemapped", input.width, input.height, LDR_FORMAT);
         self.pass.as_mut().expect("created above").run(gpu, bytemuck::bytes_of(&settings), &[&input], &out)?;
-        cx.set("image", Value::Texture(Arc::new(out)));
+        cx.set("image", Arc::new(out));
         Ok(())
     }
 }

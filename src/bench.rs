@@ -4,8 +4,8 @@ use std::time::Instant;
 
 use crate::eval::{Evaluator, FrameSettings, FrameTime};
 use crate::graph::{Graph, Link, NodeDoc, PortRef};
+use crate::param::ParamValue;
 use crate::resources::Resources;
-use crate::spec::ParamValue;
 
 /// A chain of `n` Math nodes (each adds 1 to its predecessor) ending in a Watch node.
 pub fn chain_graph(n: usize) -> Graph {

@@ -178,7 +178,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 anyhow::bail!("--fps must be a positive number");
             }
             // Validate before touching the GPU, so a bad graph fails fast and clearly.
-            crate::render::load_with_overrides(&graph, &sets)?;
+            let loaded = crate::render::load_with_overrides(&graph, &sets)?;
             let gpu = GpuContext::headless(pick_backend(backend)?)?;
             let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
             let opts = crate::render::RenderOptions {
@@ -192,7 +192,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 dumps,
                 progress,
             };
-            let stats = crate::render::render(&opts, &gpu)?;
+            let stats = crate::render::render_graph(&opts, &loaded, &gpu)?;
             eprintln!(
                 "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
                 stats.frames.len(),
@@ -291,7 +291,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 );
             })?;
             if let Some(path) = json {
-                crate::graph::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }
             Ok(ExitCode::SUCCESS)
         }

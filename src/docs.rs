@@ -2,7 +2,9 @@
 
 use std::fmt::Write as _;
 
-use crate::spec::{self, Category, ParamKind};
+use crate::node::Category;
+use crate::param::ParamKind;
+use crate::spec;
 
 fn kind_text(k: &ParamKind) -> (String, String) {
     let list = |v: &[f64]| format!("[{}]", v.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(", "));
@@ -77,7 +79,7 @@ pub fn listing() -> String {
         }
         let _ = writeln!(out, "{cat}:");
         for s in specs {
-            let ports = |ps: &[spec::PortSpec]| {
+            let ports = |ps: &[crate::node::PortSpec]| {
                 ps.iter().map(|p| format!("{}: {}", p.name, p.ty)).collect::<Vec<_>>().join(", ")
             };
             let _ = writeln!(out, "  {:<14} {}", s.kind, s.doc);

@@ -2,216 +2,21 @@
 //! topological order); each frame every planned node is skipped when its fingerprint
 //! (parameters, input versions, touched resources, and the time if it read it) is unchanged.
 
+use std::cell::RefCell;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use crate::gpu::{GpuContext, ShaderError};
 use crate::graph::Graph;
+use crate::node::{EvalCx, INTERNAL_ERROR, Node, NodeError, NodeSpec, Product};
+use crate::param::ParamValue;
+use crate::port::Value;
 use crate::resources::{Resources, SlotRef};
-use crate::spec::{self, NodeSpec, ParamValue};
-use crate::value::Value;
+use crate::spec;
 
-/// A node's behaviour. Instances live as long as their node in the graph, so a node may
-/// keep GPU pipelines or simulation state between frames.
-pub trait Node: Send {
-    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError>;
-}
-
-#[derive(Debug)]
-pub enum NodeError {
-    /// A resource it needs is still loading; not an error in interactive mode.
-    Pending(PathBuf),
-    Failed(String),
-}
-
-impl NodeError {
-    pub fn msg(m: impl Into<String>) -> Self {
-        NodeError::Failed(m.into())
-    }
-}
-
-impl From<anyhow::Error> for NodeError {
-    fn from(e: anyhow::Error) -> Self {
-        NodeError::Failed(format!("{e:#}"))
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FrameTime {
-    pub frame: i64,
-    pub fps: f64,
-}
-
-impl FrameTime {
-    pub fn seconds(&self) -> f64 {
-        self.frame as f64 / self.fps
-    }
-}
-
-/// A version counter that something outside the graph (a network listener, a simulator
-/// thread) bumps when it has new data for a node. A node that calls [`EvalCx::watch`] re-runs
-/// when the counter changes, the way it re-runs when a file it loaded reloads; it need not
-/// read the time (and re-run every frame) to notice. Cheap to clone (shared).
-#[derive(Clone, Debug, Default)]
-pub struct ChangeSignal(Arc<AtomicU64>);
-
-impl ChangeSignal {
-    pub fn new() -> Self {
-        Self::default()
-    }
-    /// Marks a change: nodes watching this signal re-run on the next evaluated frame.
-    pub fn bump(&self) {
-        self.0.fetch_add(1, Ordering::AcqRel);
-    }
-    pub fn version(&self) -> u64 {
-        self.0.load(Ordering::Acquire)
-    }
-}
-
-/// What every node of a frame shares.
-#[derive(Clone, Debug)]
-pub struct FrameSettings {
-    pub width: u32,
-    pub height: u32,
-    /// Folder that relative resource paths are resolved against (the graph file's folder).
-    pub base_dir: PathBuf,
-    /// Where output nodes that write files put them (`render --out`); `None` while editing.
-    pub out_dir: Option<PathBuf>,
-}
-
-impl Default for FrameSettings {
-    fn default() -> Self {
-        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from("."), out_dir: None }
-    }
-}
-
-/// What a node sees while it runs.
-pub struct EvalCx<'a> {
-    pub node_id: &'a str,
-    pub spec: &'static NodeSpec,
-    params: &'a [ParamValue],
-    inputs: &'a [Option<Value>],
-    outputs: &'a mut [Option<Value>],
-    time: FrameTime,
-    used_time: bool,
-    gpu: Option<&'a GpuContext>,
-    resources: &'a Resources,
-    touched: &'a mut Vec<(SlotRef, u64)>,
-    signals: &'a mut Vec<(ChangeSignal, u64)>,
-    warnings: &'a mut Vec<String>,
-    pub settings: &'a FrameSettings,
-}
-
-impl<'a> EvalCx<'a> {
-    fn param(&self, name: &str) -> &ParamValue {
-        let (i, _) = self
-            .spec
-            .param(name)
-            .unwrap_or_else(|| panic!("node kind {} reads undeclared parameter {name}", self.spec.kind));
-        &self.params[i]
-    }
-
-    pub fn f64(&self, name: &str) -> f64 {
-        self.param(name).as_f64().unwrap_or_default()
-    }
-    pub fn f32(&self, name: &str) -> f32 {
-        self.f64(name) as f32
-    }
-    pub fn int(&self, name: &str) -> i64 {
-        match self.param(name) {
-            ParamValue::Int(i) => *i,
-            other => other.as_f64().unwrap_or_default() as i64,
-        }
-    }
-    pub fn bool(&self, name: &str) -> bool {
-        matches!(self.param(name), ParamValue::Bool(true))
-    }
-    pub fn vec3(&self, name: &str) -> glam::Vec3 {
-        match self.param(name) {
-            ParamValue::Vec(v) if v.len() == 3 => glam::Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32),
-            _ => glam::Vec3::ZERO,
-        }
-    }
-    pub fn str(&self, name: &str) -> &str {
-        match self.param(name) {
-            ParamValue::Str(s) => s,
-            _ => "",
-        }
-    }
-    /// A path parameter resolved against the graph's folder.
-    pub fn path(&self, name: &str) -> PathBuf {
-        let p = Path::new(self.str(name));
-        if p.is_absolute() { p.to_path_buf() } else { self.settings.base_dir.join(p) }
-    }
-
-    pub fn input(&self, name: &str) -> Option<&Value> {
-        let (i, _) = self.spec.input(name)?;
-        self.inputs[i].as_ref()
-    }
-
-    pub fn required(&self, name: &str) -> Result<&Value, NodeError> {
-        self.input(name).ok_or_else(|| NodeError::msg(format!("input \"{name}\" has no value")))
-    }
-
-    pub fn set(&mut self, name: &str, value: Value) {
-        let (i, _) = self
-            .spec
-            .output(name)
-            .unwrap_or_else(|| panic!("node kind {} writes undeclared output {name}", self.spec.kind));
-        self.outputs[i] = Some(value);
-    }
-
-    /// The frame time. Reading it makes the node re-run whenever the time changes.
-    pub fn time(&mut self) -> FrameTime {
-        self.used_time = true;
-        self.time
-    }
-
-    pub fn gpu(&self) -> Result<&'a GpuContext, NodeError> {
-        self.gpu.ok_or_else(|| NodeError::msg("this node needs a GPU, but evaluation runs without one"))
-    }
-
-    pub fn warn(&mut self, message: impl Into<String>) {
-        self.warnings.push(message.into());
-    }
-
-    /// Loads a file through the lazy resource system. While it loads this returns
-    /// `NodeError::Pending`; the node re-runs when the resource is ready or reloaded.
-    pub fn load<T: Send + Sync + 'static>(
-        &mut self,
-        path: &Path,
-        loader: fn(&Path) -> anyhow::Result<T>,
-    ) -> Result<Arc<T>, NodeError> {
-        let (slot, version, state) = self.resources.request_observed(path, loader);
-        self.touched.push((slot, version));
-        state
-    }
-
-    /// Starts loading a file that a later run will `load`, without making this run depend on
-    /// it (it does not re-run when the load completes).
-    pub fn prefetch<T: Send + Sync + 'static>(&self, path: &Path, loader: fn(&Path) -> anyhow::Result<T>) {
-        let _ = self.resources.request(path, loader);
-    }
-
-    /// Lets the resource system forget a file loaded as `T` that this node no longer needs
-    /// (frees its memory). Returns false, and keeps it, while another node or a loader still
-    /// uses it; call again later.
-    pub fn release<T: 'static>(&self, path: &Path) -> bool {
-        self.resources.release::<T>(path)
-    }
-
-    /// Makes this run depend on an external change signal: the node re-runs when the signal
-    /// is bumped. Returns the version seen; the fingerprint records that version, so a bump
-    /// that races with this run still triggers the next one.
-    pub fn watch(&mut self, signal: &ChangeSignal) -> u64 {
-        let v = signal.version();
-        self.signals.push((signal.clone(), v));
-        v
-    }
-}
+/// The frame settings and time a host passes to [`Evaluator::evaluate`].
+pub use crate::node::{ChangeSignal, FrameSettings, FrameTime};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum NodeStatus {
@@ -236,6 +41,8 @@ struct NodeState {
     warnings: Vec<String>,
     /// Shaders of its last run that failed to compile (it ran on the last good pipelines, or failed).
     shader_errors: Vec<ShaderError>,
+    /// What the last successful run emitted for the batch runner.
+    products: Vec<Product>,
     last_cpu: Duration,
     ran_last_frame: bool,
     runs: u64,
@@ -384,6 +191,7 @@ impl Evaluator {
                     signals: Vec::new(),
                     warnings: Vec::new(),
                     shader_errors: Vec::new(),
+                    products: Vec::new(),
                     last_cpu: Duration::ZERO,
                     ran_last_frame: false,
                     runs: 0,
@@ -463,6 +271,7 @@ impl Evaluator {
                 continue;
             }
             self.state[i].outputs.iter_mut().for_each(|o| *o = None);
+            self.state[i].products.clear();
             stack.extend(self.consumers[i].iter().copied().filter(|&c| self.planned[c]));
         }
     }
@@ -478,10 +287,7 @@ impl Evaluator {
         let mut summary = FrameSummary::default();
         self.settings_hash = {
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            std::hash::Hash::hash(
-                &(settings.width, settings.height, &settings.base_dir, &settings.out_dir, gpu.is_some()),
-                &mut h,
-            );
+            std::hash::Hash::hash(&(settings.width, settings.height, &settings.base_dir, gpu.is_some()), &mut h);
             std::hash::Hasher::finish(&h)
         };
         self.released.iter_mut().for_each(|r| *r = false);
@@ -503,6 +309,7 @@ impl Evaluator {
                 if state.status != NodeStatus::Blocked(msg.clone()) {
                     state.status = NodeStatus::Blocked(msg);
                     state.outputs.iter_mut().for_each(|o| *o = None);
+                    state.products.clear();
                 }
                 summary.skipped += 1;
                 continue;
@@ -580,10 +387,11 @@ impl Evaluator {
         state.touched.clear();
         state.signals.clear();
         state.warnings.clear();
+        let mut products = Vec::new();
         // The node's GPU work runs in its own validation error scope.
         let scope = gpu.map(|g| g.begin_node(&self.ids[n]));
         let start = Instant::now();
-        let (result, used_time) = {
+        let (result, used_time, misuse) = {
             let mut cx = EvalCx {
                 node_id: &self.ids[n],
                 spec,
@@ -597,6 +405,8 @@ impl Evaluator {
                 touched: &mut state.touched,
                 signals: &mut state.signals,
                 warnings: &mut state.warnings,
+                products: &mut products,
+                misuse: RefCell::new(Vec::new()),
                 settings,
             };
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.instance.eval(&mut cx)));
@@ -606,10 +416,11 @@ impl Evaluator {
                     .cloned()
                     .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                     .unwrap_or_default();
-                Err(NodeError::msg(format!("internal error (panic) in {}: {what}", spec.kind)))
+                Err(NodeError::msg(format!("{INTERNAL_ERROR} (panic) in {}: {what}", spec.kind)))
             });
-            (r, cx.used_time)
+            (r, cx.used_time, cx.misuse.into_inner())
         };
+        let result = Self::check_contract(spec, result, &outputs, misuse);
         state.last_cpu = start.elapsed();
         let mut result = result;
         state.shader_errors.clear();
@@ -633,20 +444,52 @@ impl Evaluator {
             Ok(()) => {
                 state.status = NodeStatus::Ok;
                 state.outputs = outputs;
+                state.products = products;
                 state.version = self.next_version;
                 self.next_version += 1;
             }
             Err(NodeError::Pending(p)) => {
+                state.products.clear();
                 state.status = NodeStatus::Pending(p);
                 state.outputs.iter_mut().for_each(|o| *o = None);
             }
             Err(NodeError::Failed(m)) => {
+                state.products.clear();
                 state.status = NodeStatus::Failed(m);
                 state.outputs.iter_mut().for_each(|o| *o = None);
             }
         }
         inputs.clear();
         self.scratch_inputs = inputs;
+    }
+
+    /// Turns a node's programming errors (see [`INTERNAL_ERROR`]) into its result. In debug
+    /// builds also checks that a successful run set every output with a value of its declared
+    /// type (`EvalCx::set` checks types; this catches a port the node forgot).
+    fn check_contract(
+        spec: &NodeSpec,
+        result: Result<(), NodeError>,
+        outputs: &[Option<Value>],
+        mut misuse: Vec<String>,
+    ) -> Result<(), NodeError> {
+        if cfg!(debug_assertions) && result.is_ok() {
+            for (port, value) in spec.outputs.iter().zip(outputs) {
+                match value {
+                    None => misuse
+                        .push(format!("{INTERNAL_ERROR}: node kind {} left output \"{}\" unset", spec.kind, port.name)),
+                    Some(v) if v.port_type() != port.ty => misuse.push(format!(
+                        "{INTERNAL_ERROR}: node kind {} wrote a {} to {} output \"{}\"",
+                        spec.kind,
+                        v.type_name(),
+                        port.ty,
+                        port.name
+                    )),
+                    Some(_) => {}
+                }
+            }
+        }
+        // A programming error outranks whatever the node returned.
+        if misuse.is_empty() { result } else { Err(NodeError::Failed(misuse.join("; "))) }
     }
 
     /// Forgets every cache, e.g. after the frame size changed.
@@ -691,6 +534,12 @@ impl Evaluator {
     /// Reports of the planned nodes, in evaluation order.
     pub fn reports(&self) -> impl Iterator<Item = NodeReport<'_>> {
         self.order.iter().map(|&i| self.report_at(i))
+    }
+
+    /// What output node `id` emitted for the batch runner in its last successful run (a node
+    /// skipped this frame still stands by it: its inputs are unchanged).
+    pub fn products(&self, id: &str) -> &[Product] {
+        self.index.get(id).map_or(&[], |&i| &self.state[i].products)
     }
 
     pub fn output(&self, id: &str, port: &str) -> Option<&Value> {

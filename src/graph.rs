@@ -27,7 +27,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 
-use crate::spec::{self, ParamValue};
+use crate::param::ParamValue;
+use crate::spec;
 
 /// The file format version this build writes.
 pub const CURRENT_VERSION: u32 = 1;
@@ -566,7 +567,7 @@ impl Graph {
         input: bool,
         place: &Place,
         problems: &mut Vec<Problem>,
-    ) -> Option<spec::PortType> {
+    ) -> Option<crate::port::PortType> {
         let Some(node) = self.nodes.get(&port.node) else {
             problems.push(Problem::new(
                 ProblemKind::UnknownNode,
@@ -680,7 +681,7 @@ impl Graph {
     /// Writes the canonical text atomically: a temporary file in the same folder, then a rename,
     /// so a crash mid-save never leaves a half-written graph.
     pub fn save(&self, path: &Path) -> std::io::Result<()> {
-        write_atomic(path, self.to_ron().as_bytes())
+        crate::atomic::write_atomic(path, self.to_ron().as_bytes())
     }
 
     /// The value of a parameter: the file's, or the spec's default.
@@ -718,21 +719,6 @@ impl Default for Graph {
     fn default() -> Self {
         Graph::new()
     }
-}
-
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&tmp, path).inspect_err(|_| {
-        let _ = std::fs::remove_file(&tmp);
-    })
 }
 
 fn quote(s: &str) -> String {

@@ -1,19 +1,43 @@
-//! Writing read-back images: PNG (8-bit) and OpenEXR (32-bit float).
+//! Writing read-back images: PNG (8-bit) and OpenEXR (32-bit float), atomically: a write that
+//! fails leaves neither a partial image nor a temporary file behind.
 
+use std::io::Cursor;
 use std::path::Path;
 
 use anyhow::Context as _;
 
 use crate::gpu::Pixels;
 
+crate::choice!(
+    /// The image file formats `render` writes.
+    pub enum ImageFormat {
+        Png = "png",
+        Exr = "exr",
+    }
+);
+
+impl ImageFormat {
+    pub fn extension(self) -> &'static str {
+        crate::param::Choice::name(self)
+    }
+}
+
+/// Writes `px` to `path` in `format`.
+pub fn write_image(path: &Path, px: &Pixels, format: ImageFormat) -> anyhow::Result<()> {
+    match format {
+        ImageFormat::Png => write_png(path, px),
+        ImageFormat::Exr => write_exr(path, px),
+    }
+}
+
 /// Writes 8-bit PNG. LDR pixels are stored as they are (already display-encoded);
 /// HDR values are clamped to [0, 1] and sRGB-encoded.
 pub fn write_png(path: &Path, px: &Pixels) -> anyhow::Result<()> {
     let bytes = to_rgba8(px);
     let img = image::RgbaImage::from_raw(px.width, px.height, bytes).context("pixel buffer has the wrong size")?;
-    let tmp = path.with_extension("png.tmp");
-    img.save_with_format(&tmp, image::ImageFormat::Png).with_context(|| format!("cannot write {}", path.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+    let mut encoded = Cursor::new(Vec::new());
+    img.write_to(&mut encoded, image::ImageFormat::Png).context("cannot encode PNG")?;
+    crate::atomic::write_atomic(path, encoded.get_ref()).with_context(|| format!("cannot write {}", path.display()))
 }
 
 pub fn to_rgba8(px: &Pixels) -> Vec<u8> {
@@ -21,7 +45,7 @@ pub fn to_rgba8(px: &Pixels) -> Vec<u8> {
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let v = if px.is_ldr || i % 4 == 3 { v } else { crate::nodes::scene::linear_to_srgb(v.clamp(0.0, 1.0)) };
+            let v = if px.is_ldr || i % 4 == 3 { v } else { crate::color::linear_to_srgb(v.clamp(0.0, 1.0)) };
             (v.clamp(0.0, 1.0) * 255.0).round() as u8
         })
         .collect()
@@ -31,8 +55,7 @@ pub fn to_rgba8(px: &Pixels) -> Vec<u8> {
 pub fn write_exr(path: &Path, px: &Pixels) -> anyhow::Result<()> {
     let img = image::Rgba32FImage::from_raw(px.width, px.height, px.rgba.clone())
         .context("pixel buffer has the wrong size")?;
-    let tmp = path.with_extension("exr.tmp");
-    img.save_with_format(&tmp, image::ImageFormat::OpenExr)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+    let mut encoded = Cursor::new(Vec::new());
+    img.write_to(&mut encoded, image::ImageFormat::OpenExr).context("cannot encode OpenEXR")?;
+    crate::atomic::write_atomic(path, encoded.get_ref()).with_context(|| format!("cannot write {}", path.display()))
 }

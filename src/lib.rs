@@ -4,23 +4,29 @@
 //! [`eval::Evaluator`] runs the nodes that feed an output, skipping those whose inputs,
 //! parameters, resources and time are unchanged. [`render`] is the headless batch runner.
 
+pub mod atomic;
 pub mod bench;
 pub mod cli;
+pub mod color;
 pub mod docs;
 #[cfg(feature = "editor")]
 pub mod editor;
 pub mod eval;
+pub mod geometry_io;
 pub mod gpu;
 pub mod graph;
+pub mod hash;
 pub mod image_io;
 pub mod mesh;
+pub mod node;
+pub mod param;
+pub mod port;
 pub mod render;
 pub mod resources;
 pub mod rng;
 pub mod scene;
 pub mod shaders;
 pub mod spec;
-pub mod value;
 pub mod warp;
 
 #[path = "../nodes/mod.rs"]

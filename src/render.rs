@@ -9,11 +9,13 @@ use anyhow::{Context as _, bail};
 use serde::Serialize;
 
 use crate::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use crate::geometry_io;
 use crate::gpu::{self, GpuContext};
 use crate::graph::{Graph, PortRef};
-use crate::image_io;
+use crate::image_io::{self, ImageFormat};
+use crate::node::Product;
+use crate::port::Value;
 use crate::resources::Resources;
-use crate::value::Value;
 
 pub struct RenderOptions {
     pub graph_path: PathBuf,
@@ -67,10 +69,6 @@ pub struct Stats {
 /// How long batch rendering waits for one frame's pending nodes before failing.
 const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
 
-pub fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
-}
-
 /// Loads the graph and applies `--set` overrides, re-validating afterwards.
 pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
     let mut graph = Graph::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -80,9 +78,15 @@ pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph
     Ok(graph)
 }
 
-/// Renders the frames; returns the statistics (also written to `stats.json`).
+/// Loads the graph (with `--set` overrides) and renders the frames; returns the statistics
+/// (also written to `stats.json`).
 pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     let graph = load_with_overrides(&opts.graph_path, &opts.sets)?;
+    render_graph(opts, &graph, gpu)
+}
+
+/// Renders the frames of a loaded graph (`opts.sets` already applied).
+pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> anyhow::Result<Stats> {
     let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(&graph, d)).collect::<anyhow::Result<_>>()?;
     let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
     let mut evaluator = Evaluator::new(&graph, &extra_roots).map_err(anyhow::Error::msg)?;
@@ -98,11 +102,10 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
         width: opts.width,
         height: opts.height,
         base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
-        out_dir: Some(opts.out_dir.clone()),
     };
     let mut stats = Stats {
         graph: opts.graph_path.display().to_string(),
-        graph_hash: format!("{:016x}", fnv1a(graph.to_ron().as_bytes())),
+        graph_hash: format!("{:016x}", crate::hash::fnv1a(graph.to_ron().as_bytes())),
         adapter: gpu.adapter_name(),
         width: opts.width,
         height: opts.height,
@@ -177,15 +180,22 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
         }
         let roots: Vec<String> = evaluator.roots().map(str::to_string).collect();
         for id in &roots {
-            match evaluator.output(id, "image").or_else(|| evaluator.output(id, "value")) {
-                Some(Value::Texture(img)) => {
-                    let exr = graph.param(id, "format") == Some(crate::spec::ParamValue::Str("exr".into()));
-                    let name = format!("{id}_{frame:04}.{}", if exr { "exr" } else { "png" });
-                    write_image(gpu, img, &opts.out_dir.join(&name), exr)?;
-                    stats.files.push(name);
+            for product in evaluator.products(id) {
+                let name = |ext: &str| format!("{id}_{frame:04}.{ext}");
+                match product {
+                    Product::Image { image, format } => {
+                        let name = name(format.extension());
+                        let px = gpu::read_back(gpu, image)?;
+                        image_io::write_image(&opts.out_dir.join(&name), &px, *format)?;
+                        stats.files.push(name);
+                    }
+                    Product::Geometry { mesh, format } => {
+                        let name = name(format.extension());
+                        geometry_io::write_geometry(&opts.out_dir.join(&name), mesh, *format)?;
+                        stats.files.push(name);
+                    }
+                    Product::Value(v) => stats.values.entry(id.clone()).or_default().push(*v),
                 }
-                Some(Value::Scalar(v)) => stats.values.entry(id.clone()).or_default().push(*v),
-                _ => {}
             }
         }
         for d in &dumps {
@@ -193,9 +203,12 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
             let Some(img) = value.and_then(Value::as_texture) else {
                 bail!("--dump {d}: the port holds no texture this frame");
             };
-            let exr = !matches!(img.format, wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm);
-            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, if exr { "exr" } else { "png" });
-            write_image(gpu, img, &opts.out_dir.join(&name), exr)?;
+            let format = match img.format {
+                wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm => ImageFormat::Png,
+                _ => ImageFormat::Exr,
+            };
+            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.extension());
+            image_io::write_image(&opts.out_dir.join(&name), &gpu::read_back(gpu, img)?, format)?;
             stats.files.push(name);
         }
         let gpu_created = gpu.created().since(created_before);
@@ -213,13 +226,8 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
 
 fn write_stats(dir: &Path, stats: &Stats) -> anyhow::Result<()> {
     let json = serde_json::to_string_pretty(stats)?;
-    crate::graph::write_atomic(&dir.join("stats.json"), json.as_bytes())
+    crate::atomic::write_atomic(&dir.join("stats.json"), json.as_bytes())
         .with_context(|| format!("cannot write {}/stats.json", dir.display()))
-}
-
-fn write_image(gpu: &GpuContext, img: &gpu::GpuImage, path: &Path, exr: bool) -> anyhow::Result<()> {
-    let px = gpu::read_back(gpu, img)?;
-    if exr { image_io::write_exr(path, &px) } else { image_io::write_png(path, &px) }
 }
 
 fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
@@ -234,10 +242,7 @@ fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
             spec.outputs.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
         );
     };
-    if !matches!(
-        port.ty,
-        crate::spec::PortType::Texture | crate::spec::PortType::GBuffer | crate::spec::PortType::MatrixTexture
-    ) {
+    if !port.ty.viewable() {
         bail!("--dump {text}: the port is a {}, not a texture", port.ty);
     }
     Ok(r)

@@ -9,7 +9,16 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Condvar, Mutex};
 
-use crate::eval::NodeError;
+/// Why a resource has no value (yet).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LoadError {
+    /// Still loading (or reloading after an error).
+    #[error("{} is still loading", .0.display())]
+    Pending(PathBuf),
+    /// The load failed; the message names the file.
+    #[error("{0}")]
+    Failed(String),
+}
 
 type Loaded = Arc<dyn Any + Send + Sync>;
 type LoadFn = Box<dyn Fn(&Path) -> anyhow::Result<Loaded> + Send + Sync>;
@@ -88,7 +97,7 @@ impl Resources {
         &self,
         path: &Path,
         loader: fn(&Path) -> anyhow::Result<T>,
-    ) -> (SlotRef, Result<Arc<T>, NodeError>) {
+    ) -> (SlotRef, Result<Arc<T>, LoadError>) {
         let (slot, _, value) = self.request_observed(path, loader);
         (slot, value)
     }
@@ -100,7 +109,7 @@ impl Resources {
         &self,
         path: &Path,
         loader: fn(&Path) -> anyhow::Result<T>,
-    ) -> (SlotRef, u64, Result<Arc<T>, NodeError>) {
+    ) -> (SlotRef, u64, Result<Arc<T>, LoadError>) {
         let path = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
         let key = (path.clone(), TypeId::of::<T>());
         let (slot, fresh) = {
@@ -125,10 +134,10 @@ impl Resources {
         }
         let version = slot.version();
         let value = match slot.state() {
-            SlotState::Pending => Err(NodeError::Pending(path)),
-            SlotState::Failed(e) => Err(NodeError::Failed(e)),
+            SlotState::Pending => Err(LoadError::Pending(path)),
+            SlotState::Failed(e) => Err(LoadError::Failed(e)),
             SlotState::Ready(v) => {
-                v.downcast::<T>().map_err(|_| NodeError::msg(format!("{}: loaded as another type", path.display())))
+                v.downcast::<T>().map_err(|_| LoadError::Failed(format!("{}: loaded as another type", path.display())))
             }
         };
         (slot, version, value)

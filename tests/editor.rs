@@ -165,7 +165,7 @@ fn add_connect_edit_undo_redo_and_save() {
     assert_eq!(runs(&h, "gbuffer"), gbuffer_runs, "nodes upstream of the change are not re-run");
     assert_eq!(runs(&h, "tonemap"), tonemap_runs + 1, "the changed node re-ran once");
     let op = |h: &Harness<'_, EditorApp>| h.state().state.graph.nodes["tonemap"].params.get("operator").cloned();
-    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+    assert_eq!(op(&h), Some(werkstatt::param::ParamValue::Str("reinhard".into())));
 
     // Undo the parameter, then redo it (keyboard and buttons).
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
@@ -174,7 +174,7 @@ fn add_connect_edit_undo_redo_and_save() {
     assert!(h.state().state.graph.links.iter().any(|l| l.to == p("preview.image")), "only one step was undone");
     h.get_by_role_and_label(Role::Button, "Redo").click();
     settle(&mut h);
-    assert_eq!(op(&h), Some(werkstatt::spec::ParamValue::Str("reinhard".into())));
+    assert_eq!(op(&h), Some(werkstatt::param::ParamValue::Str("reinhard".into())));
 
     // Save with Ctrl+S and compare with the expected canonical file.
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
@@ -256,7 +256,7 @@ fn a_failing_node_shows_its_error_on_the_node() {
     // Fixing the parameter clears the error.
     let header = h.state().canvas.node_screen_rect("divide").unwrap();
     click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
-    h.state_mut().state.set_param("divide", "b", werkstatt::spec::ParamValue::Float(4.0)).unwrap();
+    h.state_mut().state.set_param("divide", "b", werkstatt::param::ParamValue::Float(4.0)).unwrap();
     settle(&mut h);
     assert!(h.query_by_label("error: division by zero (input b is 0)").is_none());
     assert_eq!(h.state().live.output(&p("divide.result")).map(|v| v.summary()), Some("0.25".into()));
@@ -291,7 +291,7 @@ fn a_200_node_graph_stays_responsive() {
         };
     let idle = measure(&mut h, "idle", &mut |_, _| {});
     let param = measure(&mut h, "changing a parameter every frame", &mut |h, i| {
-        h.state_mut().state.set_param("m0000", "b", werkstatt::spec::ParamValue::Float(i as f64)).unwrap();
+        h.state_mut().state.set_param("m0000", "b", werkstatt::param::ParamValue::Float(i as f64)).unwrap();
     });
     let start = h.state().canvas.node_screen_rect("m0100").map(|r| r.left_top() + Vec2::new(20.0, 10.0));
     let drag_median = match start {
@@ -612,7 +612,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
 
     // Another program rewrites the file: the editor offers to reload it (one undo step).
     let mut other = Graph::load(&path).unwrap();
-    werkstatt::editor::document::set_param(&mut other, "tonemap", "exposure", werkstatt::spec::ParamValue::Float(1.5))
+    werkstatt::editor::document::set_param(&mut other, "tonemap", "exposure", werkstatt::param::ParamValue::Float(1.5))
         .unwrap();
     other.save(&path).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1100));

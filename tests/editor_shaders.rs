@@ -8,7 +8,7 @@ use std::time::Duration;
 use werkstatt::editor::live::{Live, NodeState};
 use werkstatt::gpu::{Backend, GpuContext, read_back};
 use werkstatt::graph::{Graph, PortRef};
-use werkstatt::spec::ParamValue;
+use werkstatt::param::ParamValue;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -44,7 +44,7 @@ const DIAMOND: &str = r#"(
 
 fn scalar(ev: &Evaluator, id: &str) -> f64 {
     match ev.output(id, "value") {
-        Some(werkstatt::value::Value::Scalar(v)) => *v,
+        Some(werkstatt::port::Value::Scalar(v)) => *v,
         _ => panic!("{id} has no scalar"),
     }
 }
@@ -193,7 +193,7 @@ fn mesh_graph(path: &std::path::Path) -> Graph {
 
 fn triangles(ev: &Evaluator) -> usize {
     match ev.output("mesh", "mesh") {
-        Some(werkstatt::value::Value::Mesh(m)) => m.triangle_count(),
+        Some(werkstatt::port::Value::Mesh(m)) => m.triangle_count(),
         _ => 0,
     }
 }

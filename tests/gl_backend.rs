@@ -16,9 +16,9 @@ use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::gpu::{Backend, GpuContext, read_back};
 use werkstatt::graph::Graph;
 use werkstatt::nodes::live_link::{encode_frame, encode_topology};
+use werkstatt::param::ParamValue;
 use werkstatt::render::{RenderOptions, render};
 use werkstatt::resources::Resources;
-use werkstatt::spec::ParamValue;
 
 /// The GL context, or `None` (test skipped) where the machine has no EGL library.
 fn gl() -> Option<GpuContext> {
@@ -125,7 +125,7 @@ fn render_livelink(gpu: &GpuContext) {
     graph.nodes.get_mut("simulator").unwrap().params.insert("address".into(), ParamValue::Str("127.0.0.1:0".into()));
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let res = Resources::new(false);
-    let settings = FrameSettings { width: 160, height: 120, base_dir: root().join("graphs"), out_dir: None };
+    let settings = FrameSettings { width: 160, height: 120, base_dir: root().join("graphs") };
     let deadline = Instant::now() + Duration::from_secs(30);
     let mut sender: Option<TcpStream> = None;
     let mut frame = 0;

@@ -22,7 +22,7 @@ fn fresh_gpu() -> GpuContext {
 }
 
 fn settings(width: u32, height: u32) -> FrameSettings {
-    FrameSettings { width, height, base_dir: root().join("graphs"), out_dir: None }
+    FrameSettings { width, height, base_dir: root().join("graphs") }
 }
 
 /// Evaluates `frame` until nothing is pending.

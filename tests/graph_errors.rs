@@ -166,7 +166,7 @@ fn cli_set_errors_name_node_and_param() {
     let e = g.set_from_cli("nobody.x=1").unwrap_err();
     assert!(e.contains("no node \"nobody\""), "{e}");
     g.set_from_cli("camera.distance=5").unwrap();
-    assert_eq!(g.param("camera", "distance"), Some(werkstatt::spec::ParamValue::Float(5.0)));
+    assert_eq!(g.param("camera", "distance"), Some(werkstatt::param::ParamValue::Float(5.0)));
 }
 
 #[test]

@@ -13,8 +13,8 @@ use werkstatt::mesh::Mesh;
 use werkstatt::nodes::live_link::{
     HEADER_BYTES, Header, MAX_VERTICES, MSG_FRAME, MSG_TOPOLOGY, VERSION, encode_frame, encode_topology,
 };
+use werkstatt::port::Value;
 use werkstatt::resources::Resources;
-use werkstatt::value::Value;
 
 const WAIT: Duration = Duration::from_secs(10);
 
@@ -94,7 +94,7 @@ impl Rig {
 
     fn surface(&self) -> Arc<Mesh> {
         match self.ev.output("link", "surface") {
-            Some(Value::Mesh(m)) => m.clone(),
+            Some(Value::Surface(m)) => m.clone(),
             _ => panic!("no surface; status {:?}", self.status()),
         }
     }

@@ -10,8 +10,8 @@ use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::graph::Graph;
 use werkstatt::mesh::Mesh;
 use werkstatt::nodes::mesh_sequence::{Mode, bracket, load_frame, parse_obj};
+use werkstatt::port::Value;
 use werkstatt::resources::Resources;
-use werkstatt::value::Value;
 
 fn tablecloth() -> PathBuf {
     common::root().join("tests/data/sequence")
@@ -49,7 +49,7 @@ fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
 
 fn surface(ev: &Evaluator) -> Arc<Mesh> {
     match ev.output("seq", "surface") {
-        Some(Value::Mesh(m)) => m.clone(),
+        Some(Value::Surface(m)) => m.clone(),
         _ => panic!("no surface; status {:?}", ev.report("seq").unwrap().status),
     }
 }

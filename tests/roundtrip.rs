@@ -57,7 +57,7 @@ fn canonical_form_is_independent_of_input_order_and_layout() {
 fn strings_with_quotes_and_unicode_round_trip() {
     let mut g = Graph::new();
     let mut params = std::collections::BTreeMap::new();
-    params.insert("path".to_string(), werkstatt::spec::ParamValue::Str("dir \"x\"\\ü\n.obj".into()));
+    params.insert("path".to_string(), werkstatt::param::ParamValue::Str("dir \"x\"\\ü\n.obj".into()));
     g.nodes.insert("m".into(), werkstatt::graph::NodeDoc { kind: "MeshFile".into(), pos: [0.0, 0.0], params });
     let text = g.to_ron();
     let back = Graph::load_str(&text, "x.ron".as_ref()).unwrap();

@@ -4,12 +4,10 @@ use std::sync::Arc;
 
 use glam::{Mat4, Quat, Vec2, Vec3};
 
-use crate::eval::{EvalCx, Node, NodeError};
 use crate::mesh::Mesh;
+use crate::node::prelude::*;
 use crate::nodes::geometry;
 use crate::scene::{DrawItem, Material};
-use crate::spec::{Category, NodeSpec, ParamKind, ParamSpec, PortSpec, PortType};
-use crate::value::Value;
 
 use super::{Cloth, Collider, FRAME_DT, FlagParams, Preset, SkirtParams, TableclothParams};
 
@@ -26,7 +24,7 @@ pub static CLOTH_SIM: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "preset",
-            ParamKind::Choice { default: "tablecloth", options: &["tablecloth", "flag", "skirt"] },
+            ParamKind::Choice { default: "tablecloth", options: PresetKind::OPTIONS },
             "The scene.",
         ),
         ParamSpec::new("triangles", ParamKind::Int { default: 4000, min: 100, max: 200_000 }, "Target triangle count."),
@@ -57,13 +55,21 @@ struct ClothSimNode {
     colliders: Option<(String, Arc<Vec<DrawItem>>)>,
 }
 
+crate::choice!(
+    enum PresetKind {
+        Tablecloth = "tablecloth",
+        Flag = "flag",
+        Skirt = "skirt",
+    }
+);
+
 impl Node for ClothSimNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let (triangles, seed) = (cx.int("triangles") as usize, cx.int("seed") as u64);
-        let preset = match cx.str("preset") {
-            "flag" => Preset::Flag(FlagParams { triangles, seed, wind_speed: cx.f32("wind_speed") }),
-            "skirt" => Preset::Skirt(SkirtParams { triangles, seed, ..Default::default() }),
-            _ => Preset::Tablecloth(TableclothParams { triangles, seed, ..Default::default() }),
+        let preset = match cx.choice::<PresetKind>("preset") {
+            PresetKind::Flag => Preset::Flag(FlagParams { triangles, seed, wind_speed: cx.f32("wind_speed") }),
+            PresetKind::Skirt => Preset::Skirt(SkirtParams { triangles, seed, ..Default::default() }),
+            PresetKind::Tablecloth => Preset::Tablecloth(TableclothParams { triangles, seed, ..Default::default() }),
         };
         let key = format!("{preset:?}");
         let time = cx.time();
@@ -96,9 +102,9 @@ impl Node for ClothSimNode {
         if self.colliders.as_ref().is_none_or(|(k, _)| *k != key) {
             self.colliders = Some((key, Arc::new(collider_items(cloth.colliders())?)));
         }
-        cx.set("surface", Value::Mesh(Arc::new(mesh)));
-        cx.set("colliders", Value::Scene(self.colliders.as_ref().expect("set above").1.clone()));
-        cx.set("max_strain", Value::Scalar(strain));
+        cx.set("surface", Arc::new(mesh));
+        cx.set("colliders", self.colliders.as_ref().expect("set above").1.clone());
+        cx.set("max_strain", strain);
         Ok(())
     }
 }

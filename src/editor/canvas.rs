@@ -19,30 +19,14 @@ use egui_snarl::{InPin, InPinId, NodeId, OutPin, OutPinId, Snarl};
 use super::document::compatible_kinds;
 use super::live::{Live, NodeState};
 use crate::graph::{Graph, Link, PortRef};
-use crate::spec::{self, Category, NodeSpec, PortType};
+use crate::node::{Category, NodeSpec};
+use crate::port::PortType;
+use crate::spec;
 
 /// The colour of a port type, shared by pins, wires and the inspector.
 pub fn port_color(ty: PortType) -> Color32 {
-    match ty {
-        PortType::Scalar => Color32::from_rgb(160, 160, 160),
-        PortType::Vector => Color32::from_rgb(110, 110, 220),
-        PortType::Color => Color32::from_rgb(220, 200, 60),
-        PortType::Mesh => Color32::from_rgb(0, 190, 170),
-        PortType::Surface => Color32::from_rgb(60, 220, 120),
-        PortType::Scene => Color32::from_rgb(230, 130, 40),
-        PortType::Material => Color32::from_rgb(210, 90, 160),
-        PortType::Camera => Color32::from_rgb(120, 180, 255),
-        PortType::Texture => Color32::from_rgb(240, 90, 90),
-        PortType::GBuffer => Color32::from_rgb(190, 70, 230),
-        PortType::Lights => Color32::from_rgb(255, 230, 150),
-        PortType::Instances => Color32::from_rgb(150, 220, 60),
-        PortType::MatrixTexture => Color32::from_rgb(255, 140, 140),
-        PortType::CubeMap => Color32::from_rgb(255, 170, 90),
-        PortType::Pems => Color32::from_rgb(200, 160, 100),
-        PortType::ShadowAtlas => Color32::from_rgb(120, 120, 150),
-        PortType::Curves => Color32::from_rgb(100, 200, 230),
-        PortType::CuboidTransform => Color32::from_rgb(170, 130, 230),
-    }
+    let [r, g, b] = ty.color();
+    Color32::from_rgb(r, g, b)
 }
 
 pub const ERROR_COLOR: Color32 = Color32::from_rgb(255, 110, 100);
@@ -492,11 +476,7 @@ impl Viewer<'_> {
     fn pin(&self, ty: PortType, key: (String, bool, usize), connected: bool) -> TypedPin {
         let color = port_color(ty);
         let info = PinInfo::default()
-            .with_shape(if ty == PortType::Texture || ty == PortType::GBuffer {
-                PinShape::Square
-            } else {
-                PinShape::Circle
-            })
+            .with_shape(if ty.viewable() { PinShape::Square } else { PinShape::Circle })
             .with_fill(if connected { color } else { color.gamma_multiply(0.55) })
             .with_stroke(Stroke::new(1.0, Color32::from_gray(20)))
             .with_wire_color(color);
@@ -521,7 +501,7 @@ impl Viewer<'_> {
                 _ => {}
             },
         }
-        if !input && matches!(p.ty, PortType::Texture | PortType::GBuffer) {
+        if !input && p.ty.viewable() {
             text.push_str("\nclick to show in the viewport");
         }
         text
@@ -647,7 +627,7 @@ impl SnarlViewer<String> for Viewer<'_> {
         let id = snarl.get_node(pin.id.node).cloned().unwrap_or_default();
         let (port, ty) =
             self.out_ref(snarl, pin.id).unwrap_or((PortRef { node: id.clone(), port: "?".into() }, PortType::Scalar));
-        let texture = matches!(ty, PortType::Texture | PortType::GBuffer);
+        let texture = ty.viewable();
         let shown = self.inspected == Some(&port);
         let mut text = RichText::new(if shown { format!("👁 {}", port.port) } else { port.port.clone() }).small();
         if texture {
@@ -786,7 +766,7 @@ impl SnarlViewer<String> for Viewer<'_> {
             self.actions.push(Action::SelectOnly(id.clone()));
         }
         if let Some(spec) = self.spec(&id) {
-            for p in spec.outputs.iter().filter(|p| matches!(p.ty, PortType::Texture | PortType::GBuffer)) {
+            for p in spec.outputs.iter().filter(|p| p.ty.viewable()) {
                 if ui.button(format!("Show {}.{}", id, p.name)).clicked() {
                     self.actions.push(Action::Inspect(Some(PortRef { node: id.clone(), port: p.name.into() })));
                     ui.close();

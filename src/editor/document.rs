@@ -8,7 +8,10 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::graph::{Graph, Link, NodeDoc, PortRef};
-use crate::spec::{self, NodeSpec, ParamValue, PortType};
+use crate::node::NodeSpec;
+use crate::param::ParamValue;
+use crate::port::PortType;
+use crate::spec;
 
 /// Why an edit was refused. The message is shown to the user as it is.
 #[derive(Clone, Debug, PartialEq)]

@@ -85,7 +85,7 @@ impl FileWatch {
         }
         self.last_autosave = Instant::now();
         let path = autosave_path(state.path.as_deref());
-        let result = crate::graph::write_atomic(&path, state.graph.to_ron().as_bytes())
+        let result = crate::atomic::write_atomic(&path, state.graph.to_ron().as_bytes())
             .map(|_| path.clone())
             .map_err(|e| format!("cannot write the autosave {}: {e}", path.display()));
         if result.is_ok() {

@@ -102,7 +102,7 @@ impl History {
 mod tests {
     use super::*;
     use crate::editor::document::{add_node, set_param};
-    use crate::spec::ParamValue;
+    use crate::param::ParamValue;
 
     #[test]
     fn undo_redo_round_trip() {

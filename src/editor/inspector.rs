@@ -11,7 +11,8 @@ use egui::{RichText, Ui};
 use super::canvas::{ERROR_COLOR, PENDING_COLOR, port_color};
 use super::live::{Live, NodeState};
 use super::state::EditorState;
-use crate::spec::{self, ParamKind, ParamSpec, ParamValue};
+use crate::param::{ParamKind, ParamSpec, ParamValue};
+use crate::spec;
 
 pub struct Inspector {
     /// Whether file buttons open the system file dialog (off in tests).

@@ -10,9 +10,10 @@ use std::time::{Duration, Instant, SystemTime};
 use crate::eval::{Evaluator, FrameSettings, FrameSummary, FrameTime, NodeStatus};
 use crate::gpu::GpuContext;
 use crate::graph::{Graph, Place, PortRef, ProblemKind};
+use crate::param::ParamValue;
+use crate::port::Value;
 use crate::resources::Resources;
-use crate::spec::{self, ParamValue, PortType};
-use crate::value::Value;
+use crate::spec;
 
 /// What a node shows on the canvas.
 #[derive(Clone, Debug, PartialEq)]
@@ -165,11 +166,8 @@ pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef
     if let Some(p) = inspected {
         return Some(p.clone());
     }
-    let texture_out = |kind: &str| {
-        spec::find(kind)
-            .and_then(|s| s.outputs.iter().find(|p| matches!(p.ty, PortType::Texture | PortType::GBuffer)))
-            .map(|p| p.name)
-    };
+    let texture_out =
+        |kind: &str| spec::find(kind).and_then(|s| s.outputs.iter().find(|p| p.ty.viewable())).map(|p| p.name);
     let pick = |want_preview: bool| {
         graph.nodes.iter().find_map(|(id, n)| {
             let s = spec::find(&n.kind)?;
@@ -261,7 +259,7 @@ impl Live {
         Live {
             evaluator: None,
             resources: Resources::new(watch_files),
-            settings: FrameSettings { width: 480, height: 360, base_dir, out_dir: None },
+            settings: FrameSettings { width: 480, height: 360, base_dir },
             frame: 0,
             fps: 30.0,
             playing: false,

@@ -9,7 +9,7 @@ use std::time::Instant;
 use super::document::{self, EditError, Fragment};
 use super::history::History;
 use crate::graph::{Diagnostic, Graph, Link, PortRef};
-use crate::spec::ParamValue;
+use crate::param::ParamValue;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Level {

@@ -255,7 +255,7 @@ impl Viewport {
                 }
                 if ui.small_button("apply to graph").on_hover_text("write this view into the camera node").clicked() {
                     let _ = state.edit(&format!("set view of {}", cam.node), None, |g| {
-                        use crate::spec::ParamValue;
+                        use crate::param::ParamValue;
                         for (name, v) in [("yaw", cam.yaw), ("pitch", cam.pitch), ("distance", cam.distance)] {
                             super::document::set_param(g, &cam.node, name, ParamValue::Float(v))?;
                         }

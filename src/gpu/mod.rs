@@ -37,7 +37,7 @@ pub use pipelines::ShaderError;
 pub use readback::{Pixels, read_back, read_buffer};
 pub use texture::{GpuImage, SamplerKind, TextureDesc, TextureKind};
 
-use crate::eval::ChangeSignal;
+use crate::node::ChangeSignal;
 
 /// Which wgpu backend to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Default)]

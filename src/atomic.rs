@@ -1,0 +1,39 @@
+//! Atomic file writes: a reader sees the old file or the new one, never half of one, and a
+//! write that fails (a full disk) leaves the old file and no temporary behind.
+
+use std::io::Write;
+use std::path::Path;
+
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let written = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_failed_write_leaves_no_temporary() {
+        let dir = std::env::temp_dir().join(format!("werkstatt-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Renaming onto a non-empty directory fails after the temporary was written.
+        let target = dir.join("occupied");
+        std::fs::create_dir_all(target.join("inside")).unwrap();
+        assert!(super::write_atomic(&target, b"data").is_err());
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left, ["occupied"], "only the directory remains");
+        super::write_atomic(&dir.join("file"), b"data").unwrap();
+        assert_eq!(std::fs::read(dir.join("file")).unwrap(), b"data");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
