@@ -87,9 +87,9 @@ pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
 
 /// Renders the frames of a loaded graph (`opts.sets` already applied).
 pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> anyhow::Result<Stats> {
-    let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(&graph, d)).collect::<anyhow::Result<_>>()?;
+    let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(graph, d)).collect::<anyhow::Result<_>>()?;
     let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
-    let mut evaluator = Evaluator::new(&graph, &extra_roots).map_err(anyhow::Error::msg)?;
+    let mut evaluator = Evaluator::new(graph, &extra_roots).map_err(anyhow::Error::msg)?;
     if evaluator.roots().next().is_none() {
         bail!(
             "{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render",

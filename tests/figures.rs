@@ -39,8 +39,12 @@ fn knitwear_replaces_the_surface() {
 fn animated_figure_is_deterministic_and_exports_its_geometry() {
     let graph = root().join("graphs/fig1e_stickers.ron");
     let (a, b) = (out_dir("figure-e-a"), out_dir("figure-e-b"));
-    render_graph(&graph, &a, (0, 2), (80, 60), &[], &[]).unwrap();
+    let stats = render_graph(&graph, &a, (0, 2), (80, 60), &[], &[]).unwrap();
     render_graph(&graph, &b, (0, 2), (80, 60), &[], &[]).unwrap();
+    // The runner writes and counts what the output nodes emit: three images, one export.
+    let mut files = stats.files.clone();
+    files.sort();
+    assert_eq!(files, ["export_0000.obj", "image_0000.png", "image_0001.png", "image_0002.png"]);
     for f in ["image_0000.png", "image_0002.png", "export_0000.obj"] {
         assert!(std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(), "{f} differs between runs");
     }

@@ -15,8 +15,10 @@ use werkstatt::param::{ParamKind, ParamValue};
 use werkstatt::port::PortType;
 use werkstatt::resources::Resources;
 
+type Params = Vec<(&'static str, ParamValue)>;
+
 /// A producer for each input type: (kind, output port, parameters).
-fn producer(ty: PortType) -> Option<(&'static str, &'static str, Vec<(&'static str, ParamValue)>)> {
+fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
     let small = vec![("segments_u", ParamValue::Int(8)), ("segments_v", ParamValue::Int(4))];
     Some(match ty {
         PortType::Scalar => ("Number", "value", vec![("value", ParamValue::Float(0.5))]),
@@ -34,7 +36,7 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Vec<(&'static s
 }
 
 /// Parameters that make a node do real work in the test (files that exist, small sizes).
-fn fixture_params(kind: &str) -> Vec<(&'static str, ParamValue)> {
+fn fixture_params(kind: &str) -> Params {
     let data = |p: &str| ParamValue::Str(common::root().join(p).display().to_string());
     match kind {
         "MeshFile" => vec![("path", data("assets/meshes/spot.obj"))],
@@ -56,7 +58,7 @@ struct Builder {
 
 impl Builder {
     /// Adds a node of `kind` with every input connected to a producer; returns its id.
-    fn add(&mut self, kind: &str, params: Vec<(&'static str, ParamValue)>) -> String {
+    fn add(&mut self, kind: &str, params: Params) -> String {
         let spec = werkstatt::spec::find(kind).unwrap_or_else(|| panic!("no kind {kind}"));
         let id = format!("n{}_{}", self.next, kind.to_lowercase());
         self.next += 1;
@@ -77,7 +79,7 @@ impl Builder {
     }
 }
 
-fn run(spec: &NodeSpec, params: Vec<(&'static str, ParamValue)>) -> Result<(), String> {
+fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
     let mut b = Builder { graph: Graph::new(), next: 0 };
     let id = b.add(spec.kind, params);
     if let Some(p) = b.graph.validate().first() {
