@@ -6,7 +6,9 @@ use anyhow::{Context as _, bail};
 
 const EMBEDDED: &[(&str, &str)] = &[
     ("vertex_in.wgsl", include_str!("../shaders/vertex_in.wgsl")),
+    ("object.wgsl", include_str!("../shaders/object.wgsl")),
     ("gbuffer_common.wgsl", include_str!("../shaders/gbuffer_common.wgsl")),
+    ("depth.wgsl", include_str!("../shaders/depth.wgsl")),
     ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
