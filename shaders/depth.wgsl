@@ -5,6 +5,7 @@
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
 // #include "warp.wgsl"
+// #include "instance_in.wgsl"
 
 struct TileView {
     // The view's projection folded with the map of its clip space into the tile.
@@ -19,18 +20,6 @@ struct Tiles {
 
 @group(0) @binding(0) var<uniform> views: Tiles;
 @group(3) @binding(0) var<uniform> attached_tile: vec4<u32>;
-
-struct InstanceIn {
-    @location(5) m_tex0: vec4<f32>,
-    @location(6) m_tex1: vec4<f32>,
-    @location(7) m_tan0: vec4<f32>,
-    @location(8) m_tan1: vec4<f32>,
-    @location(9) m_tan2: vec4<f32>,
-    @location(10) m_tan3: vec4<f32>,
-    @location(11) curve01: vec4<f32>,
-    @location(12) curve23: vec4<f32>,
-    @location(13) range: vec4<f32>,
-};
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

@@ -275,27 +275,7 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &frame_bg, &[]);
-            for (item, p) in items.iter().zip(&prepared) {
-                let mesh = item.mesh.gpu(gpu);
-                pass.set_bind_group(1, &p.object, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                match (&item.attached, &p.warp, &attached) {
-                    (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
-                        if a.instances.is_empty() {
-                            continue;
-                        }
-                        pass.set_pipeline(pipeline);
-                        pass.set_bind_group(2, warp_bg, &[]);
-                        pass.set_vertex_buffer(1, buffer.slice(..));
-                        pass.draw_indexed(0..mesh.index_count, 0, 0..a.instances.len() as u32);
-                    }
-                    _ => {
-                        pass.set_pipeline(&plain);
-                        pass.draw_indexed(0..mesh.index_count, 0, 0..1);
-                    }
-                }
-            }
+            draw_items(gpu, &mut pass, items, &prepared, &plain, 1, attached.as_ref(), &[]);
         });
         Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
     }
@@ -390,32 +370,53 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &tiles_bg, &[]);
-            for (item, p) in items.iter().zip(&prepared) {
-                let mesh = item.mesh.gpu(gpu);
-                pass.set_bind_group(1, &p.object, &[]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                match (&item.attached, &p.warp, &attached) {
-                    (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
-                        if a.instances.is_empty() {
-                            continue;
-                        }
-                        pass.set_pipeline(pipeline);
-                        pass.set_bind_group(2, warp_bg, &[]);
-                        pass.set_vertex_buffer(1, buffer.slice(..));
-                        for index_bg in &index_bgs {
-                            pass.set_bind_group(3, index_bg, &[]);
-                            pass.draw_indexed(0..mesh.index_count, 0, 0..a.instances.len() as u32);
-                        }
-                    }
-                    _ => {
-                        pass.set_pipeline(&plain);
-                        pass.draw_indexed(0..mesh.index_count, 0, 0..tiles.len() as u32);
-                    }
-                }
-            }
+            draw_items(gpu, &mut pass, items, &prepared, &plain, tiles.len() as u32, attached.as_ref(), &index_bgs);
         });
         Ok(target)
+    }
+}
+
+/// Records the draws of `items`: plain ones with `plain`, `plain_instances` instances each
+/// (one per tile of a depth target); attached ones with `attached`, once, or once per bind
+/// group of `per_draw` (bound as group 3) where there are some.
+#[allow(clippy::too_many_arguments)]
+fn draw_items(
+    gpu: &GpuContext,
+    pass: &mut wgpu::RenderPass<'_>,
+    items: &[DrawItem],
+    prepared: &[Prepared],
+    plain: &wgpu::RenderPipeline,
+    plain_instances: u32,
+    attached: Option<&wgpu::RenderPipeline>,
+    per_draw: &[wgpu::BindGroup],
+) {
+    for (item, p) in items.iter().zip(prepared) {
+        let mesh = item.mesh.gpu(gpu);
+        pass.set_bind_group(1, &p.object, &[]);
+        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        match (&item.attached, &p.warp, attached) {
+            (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
+                if a.instances.is_empty() {
+                    continue;
+                }
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(2, warp_bg, &[]);
+                pass.set_vertex_buffer(1, buffer.slice(..));
+                let instances = 0..a.instances.len() as u32;
+                if per_draw.is_empty() {
+                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
+                }
+                for group in per_draw {
+                    pass.set_bind_group(3, group, &[]);
+                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
+                }
+            }
+            _ => {
+                pass.set_pipeline(plain);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
+            }
+        }
     }
 }
 
