@@ -9,6 +9,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("object.wgsl", include_str!("../shaders/object.wgsl")),
     ("gbuffer_common.wgsl", include_str!("../shaders/gbuffer_common.wgsl")),
     ("depth.wgsl", include_str!("../shaders/depth.wgsl")),
+    ("depth_readback.wgsl", include_str!("../shaders/depth_readback.wgsl")),
     ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
