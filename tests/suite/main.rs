@@ -15,6 +15,7 @@ mod editor_shaders;
 mod evaluation;
 mod figures;
 mod graph_errors;
+mod graph_props;
 mod live_link;
 mod mesh;
 mod mesh_sequence;
