@@ -14,13 +14,17 @@ mod editor;
 mod editor_shaders;
 mod evaluation;
 mod figures;
+mod gl_backend;
+mod gpu_engine;
 mod graph_errors;
 mod graph_props;
 mod live_link;
 mod mesh;
 mod mesh_sequence;
+mod node_contracts;
 mod render;
 mod roundtrip;
+mod scene_drawer;
 mod warping;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be
