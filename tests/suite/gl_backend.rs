@@ -6,7 +6,6 @@
 //! Skipped, with a message, only where no EGL driver is installed at all
 //! (`apt-get install libegl1 libegl-mesa0 libgles2`).
 
-
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 

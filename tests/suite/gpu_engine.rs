@@ -4,7 +4,6 @@
 //! the last good pipeline and reports a typed error), and error scopes per node (a validation
 //! error lands on the node that caused it).
 
-
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
