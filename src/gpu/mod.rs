@@ -83,8 +83,9 @@ pub struct Formats {
     pub linear_depth: wgpu::TextureFormat,
     /// Linear HDR colour (G-buffer colour and normal, lighting): Rgba16Float, else Rgba32Float.
     pub hdr: wgpu::TextureFormat,
-    /// Full-precision matrix textures: Rgba32Float, else Rgba16Float.
-    pub matrix_f32: wgpu::TextureFormat,
+    /// Whether Rgba32Float can be a render target. Where not (llvmpipe's GL), full-precision
+    /// matrix textures are rendered as bits into Rgba32Uint and copied (see `copy_bits`).
+    pub float32_renderable: bool,
     /// Half-precision matrix textures: Rgba16Float.
     pub matrix_f16: wgpu::TextureFormat,
     /// The hardware depth buffer: Depth32Float, else Depth24Plus.
@@ -105,7 +106,7 @@ impl Formats {
         Formats {
             linear_depth: first(&[F::R32Float, F::Rg32Float, F::Rgba32Float, F::R16Float, F::Rgba16Float]),
             hdr: first(&[F::Rgba16Float, F::Rgba32Float]),
-            matrix_f32: first(&[F::Rgba32Float, F::Rgba16Float]),
+            float32_renderable: renders(F::Rgba32Float),
             matrix_f16: first(&[F::Rgba16Float, F::Rgba32Float]),
             depth: first(&[F::Depth32Float, F::Depth24Plus]),
             ldr: F::Rgba8UnormSrgb,
