@@ -17,6 +17,8 @@ pub mod gpu;
 pub mod graph;
 pub mod hash;
 pub mod image_io;
+#[cfg(test)]
+mod layering;
 pub mod mesh;
 pub mod node;
 pub mod param;
@@ -26,6 +28,7 @@ pub mod resources;
 pub mod rng;
 pub mod scene;
 pub mod shaders;
+pub mod signal;
 pub mod spec;
 pub mod warp;
 

@@ -7,7 +7,6 @@ use std::cell::RefCell;
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::geometry_io::GeometryFormat;
 use crate::gpu::{GpuContext, GpuImage};
@@ -16,6 +15,7 @@ use crate::mesh::Mesh;
 use crate::param::{Choice, ParamKind, ParamSpec, ParamValue};
 use crate::port::{FromValue, IntoValue, PortType, Value};
 use crate::resources::{LoadError, Resources, SlotRef};
+pub use crate::signal::ChangeSignal;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Category {
@@ -133,26 +133,6 @@ pub struct FrameTime {
 impl FrameTime {
     pub fn seconds(&self) -> f64 {
         self.frame as f64 / self.fps
-    }
-}
-
-/// A version counter that something outside the graph (a network listener, a simulator
-/// thread) bumps when it has new data for a node. A node that calls [`EvalCx::watch`] re-runs
-/// when the counter changes, the way it re-runs when a file it loaded reloads; it need not
-/// read the time (and re-run every frame) to notice. Cheap to clone (shared).
-#[derive(Clone, Debug, Default)]
-pub struct ChangeSignal(Arc<AtomicU64>);
-
-impl ChangeSignal {
-    pub fn new() -> Self {
-        Self::default()
-    }
-    /// Marks a change: nodes watching this signal re-run on the next evaluated frame.
-    pub fn bump(&self) {
-        self.0.fetch_add(1, Ordering::AcqRel);
-    }
-    pub fn version(&self) -> u64 {
-        self.0.load(Ordering::Acquire)
     }
 }
 

@@ -27,7 +27,7 @@ pub fn names() -> impl Iterator<Item = &'static str> {
 /// The source of `shaders/NAME` with includes expanded: read from `WERKSTATT_SHADER_DIR` when
 /// set (live editing), otherwise the copy embedded at build time.
 pub fn source(name: &str) -> anyhow::Result<String> {
-    let dir = crate::gpu::shader_dir();
+    let dir = shader_dir();
     Ok(expand(name, &mut |n| read(dir.as_deref(), n))?.0)
 }
 
@@ -83,4 +83,9 @@ fn expand_into(
         out.push('\n');
     }
     Ok(out)
+}
+
+/// Where shader sources are read from disk when live editing, if anywhere.
+pub fn shader_dir() -> Option<std::path::PathBuf> {
+    std::env::var_os("WERKSTATT_SHADER_DIR").map(std::path::PathBuf::from)
 }

@@ -274,7 +274,7 @@ impl Live {
             last_summary: FrameSummary::default(),
             last_eval: Duration::ZERO,
             animating: false,
-            shaders: crate::gpu::shader_dir().map(ShaderWatch::new),
+            shaders: crate::shaders::shader_dir().map(ShaderWatch::new),
             shader_error: None,
             engine_error: None,
         }

@@ -37,7 +37,7 @@ pub use pipelines::ShaderError;
 pub use readback::{Pixels, read_back, read_buffer};
 pub use texture::{GpuImage, SamplerKind, TextureDesc, TextureKind};
 
-use crate::node::ChangeSignal;
+use crate::signal::ChangeSignal;
 
 /// Which wgpu backend to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Default)]
@@ -317,7 +317,7 @@ impl GpuContext {
             queued: Mutex::default(),
             current: Mutex::default(),
             pool: pool::TexturePool::default(),
-            pipelines: pipelines::PipelineCache::new(shader_dir()),
+            pipelines: pipelines::PipelineCache::new(crate::shaders::shader_dir()),
             samplers: Mutex::default(),
             staging: Mutex::default(),
         };
@@ -636,9 +636,4 @@ impl Drop for NodeScope<'_> {
             *lock(&self.gpu.current) = Current::default();
         }
     }
-}
-
-/// Where shader sources are read from disk when live editing, if anywhere.
-pub fn shader_dir() -> Option<PathBuf> {
-    std::env::var_os("WERKSTATT_SHADER_DIR").map(PathBuf::from)
 }

@@ -16,7 +16,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 use super::{GpuContext, lock};
-use crate::node::ChangeSignal;
+use crate::signal::ChangeSignal;
 
 /// A shader file that does not compile, or a pipeline that cannot be built from it.
 #[derive(Clone, Debug, PartialEq, Eq)]
