@@ -64,11 +64,10 @@ impl Node for DirectLightNode {
             self.pass = Some(FullscreenPass::new("direct_light.wgsl"));
         }
         let (w, h) = (g.width(), g.height());
-        let view_proj = g.camera.projection(w as f32 / h as f32) * g.camera.view();
         let rgb = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let uniform = LightUniform {
-            inv_view_proj: view_proj.inverse().to_cols_array_2d(),
-            eye: rgb(g.camera.eye),
+            inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
+            eye: rgb(g.view.eye),
             sun_dir: rgb(dir),
             sun: rgb(cx.vec3("sun_color") * cx.f32("sun_intensity")),
             sky: rgb(cx.vec3("sky_color")),

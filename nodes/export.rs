@@ -14,7 +14,7 @@ use crate::node::prelude::*;
 use crate::scene::DrawItem;
 use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
 
-use super::gbuffer::{InstanceResolver, warp_binds};
+use crate::draw::{InstanceResolver, warp_binds};
 
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
@@ -40,7 +40,7 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
 
 #[derive(Default)]
 struct ExportNode {
-    warper: Option<GpuWarper>,
+    warper: GpuWarper,
 }
 
 impl Node for ExportNode {
@@ -50,11 +50,7 @@ impl Node for ExportNode {
         let wanted = cx.int("frame");
         // Only a chosen frame makes the node read the time (and re-run every frame).
         let export = wanted < 0 || cx.time().frame == wanted;
-        if self.warper.is_none() {
-            self.warper = Some(GpuWarper::new(gpu)?);
-        }
-        let warper = self.warper.as_mut().expect("created above");
-        let mesh = Arc::new(flatten(gpu, warper, &items)?);
+        let mesh = Arc::new(flatten(gpu, &mut self.warper, &items)?);
         if export {
             cx.emit(Product::Geometry { mesh: mesh.clone(), format: cx.choice("format") });
         }
@@ -73,16 +69,18 @@ pub struct GpuWarper {
     output: Option<wgpu::Buffer>,
 }
 
-impl GpuWarper {
-    pub fn new(gpu: &GpuContext) -> anyhow::Result<GpuWarper> {
-        Ok(GpuWarper {
+impl Default for GpuWarper {
+    fn default() -> Self {
+        GpuWarper {
             pass: ComputePass::new("attach_export.wgsl", "main"),
-            resolver: InstanceResolver::new(gpu)?,
+            resolver: InstanceResolver::default(),
             instances: BufferRing::new("export instances", wgpu::BufferUsages::STORAGE),
             output: None,
-        })
+        }
     }
+}
 
+impl GpuWarper {
     /// Warps every instance of `mesh`; the result is instance-major.
     pub fn warp(&mut self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<Vec<WarpedVertex>> {
         let nv = mesh.positions.len();

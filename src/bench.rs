@@ -85,8 +85,8 @@ pub fn attachments(
 
     use glam::{Affine2, Mat4, Vec2, Vec3};
 
+    use crate::draw::{SceneDrawer, render_gbuffer};
     use crate::nodes::attach::point_instance;
-    use crate::nodes::gbuffer::render_gbuffer;
     use crate::nodes::geometry;
     use crate::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
     use crate::scene::{Camera, DrawItem, Material};
@@ -107,7 +107,7 @@ pub fn attachments(
         far: 10.0,
     };
     let material = Arc::new(Material::default());
-    let mut pipelines = None;
+    let mut drawer = SceneDrawer::default();
     // One untimed frame (pipelines, uploads), then the median of `frames` timed ones.
     let median_ms = |work: &mut dyn FnMut() -> anyhow::Result<()>| -> anyhow::Result<f64> {
         work()?;
@@ -193,7 +193,7 @@ pub fn attachments(
                 attached: Some(Arc::new(draw)),
             };
             let ms = median_ms(&mut || {
-                render_gbuffer(gpu, &mut pipelines, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.wait_idle();
                 Ok(())
             })?;
@@ -224,7 +224,7 @@ pub fn attachments(
                     detail: true,
                     attached: None,
                 };
-                render_gbuffer(gpu, &mut pipelines, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.wait_idle();
                 Ok(())
             })?;

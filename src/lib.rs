@@ -9,6 +9,7 @@ pub mod bench;
 pub mod cli;
 pub mod color;
 pub mod docs;
+pub mod draw;
 #[cfg(feature = "editor")]
 pub mod editor;
 pub mod eval;

@@ -27,6 +27,56 @@ impl Camera {
     }
 }
 
+/// A camera's matrices for one target size: made once per camera where the scene is drawn
+/// (the G-buffer carries it) and shared by every screen-space pass, which reads positions back
+/// from depth with `inv_view_proj` instead of rebuilding the projection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub view: Mat4,
+    pub proj: Mat4,
+    pub view_proj: Mat4,
+    pub inv_view: Mat4,
+    pub inv_proj: Mat4,
+    pub inv_view_proj: Mat4,
+    pub eye: Vec3,
+    pub near: f32,
+    pub far: f32,
+    /// Target size in pixels.
+    pub width: u32,
+    pub height: u32,
+    /// Sub-pixel offset of the projection in pixels (for temporal accumulation); zero here.
+    pub jitter: glam::Vec2,
+}
+
+impl View {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> View {
+        View::jittered(camera, width, height, glam::Vec2::ZERO)
+    }
+
+    /// A view whose projection is shifted by `jitter` pixels.
+    pub fn jittered(camera: &Camera, width: u32, height: u32, jitter: glam::Vec2) -> View {
+        let (w, h) = (width.max(1) as f32, height.max(1) as f32);
+        let shift = Mat4::from_translation(Vec3::new(2.0 * jitter.x / w, -2.0 * jitter.y / h, 0.0));
+        let view = camera.view();
+        let proj = shift * camera.projection(w / h);
+        let view_proj = proj * view;
+        View {
+            view,
+            proj,
+            view_proj,
+            inv_view: view.inverse(),
+            inv_proj: proj.inverse(),
+            inv_view_proj: view_proj.inverse(),
+            eye: camera.eye,
+            near: camera.near,
+            far: camera.far,
+            width,
+            height,
+            jitter,
+        }
+    }
+}
+
 /// An RGBA8 (sRGB-encoded) image on the CPU, e.g. a material's base-colour map.
 pub struct Image8 {
     pub width: u32,
@@ -106,6 +156,8 @@ pub struct GBuffer {
     /// The hardware depth buffer, Depth32Float.
     pub depth_buffer: GpuImage,
     pub camera: Camera,
+    /// The view the G-buffer was drawn with, for every pass that reads it.
+    pub view: View,
 }
 
 impl GBuffer {
@@ -114,5 +166,30 @@ impl GBuffer {
     }
     pub fn height(&self) -> u32 {
         self.color.height
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_view_inverts_its_own_matrices_and_jitter_shifts_by_pixels() {
+        let camera = Camera {
+            eye: Vec3::new(1.0, 2.0, 3.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            fov_y_degrees: 45.0,
+            near: 0.1,
+            far: 50.0,
+        };
+        let v = View::new(&camera, 64, 32);
+        assert!((v.view_proj * v.inv_view_proj).abs_diff_eq(Mat4::IDENTITY, 1e-4));
+        assert!(v.inv_view.transform_point3(Vec3::ZERO).abs_diff_eq(camera.eye, 1e-5));
+        // The target lands in the centre; a one-pixel jitter moves it by 2/width in NDC.
+        let centre = v.view_proj.project_point3(Vec3::ZERO);
+        assert!(centre.truncate().abs_diff_eq(glam::Vec2::ZERO, 1e-5));
+        let shifted = View::jittered(&camera, 64, 32, glam::Vec2::new(1.0, 0.0)).view_proj.project_point3(Vec3::ZERO);
+        assert!((shifted.x - 2.0 / 64.0).abs() < 1e-5 && shifted.y.abs() < 1e-5);
     }
 }

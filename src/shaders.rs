@@ -6,7 +6,10 @@ use anyhow::{Context as _, bail};
 
 const EMBEDDED: &[(&str, &str)] = &[
     ("vertex_in.wgsl", include_str!("../shaders/vertex_in.wgsl")),
+    ("object.wgsl", include_str!("../shaders/object.wgsl")),
     ("gbuffer_common.wgsl", include_str!("../shaders/gbuffer_common.wgsl")),
+    ("depth.wgsl", include_str!("../shaders/depth.wgsl")),
+    ("depth_readback.wgsl", include_str!("../shaders/depth_readback.wgsl")),
     ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
@@ -15,6 +18,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
+    ("instance_in.wgsl", include_str!("../shaders/instance_in.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),
     ("attach_resolve.wgsl", include_str!("../shaders/attach_resolve.wgsl")),

@@ -144,7 +144,7 @@ fn warp_gpu(
 ) -> Vec<werkstatt::warp::WarpedVertex> {
     let gpu = common::gpu();
     let draw = AttachedDraw::new(matrix, settings, instances);
-    GpuWarper::new(gpu).unwrap().warp(gpu, mesh, &draw).unwrap()
+    GpuWarper::default().warp(gpu, mesh, &draw).unwrap()
 }
 
 const POINT: WarpSettings = WarpSettings { mode: WarpMode::Point, gravity: 0.0, min_weight: 0.5 };

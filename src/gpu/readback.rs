@@ -75,6 +75,9 @@ pub fn read_back(gpu: &GpuContext, image: &GpuImage) -> anyhow::Result<Pixels> {
 /// Copies one layer at one mip level of a texture to the CPU.
 pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32) -> anyhow::Result<Pixels> {
     use wgpu::TextureFormat as F;
+    if image.format.is_depth_stencil_format() && image.desc.layers == 1 && mip == 0 && layer == 0 {
+        return read_back_depth(gpu, image);
+    }
     let (bytes_per_texel, channels) = match image.format {
         F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb => (4, 4),
         F::Rgba16Float => (8, 4),
@@ -156,4 +159,23 @@ pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32)
     }
     let is_ldr = matches!(image.format, F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb);
     Ok(Pixels { width, height, rgba, is_ldr })
+}
+
+/// A 2D depth texture through a compute copy into a buffer (shaders/depth_readback.wgsl):
+/// OpenGL ES cannot copy depth to a buffer (wgpu's GL backend then reads zeros), and one path
+/// for every backend keeps the values comparable.
+fn read_back_depth(gpu: &GpuContext, image: &GpuImage) -> anyhow::Result<Pixels> {
+    let (width, height) = (image.width, image.height);
+    let out = gpu.create_buffer(
+        "depth read-back",
+        u64::from(width) * u64::from(height) * 4,
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    );
+    let mut pass = super::ComputePass::new("depth_readback.wgsl", "main");
+    let float = wgpu::TextureSampleType::Float { filterable: false };
+    let binds = [super::Bind::View(&image.view, wgpu::TextureViewDimension::D2, float), super::Bind::StorageRw(&out)];
+    pass.dispatch(gpu, &[&binds], [width.div_ceil(8), height.div_ceil(8), 1])?;
+    let depth: Vec<f32> = read_buffer(gpu, &out)?;
+    let rgba = depth.iter().flat_map(|&d| [d, d, d, 1.0]).collect();
+    Ok(Pixels { width, height, rgba, is_ldr: false })
 }

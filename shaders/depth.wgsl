@@ -1,0 +1,59 @@
+// Depth only, into tiles of one texture, one view per tile (src/draw.rs `depth_tiles`):
+// shadow maps of many lights in one pass. Plain meshes are drawn instanced once per tile (the
+// instance index is the tile); attached items once per tile with the tile in group 3.
+
+// #include "object.wgsl"
+// #include "vertex_in.wgsl"
+// #include "warp.wgsl"
+// #include "instance_in.wgsl"
+
+struct TileView {
+    // The view's projection folded with the map of its clip space into the tile.
+    to_tile: mat4x4<f32>,
+    // The tile in texels: x0, y0, x1, y1.
+    rect: vec4<f32>,
+};
+
+struct Tiles {
+    tiles: array<TileView, 64>,
+};
+
+@group(0) @binding(0) var<uniform> views: Tiles;
+@group(3) @binding(0) var<uniform> attached_tile: vec4<u32>;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) tile: u32,
+    // 1 where a vertex of the primitive is an outlier (attachments).
+    @location(1) outlier: f32,
+};
+
+@vertex
+fn vs_plain(v: VertexIn, @builtin(instance_index) tile: u32) -> VertexOut {
+    var out: VertexOut;
+    out.clip = views.tiles[tile].to_tile * object.model * vec4<f32>(v.position, 1.0);
+    out.tile = tile;
+    out.outlier = 0.0;
+    return out;
+}
+
+@vertex
+fn vs_attached(v: VertexIn, i: InstanceIn) -> VertexOut {
+    let inst = Instance(i.m_tex0, i.m_tex1, i.m_tan0, i.m_tan1, i.m_tan2, i.m_tan3, i.curve01, i.curve23, i.range);
+    let w = warp_vertex(v.position, v.normal, inst);
+    let tile = attached_tile.x;
+    var out: VertexOut;
+    out.clip = views.tiles[tile].to_tile * vec4<f32>(w.position, 1.0);
+    out.tile = tile;
+    out.outlier = select(1.0, 0.0, w.valid);
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) {
+    let r = views.tiles[in.tile].rect;
+    let p = in.clip.xy;
+    if in.outlier > 0.0 || p.x < r.x || p.y < r.y || p.x >= r.z || p.y >= r.w {
+        discard;
+    }
+}

@@ -1,0 +1,21 @@
+// A drawn object (group 1): its transform and material, shared by every pass that draws
+// the scene (src/draw.rs `ObjectUniform`).
+
+struct Object {
+    model: mat4x4<f32>,
+    // Inverse transpose of the model matrix, for normals and tangents.
+    normal_matrix: mat4x4<f32>,
+    // rgb: linear base colour, a: glossiness.
+    base_color: vec4<f32>,
+    // x: uv scale, y: 1 if a texture is bound, z: detail flag, w: 1 if a gloss map is bound.
+    params: vec4<f32>,
+    // x: glossiness where the gloss map is 0.
+    extra: vec4<f32>,
+};
+
+@group(1) @binding(0) var<uniform> object: Object;
+@group(1) @binding(1) var base_map: texture_2d<f32>;
+@group(1) @binding(2) var base_sampler: sampler;
+// Glossiness parameter map (dissertation Fig. 5.23), red channel.
+@group(1) @binding(3) var gloss_map: texture_2d<f32>;
+

@@ -1,0 +1,449 @@
+//! The scene drawer: the one place that draws a Scene (plain meshes and deferred-warped
+//! attachments, warped the same way everywhere) into a target. Targets:
+//!
+//! - [`SceneDrawer::gbuffer`]: the deferred renderer's G-buffer (dissertation section 4.2);
+//! - [`SceneDrawer::depth_tiles`]: depth only, into tiles of one depth texture, one view per
+//!   tile (shadow maps: a light per tile of an atlas). Plain meshes fill every tile in one
+//!   instanced draw (the instance index picks the tile's view, wgpu having no geometry shader);
+//!   attached items draw once per tile. A fragment outside its tile is discarded, so a tile
+//!   never spills into its neighbours.
+
+use glam::{Mat4, Vec4};
+
+use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
+use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind, TextureDesc};
+use crate::mesh::Vertex;
+use crate::scene::{DrawItem, GBuffer, Image8, View};
+use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
+
+/// The most tiles one depth draw fills (the size of the views array in shaders/depth.wgsl).
+pub const MAX_TILES: usize = 64;
+
+/// One tile of a depth target: the view drawn into it and where it lies in the texture.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tile {
+    pub view_proj: Mat4,
+    /// The tile's rectangle in texels: x, y, width, height.
+    pub rect: [u32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FrameUniform {
+    view_proj: [[f32; 4]; 4],
+    view: [[f32; 4]; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ObjectUniform {
+    model: [[f32; 4]; 4],
+    normal_matrix: [[f32; 4]; 4],
+    base_color: [f32; 4],
+    params: [f32; 4],
+    extra: [f32; 4],
+}
+
+/// shaders/depth.wgsl `TileView`: a tile's view-projection folded with the map from clip
+/// space into its rectangle of the texture, and that rectangle in texels (x0, y0, x1, y1) for
+/// the fragment test.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TileUniform {
+    to_tile: [[f32; 4]; 4],
+    rect: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TilesUniform {
+    tiles: [TileUniform; MAX_TILES],
+}
+
+/// Group 2 of shaders/warp.wgsl: the matrix texture's three columns, the warp settings
+/// (`uniform`, from `WarpSettings::uniform`) and the seam map.
+pub fn warp_binds<'a>(m: &'a MatrixTexture, uniform: &'a [f32; 4]) -> [Bind<'a>; 5] {
+    [
+        Bind::Texture(&m.col_u),
+        Bind::Texture(&m.col_n),
+        Bind::Texture(&m.col_v),
+        Bind::Uniform(bytemuck::cast_slice(uniform)),
+        Bind::Texture(&m.seams),
+    ]
+}
+
+/// The layout of [`warp_binds`], as seen from `visibility`.
+pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayout {
+    gpu.bind_group_layout(&[
+        texture_entry(0, visibility, false),
+        texture_entry(1, visibility, false),
+        texture_entry(2, visibility, false),
+        uniform_entry(3, visibility),
+        texture_entry(4, visibility, false),
+    ])
+}
+
+/// Looks up point attachments' frames once per instance (shaders/attach_resolve.wgsl).
+pub struct InstanceResolver {
+    pass: ComputePass,
+}
+
+impl Default for InstanceResolver {
+    fn default() -> Self {
+        InstanceResolver { pass: ComputePass::new("attach_resolve.wgsl", "main") }
+    }
+}
+
+impl InstanceResolver {
+    /// A new instance buffer with each instance's frame filled in.
+    pub fn resolve(
+        &mut self,
+        gpu: &GpuContext,
+        raw: &wgpu::Buffer,
+        draw: &AttachedDraw,
+    ) -> anyhow::Result<wgpu::Buffer> {
+        let out = gpu.create_buffer(
+            "resolved instances",
+            raw.size(),
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let uniform = draw.settings.uniform(false);
+        let warp = warp_binds(&draw.matrix, &uniform);
+        let io = [Bind::Storage(raw), Bind::StorageRw(&out)];
+        self.pass.dispatch(gpu, &[&io, &[], &warp], ComputePass::groups_for(draw.instances.len(), 64))?;
+        Ok(out)
+    }
+}
+
+fn object_uniform(item: &DrawItem) -> ObjectUniform {
+    let m = &item.material;
+    ObjectUniform {
+        model: item.model.to_cols_array_2d(),
+        normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
+        base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
+        params: [
+            m.uv_scale,
+            f32::from(u8::from(m.texture.is_some())),
+            f32::from(u8::from(item.detail)),
+            f32::from(u8::from(m.gloss_map.is_some())),
+        ],
+        extra: [m.gloss_min, 0.0, 0.0, 0.0],
+    }
+}
+
+/// An item's bind groups for one draw: its object group, and for attachments the warp group
+/// and the instance buffer.
+struct Prepared {
+    object: wgpu::BindGroup,
+    warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
+}
+
+/// What a pass that draws scenes keeps between frames: per item its uniform buffers and
+/// cached bind groups, and the point-attachment resolver (the pipelines live in the
+/// context's cache, so a shader reload reaches them).
+pub struct SceneDrawer {
+    frame: Bindings,
+    tiles: Bindings,
+    tile_index: Bindings,
+    objects: Vec<Bindings>,
+    warps: Vec<Bindings>,
+    white: Image8,
+    resolver: InstanceResolver,
+}
+
+impl Default for SceneDrawer {
+    fn default() -> Self {
+        SceneDrawer {
+            frame: Bindings::new(wgpu::ShaderStages::VERTEX),
+            tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
+            tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
+            objects: Vec::new(),
+            warps: Vec::new(),
+            white: Image8::new(1, 1, vec![255; 4]),
+            resolver: InstanceResolver::default(),
+        }
+    }
+}
+
+const OBJECT_VISIBILITY: wgpu::ShaderStages = wgpu::ShaderStages::VERTEX_FRAGMENT;
+
+impl SceneDrawer {
+    /// The layout of group 1 (the object: uniform, base map, sampler, gloss map).
+    fn object_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
+        let white = self.white.gpu(gpu);
+        let shape =
+            [Bind::Uniform(&[]), Bind::Texture(white), Bind::Sampler(SamplerKind::LinearRepeat), Bind::Texture(white)];
+        Bindings::new(OBJECT_VISIBILITY).layout(gpu, &shape)
+    }
+
+    /// Bind groups for every item (resolving point attachments' frames on first use).
+    fn prepare(
+        &mut self,
+        gpu: &GpuContext,
+        items: &[DrawItem],
+        object_layout: &wgpu::BindGroupLayout,
+        warp_layout: Option<&wgpu::BindGroupLayout>,
+    ) -> anyhow::Result<Vec<Prepared>> {
+        while self.objects.len() < items.len() {
+            self.objects.push(Bindings::new(OBJECT_VISIBILITY));
+            self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
+        }
+        let mut prepared = Vec::with_capacity(items.len());
+        for (i, item) in items.iter().enumerate() {
+            let m = &item.material;
+            let uniform = object_uniform(item);
+            let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
+            let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
+            let binds = [
+                Bind::Uniform(bytemuck::bytes_of(&uniform)),
+                Bind::Texture(tex),
+                Bind::Sampler(SamplerKind::LinearRepeat),
+                Bind::Texture(gloss),
+            ];
+            let object = self.objects[i].bind_group(gpu, object_layout, &binds);
+            let warp = match (&item.attached, warp_layout) {
+                (Some(a), Some(layout)) => {
+                    let resolver = &mut self.resolver;
+                    let buffer = a.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, a))?.clone();
+                    let uniform = a.settings.uniform(a.per_instance_frames());
+                    Some((self.warps[i].bind_group(gpu, layout, &warp_binds(&a.matrix, &uniform)), buffer))
+                }
+                _ => None,
+            };
+            prepared.push(Prepared { object, warp });
+        }
+        Ok(prepared)
+    }
+
+    /// Draws `items` into a new G-buffer of the view's size (pooled targets; recorded, submitted
+    /// with the frame).
+    pub fn gbuffer(
+        &mut self,
+        gpu: &GpuContext,
+        items: &[DrawItem],
+        camera: crate::scene::Camera,
+        view: View,
+    ) -> anyhow::Result<GBuffer> {
+        let (w, h) = (view.width, view.height);
+        let formats = *gpu.formats();
+        let color = GpuImage::target(gpu, "gbuffer color", w, h, formats.hdr);
+        let normal = GpuImage::target(gpu, "gbuffer normal", w, h, formats.hdr);
+        let depth = GpuImage::target(gpu, "gbuffer depth", w, h, formats.linear_depth);
+        let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, formats.depth);
+
+        let frame_uniform =
+            FrameUniform { view_proj: view.view_proj.to_cols_array_2d(), view: view.view.to_cols_array_2d() };
+        let frame_binds = [Bind::Uniform(bytemuck::bytes_of(&frame_uniform))];
+        let frame_layout = self.frame.layout(gpu, &frame_binds);
+        let frame_bg = self.frame.bind_group(gpu, &frame_layout, &frame_binds);
+        let object_layout = self.object_layout(gpu);
+        // The attached pipeline only where something is attached: the node then depends on attach.wgsl.
+        let warp_layout =
+            items.iter().any(|i| i.attached.is_some()).then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
+        let targets = [formats.hdr, formats.hdr, formats.linear_depth];
+        let depth_test = Some((formats.depth, wgpu::CompareFunction::Less));
+        let vertex = [Some(Vertex::layout())];
+        let plain = gpu.render_pipeline(&RenderPipelineDesc {
+            depth: depth_test,
+            ..RenderPipelineDesc::new("gbuffer.wgsl", &[Some(&frame_layout), Some(&object_layout)], &vertex, &targets)
+        })?;
+        let attached = match &warp_layout {
+            Some(warp_layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+                depth: depth_test,
+                ..RenderPipelineDesc::new(
+                    "attach.wgsl",
+                    &[Some(&frame_layout), Some(&object_layout), Some(warp_layout)],
+                    &[Some(Vertex::layout()), Some(InstanceData::layout())],
+                    &targets,
+                )
+            })?),
+            None => None,
+        };
+        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref())?;
+
+        gpu.record(|enc| {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("gbuffer"),
+                color_attachments: &[color.clear_attachment(), normal.clear_attachment(), depth.clear_attachment()],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_buffer.view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: gpu.pass_timestamps(),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &frame_bg, &[]);
+            draw_items(gpu, &mut pass, items, &prepared, &plain, 1, attached.as_ref(), &[]);
+        });
+        Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
+    }
+
+    /// Draws `items` depth-only into a new `width` x `height` depth texture (the context's depth
+    /// format, sampleable), one view per tile. Texels outside every tile stay at 1 (far).
+    pub fn depth_tiles(
+        &mut self,
+        gpu: &GpuContext,
+        items: &[DrawItem],
+        tiles: &[Tile],
+        width: u32,
+        height: u32,
+    ) -> anyhow::Result<GpuImage> {
+        anyhow::ensure!(
+            (1..=MAX_TILES).contains(&tiles.len()),
+            "a depth draw fills 1 to {MAX_TILES} tiles, not {}",
+            tiles.len()
+        );
+        if let Some(t) = tiles.iter().find(|t| t.rect[0] + t.rect[2] > width || t.rect[1] + t.rect[3] > height) {
+            anyhow::bail!("tile {:?} lies outside the {width}x{height} texture", t.rect);
+        }
+        let format = gpu.formats().depth;
+        let target = gpu.acquire(
+            "depth tiles",
+            TextureDesc::d2(
+                width,
+                height,
+                format,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            ),
+        );
+        let mut uniform = TilesUniform { tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES] };
+        for (u, t) in uniform.tiles.iter_mut().zip(tiles) {
+            *u = tile_uniform(t, width, height);
+        }
+        let tile_binds = [Bind::Uniform(bytemuck::bytes_of(&uniform))];
+        let tiles_layout = self.tiles.layout(gpu, &tile_binds);
+        let tiles_bg = self.tiles.bind_group(gpu, &tiles_layout, &tile_binds);
+        let object_layout = self.object_layout(gpu);
+        let any_attached = items.iter().any(|i| i.attached.is_some());
+        let warp_layout = any_attached.then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
+        let index_layout = self.tile_index.layout(gpu, &[Bind::Uniform(&[0u8; 16])]);
+        let depth_test = Some((format, wgpu::CompareFunction::Less));
+        let plain = gpu.render_pipeline(&RenderPipelineDesc {
+            vertex_entry: "vs_plain",
+            depth: depth_test,
+            ..RenderPipelineDesc::new(
+                "depth.wgsl",
+                &[Some(&tiles_layout), Some(&object_layout)],
+                &[Some(Vertex::layout())],
+                &[],
+            )
+        })?;
+        let attached = match &warp_layout {
+            Some(warp_layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+                vertex_entry: "vs_attached",
+                depth: depth_test,
+                ..RenderPipelineDesc::new(
+                    "depth.wgsl",
+                    &[Some(&tiles_layout), Some(&object_layout), Some(warp_layout), Some(&index_layout)],
+                    &[Some(Vertex::layout()), Some(InstanceData::layout())],
+                    &[],
+                )
+            })?),
+            None => None,
+        };
+        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref())?;
+        // Attached items draw once per tile; each draw reads its tile index from group 3.
+        let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
+            (0..tiles.len() as u32)
+                .map(|t| {
+                    let index = [t, 0, 0, 0];
+                    self.tile_index.bind_group(gpu, &index_layout, &[Bind::Uniform(bytemuck::bytes_of(&index))])
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        gpu.record(|enc| {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("depth tiles"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &target.view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: gpu.pass_timestamps(),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &tiles_bg, &[]);
+            draw_items(gpu, &mut pass, items, &prepared, &plain, tiles.len() as u32, attached.as_ref(), &index_bgs);
+        });
+        Ok(target)
+    }
+}
+
+/// Records the draws of `items`: plain ones with `plain`, `plain_instances` instances each
+/// (one per tile of a depth target); attached ones with `attached`, once, or once per bind
+/// group of `per_draw` (bound as group 3) where there are some.
+#[allow(clippy::too_many_arguments)]
+fn draw_items(
+    gpu: &GpuContext,
+    pass: &mut wgpu::RenderPass<'_>,
+    items: &[DrawItem],
+    prepared: &[Prepared],
+    plain: &wgpu::RenderPipeline,
+    plain_instances: u32,
+    attached: Option<&wgpu::RenderPipeline>,
+    per_draw: &[wgpu::BindGroup],
+) {
+    for (item, p) in items.iter().zip(prepared) {
+        let mesh = item.mesh.gpu(gpu);
+        pass.set_bind_group(1, &p.object, &[]);
+        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        match (&item.attached, &p.warp, attached) {
+            (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
+                if a.instances.is_empty() {
+                    continue;
+                }
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(2, warp_bg, &[]);
+                pass.set_vertex_buffer(1, buffer.slice(..));
+                let instances = 0..a.instances.len() as u32;
+                if per_draw.is_empty() {
+                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
+                }
+                for group in per_draw {
+                    pass.set_bind_group(3, group, &[]);
+                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
+                }
+            }
+            _ => {
+                pass.set_pipeline(plain);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
+            }
+        }
+    }
+}
+
+/// The map from a view's clip space into its tile: NDC [-1, 1]^2 onto the tile's rectangle
+/// of the whole texture's NDC (y up in NDC, texel rows down).
+fn tile_uniform(t: &Tile, width: u32, height: u32) -> TileUniform {
+    let (w, h) = (width as f32, height as f32);
+    let [x, y, tw, th] = t.rect.map(|v| v as f32);
+    let (x0, x1) = (2.0 * x / w - 1.0, 2.0 * (x + tw) / w - 1.0);
+    let (y1, y0) = (1.0 - 2.0 * y / h, 1.0 - 2.0 * (y + th) / h);
+    let scale_bias = Mat4::from_cols(
+        Vec4::new((x1 - x0) / 2.0, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, (y1 - y0) / 2.0, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, 1.0, 0.0),
+        Vec4::new((x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0, 1.0),
+    );
+    TileUniform { to_tile: (scale_bias * t.view_proj).to_cols_array_2d(), rect: [x, y, x + tw, y + th] }
+}
+
+/// What `werkstatt bench` and tests share with the G-buffer node: one drawer per call site.
+pub fn render_gbuffer(
+    gpu: &GpuContext,
+    drawer: &mut SceneDrawer,
+    items: &[DrawItem],
+    camera: crate::scene::Camera,
+    w: u32,
+    h: u32,
+) -> anyhow::Result<GBuffer> {
+    drawer.gbuffer(gpu, items, camera, View::new(&camera, w, h))
+}
