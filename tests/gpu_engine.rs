@@ -105,6 +105,38 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
     }
 }
 
+/// A simulated cloth is a new mesh every frame: its buffers come back from the pool once a
+/// submit has passed, and reusing them changes nothing in the picture.
+#[test]
+fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
+    let gpu = fresh_gpu();
+    let graph = root().join("graphs/tablecloth.ron");
+    let run = |out: &Path, frames: (i64, i64)| {
+        let opts = RenderOptions {
+            graph_path: graph.clone(),
+            frames,
+            fps: 30.0,
+            width: 96,
+            height: 72,
+            out_dir: out.to_path_buf(),
+            sets: Vec::new(),
+            dumps: Vec::new(),
+            progress: false,
+        };
+        render(&opts, &gpu).unwrap()
+    };
+    let (seq, alone) = (out_dir("gpu-cloth-sequence"), out_dir("gpu-cloth-alone"));
+    let stats = run(&seq, (0, 5));
+    for f in &stats.frames[2..] {
+        assert_eq!((f.gpu_created.textures, f.gpu_created.buffers), (0, 0), "frame {}", f.frame);
+    }
+    run(&alone, (5, 5));
+    assert!(
+        std::fs::read(seq.join("image_0005.png")).unwrap() == std::fs::read(alone.join("image_0005.png")).unwrap(),
+        "frame 5 after 5 frames of reuse differs from frame 5 rendered alone"
+    );
+}
+
 #[test]
 fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
     let gpu = fresh_gpu();

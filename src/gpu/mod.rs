@@ -34,6 +34,7 @@ use anyhow::{Context as _, bail};
 pub use pass::{Bind, BufferRing, ComputePass, FullscreenPass};
 pub use pipelines::RenderPipelineDesc;
 pub use pipelines::ShaderError;
+pub use pool::PooledBuffer;
 pub use readback::{Pixels, read_back, read_buffer};
 pub use texture::{GpuImage, SamplerKind, TextureDesc, TextureKind};
 
@@ -198,6 +199,7 @@ pub struct GpuContext {
     queued: Mutex<Vec<wgpu::CommandBuffer>>,
     current: Mutex<Current>,
     pub(crate) pool: pool::TexturePool,
+    pub(crate) buffer_pool: pool::BufferPool,
     pub(crate) pipelines: pipelines::PipelineCache,
     samplers: Mutex<HashMap<SamplerKind, wgpu::Sampler>>,
     /// Mappable buffers for read-backs, reused.
@@ -317,6 +319,7 @@ impl GpuContext {
             queued: Mutex::default(),
             current: Mutex::default(),
             pool: pool::TexturePool::default(),
+            buffer_pool: pool::BufferPool::default(),
             pipelines: pipelines::PipelineCache::new(crate::shaders::shader_dir()),
             samplers: Mutex::default(),
             staging: Mutex::default(),
@@ -437,7 +440,7 @@ impl GpuContext {
         // Submitting nothing still flushes `queue.write_buffer`/`write_texture` calls.
         self.queue.submit(buffers);
         let epoch = self.epoch.fetch_add(1, Ordering::AcqRel) + 1;
-        self.pool.trim(epoch);
+        self.pools_after_submit(epoch);
     }
 
     /// wgpu validation errors raised outside any node's scope since the last call.
