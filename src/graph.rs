@@ -318,13 +318,20 @@ impl Graph {
 
     /// Reads and validates a graph file. All problems found are reported together.
     pub fn load(path: &Path) -> Result<Graph, LoadError> {
-        let source = std::fs::read_to_string(path).map_err(|e| LoadError {
+        let error = |line, col, message: String| LoadError {
             diagnostics: vec![Diagnostic {
                 file: path.to_path_buf(),
-                line: 0,
-                col: 0,
-                problem: Problem::new(ProblemKind::Io, Place::File, format!("cannot read the file: {e}")),
+                line,
+                col,
+                problem: Problem::new(ProblemKind::Io, Place::File, format!("cannot read the file: {message}")),
             }],
+        };
+        let bytes = std::fs::read(path).map_err(|e| error(0, 0, e.to_string()))?;
+        // Text that is not UTF-8 is reported at its first bad byte.
+        let source = String::from_utf8(bytes).map_err(|e| {
+            let valid = std::str::from_utf8(&e.as_bytes()[..e.utf8_error().valid_up_to()]).unwrap_or_default();
+            let (line, col) = SourceMap::new(valid).line_col(valid.len());
+            error(line, col, "stream did not contain valid UTF-8".into())
         })?;
         Graph::load_str(&source, path)
     }
@@ -353,7 +360,7 @@ impl Graph {
         let diagnostics = problems
             .into_iter()
             .map(|problem| {
-                let (line, col) = map.locate(&problem.place, &graph);
+                let (line, col) = map.locate(&problem.place);
                 Diagnostic { file: path.to_path_buf(), line, col, problem }
             })
             .collect();
@@ -605,7 +612,10 @@ impl Graph {
     /// A cycle through the links, as the node ids along it, if there is one.
     pub fn find_cycle(&self) -> Option<Vec<String>> {
         let mut succ: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
-        for l in &self.links {
+        // A link to or from a node that does not exist is an error of its own, not part of a cycle.
+        for l in
+            self.links.iter().filter(|l| self.nodes.contains_key(&l.from.node) && self.nodes.contains_key(&l.to.node))
+        {
             succ.entry(&l.from.node).or_default().insert(&l.to.node);
         }
         // Iterative DFS with colours; the grey stack is the current path.
@@ -741,100 +751,101 @@ fn value_ron(v: &ParamValue) -> String {
     }
 }
 
-/// Finds where ids, parameters and links are written, for error positions.
-/// RON values carry no spans, so this searches the text for the quoted names.
+/// Finds where ids, parameters and links are written, for error positions. RON values carry
+/// no spans, so this scans the text once, skipping comments, for the string keys (decoded, with
+/// their nesting depth: node ids sit directly in the `nodes` map, parameter names two levels
+/// deeper) and the entries of the `links` list.
 struct SourceMap<'a> {
     source: &'a str,
+    /// Every string literal followed by `:`, as (offset, depth, value).
+    keys: Vec<(usize, usize, String)>,
+    /// Where each entry of the top-level `links` list starts.
+    links: Vec<usize>,
 }
+
+/// The depth of node ids: inside the graph's `(` and the `nodes` map's `{`.
+const NODE_DEPTH: usize = 2;
+/// The depth of parameter names: inside the node's `(` and its `params` map's `{`.
+const PARAM_DEPTH: usize = 4;
 
 impl<'a> SourceMap<'a> {
     fn new(source: &'a str) -> Self {
-        SourceMap { source }
+        let b = source.as_bytes();
+        let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+        let (mut keys, mut links) = (Vec::new(), Vec::new());
+        let (mut i, mut depth) = (0, 0usize);
+        // After the top-level `links` key: waiting for its list, then inside it.
+        let (mut links_key, mut in_links) = (false, false);
+        while i < b.len() {
+            let c = b[i];
+            // (Identifiers are skipped whole, so an `r` inside one does not start a raw string.)
+            if let Some(end) = string_end(b, i) {
+                if b.get(skip_trivia(b, end)) == Some(&b':')
+                    && let Ok(value) = ron::from_str::<String>(&source[i..end])
+                {
+                    keys.push((i, depth, value));
+                }
+                i = end;
+                continue;
+            }
+            match c {
+                b'/' if matches!(b.get(i + 1), Some(b'/' | b'*')) => {
+                    i = skip_trivia(b, i);
+                    continue;
+                }
+                b'(' | b'[' | b'{' => {
+                    if c == b'(' && in_links && depth == 2 {
+                        links.push(i);
+                    }
+                    if c == b'[' && links_key && depth == 1 {
+                        (links_key, in_links) = (false, true);
+                    }
+                    depth += 1;
+                }
+                b')' | b']' | b'}' => {
+                    depth = depth.saturating_sub(1);
+                    if depth == 1 {
+                        in_links = false;
+                    }
+                }
+                _ if ident(c) => {
+                    let start = i;
+                    while i < b.len() && ident(b[i]) {
+                        i += 1;
+                    }
+                    if depth == 1 && &b[start..i] == b"links" {
+                        links_key = true;
+                    }
+                    continue;
+                }
+                _ => {}
+            }
+            i += 1;
+        }
+        SourceMap { source, keys, links }
     }
 
-    fn locate(&self, place: &Place, graph: &Graph) -> (usize, usize) {
+    fn locate(&self, place: &Place) -> (usize, usize) {
         let offset = match place {
             Place::File => Some(0),
-            Place::Node(id) => self.node_offset(id),
-            Place::Param(id, name) => self.node_offset(id).and_then(|start| {
-                let end = self.next_node_offset(start, graph);
-                self.find_key(name, start, end)
+            Place::Node(id) => self.node_offsets(id).next(),
+            // A repeated id keeps its last entry, so look in every entry written with that id.
+            Place::Param(id, name) => self.node_offsets(id).find_map(|start| {
+                let end =
+                    self.keys.iter().find(|k| k.0 > start && k.1 == NODE_DEPTH).map_or(self.source.len(), |k| k.0);
+                self.keys
+                    .iter()
+                    .find(|k| (start..end).contains(&k.0) && k.1 == PARAM_DEPTH && k.2 == *name)
+                    .map(|k| k.0)
             }),
-            Place::Link(i) => self.link_offset(*i),
+            Place::Link(i) => self.links.get(*i).copied(),
         };
         self.line_col(offset.unwrap_or(0))
     }
 
-    fn nodes_section(&self) -> usize {
-        self.source.find("nodes").unwrap_or(0)
-    }
-
-    fn node_offset(&self, id: &str) -> Option<usize> {
-        self.find_key(id, self.nodes_section(), self.source.len())
-    }
-
-    fn next_node_offset(&self, start: usize, graph: &Graph) -> usize {
-        graph
-            .nodes
-            .keys()
-            .filter_map(|id| self.node_offset(id))
-            .filter(|&o| o > start)
-            .min()
-            .or_else(|| self.links_key().filter(|&o| o > start))
-            .unwrap_or(self.source.len())
-    }
-
-    /// The offset of `"key"` followed by `:` between `start` and `end`.
-    fn find_key(&self, key: &str, start: usize, end: usize) -> Option<usize> {
-        let needle = quote(key);
-        let hay = &self.source[start..end];
-        let mut from = 0;
-        while let Some(i) = hay[from..].find(&needle) {
-            let at = from + i;
-            if hay[at + needle.len()..].trim_start().starts_with(':') {
-                return Some(start + at);
-            }
-            from = at + needle.len();
-        }
-        None
-    }
-
-    /// The offset of the top-level `links:` key (ids are quoted, so `links:` is not in one).
-    fn links_key(&self) -> Option<usize> {
-        self.source.rfind("links:").or_else(|| self.source.rfind("links"))
-    }
-
-    /// The offset of the i-th entry of the links list.
-    fn link_offset(&self, index: usize) -> Option<usize> {
-        let links = self.links_key()?;
-        let open = links + self.source[links..].find('[')?;
-        let mut depth = 0;
-        let mut count = 0;
-        let mut in_string = false;
-        let mut prev = '\0';
-        for (i, c) in self.source[open + 1..].char_indices() {
-            if in_string {
-                if c == '"' && prev != '\\' {
-                    in_string = false;
-                }
-            } else if c == '"' {
-                in_string = true;
-            } else if c == '(' {
-                if depth == 0 {
-                    if count == index {
-                        return Some(open + 1 + i);
-                    }
-                    count += 1;
-                }
-                depth += 1;
-            } else if c == ')' {
-                depth -= 1;
-            } else if c == ']' && depth == 0 {
-                break;
-            }
-            prev = c;
-        }
-        None
+    /// Where each entry of the node `id` starts (more than one if the id is repeated).
+    fn node_offsets(&self, id: &str) -> impl Iterator<Item = usize> {
+        self.keys.iter().filter(move |k| k.1 == NODE_DEPTH && k.2 == id).map(|k| k.0)
     }
 
     fn line_col(&self, offset: usize) -> (usize, usize) {
@@ -842,5 +853,56 @@ impl<'a> SourceMap<'a> {
         let line = before.matches('\n').count() + 1;
         let col = before.rfind('\n').map_or(before.chars().count(), |nl| before[nl + 1..].chars().count()) + 1;
         (line, col)
+    }
+}
+
+/// The end of the string literal (`"..."` or `r#"..."#`) that starts at `i`, if one does.
+fn string_end(b: &[u8], i: usize) -> Option<usize> {
+    match b[i] {
+        b'"' => {
+            let mut j = i + 1;
+            while j < b.len() && b[j] != b'"' {
+                j += if b[j] == b'\\' { 2 } else { 1 };
+            }
+            Some((j + 1).min(b.len()))
+        }
+        b'r' => {
+            let hashes = b[i + 1..].iter().take_while(|&&c| c == b'#').count();
+            if b.get(i + 1 + hashes) != Some(&b'"') {
+                return None;
+            }
+            let close: Vec<u8> = std::iter::once(b'"').chain(std::iter::repeat_n(b'#', hashes)).collect();
+            let body = i + 2 + hashes;
+            let end = b[body..].windows(close.len()).position(|w| w == close.as_slice());
+            Some(end.map_or(b.len(), |e| body + e + close.len()))
+        }
+        _ => None,
+    }
+}
+
+/// The offset of the first byte at or after `i` that is not white space or in a comment.
+fn skip_trivia(b: &[u8], mut i: usize) -> usize {
+    loop {
+        match (b.get(i), b.get(i + 1)) {
+            (Some(c), _) if c.is_ascii_whitespace() => i += 1,
+            (Some(b'/'), Some(b'/')) => i = b[i..].iter().position(|&c| c == b'\n').map_or(b.len(), |n| i + n),
+            (Some(b'/'), Some(b'*')) => {
+                // Block comments nest.
+                let mut depth = 0;
+                while i < b.len() {
+                    if b[i..].starts_with(b"/*") {
+                        (depth, i) = (depth + 1, i + 2);
+                    } else if b[i..].starts_with(b"*/") {
+                        (depth, i) = (depth - 1, i + 2);
+                        if depth == 0 {
+                            break;
+                        }
+                    } else {
+                        i += 1;
+                    }
+                }
+            }
+            _ => return i,
+        }
     }
 }

@@ -3,8 +3,6 @@
 //! and against the CPU reference; no shear on sheared UVs; outliers discarded.
 //! Tolerances are stated relative to the world size of one texel.
 
-mod common;
-
 use std::f32::consts::{PI, TAU};
 use std::sync::Arc;
 
@@ -15,6 +13,8 @@ use werkstatt::nodes::export::GpuWarper;
 use werkstatt::nodes::geometry;
 use werkstatt::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
 use werkstatt::warp::{AttachedDraw, InstanceData, MatrixTexels, Placement, WarpMode, WarpSettings, warp_all_cpu};
+
+use crate::common;
 
 const F32: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 

@@ -1,8 +1,6 @@
 //! MeshSequence: OBJ frame sequences played back against the frame time: interpolation,
 //! topology checks, time modes, bounded memory, and batch rendering of graphs/sequence.ron.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -12,6 +10,8 @@ use werkstatt::mesh::Mesh;
 use werkstatt::nodes::mesh_sequence::{Mode, bracket, load_frame, parse_obj};
 use werkstatt::port::Value;
 use werkstatt::resources::Resources;
+
+use crate::common;
 
 fn tablecloth() -> PathBuf {
     common::root().join("tests/data/sequence")

@@ -1,6 +1,8 @@
 //! Shader hot reload in the editor's live evaluation (`WERKSTATT_SHADER_DIR`): a saved shader
 //! is picked up; one that does not compile keeps the last good pipeline and reports the error.
-//! A test binary of its own, because it sets the environment variable for the process.
+//! The variable is read by the whole process and the other tests run on threads of this one, so
+//! the test runs in a process of its own: the test binary again, filtered to this test, with the
+//! variable set in the child's environment.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -33,16 +35,36 @@ fn centre(live: &Live, gpu: &GpuContext) -> [f32; 4] {
     [px.rgba[i], px.rgba[i + 1], px.rgba[i + 2], px.rgba[i + 3]]
 }
 
+/// Set in the environment of the child process that runs the test body.
+const CHILD: &str = "WERKSTATT_TEST_SHADER_RELOAD_CHILD";
+
 #[test]
 fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     let dir = root().join("target/test-out/editor-shaders");
+    if std::env::var_os(CHILD).is_none() {
+        // The test's name in the harness: its module path without the crate's name.
+        let name = "shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline";
+        let test = module_path!().split_once("::").map_or(name.to_string(), |(_, m)| format!("{m}::{name}"));
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", &test, "--test-threads=1", "--nocapture"])
+            .env(CHILD, "1")
+            .env("WERKSTATT_SHADER_DIR", &dir)
+            .output()
+            .unwrap();
+        let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success() && stdout.contains("test result: ok. 1 passed"),
+            "the test in its own process ({}) failed:\n{stdout}\n{stderr}",
+            out.status
+        );
+        return;
+    }
+    assert_eq!(werkstatt::gpu::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     for name in werkstatt::shaders::names() {
         std::fs::copy(root().join("shaders").join(name), dir.join(name)).unwrap();
     }
-    // SAFETY: the only test of this binary; set before any thread reads the environment.
-    unsafe { std::env::set_var("WERKSTATT_SHADER_DIR", &dir) };
     let gpu = GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)");
     let mut graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
     let mut live = Live::new(root().join("graphs"), false);

@@ -1,9 +1,7 @@
 //! Rendering through the batch runner on the software adapter: non-blank, depth-correct,
 //! deterministic, and matching the golden images.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 
 fn default_graph() -> std::path::PathBuf {
     root().join("graphs/default.ron")

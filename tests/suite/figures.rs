@@ -2,9 +2,7 @@
 //! each renders, its attached detail geometry covers part of the image (the G-buffer's detail
 //! flag), and the output is deterministic.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 
 const FIGURES: [&str; 6] =
     ["fig1a_fur", "fig1b_embroidery", "fig1c_buttons_seam", "fig1d_knitwear", "fig1e_stickers", "placements"];
