@@ -14,6 +14,8 @@ mod editor;
 mod editor_shaders;
 mod evaluation;
 mod figures;
+mod gl_backend;
+mod gpu_engine;
 mod graph_errors;
 mod graph_props;
 mod live_link;

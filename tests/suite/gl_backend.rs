@@ -6,12 +6,10 @@
 //! Skipped, with a message, only where no EGL driver is installed at all
 //! (`apt-get install libegl1 libegl-mesa0 libgles2`).
 
-mod common;
-
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use common::*;
+use crate::common::*;
 use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::gpu::{Backend, GpuContext, read_back};
 use werkstatt::graph::Graph;

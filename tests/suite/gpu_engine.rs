@@ -4,12 +4,10 @@
 //! the last good pipeline and reports a typed error), and error scopes per node (a validation
 //! error lands on the node that caused it).
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::gpu::{Backend, GpuContext, read_back};
 use werkstatt::graph::Graph;
