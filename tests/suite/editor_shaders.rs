@@ -59,7 +59,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
         );
         return;
     }
-    assert_eq!(werkstatt::gpu::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
+    assert_eq!(werkstatt::shaders::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     for name in werkstatt::shaders::names() {

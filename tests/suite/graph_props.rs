@@ -13,7 +13,9 @@ use std::sync::OnceLock;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use werkstatt::graph::{Graph, Link, NodeDoc, Place, PortRef, Problem, ProblemKind};
-use werkstatt::spec::{self, NodeSpec, ParamKind, ParamValue};
+use werkstatt::node::NodeSpec;
+use werkstatt::param::{ParamKind, ParamValue};
+use werkstatt::spec;
 
 use crate::common;
 

@@ -21,8 +21,10 @@ mod graph_props;
 mod live_link;
 mod mesh;
 mod mesh_sequence;
+mod node_contracts;
 mod render;
 mod roundtrip;
+mod scene_drawer;
 mod warping;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be

@@ -3,7 +3,7 @@
 //! or parameter its spec does not declare, reads one as the wrong type, or leaves an output
 //! unset (the evaluator reports those as internal errors; see `werkstatt::node::INTERNAL_ERROR`).
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

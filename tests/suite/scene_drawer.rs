@@ -3,7 +3,7 @@
 //! the G-buffer target writes for the same view, texel for texel, without spilling into the
 //! neighbouring tile.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::sync::Arc;
