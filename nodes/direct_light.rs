@@ -61,7 +61,7 @@ impl Node for DirectLightNode {
         let dir =
             cx.vec3("sun_direction").try_normalize().ok_or_else(|| NodeError::msg("sun_direction must not be zero"))?;
         if self.pass.is_none() {
-            self.pass = Some(FullscreenPass::new(gpu, "direct_light.wgsl", 3, &[gpu.formats().hdr])?);
+            self.pass = Some(FullscreenPass::new("direct_light.wgsl"));
         }
         let (w, h) = (g.width(), g.height());
         let rgb = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];

@@ -2,7 +2,8 @@
 
 use std::sync::Arc;
 
-use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, read_back};
+use crate::gpu::texture::copy_bits;
+use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, TextureDesc, read_back};
 use crate::mesh::{Mesh, Vertex};
 use crate::node::prelude::*;
 use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
@@ -45,6 +46,8 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
 #[derive(Default)]
 pub struct MatrixTextureNode {
     filter: Option<FullscreenPass>,
+    /// Where Rgba32Float cannot be rendered: the buffer its bits are copied through.
+    bit_copy: Option<wgpu::Buffer>,
     /// The seam map depends only on UVs, seams and resolution, not on positions: kept across frames.
     seam_map: Option<(u64, GpuImage)>,
 }
@@ -85,16 +88,19 @@ impl MatrixTextureNode {
         format: wgpu::TextureFormat,
         filter_radius: u32,
     ) -> anyhow::Result<MatrixTexture> {
-        let make = |name| GpuImage::target(gpu, name, resolution, resolution, format);
+        // Where 32-bit floats cannot be rendered (llvmpipe's GL) the passes write their bits
+        // into Rgba32Uint targets, copied into the Rgba32Float texture: the same values.
+        let bits = format == wgpu::TextureFormat::Rgba32Float && !gpu.formats().float32_renderable;
+        let (target_format, entry) =
+            if bits { (wgpu::TextureFormat::Rgba32Uint, "fs_bits") } else { (format, "fs_main") };
+        let make = |name| GpuImage::target(gpu, name, resolution, resolution, target_format);
         let (col_u, col_n, col_v) = (make("matrix t_u"), make("matrix n"), make("matrix t_v"));
         let gpu_mesh = mesh.gpu(gpu);
-        let formats = [format; 3];
-        let pipeline = gpu.render_pipeline(&RenderPipelineDesc::new(
-            "matrix_texture.wgsl",
-            &[],
-            &[Some(Vertex::layout())],
-            &formats,
-        ))?;
+        let formats = [target_format; 3];
+        let pipeline = gpu.render_pipeline(&RenderPipelineDesc {
+            fragment_entry: entry,
+            ..RenderPipelineDesc::new("matrix_texture.wgsl", &[], &[Some(Vertex::layout())], &formats)
+        })?;
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("matrix texture"),
@@ -115,11 +121,24 @@ impl MatrixTextureNode {
         }
         let seams = self.seam_map.as_ref().expect("set above").1.share();
         let mut m = MatrixTexture { col_u, col_n, col_v, seams, resolution };
-        if filter_radius > 0 {
-            if self.filter.is_none() {
-                self.filter = Some(FullscreenPass::new(gpu, "matrix_filter.wgsl", 3, &formats)?);
+        let bit_copy = &mut self.bit_copy;
+        let mut as_floats = |m: MatrixTexture| {
+            if !bits {
+                return m;
             }
-            let pass = self.filter.as_mut().expect("created above");
+            let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+            let desc = TextureDesc::d2(resolution, resolution, format, usage);
+            let [u, n, v] = [&m.col_u, &m.col_n, &m.col_v].map(|src| {
+                let dst = gpu.acquire("matrix column", desc);
+                copy_bits(gpu, src, &dst, bit_copy);
+                dst
+            });
+            MatrixTexture { col_u: u, col_n: n, col_v: v, seams: m.seams, resolution }
+        };
+        m = as_floats(m);
+        if filter_radius > 0 {
+            let pass =
+                self.filter.get_or_insert_with(|| FullscreenPass::new("matrix_filter.wgsl").with_fragment_entry(entry));
             for dir in [[1.0f32, 0.0], [0.0, 1.0]] {
                 let out = MatrixTexture {
                     seams: m.seams.share(),
@@ -135,7 +154,7 @@ impl MatrixTextureNode {
                     &[&m.col_u, &m.col_n, &m.col_v],
                     &[&out.col_u, &out.col_n, &out.col_v],
                 )?;
-                m = out;
+                m = as_floats(out);
             }
         }
         Ok(m)
@@ -171,7 +190,7 @@ impl Node for MatrixTextureNode {
         }
         let format = match cx.choice::<Precision>("precision") {
             Precision::F16 => gpu.formats().matrix_f16,
-            Precision::F32 => gpu.formats().matrix_f32,
+            Precision::F32 => wgpu::TextureFormat::Rgba32Float,
         };
         let m = self.render(gpu, &mesh, resolution, format, cx.int("filter_radius") as u32)?;
         cx.set("normal", Arc::new(m.col_n.share()));

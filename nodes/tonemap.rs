@@ -50,7 +50,7 @@ impl Node for TonemapNode {
         let gpu = cx.gpu()?;
         let input: Arc<GpuImage> = cx.input("image")?;
         if self.pass.is_none() {
-            self.pass = Some(FullscreenPass::new(gpu, "tonemap.wgsl", 1, &[LDR_FORMAT])?);
+            self.pass = Some(FullscreenPass::new("tonemap.wgsl"));
         }
         let op = cx.choice::<ToneCurve>("operator") as u32;
         let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];

@@ -24,6 +24,24 @@ struct MatrixOut {
 
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> MatrixOut {
+    return filtered(frag);
+}
+
+// The same as bits into Rgba32Uint targets, where 32-bit floats cannot be rendered (see
+// matrix_texture.wgsl).
+struct MatrixBits {
+    @location(0) col_u: vec4<u32>,
+    @location(1) col_n: vec4<u32>,
+    @location(2) col_v: vec4<u32>,
+};
+
+@fragment
+fn fs_bits(@builtin(position) frag: vec4<f32>) -> MatrixBits {
+    let m = filtered(frag);
+    return MatrixBits(bitcast<vec4<u32>>(m.col_u), bitcast<vec4<u32>>(m.col_n), bitcast<vec4<u32>>(m.col_v));
+}
+
+fn filtered(frag: vec4<f32>) -> MatrixOut {
     let px = vec2<i32>(frag.xy);
     let dims = vec2<i32>(textureDimensions(col_n));
     let centre_n = textureLoad(col_n, px, 0);

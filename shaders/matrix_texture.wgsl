@@ -33,6 +33,24 @@ struct MatrixOut {
 
 @fragment
 fn fs_main(in: VertexOut) -> MatrixOut {
+    return matrix(in);
+}
+
+// Where 32-bit float targets cannot be rendered (llvmpipe's OpenGL), the same values are
+// written as their bits into Rgba32Uint targets, which the node copies into the float texture.
+struct MatrixBits {
+    @location(0) col_u: vec4<u32>,
+    @location(1) col_n: vec4<u32>,
+    @location(2) col_v: vec4<u32>,
+};
+
+@fragment
+fn fs_bits(in: VertexOut) -> MatrixBits {
+    let m = matrix(in);
+    return MatrixBits(bitcast<vec4<u32>>(m.col_u), bitcast<vec4<u32>>(m.col_n), bitcast<vec4<u32>>(m.col_v));
+}
+
+fn matrix(in: VertexOut) -> MatrixOut {
     // Gram-Schmidt keeps n and the directions of dP/du and dP/dv; the frame is orthonormal
     // so attached geometry is never sheared (paper section 3.2).
     let n = normalize(in.normal);

@@ -194,6 +194,7 @@ pub fn attachments(
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                gpu.submit_checked()?;
                 gpu.wait_idle();
                 Ok(())
             })?;
@@ -225,6 +226,7 @@ pub fn attachments(
                     attached: None,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
+                gpu.submit_checked()?;
                 gpu.wait_idle();
                 Ok(())
             })?;

@@ -267,13 +267,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             if let Ok(gpu) = GpuContext::headless(backend) {
                 let f = gpu.formats();
                 println!(
-                    "formats on {}: linear depth {:?}, HDR {:?}, matrix {:?}/{:?}, depth {:?}, float32 filterable: {}",
+                    "formats on {}: linear depth {:?}, HDR {:?}, half matrix {:?}, depth {:?}, float32 renderable: {}, float32 filterable: {}",
                     gpu.adapter_name(),
                     f.linear_depth,
                     f.hdr,
-                    f.matrix_f32,
                     f.matrix_f16,
                     f.depth,
+                    f.float32_renderable,
                     f.float32_filterable
                 );
             }

@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec4};
 
 use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
-use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind, TextureDesc};
+use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc};
 use crate::mesh::Vertex;
 use crate::scene::{DrawItem, GBuffer, Image8, View};
 use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
@@ -101,8 +101,8 @@ impl InstanceResolver {
         gpu: &GpuContext,
         raw: &wgpu::Buffer,
         draw: &AttachedDraw,
-    ) -> anyhow::Result<wgpu::Buffer> {
-        let out = gpu.create_buffer(
+    ) -> anyhow::Result<PooledBuffer> {
+        let out = gpu.scratch_pooled(
             "resolved instances",
             raw.size(),
             wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,

@@ -74,8 +74,8 @@ impl Vertex {
 }
 
 pub struct GpuMesh {
-    pub vertices: wgpu::Buffer,
-    pub indices: wgpu::Buffer,
+    pub vertices: crate::gpu::PooledBuffer,
+    pub indices: crate::gpu::PooledBuffer,
     pub index_count: u32,
 }
 
@@ -258,12 +258,13 @@ impl Mesh {
                     tangent_v: self.tangents_v[i].to_array(),
                 })
                 .collect();
-            let vertices = gpu.create_buffer_init(
+            // Pooled: a simulated mesh is a new mesh of the same size every frame.
+            let vertices = gpu.upload_pooled(
                 "mesh vertices",
                 bytemuck::cast_slice(&verts),
                 wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
             );
-            let indices = gpu.create_buffer_init(
+            let indices = gpu.upload_pooled(
                 "mesh indices",
                 bytemuck::cast_slice(&self.indices),
                 wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,

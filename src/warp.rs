@@ -366,8 +366,8 @@ pub struct AttachedDraw {
     pub matrix: Arc<MatrixTexture>,
     pub settings: WarpSettings,
     pub instances: Arc<Vec<InstanceData>>,
-    instance_buffer: std::sync::OnceLock<wgpu::Buffer>,
-    resolved_buffer: std::sync::OnceLock<Result<wgpu::Buffer, String>>,
+    instance_buffer: std::sync::OnceLock<crate::gpu::PooledBuffer>,
+    resolved_buffer: std::sync::OnceLock<Result<crate::gpu::PooledBuffer, String>>,
 }
 
 impl AttachedDraw {
@@ -388,7 +388,7 @@ impl AttachedDraw {
             } else {
                 bytemuck::cast_slice(&self.instances)
             };
-            gpu.create_buffer_init(
+            gpu.upload_pooled(
                 "attachment instances",
                 bytes,
                 wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
@@ -408,7 +408,7 @@ impl AttachedDraw {
     pub fn draw_buffer(
         &self,
         gpu: &crate::gpu::GpuContext,
-        resolve: impl FnOnce(&wgpu::Buffer) -> anyhow::Result<wgpu::Buffer>,
+        resolve: impl FnOnce(&wgpu::Buffer) -> anyhow::Result<crate::gpu::PooledBuffer>,
     ) -> anyhow::Result<&wgpu::Buffer> {
         let raw = self.instance_buffer(gpu);
         if !self.per_instance_frames() {
@@ -417,6 +417,7 @@ impl AttachedDraw {
         self.resolved_buffer
             .get_or_init(|| resolve(raw).map_err(|e| format!("{e:#}")))
             .as_ref()
+            .map(|b| &**b)
             .map_err(|e| anyhow::anyhow!("{e}"))
     }
 }

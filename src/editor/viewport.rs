@@ -20,8 +20,8 @@ struct Converter {
 }
 
 impl Converter {
-    fn new(gpu: &GpuContext) -> anyhow::Result<Converter> {
-        Ok(Converter { pass: FullscreenPass::new(gpu, "display.wgsl", 1, &[DISPLAY_FORMAT])? })
+    fn new() -> Converter {
+        Converter { pass: FullscreenPass::new("display.wgsl") }
     }
 
     /// The display mode for a source format, or why it cannot be shown.
@@ -52,7 +52,7 @@ impl Converter {
 pub const SIZES: &[(u32, u32)] = &[(320, 240), (480, 360), (640, 480), (960, 720), (1280, 960)];
 
 pub struct Viewport {
-    converter: Option<Result<Converter, String>>,
+    converter: Option<Converter>,
     display: Option<GpuImage>,
     texture_id: Option<egui::TextureId>,
     /// The source last converted: its address and the evaluation count, to skip repeats.
@@ -84,10 +84,7 @@ impl Viewport {
             return Ok(());
         }
         let mode = Converter::mode(src)?;
-        let converter = match self.converter.get_or_insert_with(|| Converter::new(gpu).map_err(|e| format!("{e:#}"))) {
-            Ok(c) => c,
-            Err(e) => return Err(e.clone()),
-        };
+        let converter = self.converter.get_or_insert_with(Converter::new);
         let resized = self.display.as_ref().is_none_or(|d| (d.width, d.height) != (src.width, src.height));
         if resized {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;

@@ -34,6 +34,7 @@ use anyhow::{Context as _, bail};
 pub use pass::{Bind, BufferRing, ComputePass, FullscreenPass};
 pub use pipelines::RenderPipelineDesc;
 pub use pipelines::ShaderError;
+pub use pool::PooledBuffer;
 pub use readback::{Pixels, read_back, read_buffer};
 pub use texture::{GpuImage, SamplerKind, TextureDesc, TextureKind};
 
@@ -83,8 +84,9 @@ pub struct Formats {
     pub linear_depth: wgpu::TextureFormat,
     /// Linear HDR colour (G-buffer colour and normal, lighting): Rgba16Float, else Rgba32Float.
     pub hdr: wgpu::TextureFormat,
-    /// Full-precision matrix textures: Rgba32Float, else Rgba16Float.
-    pub matrix_f32: wgpu::TextureFormat,
+    /// Whether Rgba32Float can be a render target. Where not (llvmpipe's GL), full-precision
+    /// matrix textures are rendered as bits into Rgba32Uint and copied (see `copy_bits`).
+    pub float32_renderable: bool,
     /// Half-precision matrix textures: Rgba16Float.
     pub matrix_f16: wgpu::TextureFormat,
     /// The hardware depth buffer: Depth32Float, else Depth24Plus.
@@ -105,7 +107,7 @@ impl Formats {
         Formats {
             linear_depth: first(&[F::R32Float, F::Rg32Float, F::Rgba32Float, F::R16Float, F::Rgba16Float]),
             hdr: first(&[F::Rgba16Float, F::Rgba32Float]),
-            matrix_f32: first(&[F::Rgba32Float, F::Rgba16Float]),
+            float32_renderable: renders(F::Rgba32Float),
             matrix_f16: first(&[F::Rgba16Float, F::Rgba32Float]),
             depth: first(&[F::Depth32Float, F::Depth24Plus]),
             ldr: F::Rgba8UnormSrgb,
@@ -197,6 +199,7 @@ pub struct GpuContext {
     queued: Mutex<Vec<wgpu::CommandBuffer>>,
     current: Mutex<Current>,
     pub(crate) pool: pool::TexturePool,
+    pub(crate) buffer_pool: pool::BufferPool,
     pub(crate) pipelines: pipelines::PipelineCache,
     samplers: Mutex<HashMap<SamplerKind, wgpu::Sampler>>,
     /// Mappable buffers for read-backs, reused.
@@ -316,6 +319,7 @@ impl GpuContext {
             queued: Mutex::default(),
             current: Mutex::default(),
             pool: pool::TexturePool::default(),
+            buffer_pool: pool::BufferPool::default(),
             pipelines: pipelines::PipelineCache::new(crate::shaders::shader_dir()),
             samplers: Mutex::default(),
             staging: Mutex::default(),
@@ -436,7 +440,7 @@ impl GpuContext {
         // Submitting nothing still flushes `queue.write_buffer`/`write_texture` calls.
         self.queue.submit(buffers);
         let epoch = self.epoch.fetch_add(1, Ordering::AcqRel) + 1;
-        self.pool.trim(epoch);
+        self.pools_after_submit(epoch);
     }
 
     /// wgpu validation errors raised outside any node's scope since the last call.

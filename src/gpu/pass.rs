@@ -252,26 +252,22 @@ impl Bindings {
 /// mapping, filters and later screen-space passes are all of this shape.
 pub struct FullscreenPass {
     shader: &'static str,
+    fragment_entry: &'static str,
     bindings: Bindings,
 }
 
 impl FullscreenPass {
-    /// `shader` must define `vs_fullscreen` (include shaders/fullscreen.wgsl) and `fs_main`,
-    /// with the uniform at binding 0 and `textures` 2D textures at bindings 1.. of group 0
-    /// (for [`FullscreenPass::run`]); [`FullscreenPass::draw`] binds anything. Checks that
-    /// the shader compiles for `targets`.
-    pub fn new(
-        gpu: &GpuContext,
-        shader: &'static str,
-        textures: usize,
-        targets: &[wgpu::TextureFormat],
-    ) -> anyhow::Result<Self> {
-        let pass = FullscreenPass { shader, bindings: Bindings::new(wgpu::ShaderStages::FRAGMENT) };
-        let mut entries = vec![uniform_entry(0, wgpu::ShaderStages::FRAGMENT)];
-        entries.extend((0..textures).map(|i| texture_entry(1 + i as u32, wgpu::ShaderStages::FRAGMENT, false)));
-        let layout = gpu.bind_group_layout(&entries);
-        gpu.render_pipeline(&RenderPipelineDesc::fullscreen(shader, &[Some(&layout)], targets))?;
-        Ok(pass)
+    /// `shader` must define `vs_fullscreen` (include shaders/fullscreen.wgsl) and `fs_main`.
+    /// [`FullscreenPass::run`] binds a uniform block at binding 0 and 2D textures at bindings
+    /// 1.. of group 0; [`FullscreenPass::draw`] binds anything. The pipeline for the bound
+    /// resources and targets comes from the context's cache on each run.
+    pub fn new(shader: &'static str) -> Self {
+        FullscreenPass { shader, fragment_entry: "fs_main", bindings: Bindings::new(wgpu::ShaderStages::FRAGMENT) }
+    }
+
+    /// Draws with fragment entry point `entry` instead of `fs_main`.
+    pub fn with_fragment_entry(self, entry: &'static str) -> Self {
+        FullscreenPass { fragment_entry: entry, ..self }
     }
 
     /// A uniform block and 2D textures into one target.
@@ -310,7 +306,10 @@ impl FullscreenPass {
         formats: &[wgpu::TextureFormat],
     ) -> anyhow::Result<()> {
         let layout = self.bindings.layout(gpu, binds);
-        let pipeline = gpu.render_pipeline(&RenderPipelineDesc::fullscreen(self.shader, &[Some(&layout)], formats))?;
+        let pipeline = gpu.render_pipeline(&RenderPipelineDesc {
+            fragment_entry: self.fragment_entry,
+            ..RenderPipelineDesc::fullscreen(self.shader, &[Some(&layout)], formats)
+        })?;
         let group = self.bindings.bind_group(gpu, &layout, binds);
         let attachments: Vec<_> = targets.iter().map(|v| Some(clear_attachment(v))).collect();
         gpu.record(|enc| {

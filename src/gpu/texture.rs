@@ -352,3 +352,24 @@ impl SamplerKind {
         })
     }
 }
+
+/// Copies mip 0 of `src` into `dst` byte for byte through `scratch` (grown as needed): for
+/// formats of the same texel size that `copy_texture_to_texture` will not pair, e.g. a float
+/// texture rendered as its bits into Rgba32Uint where Rgba32Float is not renderable.
+pub fn copy_bits(gpu: &GpuContext, src: &GpuImage, dst: &GpuImage, scratch: &mut Option<wgpu::Buffer>) {
+    let texel = src.format.block_copy_size(None).unwrap_or(4);
+    debug_assert_eq!(Some(texel), dst.format.block_copy_size(None), "copy_bits needs equal texel sizes");
+    let row = (src.width * texel).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let size = row as u64 * src.height as u64;
+    if scratch.as_ref().is_none_or(|b| b.size() < size) {
+        let usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        *scratch = Some(gpu.create_buffer("bit copy", size, usage));
+    }
+    let buffer = scratch.as_ref().expect("made above");
+    let layout = wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(src.height) };
+    let extent = wgpu::Extent3d { width: src.width, height: src.height, depth_or_array_layers: 1 };
+    gpu.record(|enc| {
+        enc.copy_texture_to_buffer(src.texture.as_image_copy(), wgpu::TexelCopyBufferInfo { buffer, layout }, extent);
+        enc.copy_buffer_to_texture(wgpu::TexelCopyBufferInfo { buffer, layout }, dst.texture.as_image_copy(), extent);
+    });
+}

@@ -73,6 +73,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     settle(&mut live, &gpu);
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let original = std::fs::read_to_string(dir.join("tonemap.wgsl")).unwrap();
+    let gbuffer_runs = live.runs("gbuffer");
 
     // A broken shader: the error is reported, the last good pipeline keeps rendering.
     std::fs::write(dir.join("tonemap.wgsl"), original.replace("fn aces(", "fn aces( this is not wgsl")).unwrap();
@@ -80,6 +81,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     let err = live.shader_error.clone().expect("the compile error is kept");
     assert!(err.contains("tonemap.wgsl"), "{err}");
     assert!(matches!(live.state("tonemap"), NodeState::Failed(ref m) if m.contains("last good pipeline kept")));
+    assert_eq!(live.runs("gbuffer"), gbuffer_runs, "a tonemap.wgsl edit re-runs only what uses it");
     let runs = live.runs("tonemap");
     werkstatt::editor::document::set_param(&mut graph, "tonemap", "exposure", ParamValue::Float(0.5)).unwrap();
     live.sync(&graph, 2, None);

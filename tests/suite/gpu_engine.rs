@@ -103,6 +103,38 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
     }
 }
 
+/// A simulated cloth is a new mesh every frame: its buffers come back from the pool once a
+/// submit has passed, and reusing them changes nothing in the picture.
+#[test]
+fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
+    let gpu = fresh_gpu();
+    let graph = root().join("graphs/tablecloth.ron");
+    let run = |out: &Path, frames: (i64, i64)| {
+        let opts = RenderOptions {
+            graph_path: graph.clone(),
+            frames,
+            fps: 30.0,
+            width: 96,
+            height: 72,
+            out_dir: out.to_path_buf(),
+            sets: Vec::new(),
+            dumps: Vec::new(),
+            progress: false,
+        };
+        render(&opts, &gpu).unwrap()
+    };
+    let (seq, alone) = (out_dir("gpu-cloth-sequence"), out_dir("gpu-cloth-alone"));
+    let stats = run(&seq, (0, 5));
+    for f in &stats.frames[2..] {
+        assert_eq!((f.gpu_created.textures, f.gpu_created.buffers), (0, 0), "frame {}", f.frame);
+    }
+    run(&alone, (5, 5));
+    assert!(
+        std::fs::read(seq.join("image_0005.png")).unwrap() == std::fs::read(alone.join("image_0005.png")).unwrap(),
+        "frame 5 after 5 frames of reuse differs from frame 5 rendered alone"
+    );
+}
+
 #[test]
 fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
     let gpu = fresh_gpu();
@@ -239,4 +271,100 @@ fn node_scopes_keep_errors_apart() {
     assert!(bad.error.as_deref().is_some_and(|e| e.contains("Validation")), "{:?}", bad.error);
     assert_eq!(good.error, None);
     gpu.submit_checked().expect("the bad commands were dropped, the good ones submit");
+}
+
+/// The toolkit's texture kinds through the pass helpers: a cube map with mips and a 2D array
+/// rendered face by face and level by level (full-screen passes into layer/mip views), a
+/// depth texture, then read in one compute pass that binds a cube, an array, a depth texture,
+/// a filtering and a comparison sampler and a storage buffer, read back generically.
+#[test]
+fn passes_bind_cube_array_and_depth_textures_with_samplers() {
+    let gpu = fresh_gpu();
+    let dir = shader_copy(&gpu, "gpu-texture-kinds");
+    std::fs::write(
+        dir.join("fill.wgsl"),
+        "// #include \"fullscreen.wgsl\"\n\
+         struct P { value: vec4<f32> };\n\
+         @group(0) @binding(0) var<uniform> p: P;\n\
+         @fragment fn fs_main() -> @location(0) vec4<f32> { return p.value; }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("probe.wgsl"),
+        "@group(0) @binding(0) var cube: texture_cube<f32>;\n\
+         @group(0) @binding(1) var samp: sampler;\n\
+         @group(0) @binding(2) var<storage, read_write> out: array<vec4<f32>>;\n\
+         @group(0) @binding(3) var layers: texture_2d_array<f32>;\n\
+         @group(0) @binding(4) var depth: texture_depth_2d;\n\
+         @group(0) @binding(5) var cmp: sampler_comparison;\n\
+         @compute @workgroup_size(1) fn main() {\n\
+           out[0] = textureSampleLevel(cube, samp, vec3<f32>(1.0, 0.0, 0.0), 0.0);\n\
+           out[1] = textureSampleLevel(cube, samp, vec3<f32>(-1.0, 0.0, 0.0), 0.0);\n\
+           out[2] = textureSampleLevel(cube, samp, vec3<f32>(0.0, 1.0, 0.0), 0.0);\n\
+           out[3] = textureSampleLevel(cube, samp, vec3<f32>(0.0, -1.0, 0.0), 0.0);\n\
+           out[4] = textureSampleLevel(cube, samp, vec3<f32>(0.0, 0.0, 1.0), 0.0);\n\
+           out[5] = textureSampleLevel(cube, samp, vec3<f32>(0.0, 0.0, -1.0), 0.0);\n\
+           out[6] = textureSampleLevel(cube, samp, vec3<f32>(0.0, 0.0, -1.0), 1.0);\n\
+           out[7] = textureLoad(layers, vec2<i32>(1, 1), 2, 0);\n\
+           out[8] = vec4<f32>(textureSampleCompareLevel(depth, cmp, vec2<f32>(0.5, 0.5), 0.1));\n\
+           out[9] = vec4<f32>(textureSampleCompareLevel(depth, cmp, vec2<f32>(0.5, 0.5), 0.5));\n\
+         }\n",
+    )
+    .unwrap();
+    use werkstatt::gpu::{Bind, ComputePass, FullscreenPass, SamplerKind, TextureDesc};
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let hdr = gpu.formats().hdr;
+    let cube = gpu.acquire("cube", TextureDesc::cube(8, hdr, usage).with_full_mips());
+    assert_eq!((cube.desc.layers, cube.desc.mips), (6, 4));
+    let layers = gpu.acquire("layers", TextureDesc::array(4, 4, 3, hdr, usage));
+    let depth = gpu.acquire("depth", TextureDesc::target(4, 4, wgpu::TextureFormat::Depth32Float));
+    let mut fill = FullscreenPass::new("fill.wgsl");
+    for face in 0..6 {
+        for mip in 0..2 {
+            let value = [face as f32, mip as f32, 0.0, 1.0];
+            fill.draw(&gpu, &[Bind::Uniform(bytemuck::cast_slice(&value))], &[&cube.layer_view(face, mip)], &[hdr])
+                .unwrap();
+        }
+    }
+    for layer in 0..3 {
+        let value = [10.0 + layer as f32, 0.0, 0.0, 1.0];
+        fill.draw(&gpu, &[Bind::Uniform(bytemuck::cast_slice(&value))], &[&layers.layer_view(layer, 0)], &[hdr])
+            .unwrap();
+    }
+    gpu.record(|enc| {
+        enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("depth clear"),
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth.view,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.25), store: wgpu::StoreOp::Store }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+    });
+    let out = gpu.create_buffer("probe out", 16 * 10, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
+    let mut probe = ComputePass::new("probe.wgsl", "main");
+    let binds = [
+        Bind::Texture(&cube),
+        Bind::Sampler(SamplerKind::LinearClamp),
+        Bind::StorageRw(&out),
+        Bind::Texture(&layers),
+        Bind::Texture(&depth),
+        Bind::Sampler(SamplerKind::Comparison),
+    ];
+    probe.dispatch(&gpu, &[&binds], [1, 1, 1]).unwrap();
+    let px: Vec<[f32; 4]> = werkstatt::gpu::read_buffer(&gpu, &out).unwrap();
+    for (face, texel) in px[..6].iter().enumerate() {
+        assert_eq!(texel[..2], [face as f32, 0.0], "cube face {face} at mip 0: {texel:?}");
+    }
+    assert_eq!(px[6][..2], [5.0, 1.0], "face -z at mip 1: {:?}", px[6]);
+    assert_eq!(px[7][0], 12.0, "array layer 2: {:?}", px[7]);
+    assert_eq!((px[8][0], px[9][0]), (1.0, 0.0), "comparison against depth 0.25");
+    assert!(gpu.take_errors().is_empty(), "{:?}", gpu.take_errors());
+    // A layer of the array reads back on its own too.
+    let layer = werkstatt::gpu::readback::read_back_layer(&gpu, &layers, 1, 0).unwrap();
+    assert_eq!(layer.rgba[0], 11.0);
 }
