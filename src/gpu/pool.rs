@@ -8,7 +8,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::texture::{GpuImage, Shared, TextureDesc};
+use super::texture::{GpuImage, TextureDesc};
 use super::{GpuContext, lock};
 
 /// A pooled texture unused for this many submits is released (e.g. after a resize).
@@ -33,17 +33,7 @@ impl TexturePool {
             e.last_used = epoch;
             return e.image.share();
         }
-        let texture = gpu.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: desc.extent(),
-            mip_level_count: desc.mips,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: desc.format,
-            usage: desc.usage,
-            view_formats: &[],
-        });
-        let image = GpuImage::from_texture(texture, desc, Arc::new(Shared::default()));
+        let image = GpuImage::create(gpu, label, desc);
         let handle = image.share();
         entries.push(Entry { image, last_used: epoch });
         handle
