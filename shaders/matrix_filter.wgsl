@@ -5,6 +5,7 @@
 // tall attached geometry intersect itself.
 
 // #include "fullscreen.wgsl"
+// #include "matrix_out.wgsl"
 
 struct Params {
     // xy: step direction in texels, z: radius in texels.
@@ -16,29 +17,14 @@ struct Params {
 @group(0) @binding(2) var col_n: texture_2d<f32>;
 @group(0) @binding(3) var col_v: texture_2d<f32>;
 
-struct MatrixOut {
-    @location(0) col_u: vec4<f32>,
-    @location(1) col_n: vec4<f32>,
-    @location(2) col_v: vec4<f32>,
-};
-
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> MatrixOut {
     return filtered(frag);
 }
 
-// The same as bits into Rgba32Uint targets, where 32-bit floats cannot be rendered (see
-// matrix_texture.wgsl).
-struct MatrixBits {
-    @location(0) col_u: vec4<u32>,
-    @location(1) col_n: vec4<u32>,
-    @location(2) col_v: vec4<u32>,
-};
-
 @fragment
 fn fs_bits(@builtin(position) frag: vec4<f32>) -> MatrixBits {
-    let m = filtered(frag);
-    return MatrixBits(bitcast<vec4<u32>>(m.col_u), bitcast<vec4<u32>>(m.col_n), bitcast<vec4<u32>>(m.col_v));
+    return matrix_bits(filtered(frag));
 }
 
 fn filtered(frag: vec4<f32>) -> MatrixOut {

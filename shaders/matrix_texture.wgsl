@@ -3,6 +3,7 @@
 // tangent frame and the world position. Texels no piece covers keep the cleared zero matrix.
 
 // #include "vertex_in.wgsl"
+// #include "matrix_out.wgsl"
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -24,30 +25,14 @@ fn vs_main(v: VertexIn) -> VertexOut {
     return out;
 }
 
-struct MatrixOut {
-    // Columns of eq. (3), each with one position component in w.
-    @location(0) col_u: vec4<f32>,
-    @location(1) col_n: vec4<f32>,
-    @location(2) col_v: vec4<f32>,
-};
-
 @fragment
 fn fs_main(in: VertexOut) -> MatrixOut {
     return matrix(in);
 }
 
-// Where 32-bit float targets cannot be rendered (llvmpipe's OpenGL), the same values are
-// written as their bits into Rgba32Uint targets, which the node copies into the float texture.
-struct MatrixBits {
-    @location(0) col_u: vec4<u32>,
-    @location(1) col_n: vec4<u32>,
-    @location(2) col_v: vec4<u32>,
-};
-
 @fragment
 fn fs_bits(in: VertexOut) -> MatrixBits {
-    let m = matrix(in);
-    return MatrixBits(bitcast<vec4<u32>>(m.col_u), bitcast<vec4<u32>>(m.col_n), bitcast<vec4<u32>>(m.col_v));
+    return matrix_bits(matrix(in));
 }
 
 fn matrix(in: VertexOut) -> MatrixOut {

@@ -15,6 +15,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
     ("tonemap.wgsl", include_str!("../shaders/tonemap.wgsl")),
     ("display.wgsl", include_str!("../shaders/display.wgsl")),
+    ("matrix_out.wgsl", include_str!("../shaders/matrix_out.wgsl")),
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
