@@ -111,7 +111,8 @@ pub const STRICT: Tolerance = Tolerance { min_psnr: 40.0, level: 3, max_differin
 /// (re)written instead. On failure a diff image (differences x8) is written beside the output.
 pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
     let golden = root().join("tests/golden").join(format!("{name}.png"));
-    if std::env::var_os("WERKSTATT_BLESS").is_some() {
+    // Only an explicit 1 re-blesses: `WERKSTATT_BLESS=0` or an empty value compares.
+    if std::env::var("WERKSTATT_BLESS").as_deref() == Ok("1") {
         actual.save(&golden).unwrap();
         eprintln!("blessed {}", golden.display());
         return;

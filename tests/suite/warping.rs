@@ -113,6 +113,7 @@ fn half_float_path_matches_the_float_path() {
     let mesh = geometry::cylinder(0.5, 1.0, 128, 4).unwrap();
     let (_, a) = matrix(&mesh, 64, F32, 0);
     let (_, b) = matrix(&mesh, 64, wgpu::TextureFormat::Rgba16Float, 0);
+    assert_eq!(a.frames.len(), b.frames.len());
     for (fa, fb) in a.frames.iter().zip(&b.frames) {
         assert!((fa.p - fb.p).length() < 1e-3 && (fa.n - fb.n).length() < 2e-3, "{fa:?} vs {fb:?}");
     }
@@ -124,6 +125,7 @@ fn filtering_keeps_positions_and_orthonormal_frames() {
     let (_, raw) = matrix(&mesh, 64, F32, 0);
     let (_, smooth) = matrix(&mesh, 64, F32, 3);
     let mut changed = 0.0f32;
+    assert_eq!(raw.frames.len(), smooth.frames.len());
     for (a, b) in raw.frames.iter().zip(&smooth.frames) {
         if a.n.length_squared() < 0.25 {
             assert_eq!(b.n, Vec3::ZERO, "empty texels stay empty");
@@ -161,6 +163,7 @@ fn point_attachment_on_a_cylinder_matches_the_analytic_frame() {
     let instances = places.iter().map(|p| point_instance(p, scale, 1.0, lift, 0.0)).collect();
     let warped = warp_gpu(m, &detail, POINT, instances);
     let texel_world = TAU * r / 256.0;
+    assert_eq!(warped.len(), places.len() * detail.positions.len(), "one warped vertex per instance and vertex");
     for (p, verts) in places.iter().zip(warped.chunks(detail.positions.len())) {
         let a = p.u * TAU;
         let n = Vec3::new(a.sin(), 0.0, a.cos());
@@ -217,6 +220,10 @@ fn gpu_warp_equals_the_cpu_reference_for_every_mode() {
             let s = WarpSettings { mode, gravity, min_weight: 0.5 };
             let gpu = warp_gpu(m.clone(), &detail, s, instances.clone());
             let cpu = warp_all_cpu(&texels, &s, &detail, &instances);
+            // Equal lengths, and something valid: an empty or all-outlier GPU result must fail.
+            assert_eq!(gpu.len(), instances.len() * detail.positions.len(), "{mode:?}");
+            assert_eq!(gpu.len(), cpu.len(), "{mode:?}");
+            assert!(gpu.iter().any(|g| g.valid), "{mode:?}: no valid vertex");
             for (g, c) in gpu.iter().zip(&cpu) {
                 assert_eq!(g.valid, c.valid, "{mode:?}");
                 if g.valid {
