@@ -8,18 +8,12 @@ use anyhow::Context as _;
 use crate::mesh::Mesh;
 
 crate::choice!(
-    /// The geometry file formats `render` writes.
+    /// The geometry file formats `render` writes; the option names are the file extensions.
     pub enum GeometryFormat {
         Obj = "obj",
         Ply = "ply",
     }
 );
-
-impl GeometryFormat {
-    pub fn extension(self) -> &'static str {
-        crate::param::Choice::name(self)
-    }
-}
 
 /// Writes `mesh` to `path` in `format`.
 pub fn write_geometry(path: &Path, mesh: &Mesh, format: GeometryFormat) -> anyhow::Result<()> {

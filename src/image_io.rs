@@ -9,18 +9,12 @@ use anyhow::Context as _;
 use crate::gpu::Pixels;
 
 crate::choice!(
-    /// The image file formats `render` writes.
+    /// The image file formats `render` writes; the option names are the file extensions.
     pub enum ImageFormat {
         Png = "png",
         Exr = "exr",
     }
 );
-
-impl ImageFormat {
-    pub fn extension(self) -> &'static str {
-        crate::param::Choice::name(self)
-    }
-}
 
 /// Writes `px` to `path` in `format`.
 pub fn write_image(path: &Path, px: &Pixels, format: ImageFormat) -> anyhow::Result<()> {

@@ -41,11 +41,6 @@ macro_rules! port_types {
                 match self { $(PortType::$ty => stringify!($ty)),+ }
             }
 
-            /// The first line of the type's doc, for tooltips and the node reference.
-            pub fn doc(self) -> &'static str {
-                match self { $(PortType::$ty => [$($doc),+][0].trim()),+ }
-            }
-
             /// The pin colour in the node editor (sRGB).
             pub fn color(self) -> [u8; 3] {
                 match self { $(PortType::$ty => [$r, $g, $b]),+ }
@@ -118,11 +113,6 @@ impl fmt::Display for PortType {
 impl Value {
     pub fn type_name(&self) -> &'static str {
         self.port_type().name()
-    }
-
-    /// Whether this value may sit on a port of type `ty`.
-    pub fn matches(&self, ty: PortType) -> bool {
-        ty.accepts(self.port_type())
     }
 
     /// A one-line description for tooltips and logs.
@@ -209,7 +199,6 @@ mod tests {
         let colors: std::collections::HashSet<_> = PortType::ALL.iter().map(|t| t.color()).collect();
         assert_eq!(names.len(), PortType::ALL.len());
         assert_eq!(colors.len(), PortType::ALL.len());
-        assert!(PortType::ALL.iter().all(|t| !t.doc().is_empty()));
     }
 
     #[test]

@@ -14,6 +14,7 @@ use crate::gpu::{self, GpuContext};
 use crate::graph::{Graph, PortRef};
 use crate::image_io::{self, ImageFormat};
 use crate::node::Product;
+use crate::param::Choice as _;
 use crate::port::Value;
 use crate::resources::Resources;
 
@@ -184,13 +185,13 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
                 let name = |ext: &str| format!("{id}_{frame:04}.{ext}");
                 match product {
                     Product::Image { image, format } => {
-                        let name = name(format.extension());
+                        let name = name(format.name());
                         let px = gpu::read_back(gpu, image)?;
                         image_io::write_image(&opts.out_dir.join(&name), &px, *format)?;
                         stats.files.push(name);
                     }
                     Product::Geometry { mesh, format } => {
-                        let name = name(format.extension());
+                        let name = name(format.name());
                         geometry_io::write_geometry(&opts.out_dir.join(&name), mesh, *format)?;
                         stats.files.push(name);
                     }
@@ -207,7 +208,7 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
                 wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm => ImageFormat::Png,
                 _ => ImageFormat::Exr,
             };
-            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.extension());
+            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
             image_io::write_image(&opts.out_dir.join(&name), &gpu::read_back(gpu, img)?, format)?;
             stats.files.push(name);
         }
