@@ -17,6 +17,7 @@ pub mod geometry_io;
 pub mod gpu;
 pub mod graph;
 pub mod hash;
+pub mod ibl;
 pub mod image_io;
 #[cfg(test)]
 mod layering;
