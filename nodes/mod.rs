@@ -6,13 +6,17 @@ pub mod camera;
 pub mod cloth;
 pub mod curves;
 pub mod direct_light;
+pub mod environment_map;
 pub mod export;
 pub mod gbuffer;
+pub mod ibl_shading;
 pub mod geometry;
 pub mod live_link;
 pub mod matrix_texture;
+pub mod median_cut;
 pub mod mesh_sequence;
 pub mod output;
+pub mod pems;
 pub mod placements;
 pub mod scene;
 pub mod tonemap;
@@ -45,6 +49,10 @@ pub static ALL: &[&NodeSpec] = &[
     &attach::CURVE_ATTACHMENT,
     &gbuffer::GBUFFER_PASS,
     &direct_light::DIRECT_LIGHT,
+    &environment_map::ENVIRONMENT_MAP,
+    &median_cut::MEDIAN_CUT,
+    &pems::PEMS,
+    &ibl_shading::IBL_SHADING,
     &tonemap::TONEMAP,
     &output::IMAGE_WRITE,
     &output::PREVIEW,

@@ -5,6 +5,11 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.0031308 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
 }
 
+/// Rec. 709 luminance of a linear RGB colour.
+pub fn luminance(c: glam::Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

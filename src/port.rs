@@ -12,6 +12,7 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use crate::gpu::GpuImage;
+use crate::ibl::gpu::{EnvMap, Lights, PemSet};
 use crate::mesh::Mesh;
 use crate::scene::{Camera, DrawItem, GBuffer, Material};
 use crate::warp::{Curves, MatrixTexture, Placement};
@@ -94,6 +95,12 @@ port_types! {
     MatrixTexture(Arc<MatrixTexture>) { color: [255, 140, 140], view: Some(|m| Some(&m.col_n)) };
     /// 2D Bezier curves (from SVG) for curve attachments.
     Curves(Arc<Curves>) { color: [100, 200, 230], view: None };
+    /// A light probe as a cube map with mips; viewed as its equirectangular preview.
+    Environment(Arc<EnvMap>) { color: [255, 200, 120], view: Some(|e| Some(&e.preview)) };
+    /// Directional lights, one per median-cut region; viewed as the regions.
+    Lights(Arc<Lights>) { color: [250, 240, 170], view: Some(|l| l.preview.as_ref()) };
+    /// Filtered partial environment maps, one per region; viewed as the chosen preview.
+    Pems(Arc<PemSet>) { color: [240, 160, 50], view: Some(|p| Some(&p.preview)) };
 }
 
 impl PortType {
@@ -129,6 +136,9 @@ impl Value {
             Value::MatrixTexture(m) => format!("matrix texture {0}x{0}", m.resolution),
             Value::Instances(p) => format!("{} placements", p.len()),
             Value::Curves(c) => format!("{} paths, {} Bezier segments", c.paths.len(), c.segment_count()),
+            Value::Environment(e) => format!("environment {0}x{0} from {1}", e.size(), e.source.display()),
+            Value::Lights(l) => format!("{} lights", l.lights.len()),
+            Value::Pems(p) => format!("{} PEMs, {:.1} MiB", p.pems.len(), p.bytes as f64 / (1u64 << 20) as f64),
         }
     }
 }
@@ -188,6 +198,9 @@ typed!(Arc<GBuffer>: GBuffer);
 typed!(Arc<Vec<Placement>>: Instances);
 typed!(Arc<MatrixTexture>: MatrixTexture);
 typed!(Arc<Curves>: Curves);
+typed!(Arc<EnvMap>: Environment);
+typed!(Arc<Lights>: Lights);
+typed!(Arc<PemSet>: Pems);
 
 #[cfg(test)]
 mod tests {

@@ -1,0 +1,73 @@
+// Cube map conventions, mirrored from src/ibl/cube.rs (faces +X -X +Y -Y +Z -Z, face
+// coordinates u, v in [-1, 1] growing with texel column and row), and the bilinear lookup
+// clamped within a face that the PEM filters and their CPU twin share.
+
+fn face_dir(face: u32, u: f32, v: f32) -> vec3<f32> {
+    switch face {
+        case 0u: { return vec3<f32>(1.0, -v, -u); }
+        case 1u: { return vec3<f32>(-1.0, -v, u); }
+        case 2u: { return vec3<f32>(u, 1.0, v); }
+        case 3u: { return vec3<f32>(u, -1.0, -v); }
+        case 4u: { return vec3<f32>(u, -v, 1.0); }
+        default: { return vec3<f32>(-u, -v, -1.0); }
+    }
+}
+
+struct FaceUv {
+    face: u32,
+    uv: vec2<f32>,
+};
+
+fn dir_to_face(d: vec3<f32>) -> FaceUv {
+    let a = abs(d);
+    if a.x >= a.y && a.x >= a.z {
+        if d.x >= 0.0 { return FaceUv(0u, vec2<f32>(-d.z, -d.y) / a.x); }
+        return FaceUv(1u, vec2<f32>(d.z, -d.y) / a.x);
+    }
+    if a.y >= a.z {
+        if d.y >= 0.0 { return FaceUv(2u, vec2<f32>(d.x, d.z) / a.y); }
+        return FaceUv(3u, vec2<f32>(d.x, -d.z) / a.y);
+    }
+    if d.z >= 0.0 { return FaceUv(4u, vec2<f32>(d.x, -d.y) / a.z); }
+    return FaceUv(5u, vec2<f32>(-d.x, -d.y) / a.z);
+}
+
+// Face coordinate of the centre of texel `i` of a face `size` texels wide.
+fn texel_center(size: u32, i: u32) -> f32 {
+    return 2.0 * (f32(i) + 0.5) / f32(size) - 1.0;
+}
+
+// Bilinear lookup along `d` in one mip of a cube seen as a 2D array (layer = face),
+// clamped at the edges of the face `d` falls on: CubeImage::sample.
+fn cube_bilinear(tex: texture_2d_array<f32>, size: u32, d: vec3<f32>) -> vec4<f32> {
+    let f = dir_to_face(d);
+    let s = f32(size);
+    let p = (f.uv + vec2<f32>(1.0)) * 0.5 * s - vec2<f32>(0.5);
+    let fl = floor(p);
+    let t = p - fl;
+    let last = i32(size) - 1;
+    let x0 = clamp(i32(fl.x), 0, last);
+    let x1 = clamp(i32(fl.x) + 1, 0, last);
+    let y0 = clamp(i32(fl.y), 0, last);
+    let y1 = clamp(i32(fl.y) + 1, 0, last);
+    let layer = i32(f.face);
+    let top = mix(textureLoad(tex, vec2<i32>(x0, y0), layer, 0), textureLoad(tex, vec2<i32>(x1, y0), layer, 0), t.x);
+    let bottom = mix(textureLoad(tex, vec2<i32>(x0, y1), layer, 0), textureLoad(tex, vec2<i32>(x1, y1), layer, 0), t.x);
+    return mix(top, bottom, t.y);
+}
+
+const TAU: f32 = 6.28318530718;
+const PI_F: f32 = 3.14159265359;
+
+// Where direction `d` falls in an equirectangular map (src/ibl/cube.rs equirect_uv).
+fn equirect_uv(d: vec3<f32>) -> vec2<f32> {
+    let n = normalize(d);
+    return vec2<f32>(0.5 + atan2(n.x, -n.z) / TAU, acos(clamp(n.y, -1.0, 1.0)) / PI_F);
+}
+
+// The direction at equirectangular coordinates `uv` (inverse of equirect_uv).
+fn equirect_dir(uv: vec2<f32>) -> vec3<f32> {
+    let phi = (uv.x - 0.5) * TAU;
+    let theta = uv.y * PI_F;
+    return vec3<f32>(sin(theta) * sin(phi), cos(theta), -sin(theta) * cos(phi));
+}

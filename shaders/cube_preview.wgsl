@@ -1,0 +1,21 @@
+// A cube map shown as an equirectangular (latitude-longitude) image, for the viewport and
+// --dump: the probe as loaded, a PEM, their mip levels.
+
+struct Params {
+    size: vec2<f32>,
+    level: f32,
+    scale: f32,
+};
+
+@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(1) var cube: texture_cube<f32>;
+@group(0) @binding(2) var samp: sampler;
+
+// #include "fullscreen.wgsl"
+// #include "cube.wgsl"
+
+@fragment
+fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let d = equirect_dir(frag.xy / p.size);
+    return vec4<f32>(textureSampleLevel(cube, samp, d, p.level).rgb * p.scale, 1.0);
+}

@@ -1,0 +1,243 @@
+//! The GPU side of image-based lighting: the values that flow between the IBL nodes and
+//! the passes they share (probe resampling, the PEM mask and mip filter, cube previews).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::cube::{CubeImage, EquirectImage};
+use super::median_cut::{RegionLight, Regions};
+use super::pem::{Calibration, Kernel};
+use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, SamplerKind, TextureDesc};
+
+/// A light probe as a cube map (`EnvironmentMap`'s output).
+pub struct EnvMap {
+    /// The radiance, rotated and scaled, with a plain (2x2 box) mip chain: HDR format.
+    pub cube: GpuImage,
+    /// Level 0 as read back (what the median cut splits and the reference integrates).
+    pub texels: Arc<CubeImage>,
+    /// An equirectangular view of level 0 for the viewport.
+    pub preview: GpuImage,
+    pub source: PathBuf,
+}
+
+impl EnvMap {
+    pub fn size(&self) -> usize {
+        self.texels.size
+    }
+}
+
+/// Directional lights, one per region of the environment map (`MedianCut`'s output), with
+/// the regions themselves where they came from a map (the PEMs need them).
+pub struct Lights {
+    pub lights: Vec<RegionLight>,
+    pub regions: Option<Arc<Regions>>,
+    /// The regions shown over the map, for inspection (Fig. 3.14).
+    pub preview: Option<GpuImage>,
+}
+
+/// The filtered partial environment maps of every region (`Pems`' output).
+pub struct PemSet {
+    pub kernel: Kernel,
+    /// One cube map per region, full mip chain, HDR format.
+    pub pems: Vec<GpuImage>,
+    /// The whole map filtered with the same kernel: what the PEMs sum to.
+    pub full: GpuImage,
+    pub calibration: Arc<Calibration>,
+    /// A chosen PEM (or the sum) at a chosen level, as an equirectangular image.
+    pub preview: GpuImage,
+    /// GPU memory of `pems` (bytes), mip chains included.
+    pub bytes: u64,
+}
+
+/// A cube map texture of `size` for rendering into faces and levels and sampling.
+pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> GpuImage {
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_DST;
+    GpuImage::create(gpu, label, TextureDesc::cube(size, gpu.formats().hdr, usage).with_full_mips())
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ProbeParams {
+    face: u32,
+    size: u32,
+    probe_width: u32,
+    probe_height: u32,
+    rotation: [f32; 2],
+    intensity: f32,
+    pad: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FilterParams {
+    face: u32,
+    src_size: u32,
+    region: u32,
+    pad: u32,
+    weights: [f32; 28],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PreviewParams {
+    size: [f32; 2],
+    level: f32,
+    scale: f32,
+}
+
+/// The passes that build cube maps: probe resampling, masking, the mip filter, previews.
+pub struct CubePasses {
+    probe: FullscreenPass,
+    filter: FullscreenPass,
+    mask: FullscreenPass,
+    preview: FullscreenPass,
+}
+
+impl Default for CubePasses {
+    fn default() -> Self {
+        CubePasses {
+            probe: FullscreenPass::new("equirect_to_cube.wgsl"),
+            filter: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
+            mask: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
+            preview: FullscreenPass::new("cube_preview.wgsl"),
+        }
+    }
+}
+
+impl CubePasses {
+    /// Resamples `probe` into level 0 of `cube` (shaders/equirect_to_cube.wgsl).
+    pub fn resample_probe(
+        &mut self,
+        gpu: &GpuContext,
+        probe: &EquirectImage,
+        cube: &GpuImage,
+        rotation_deg: f32,
+        intensity: f32,
+    ) -> anyhow::Result<()> {
+        let texels: Vec<[f32; 4]> = probe.rgb.iter().map(|c| [c.x, c.y, c.z, 1.0]).collect();
+        let source = GpuImage::upload(
+            gpu,
+            "light probe",
+            probe.width as u32,
+            probe.height as u32,
+            wgpu::TextureFormat::Rgba32Float,
+            16,
+            bytemuck::cast_slice(&texels),
+        );
+        let angle = (-rotation_deg).to_radians();
+        for face in 0..6 {
+            let params = ProbeParams {
+                face,
+                size: cube.width,
+                probe_width: probe.width as u32,
+                probe_height: probe.height as u32,
+                rotation: [angle.cos(), angle.sin()],
+                intensity,
+                pad: 0.0,
+            };
+            self.probe.draw(
+                gpu,
+                &[Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Texture(&source)],
+                &[&cube.layer_view(face, 0)],
+                &[cube.format],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl).
+    pub fn filter_chain(&mut self, gpu: &GpuContext, cube: &GpuImage, kernel: Kernel) -> anyhow::Result<()> {
+        let w = super::pem::weights(kernel);
+        let total: f32 = w.iter().flatten().sum();
+        let mut weights = [0.0f32; 28];
+        for (i, v) in w.iter().flatten().enumerate() {
+            weights[i] = v / total;
+        }
+        for mip in 1..cube.desc.mips {
+            let source = cube.view_of(crate::gpu::texture::ViewSel {
+                dimension: wgpu::TextureViewDimension::D2Array,
+                base_mip: mip - 1,
+                mips: 1,
+                base_layer: 0,
+                layers: 6,
+            });
+            let sample_type = cube.desc.sample_type(false);
+            for face in 0..6 {
+                let params = FilterParams { face, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
+                self.filter.draw(
+                    gpu,
+                    &[
+                        Bind::Uniform(bytemuck::bytes_of(&params)),
+                        Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type),
+                    ],
+                    &[&cube.layer_view(face, mip)],
+                    &[cube.format],
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Level 0 of `dst`: level 0 of `src` where `regions` (faces stacked vertically) holds
+    /// `region`, black elsewhere.
+    pub fn mask(
+        &mut self,
+        gpu: &GpuContext,
+        src: &GpuImage,
+        regions: &GpuImage,
+        region: u32,
+        dst: &GpuImage,
+    ) -> anyhow::Result<()> {
+        let source = src.view_of(crate::gpu::texture::ViewSel {
+            dimension: wgpu::TextureViewDimension::D2Array,
+            base_mip: 0,
+            mips: 1,
+            base_layer: 0,
+            layers: 6,
+        });
+        let sample_type = src.desc.sample_type(false);
+        for face in 0..6 {
+            let params = FilterParams { face, src_size: src.width, region, pad: 0, weights: [0.0; 28] };
+            self.mask.draw(
+                gpu,
+                &[
+                    Bind::Uniform(bytemuck::bytes_of(&params)),
+                    Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type),
+                    Bind::Texture(regions),
+                ],
+                &[&dst.layer_view(face, 0)],
+                &[dst.format],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// An equirectangular image (2 size x size) of `cube` at mip `level`, times `scale`.
+    pub fn preview(&mut self, gpu: &GpuContext, cube: &GpuImage, level: f32, scale: f32) -> anyhow::Result<GpuImage> {
+        let (w, h) = (2 * cube.width.max(16), cube.width.max(16));
+        let out = GpuImage::create(gpu, "cube preview", TextureDesc::target(w, h, gpu.formats().hdr));
+        let params = PreviewParams { size: [w as f32, h as f32], level, scale };
+        self.preview.draw(
+            gpu,
+            &[Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Texture(cube), Bind::Sampler(SamplerKind::LinearClamp)],
+            &[&out.view],
+            &[out.format],
+        )?;
+        Ok(out)
+    }
+}
+
+/// Level 0 of a cube map read back to the CPU.
+pub fn read_cube_level0(gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<CubeImage> {
+    let size = cube.width as usize;
+    let mut out = CubeImage::new(size);
+    for face in 0..6 {
+        let px = crate::gpu::readback::read_back_layer(gpu, cube, face as u32, 0)?;
+        for (i, t) in px.rgba.chunks_exact(4).enumerate() {
+            out.texels[face * size * size + i] = glam::Vec4::new(t[0], t[1], t[2], t[3]);
+        }
+    }
+    Ok(out)
+}
