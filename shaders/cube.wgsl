@@ -1,6 +1,6 @@
 // Cube map conventions, mirrored from src/ibl/cube.rs (faces +X -X +Y -Y +Z -Z, face
-// coordinates u, v in [-1, 1] growing with texel column and row), and the bilinear lookup
-// clamped within a face that the PEM filters and their CPU twin share.
+// coordinates u, v in [-1, 1] growing with texel column and row), and the seamless bilinear
+// lookup that the PEM filters and their CPU twin share.
 
 fn face_dir(face: u32, u: f32, v: f32) -> vec3<f32> {
     switch face {
@@ -37,22 +37,31 @@ fn texel_center(size: u32, i: u32) -> f32 {
     return 2.0 * (f32(i) + 0.5) / f32(size) - 1.0;
 }
 
-// Bilinear lookup along `d` in one mip of a cube seen as a 2D array (layer = face),
-// clamped at the edges of the face `d` falls on: CubeImage::sample.
+// Texel (x, y) of `face` in one mip of a cube seen as a 2D array; a coordinate one past the
+// edge continues onto the neighbouring face (CubeImage::tap).
+fn cube_tap(tex: texture_2d_array<f32>, size: u32, face: u32, x: i32, y: i32) -> vec4<f32> {
+    let n = i32(size);
+    if x >= 0 && x < n && y >= 0 && y < n {
+        return textureLoad(tex, vec2<i32>(x, y), i32(face), 0);
+    }
+    let centre = (2.0 * (vec2<f32>(f32(x), f32(y)) + vec2<f32>(0.5))) / f32(size) - vec2<f32>(1.0);
+    let f = dir_to_face(face_dir(face, centre.x, centre.y));
+    let t = clamp(vec2<i32>(floor((f.uv + vec2<f32>(1.0)) * 0.5 * f32(size))), vec2<i32>(0), vec2<i32>(n - 1));
+    return textureLoad(tex, t, i32(f.face), 0);
+}
+
+// Bilinear lookup along `d`, seamless like the hardware's cube sampling: taps off the face
+// come from the neighbouring face (CubeImage::sample).
 fn cube_bilinear(tex: texture_2d_array<f32>, size: u32, d: vec3<f32>) -> vec4<f32> {
     let f = dir_to_face(d);
     let s = f32(size);
     let p = (f.uv + vec2<f32>(1.0)) * 0.5 * s - vec2<f32>(0.5);
     let fl = floor(p);
     let t = p - fl;
-    let last = i32(size) - 1;
-    let x0 = clamp(i32(fl.x), 0, last);
-    let x1 = clamp(i32(fl.x) + 1, 0, last);
-    let y0 = clamp(i32(fl.y), 0, last);
-    let y1 = clamp(i32(fl.y) + 1, 0, last);
-    let layer = i32(f.face);
-    let top = mix(textureLoad(tex, vec2<i32>(x0, y0), layer, 0), textureLoad(tex, vec2<i32>(x1, y0), layer, 0), t.x);
-    let bottom = mix(textureLoad(tex, vec2<i32>(x0, y1), layer, 0), textureLoad(tex, vec2<i32>(x1, y1), layer, 0), t.x);
+    let x0 = i32(fl.x);
+    let y0 = i32(fl.y);
+    let top = mix(cube_tap(tex, size, f.face, x0, y0), cube_tap(tex, size, f.face, x0 + 1, y0), t.x);
+    let bottom = mix(cube_tap(tex, size, f.face, x0, y0 + 1), cube_tap(tex, size, f.face, x0 + 1, y0 + 1), t.x);
     return mix(top, bottom, t.y);
 }
 

@@ -94,8 +94,9 @@ impl CubeImage {
         self.texels[self.index(face, x, y)]
     }
 
-    /// Bilinear lookup along `d`, clamped at the edges of the face `d` falls on (what
-    /// shaders/cube.wgsl `cube_bilinear` does with `textureLoad`).
+    /// Bilinear lookup along `d`, seamless like the hardware's cube sampling: a tap that falls
+    /// off the face is taken from the neighbouring face (the texel nearest to where the tap's
+    /// direction lands). shaders/cube.wgsl `cube_bilinear` does the same with `textureLoad`.
     pub fn sample(&self, d: Vec3) -> Vec4 {
         let (face, u, v) = dir_to_face(d);
         let s = self.size as f32;
@@ -103,12 +104,23 @@ impl CubeImage {
         let py = (v + 1.0) * 0.5 * s - 0.5;
         let (fx, fy) = (px.floor(), py.floor());
         let (tx, ty) = (px - fx, py - fy);
-        let last = self.size as i64 - 1;
-        let clamp = |i: f32| (i as i64).clamp(0, last) as usize;
-        let (x0, x1, y0, y1) = (clamp(fx), clamp(fx + 1.0), clamp(fy), clamp(fy + 1.0));
-        let top = self.texel(face, x0, y0).lerp(self.texel(face, x1, y0), tx);
-        let bottom = self.texel(face, x0, y1).lerp(self.texel(face, x1, y1), tx);
+        let (x0, y0) = (fx as i64, fy as i64);
+        let top = self.tap(face, x0, y0).lerp(self.tap(face, x0 + 1, y0), tx);
+        let bottom = self.tap(face, x0, y0 + 1).lerp(self.tap(face, x0 + 1, y0 + 1), tx);
         top.lerp(bottom, ty)
+    }
+
+    /// Texel (`x`, `y`) of `face`, where a coordinate one past the edge continues onto the
+    /// neighbouring face.
+    fn tap(&self, face: usize, x: i64, y: i64) -> Vec4 {
+        let n = self.size as i64;
+        if (0..n).contains(&x) && (0..n).contains(&y) {
+            return self.texel(face, x as usize, y as usize);
+        }
+        let centre = |i: i64| (2.0 * (i as f32 + 0.5)) / n as f32 - 1.0;
+        let (f, u, v) = dir_to_face(face_dir(face, centre(x), centre(y)));
+        let nearest = |c: f32| (((c + 1.0) * 0.5 * n as f32).floor() as i64).clamp(0, n - 1) as usize;
+        self.texel(f, nearest(u), nearest(v))
     }
 }
 

@@ -18,6 +18,7 @@ mod gl_backend;
 mod gpu_engine;
 mod graph_errors;
 mod graph_props;
+mod ibl;
 mod live_link;
 mod mesh;
 mod mesh_sequence;

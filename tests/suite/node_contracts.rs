@@ -31,6 +31,9 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
         PortType::Instances => ("GridPlacement", "placements", vec![]),
         PortType::MatrixTexture => ("MatrixTexture", "matrix", vec![("resolution", ParamValue::Int(64))]),
         PortType::Curves => ("SvgCurves", "curves", vec![]),
+        PortType::Environment => ("EnvironmentMap", "environment", vec![]),
+        PortType::Lights => ("MedianCut", "lights", vec![]),
+        PortType::Pems => ("Pems", "pems", vec![]),
         PortType::Vector | PortType::Color => return None,
     })
 }
@@ -46,6 +49,8 @@ fn fixture_params(kind: &str) -> Params {
         "ClothSim" => vec![("triangles", ParamValue::Int(200))],
         "Material" => vec![("texture_path", data("docs/default.png")), ("gloss_map_path", data("docs/default.png"))],
         "MatrixTexture" => vec![("resolution", ParamValue::Int(64))],
+        "EnvironmentMap" => vec![("path", data("assets/hdri/forest.hdr")), ("size", ParamValue::Int(8))],
+        "MedianCut" => vec![("count", ParamValue::Int(5))],
         "Primitive" => vec![("segments_u", ParamValue::Int(8)), ("segments_v", ParamValue::Int(4))],
         _ => vec![],
     }

@@ -1,0 +1,379 @@
+//! Image-based lighting on the GPU (issue 10): the probe resampled into a cube map agrees
+//! with its CPU twin; the PEMs partition the map (exact sum at level 0, the filtered map's
+//! sum at every level); a white furnace stays white at every glossiness; the partitioned
+//! sum equals one lookup into the filtered map; g = 0 looks up along the normal and g = 1
+//! returns the map along the reflection; node errors name the problem.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::{Vec3, Vec4};
+
+use crate::common::*;
+use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::gpu::readback::read_back_layer;
+use werkstatt::gpu::{GpuContext, GpuImage, read_back};
+use werkstatt::graph::Graph;
+use werkstatt::ibl::cube::{CubeImage, EquirectImage, cube_from_equirect};
+use werkstatt::ibl::gpu::{EnvMap, PemSet};
+use werkstatt::port::Value;
+use werkstatt::resources::Resources;
+
+/// Writes an equirectangular .hdr of `width` x `height` whose pixel (x, y) is `f(x, y)`.
+fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> Vec3) {
+    let pixels: Vec<image::Rgb<f32>> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| image::Rgb(f(x, y).to_array()))
+        .collect();
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, width, height).unwrap();
+}
+
+fn forest() -> PathBuf {
+    root().join("assets/hdri/forest.hdr")
+}
+
+/// A row of spheres (one per glossiness, albedo `albedo`) lit by `probe` through the whole
+/// IBL chain; `ibl` adds IblShading parameters, `pems` Pems parameters.
+fn sphere_graph(probe: &Path, size: u32, count: usize, gloss: &[f32], albedo: f32, ibl: &str, pems: &str) -> Graph {
+    let mut nodes = format!(
+        r#""sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.45 }}),
+        "camera": (kind: "OrbitCamera", params: {{ "distance": {dist}, "yaw": 0.0, "pitch": 0.0, "fov": 30.0 }}),
+        "gbuffer": (kind: "GBufferPass"),
+        "env": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": {size} }}),
+        "cut": (kind: "MedianCut", params: {{ "count": {count} }}),
+        "pems": (kind: "Pems", params: {{ {pems} }}),
+        "ibl": (kind: "IblShading", params: {{ {ibl} }}),
+        "out": (kind: "Preview"),
+        "#,
+        dist = 2.1,
+        probe = probe.display().to_string(),
+    );
+    let mut links = String::from(
+        r#"("camera.camera", "gbuffer.camera"), ("env.environment", "cut.environment"),
+        ("env.environment", "pems.environment"), ("cut.lights", "pems.lights"), ("pems.pems", "ibl.pems"),
+        ("gbuffer.gbuffer", "ibl.gbuffer"), ("ibl.image", "out.image"),"#,
+    );
+    let merges = gloss.len().div_ceil(4);
+    for (i, g) in gloss.iter().enumerate() {
+        let x = (i as f32 - (gloss.len() as f32 - 1.0) / 2.0) * 1.0;
+        nodes += &format!(
+            r#""m{i}": (kind: "Material", params: {{ "base_color": [{albedo}, {albedo}, {albedo}], "glossiness": {g} }}),
+            "d{i}": (kind: "Draw", params: {{ "translate": [{x}, 0.0, 0.0] }}),"#
+        );
+        links += &format!(
+            r#"("sphere.mesh", "d{i}.mesh"), ("m{i}.material", "d{i}.material"), ("d{i}.scene", "row{}.{}"),"#,
+            i / 4,
+            ["a", "b", "c", "d"][i % 4]
+        );
+    }
+    for m in 0..merges {
+        nodes += &format!(r#""row{m}": (kind: "Merge"),"#);
+        links += &format!(r#"("row{m}.scene", "all.{}"),"#, ["a", "b", "c", "d"][m]);
+    }
+    nodes += r#""all": (kind: "Merge"),"#;
+    links += r#"("all.scene", "gbuffer.scene"),"#;
+    let text = format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])");
+    Graph::load_str(&text, "ibl-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+/// Evaluates frame 0 until nothing is pending (deadline: 120 s) and checks every node ran fine.
+fn run(graph: &Graph, width: u32, height: u32) -> Evaluator {
+    let gpu = gpu();
+    let mut ev = Evaluator::new(graph, &[]).unwrap();
+    let res = Resources::new(false);
+    let settings = FrameSettings { width, height, base_dir: root() };
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu), &res, &settings);
+        if summary.pending == 0 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the IBL graph did not finish loading within 120 s");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    for id in graph.nodes.keys() {
+        if let Some(r) = ev.report(id) {
+            assert!(matches!(r.status, NodeStatus::Ok), "node {id}: {:?}", r.status);
+        }
+    }
+    ev
+}
+
+fn env_of(ev: &Evaluator) -> Arc<EnvMap> {
+    match ev.output("env", "environment") {
+        Some(Value::Environment(e)) => e.clone(),
+        _ => panic!("no environment"),
+    }
+}
+
+fn pems_of(ev: &Evaluator) -> Arc<PemSet> {
+    match ev.output("pems", "pems") {
+        Some(Value::Pems(p)) => p.clone(),
+        _ => panic!("no PEMs"),
+    }
+}
+
+fn image_of(ev: &Evaluator) -> werkstatt::gpu::Pixels {
+    read_back(gpu(), ev.output("ibl", "image").and_then(Value::as_texture).expect("an image")).unwrap()
+}
+
+/// One mip level of a cube map read back.
+fn read_level(gpu: &GpuContext, cube: &GpuImage, mip: u32) -> CubeImage {
+    let size = (cube.width >> mip).max(1) as usize;
+    let mut out = CubeImage::new(size);
+    for face in 0..6 {
+        let px = read_back_layer(gpu, cube, face, mip).unwrap();
+        for (i, t) in px.rgba.chunks_exact(4).enumerate() {
+            out.texels[face as usize * size * size + i] = Vec4::from_slice(t);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_probe_becomes_the_cube_map_its_cpu_twin_computes() {
+    let out = out_dir("ibl-probe");
+    let probe = out.join("probe.hdr");
+    // A smooth gradient plus a small bright "sun", so rotation and filtering both show.
+    write_probe(&probe, 64, 32, |x, y| {
+        let sun = if (20..23).contains(&x) && (8..10).contains(&y) { 40.0 } else { 0.0 };
+        Vec3::new(x as f32 / 64.0 + sun, y as f32 / 32.0, 0.25 + sun * 0.5)
+    });
+    let mut graph = sphere_graph(&probe, 16, 3, &[0.5], 1.0, "", "");
+    let env_node = graph.nodes.get_mut("env").unwrap();
+    env_node.params.insert("rotation".into(), werkstatt::param::ParamValue::Float(30.0));
+    env_node.params.insert("intensity".into(), werkstatt::param::ParamValue::Float(2.0));
+    let ev = run(&graph, 32, 32);
+    let env = env_of(&ev);
+    let cpu = cube_from_equirect(&EquirectImage::load(&probe).unwrap(), 16, 30.0, 2.0);
+    assert_eq!(env.texels.texels.len(), 6 * 16 * 16);
+    let mut errors: Vec<f32> = env
+        .texels
+        .texels
+        .iter()
+        .zip(&cpu.texels)
+        .map(|(g, c)| (g.truncate() - c.truncate()).abs().max_element() / c.truncate().max_element().max(0.05))
+        .collect();
+    errors.sort_by(f32::total_cmp);
+    // Half-float storage (2^-11); the GPU's atan2/acos approximations move a lookup by a
+    // fraction of a probe texel, which shows at the sun's sharp edge.
+    let (p99, worst) = (errors[errors.len() * 99 / 100], errors[errors.len() - 1]);
+    assert!(p99 < 2e-3 && worst < 2e-2, "GPU and CPU resampling differ: 99th percentile {p99}, worst {worst}");
+    // Rotation matters: the unrotated CPU cube is far from the GPU's.
+    let unrotated = cube_from_equirect(&EquirectImage::load(&probe).unwrap(), 16, 0.0, 2.0);
+    let diff: f32 = env.texels.texels.iter().zip(&unrotated.texels).map(|(g, c)| (*g - *c).abs().max_element()).sum();
+    assert!(diff > 10.0, "rotation had no effect ({diff})");
+}
+
+#[test]
+fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_level() {
+    let graph = sphere_graph(&forest(), 32, 5, &[0.5], 1.0, "", "");
+    let ev = run(&graph, 32, 32);
+    let (env, pems) = (env_of(&ev), pems_of(&ev));
+    assert_eq!(pems.pems.len(), 5);
+    let gpu = gpu();
+    let mips = pems.full.desc.mips;
+    assert_eq!(mips, 6, "32 -> 1 is six levels");
+    for mip in 0..mips {
+        let full = read_level(gpu, &pems.full, mip);
+        let parts: Vec<CubeImage> = pems.pems.iter().map(|p| read_level(gpu, p, mip)).collect();
+        for i in 0..full.texels.len() {
+            let sum: Vec4 = parts.iter().map(|p| p.texels[i]).sum();
+            if mip == 0 {
+                // Every texel is in exactly one region: the others contribute exact zeros.
+                assert_eq!(sum.truncate(), env.texels.texels[i].truncate(), "texel {i} at level 0");
+                assert_eq!(parts.iter().filter(|p| p.texels[i].truncate() != Vec3::ZERO).count() <= 1, true);
+            } else {
+                let want = full.texels[i].truncate();
+                let tol = want.max_element() * (mip as f32 + 1.0) * 2f32.powi(-10) + 1e-6;
+                let err = (sum.truncate() - want).abs().max_element();
+                assert!(err <= tol, "level {mip}, texel {i}: PEMs sum to {sum:?}, filtered map {want:?}");
+            }
+        }
+    }
+    // The memory output counts N cubes with their mip chains.
+    let expected = 5 * 6 * 8 * (32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) as u64;
+    assert_eq!(pems.bytes, expected);
+}
+
+#[test]
+fn a_white_furnace_stays_white_at_every_glossiness_and_level() {
+    let out = out_dir("ibl-furnace");
+    let probe = out.join("white.hdr");
+    write_probe(&probe, 16, 8, |_, _| Vec3::ONE);
+    let gloss = [0.0, 0.25, 0.5, 0.75, 0.9, 1.0];
+    for mode in ["pems", "full"] {
+        let graph = sphere_graph(&probe, 16, 11, &gloss, 1.0, &format!(r#""mode": "{mode}""#), r#""kernel": "box""#);
+        let ev = run(&graph, 6 * 48, 48);
+        let pems = pems_of(&ev);
+        for mip in 0..pems.full.desc.mips {
+            let level = read_level(gpu(), &pems.full, mip);
+            assert!(level.texels.iter().all(|t| (t.truncate() - Vec3::ONE).abs().max_element() < 2e-3), "level {mip}");
+        }
+        let img = image_of(&ev);
+        let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+        let mut lit = 0;
+        for (i, px) in img.rgba.chunks_exact(4).enumerate() {
+            if depth.rgba[i * 4] > 0.0 {
+                lit += 1;
+                let err = (Vec3::from_slice(&px[..3]) - Vec3::ONE).abs().max_element();
+                assert!(err < 4e-3, "mode {mode}: pixel {i} is {px:?}, not 1");
+            }
+        }
+        assert!(lit > 1000, "only {lit} pixels were covered");
+    }
+}
+
+fn gbuffer_of(ev: &Evaluator) -> Arc<werkstatt::scene::GBuffer> {
+    match ev.output("gbuffer", "gbuffer") {
+        Some(Value::GBuffer(g)) => g.clone(),
+        _ => panic!("no G-buffer"),
+    }
+}
+
+#[test]
+fn summing_the_pems_equals_one_lookup_into_the_filtered_map() {
+    // 12 regions: two passes (8 + 4), so the accumulation across passes is covered.
+    let gloss = [0.0, 0.5, 0.8, 0.95];
+    let a = image_of(&run(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "pems""#, ""), 4 * 48, 48));
+    let b = image_of(&run(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "full""#, ""), 4 * 48, 48));
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    let mut worst = 0.0f32;
+    for (x, y) in a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)) {
+        let (x, y) = (Vec3::from_slice(&x[..3]), Vec3::from_slice(&y[..3]));
+        worst = worst.max((x - y).abs().max_element() / y.max_element().max(0.01));
+    }
+    // Each PEM level and each pass rounds to half precision.
+    assert!(worst < 1e-2, "partitioned and full lookups differ by {worst} (relative)");
+}
+
+/// The per-pixel view ray and normal of the G-buffer (None where nothing was drawn).
+fn rays_and_normals(ev: &Evaluator) -> Vec<Option<(Vec3, Vec3)>> {
+    let g = gbuffer_of(ev);
+    let normal = read_back(gpu(), &g.normal).unwrap();
+    let depth = read_back(gpu(), &g.depth).unwrap();
+    let (w, h) = (g.width() as f32, g.height() as f32);
+    (0..(g.width() * g.height()) as usize)
+        .map(|i| {
+            if depth.rgba[i * 4] <= 0.0 {
+                return None;
+            }
+            let (x, y) = ((i % g.width() as usize) as f32 + 0.5, (i / g.width() as usize) as f32 + 0.5);
+            let ndc = glam::Vec2::new(x / w * 2.0 - 1.0, 1.0 - y / h * 2.0);
+            let far = g.view.inv_view_proj.project_point3(ndc.extend(1.0));
+            let near = g.view.inv_view_proj.project_point3(ndc.extend(0.0));
+            Some(((far - near).normalize(), Vec3::from_slice(&normal.rgba[i * 4..i * 4 + 3]).normalize()))
+        })
+        .collect()
+}
+
+/// Trilinear lookup in read-back levels, as the sampler does (within a face).
+fn trilinear(levels: &[CubeImage], d: Vec3, level: f32) -> Vec3 {
+    let l0 = (level.floor() as usize).min(levels.len() - 1);
+    let l1 = (l0 + 1).min(levels.len() - 1);
+    levels[l0].sample(d).truncate().lerp(levels[l1].sample(d).truncate(), level - l0 as f32)
+}
+
+/// The fraction of covered pixels whose shading is within `tol` (relative) of `expect`.
+fn agreement(ev: &Evaluator, albedo: f32, expect: impl Fn(Vec3, Vec3) -> Vec3, tol: f32) -> f32 {
+    let img = image_of(ev);
+    let (mut good, mut total) = (0, 0);
+    for (i, rn) in rays_and_normals(ev).into_iter().enumerate() {
+        let Some((ray, n)) = rn else { continue };
+        let want = expect(ray, n) * albedo;
+        let got = Vec3::from_slice(&img.rgba[i * 4..i * 4 + 3]);
+        total += 1;
+        if (got - want).abs().max_element() <= tol * want.max_element().max(0.02) {
+            good += 1;
+        }
+    }
+    assert!(total > 500, "only {total} pixels covered");
+    good as f32 / total as f32
+}
+
+#[test]
+fn glossiness_0_looks_up_along_the_normal_and_1_returns_the_map_along_the_reflection() {
+    let gpu = gpu();
+    let diffuse = run(&sphere_graph(&forest(), 32, 4, &[0.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+    let pems = pems_of(&diffuse);
+    let levels: Vec<CubeImage> = (0..pems.full.desc.mips).map(|m| read_level(gpu, &pems.full, m)).collect();
+    let l = pems.calibration.level_for_glossiness(0.0);
+    let reflect_first = {
+        let mirror = run(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+        let env = env_of(&mirror);
+        agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02)
+    };
+    assert!(reflect_first > 0.97, "g = 1: {reflect_first} of the pixels match the map along the reflection");
+    let along_normal = agreement(&diffuse, 1.0, |_, n| trilinear(&levels, n, l), 0.02);
+    // Texels next to a cube edge are filtered across the seam by the sampler, not by the twin.
+    assert!(along_normal > 0.97, "g = 0: {along_normal} of the pixels match a lookup along the normal");
+    let wrong = agreement(&diffuse, 1.0, |ray, n| trilinear(&levels, ray.reflect(n), l), 0.02);
+    assert!(wrong < 0.8, "the reflection direction matches as well ({wrong}): the test cannot tell them apart");
+
+    let mirror = run(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+    let env = env_of(&mirror);
+    let reflect = agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02);
+    assert!(reflect > 0.97, "g = 1: {reflect} of the pixels match the map along the reflection");
+}
+
+#[test]
+fn ibl_nodes_report_bad_parameters_and_files_by_name() {
+    let bad = |edit: &dyn Fn(&mut Graph), needle: &str| {
+        let mut graph = sphere_graph(&forest(), 32, 4, &[0.5], 1.0, "", "");
+        edit(&mut graph);
+        let mut ev = Evaluator::new(&graph, &[]).unwrap();
+        let res = Resources::new(false);
+        let settings = FrameSettings { width: 16, height: 16, base_dir: root() };
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let s = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);
+            if s.pending == 0 {
+                break;
+            }
+            assert!(Instant::now() < deadline, "did not settle");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let msg = graph
+            .nodes
+            .keys()
+            .filter_map(|id| ev.report(id))
+            .map(|r| format!("{:?}", r.status))
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert!(msg.contains(needle), "expected {needle:?} among the statuses:\n{msg}");
+    };
+    use werkstatt::param::ParamValue;
+    bad(
+        &|g| drop(g.nodes.get_mut("env").unwrap().params.insert("size".into(), ParamValue::Int(24))),
+        "not a power of two",
+    );
+    bad(
+        &|g| {
+            drop(
+                g.nodes
+                    .get_mut("env")
+                    .unwrap()
+                    .params
+                    .insert("path".into(), ParamValue::Str("nope/missing.hdr".into())),
+            )
+        },
+        "no such file",
+    );
+    bad(
+        &|g| drop(g.nodes.get_mut("env").unwrap().params.insert("path".into(), ParamValue::Str("README.md".into()))),
+        "unsupported light probe format",
+    );
+    bad(
+        &|g| drop(g.nodes.get_mut("pems").unwrap().params.insert("preview_region".into(), ParamValue::Int(9))),
+        "preview_region 9 does not exist",
+    );
+    bad(
+        &|g| {
+            g.nodes.get_mut("env").unwrap().params.insert("size".into(), ParamValue::Int(8));
+            g.nodes.get_mut("cut").unwrap().params.insert("count".into(), ParamValue::Int(400));
+        },
+        "texel",
+    );
+}
