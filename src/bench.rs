@@ -289,3 +289,93 @@ pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
         })
         .collect()
 }
+
+/// One row of `werkstatt bench ibl`.
+#[derive(Debug, serde::Serialize)]
+pub struct IblRow {
+    /// Median-cut regions (PEMs); 0 for the single lookup into the filtered full map.
+    pub regions: usize,
+    /// Median cut + PEM filtering + one shaded frame, after changing the region count.
+    pub rebuild_ms: f64,
+    /// One frame with a moving camera: G-buffer + IBL shading (median).
+    pub frame_ms: f64,
+    /// GPU memory of the PEMs (MiB), mip chains included.
+    pub pem_mib: f64,
+}
+
+/// IBL cost against the number of regions: graphs/fig3_13_glossiness.ron (six spheres under
+/// the forest probe) with the camera orbiting so every frame re-renders and re-shades.
+pub fn ibl(
+    gpu: &crate::gpu::GpuContext,
+    regions: &[usize],
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&IblRow),
+) -> anyhow::Result<Vec<IblRow>> {
+    use crate::eval::NodeStatus;
+
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
+    let mut graph = Graph::load(&dir.join("fig3_13_glossiness.ron")).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let set = |graph: &mut Graph, node: &str, param: &str, value: ParamValue| -> anyhow::Result<()> {
+        graph
+            .nodes
+            .get_mut(node)
+            .ok_or_else(|| anyhow::anyhow!("fig3_13_glossiness.ron has no node {node}"))?
+            .params
+            .insert(param.into(), value);
+        Ok(())
+    };
+    set(&mut graph, "camera", "orbit_speed", ParamValue::Float(30.0))?;
+    let resources = Resources::new(false);
+    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir };
+    let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+    let mut frame = 0i64;
+    let mut step = |ev: &mut Evaluator| -> anyhow::Result<()> {
+        let deadline = Instant::now() + std::time::Duration::from_secs(300);
+        loop {
+            let s = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), &resources, &settings);
+            gpu.wait_idle();
+            if s.failed > 0 {
+                let why: Vec<String> = ev
+                    .reports()
+                    .filter(|r| !matches!(r.status, NodeStatus::Ok))
+                    .map(|r| format!("{}: {:?}", r.id, r.status))
+                    .collect();
+                anyhow::bail!("the IBL graph failed: {}", why.join("; "));
+            }
+            if s.pending == 0 {
+                break;
+            }
+            anyhow::ensure!(Instant::now() < deadline, "the light probe did not load within 300 s");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        frame += 1;
+        Ok(())
+    };
+    step(&mut ev)?;
+    let mut rows = Vec::new();
+    for &n in regions {
+        let (mode, count) = if n == 0 { ("full", 1) } else { ("pems", n) };
+        set(&mut graph, "median_cut", "count", ParamValue::Int(count as i64))?;
+        set(&mut graph, "ibl", "mode", ParamValue::Str(mode.into()))?;
+        ev.update(&graph, &[]).map_err(anyhow::Error::msg)?;
+        let t = Instant::now();
+        step(&mut ev)?;
+        let rebuild_ms = t.elapsed().as_secs_f64() * 1e3;
+        let mut samples = Vec::new();
+        for _ in 0..frames.max(1) {
+            let t = Instant::now();
+            step(&mut ev)?;
+            samples.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        samples.sort_by(f64::total_cmp);
+        let pem_mib = match ev.output("pems", "memory_mb") {
+            Some(crate::port::Value::Scalar(mb)) if n > 0 => *mb,
+            _ => 0.0,
+        };
+        let row = IblRow { regions: n, rebuild_ms, frame_ms: samples[samples.len() / 2], pem_mib };
+        report(&row);
+        rows.push(row);
+    }
+    Ok(rows)
+}

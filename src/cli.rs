@@ -104,6 +104,23 @@ enum BenchWhat {
         #[arg(long, default_value_t = 60)]
         frames: usize,
     },
+    /// Image-based lighting (graphs/fig3_13_glossiness.ron) against the number of median-cut
+    /// regions: PEM rebuild time, frame time (G-buffer + shading), PEM memory. Region count
+    /// 0 is one lookup into the filtered full map.
+    Ibl {
+        #[arg(long, default_value = "0,1,4,16,64,256", value_delimiter = ',')]
+        regions: Vec<usize>,
+        /// Timed frames per count (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
     /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
     Attachments {
@@ -289,6 +306,22 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
                     r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
                 );
+            })?;
+            if let Some(path) = json {
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Ibl { regions, frames, size, json, backend } } => {
+            let size = parse_size(&size)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| regions | rebuild ms (cut + PEMs + frame) | ms/frame (G-buffer + IBL) | PEM MiB |\n|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::ibl(&gpu, &regions, frames, size, |r| {
+                let n = if r.regions == 0 { "full map".to_string() } else { r.regions.to_string() };
+                println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
             })?;
             if let Some(path) = json {
                 crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
