@@ -377,3 +377,16 @@ fn ibl_nodes_report_bad_parameters_and_files_by_name() {
         "texel",
     );
 }
+
+#[test]
+fn ibl_figure_graphs_match_their_goldens() {
+    let out = out_dir("ibl-figures");
+    render_graph(&root().join("graphs/fig3_13_glossiness.ron"), &out.join("313"), (0, 0), (192, 64), &[], &[]).unwrap();
+    assert_golden("fig3_13_glossiness", &read_png(&out.join("313/image_0000.png")), STRICT);
+    render_graph(&root().join("graphs/fig3_14_median_cut.ron"), &out.join("314"), (0, 0), (32, 32), &[], &[]).unwrap();
+    for name in ["regions_out", "pem_out", "sum_out"] {
+        assert_golden(&format!("fig3_14_{name}"), &read_png(&out.join(format!("314/{name}_0000.png"))), STRICT);
+    }
+    render_graph(&root().join("graphs/fig5_23_garment.ron"), &out.join("523"), (0, 0), (96, 128), &[], &[]).unwrap();
+    assert_golden("fig5_23_garment", &read_png(&out.join("523/image_0000.png")), STRICT);
+}
