@@ -13,8 +13,16 @@ pub static ENVIRONMENT_MAP: NodeSpec = NodeSpec {
     doc: "Loads an equirectangular light probe (Radiance .hdr or OpenEXR .exr, on a worker thread) and resamples it on the GPU into a cube map with a full mip chain; rotation about +Y and an intensity scale. The map's centre column looks down -Z.",
     inputs: &[],
     outputs: &[
-        PortSpec::output("environment", PortType::Environment, "The cube map (HDR, 2x2-box mip chain) and its level 0 on the CPU."),
-        PortSpec::output("preview", PortType::Texture, "Level 0 as an equirectangular image (2 size x size), for the viewport."),
+        PortSpec::output(
+            "environment",
+            PortType::Environment,
+            "The cube map (HDR, 2x2-box mip chain) and its level 0 on the CPU.",
+        ),
+        PortSpec::output(
+            "preview",
+            PortType::Texture,
+            "Level 0 as an equirectangular image (2 size x size), for the viewport.",
+        ),
     ],
     params: &[
         ParamSpec::new(

@@ -16,7 +16,11 @@ pub static MEDIAN_CUT: NodeSpec = NodeSpec {
     inputs: &[PortSpec::required("environment", PortType::Environment, "The map to split.")],
     outputs: &[
         PortSpec::output("lights", PortType::Lights, "One light per region, with the regions."),
-        PortSpec::output("regions", PortType::Texture, "The regions over the map (equirectangular), lights as dots (Fig. 3.14)."),
+        PortSpec::output(
+            "regions",
+            PortType::Texture,
+            "The regions over the map (equirectangular), lights as dots (Fig. 3.14).",
+        ),
     ],
     params: &[ParamSpec::new(
         "count",
@@ -37,7 +41,8 @@ impl Node for MedianCutNode {
         let (w, h, rgba) = region_image(&env, &regions);
         let preview = crate::gpu::GpuImage::upload(gpu, "median cut regions", w, h, gpu.formats().ldr, 4, &rgba);
         cx.set("regions", Arc::new(preview.share()));
-        let lights = Lights { lights: regions.lights.clone(), regions: Some(Arc::new(regions)), preview: Some(preview) };
+        let lights =
+            Lights { lights: regions.lights.clone(), regions: Some(Arc::new(regions)), preview: Some(preview) };
         cx.set("lights", Arc::new(lights));
         Ok(())
     }
@@ -65,7 +70,8 @@ fn region_image(env: &EnvMap, regions: &Regions) -> (u32, u32, Vec<u8>) {
         let (phi, theta) = ((u - 0.5) * std::f32::consts::TAU, v * std::f32::consts::PI);
         Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())
     };
-    let ids: Vec<(u32, Vec3)> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| id_at(dir_at(x, y))).collect();
+    let ids: Vec<(u32, Vec3)> =
+        (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| id_at(dir_at(x, y))).collect();
     let mut rgba = vec![0u8; w * h * 4];
     for y in 0..h {
         for x in 0..w {

@@ -18,7 +18,11 @@ pub static PEMS: NodeSpec = NodeSpec {
     outputs: &[
         PortSpec::output("pems", PortType::Pems, "The filtered PEMs, the filtered full map and the calibration."),
         PortSpec::output("preview", PortType::Texture, "One PEM (or the sum) at one level, equirectangular."),
-        PortSpec::output("memory_mb", PortType::Scalar, "GPU memory of the PEMs in MiB: N x 6 x size^2 x texel bytes x 4/3."),
+        PortSpec::output(
+            "memory_mb",
+            PortType::Scalar,
+            "GPU memory of the PEMs in MiB: N x 6 x size^2 x texel bytes x 4/3.",
+        ),
     ],
     params: &[
         ParamSpec::new(

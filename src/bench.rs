@@ -379,3 +379,171 @@ pub fn ibl(
     }
     Ok(rows)
 }
+
+/// One row of `werkstatt bench pem-lobes`: a kernel's lobe error at one Phong exponent.
+#[derive(Debug, serde::Serialize)]
+pub struct PemLobeRow {
+    pub kernel: &'static str,
+    pub size: usize,
+    pub s: f32,
+    #[serde(flatten)]
+    pub error: crate::ibl::pem::LobeError,
+}
+
+/// The dissertation's Figs. 5.19/5.20 on the CPU: every kernel at every exponent of
+/// [`BENCH_EXPONENTS`](crate::ibl::pem::BENCH_EXPONENTS), face size `size`.
+pub fn pem_lobes(size: usize) -> anyhow::Result<Vec<PemLobeRow>> {
+    use crate::ibl::pem::{BENCH_EXPONENTS, Kernel, lobe_error};
+    use crate::param::Choice as _;
+    if !size.is_power_of_two() || !(4..=1024).contains(&size) {
+        anyhow::bail!("--size {size}: the face size must be a power of two in 4..=1024");
+    }
+    // One thread per kernel (the impulse chains and calibrations are independent).
+    let rows = std::thread::scope(|s| {
+        let handles: Vec<_> = Kernel::ALL
+            .iter()
+            .map(|&k| {
+                s.spawn(move || {
+                    BENCH_EXPONENTS
+                        .iter()
+                        .map(|&e| PemLobeRow { kernel: k.name(), size, s: e, error: lobe_error(k, size, e) })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().expect("lobe error thread")).collect()
+    });
+    Ok(rows)
+}
+
+/// The shape errors as a Markdown table: one row per exponent, one column per kernel (%),
+/// plus the default kernel's calibrated level and volume error.
+pub fn pem_lobes_markdown(rows: &[PemLobeRow]) -> String {
+    use crate::ibl::pem::{BENCH_EXPONENTS, Kernel};
+    use crate::param::Choice as _;
+    let mut out = String::from("| s |");
+    for k in Kernel::ALL {
+        out += &format!(" {} |", k.name());
+    }
+    let default = Kernel::default().name();
+    out += &format!(" level ({default}) | volume error ({default}) |\n|---:|");
+    out += &"---:|".repeat(Kernel::ALL.len() + 2);
+    out += "\n";
+    for &s in &BENCH_EXPONENTS {
+        out += &format!("| {s} |");
+        for k in Kernel::ALL {
+            let r = rows.iter().find(|r| r.s == s && r.kernel == k.name());
+            out += &r.map_or(" |".to_string(), |r| format!(" {:.1}% |", 100.0 * r.error.shape_error));
+        }
+        let d = rows.iter().find(|r| r.s == s && r.kernel == default);
+        out += &d
+            .map_or(" | |".to_string(), |r| format!(" {:.3} | {:+.2}% |", r.error.level, 100.0 * r.error.volume_error));
+        out += "\n";
+    }
+    out
+}
+
+/// The shape error (%) against s on a log axis, one polyline per kernel, as SVG text (colours
+/// as in the dissertation's Fig. 5.20: none dotted violet, gaussian black, box red, cosine
+/// green, sqrt_cosine blue).
+pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
+    use crate::ibl::pem::Kernel;
+    use crate::param::Choice as _;
+    let (w, h, left, right, top, bottom) = (760.0f32, 440.0f32, 70.0f32, 170.0f32, 40.0f32, 50.0f32);
+    let max_err = rows.iter().map(|r| 100.0 * r.error.shape_error).fold(10.0f32, f32::max);
+    let y_max = ((max_err / 10.0).ceil() * 10.0).min(200.0);
+    let x = |s: f32| left + (s.log10() / 3.0) * (w - left - right);
+    let y = |e: f32| top + (1.0 - (e / y_max).min(1.0)) * (h - top - bottom);
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
+        (left + w - right) / 2.0
+    );
+    for s in [1.0f32, 10.0, 100.0, 1000.0] {
+        svg += &format!(
+            "<line x1=\"{0:.1}\" y1=\"{top}\" x2=\"{0:.1}\" y2=\"{1:.1}\" stroke=\"#ccc\"/><text x=\"{0:.1}\" y=\"{2:.1}\" text-anchor=\"middle\">{s}</text>\n",
+            x(s),
+            h - bottom,
+            h - bottom + 16.0
+        );
+    }
+    let step = if y_max > 50.0 { 20.0 } else { 10.0 };
+    let mut e = 0.0;
+    while e <= y_max + 1e-3 {
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{0:.1}\" x2=\"{1:.1}\" y2=\"{0:.1}\" stroke=\"#ccc\"/><text x=\"{2:.1}\" y=\"{3:.1}\" text-anchor=\"end\">{e}%</text>\n",
+            y(e),
+            w - right,
+            left - 6.0,
+            y(e) + 4.0
+        );
+        e += step;
+    }
+    svg += &format!(
+        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">Phong exponent s (log)</text>\n<text x=\"16\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {:.1})\">shape error at equal volume</text>\n",
+        (left + w - right) / 2.0,
+        h - 12.0,
+        (top + h - bottom) / 2.0,
+        (top + h - bottom) / 2.0
+    );
+    for (i, k) in Kernel::ALL.iter().enumerate() {
+        let (colour, dash) = match k {
+            Kernel::None => ("#8a2be2", " stroke-dasharray=\"3 3\""),
+            Kernel::Box => ("#d62728", ""),
+            Kernel::Gaussian => ("#000000", ""),
+            Kernel::Cosine => ("#2ca02c", ""),
+            Kernel::SqrtCosine => ("#1f4fd6", ""),
+        };
+        let points: Vec<String> = rows
+            .iter()
+            .filter(|r| r.kernel == k.name())
+            .map(|r| format!("{:.1},{:.1}", x(r.s), y(100.0 * r.error.shape_error)))
+            .collect();
+        svg += &format!(
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\"{dash} points=\"{}\"/>\n",
+            points.join(" ")
+        );
+        let ly = top + 10.0 + 20.0 * i as f32;
+        svg += &format!(
+            "<line x1=\"{0:.1}\" y1=\"{ly:.1}\" x2=\"{1:.1}\" y2=\"{ly:.1}\" stroke=\"{colour}\" stroke-width=\"2\"{dash}/><text x=\"{2:.1}\" y=\"{3:.1}\">{4}</text>\n",
+            w - right + 12.0,
+            w - right + 40.0,
+            w - right + 46.0,
+            ly + 4.0,
+            k.name()
+        );
+    }
+    svg += "</svg>\n";
+    svg
+}
+
+/// The default kernel's calibration table at face size `size` as Markdown (s -> level).
+pub fn pem_calibration_markdown(size: usize) -> String {
+    use crate::ibl::pem::{Kernel, TABLE, calibration, table_exponent};
+    use crate::param::Choice as _;
+    let c = calibration(Kernel::default(), size);
+    let mut out = format!("| i | s | g = 1 - 1/s | level ({}, {size}^2) |\n|---:|---:|---:|---:|\n", c.kernel.name());
+    for i in 0..TABLE {
+        let s = table_exponent(i);
+        out += &format!("| {i} | {s:.2} | {:.4} | {:.4} |\n", 1.0 - 1.0 / s, c.levels[i]);
+    }
+    out
+}
+
+/// PEM memory (MiB) with a real mip chain (x4/3) beside the dissertation's Table 5.1 (x2).
+pub fn pem_memory_markdown() -> String {
+    let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+    let mut out = String::from(
+        "| N | 128^2, x4/3 (ours) | 128^2, x2 (Table 5.1) | 256^2, x4/3 (ours) | 256^2, x2 (Table 5.1) |\n|---:|---:|---:|---:|---:|\n",
+    );
+    for n in [1u64, 12, 32, 64, 128, 256] {
+        let row: Vec<String> = [128u64, 256]
+            .iter()
+            .flat_map(|&res| {
+                let ours = crate::ibl::pem::pem_memory_bytes(n, res);
+                [format!("{:.2}", mib(ours)), format!("{}", mib(n * 6 * res * res * 8 * 2))]
+            })
+            .collect();
+        out += &format!("| {n} | {} |\n", row.join(" | "));
+    }
+    out
+}

@@ -141,6 +141,20 @@ enum BenchWhat {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// The dissertation's Figs. 5.19/5.20 on the CPU: for each PEM filter kernel and Phong
+    /// exponent, the volume-matched mip level and the lobe's shape error; also the default
+    /// kernel's calibration table and the PEM memory table.
+    PemLobes {
+        /// Cube map face size (a power of two).
+        #[arg(long, default_value_t = 128)]
+        size: usize,
+        /// Also write the plot (shape error against s) as SVG.
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
 }
 
 pub fn main() -> ExitCode {
@@ -339,6 +353,23 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     "| {} | {:.2} | {:.2} | {:.2} | {cpu} | {:.3} |",
                     r.triangles, r.mean_ms, r.median_ms, r.worst_ms, r.max_strain
                 );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::PemLobes { size, svg, json } } => {
+            let rows = crate::bench::pem_lobes(size)?;
+            println!("Lobe shape error at equal volume, face size {size}:\n");
+            print!("{}", crate::bench::pem_lobes_markdown(&rows));
+            println!("\nCalibration, default kernel, face size {size}:\n");
+            print!("{}", crate::bench::pem_calibration_markdown(size));
+            println!("\nPEM memory (MiB):\n");
+            print!("{}", crate::bench::pem_memory_markdown());
+            if let Some(path) = svg {
+                let title = format!("PEM lobe shape error at equal volume, {size}^2 faces");
+                crate::atomic::write_atomic(&path, crate::bench::pem_lobes_svg(&rows, &title).as_bytes())?;
+            }
+            if let Some(path) = json {
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -51,9 +51,8 @@ pub struct PemSet {
 
 /// A cube map texture of `size` for rendering into faces and levels and sampling.
 pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> GpuImage {
-    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-        | wgpu::TextureUsages::TEXTURE_BINDING
-        | wgpu::TextureUsages::COPY_DST;
+    let usage =
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
     GpuImage::create(gpu, label, TextureDesc::cube(size, gpu.formats().hdr, usage).with_full_mips())
 }
 

@@ -390,3 +390,36 @@ fn ibl_figure_graphs_match_their_goldens() {
     render_graph(&root().join("graphs/fig5_23_garment.ron"), &out.join("523"), (0, 0), (96, 128), &[], &[]).unwrap();
     assert_golden("fig5_23_garment", &read_png(&out.join("523/image_0000.png")), STRICT);
 }
+
+/// The issue's aim: shaded spheres within 5% (mean absolute error relative to the
+/// reference's mean) of a Monte-Carlo integration of eq. 3.42 against the original map,
+/// for g in {0, 0.25, 0.5, 0.75, 0.9}, with the default kernel.
+#[test]
+fn shaded_spheres_match_the_monte_carlo_reference_of_eq_3_42() {
+    use werkstatt::ibl::reference::shade;
+    let gloss = [0.0, 0.25, 0.5, 0.75, 0.9];
+    let ev = run(&sphere_graph(&forest(), 64, 4, &gloss, 1.0, r#""mode": "pems""#, ""), 5 * 48, 48);
+    let env = env_of(&ev);
+    let img = image_of(&ev);
+    let color = read_back(gpu(), &gbuffer_of(&ev).color).unwrap();
+    let mut sums = [(0.0f64, 0.0f64, 0usize); 5];
+    for (i, rn) in rays_and_normals(&ev).into_iter().enumerate() {
+        let Some((ray, n)) = rn else { continue };
+        let g = color.rgba[i * 4 + 3];
+        let k = gloss.iter().enumerate().min_by(|a, b| (a.1 - g).abs().total_cmp(&(b.1 - g).abs())).unwrap().0;
+        let want = shade(&env.texels, n, -ray, g, 1024);
+        let got = Vec3::from_slice(&img.rgba[i * 4..i * 4 + 3]);
+        sums[k].0 += (got - want).abs().element_sum() as f64 / 3.0;
+        sums[k].1 += want.element_sum() as f64 / 3.0;
+        sums[k].2 += 1;
+    }
+    let mut report = String::new();
+    for (k, (err, mean, count)) in sums.iter().enumerate() {
+        assert!(*count > 300, "sphere g = {} covers only {count} pixels", gloss[k]);
+        report += &format!("g = {}: {:.4}\n", gloss[k], err / mean);
+    }
+    eprintln!("relative mean absolute error per glossiness:\n{report}");
+    for (k, (err, mean, _)) in sums.iter().enumerate() {
+        assert!(err / mean <= 0.05, "g = {}: relative MAE {:.4} > 0.05\n{report}", gloss[k], err / mean);
+    }
+}
