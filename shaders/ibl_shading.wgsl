@@ -40,12 +40,18 @@ fn table(i: u32) -> f32 {
     return ibl.levels[i / 4u][i % 4u];
 }
 
-// The calibrated mip level for glossiness g (s = 1 / (1 - g), table in log2 s).
+// The calibrated mip level for glossiness g (Calibration::level_for_glossiness): s = 1/(1-g),
+// linear in log2 s between table entries, extrapolated past the last one with its slope,
+// clamped to [0, top]; g = 1 is the mirror, level 0.
 fn level_for_glossiness(g: f32) -> f32 {
-    let s = 1.0 / max(1.0 - g, 1e-6);
-    let t = clamp(log2(s) * 3.2, 0.0, 32.0);
-    let i = min(u32(floor(t)), 31u);
-    return clamp(mix(table(i), table(i + 1u), t - f32(i)), 0.0, ibl.misc.y);
+    if g >= 1.0 {
+        return 0.0;
+    }
+    let s = 1.0 / (1.0 - max(g, 0.0));
+    let x = max(log2(max(s, 1.0)), 0.0) * 3.2;
+    let i = min(u32(floor(x)), 31u);
+    let l = table(i) + (table(i + 1u) - table(i)) * (x - f32(i));
+    return clamp(l, 0.0, ibl.misc.y);
 }
 
 @fragment

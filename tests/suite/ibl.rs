@@ -306,10 +306,12 @@ fn glossiness_0_looks_up_along_the_normal_and_1_returns_the_map_along_the_reflec
         agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02)
     };
     assert!(reflect_first > 0.97, "g = 1: {reflect_first} of the pixels match the map along the reflection");
-    let along_normal = agreement(&diffuse, 1.0, |_, n| trilinear(&levels, n, l), 0.02);
+    // At the coarse levels of diffuse lookups (2x2 and 1x1 faces) the sampler blends cube
+    // corners from three faces where the twin takes the nearest texel: 5% tolerance.
+    let along_normal = agreement(&diffuse, 1.0, |_, n| trilinear(&levels, n, l), 0.05);
     // Texels next to a cube edge are filtered across the seam by the sampler, not by the twin.
     assert!(along_normal > 0.97, "g = 0: {along_normal} of the pixels match a lookup along the normal");
-    let wrong = agreement(&diffuse, 1.0, |ray, n| trilinear(&levels, ray.reflect(n), l), 0.02);
+    let wrong = agreement(&diffuse, 1.0, |ray, n| trilinear(&levels, ray.reflect(n), l), 0.05);
     assert!(wrong < 0.8, "the reflection direction matches as well ({wrong}): the test cannot tell them apart");
 
     let mirror = run(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
