@@ -27,8 +27,8 @@ pub static PEMS: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "kernel",
-            ParamKind::Choice { default: "sqrt_cosine", options: Kernel::OPTIONS },
-            "The 5x5 filter applied at every mip level (the dissertation chose the square root of the cosine).",
+            ParamKind::Choice { default: "phong", options: Kernel::OPTIONS },
+            "How the mip levels are filtered: a 5x5 kernel at every level (none, box, gaussian, cosine, sqrt_cosine: the dissertation chose sqrt_cosine), or phong: each level the map convolved with a Phong lobe (lowest lobe error, docs/ibl.md).",
         ),
         ParamSpec::new(
             "preview_region",

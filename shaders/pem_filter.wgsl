@@ -56,3 +56,67 @@ fn fs_mask(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let texel = textureLoad(src, xy, i32(p.face), 0);
     return select(vec4<f32>(0.0), texel, id == p.region);
 }
+
+// The Phong prefilter (src/ibl/pem.rs phong_level): per destination texel with direction r,
+// the lobe max(0, r.w)^s times each sample's solid angle, normalized, over a source level of
+// the plain chain: every texel of all faces (small destinations) or a window of points one
+// source texel apart on the face's plane, read with the seamless bilinear lookup.
+struct Phong {
+    face: u32,
+    dst_size: u32,
+    src_size: u32,
+    // 1: sum the whole sphere; 0: the window.
+    full_sphere: u32,
+    exponent: f32,
+    window: i32,
+    pad: vec2<f32>,
+};
+
+@group(0) @binding(0) var<uniform> ph: Phong;
+
+fn plane_solid_angle(u: f32, v: f32, h: f32) -> f32 {
+    return h * h / pow(1.0 + u * u + v * v, 1.5);
+}
+
+@fragment
+fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let xy = vec2<u32>(frag.xy);
+    let uc = texel_center(ph.dst_size, xy.x);
+    let vc = texel_center(ph.dst_size, xy.y);
+    let r = normalize(face_dir(ph.face, uc, vc));
+    let m = ph.src_size;
+    let h = 2.0 / f32(m);
+    var sum = vec4<f32>(0.0);
+    var total = 0.0;
+    if ph.full_sphere == 1u {
+        for (var f = 0u; f < 6u; f++) {
+            for (var ty = 0u; ty < m; ty++) {
+                for (var tx = 0u; tx < m; tx++) {
+                    let u = texel_center(m, tx);
+                    let v = texel_center(m, ty);
+                    let c = dot(r, normalize(face_dir(f, u, v)));
+                    if c > 0.0 {
+                        let w = pow(c, ph.exponent) * plane_solid_angle(u, v, h);
+                        sum += w * textureLoad(src, vec2<u32>(tx, ty), f, 0);
+                        total += w;
+                    }
+                }
+            }
+        }
+    } else {
+        for (var b = -ph.window; b <= ph.window; b++) {
+            for (var a = -ph.window; a <= ph.window; a++) {
+                let u = uc + f32(a) * h;
+                let v = vc + f32(b) * h;
+                let d = normalize(face_dir(ph.face, u, v));
+                let c = dot(r, d);
+                if c > 0.0 {
+                    let w = pow(c, ph.exponent) * plane_solid_angle(u, v, h);
+                    sum += w * cube_bilinear(src, m, d);
+                    total += w;
+                }
+            }
+        }
+    }
+    return sum / total;
+}

@@ -492,6 +492,7 @@ pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
             Kernel::Gaussian => ("#000000", ""),
             Kernel::Cosine => ("#2ca02c", ""),
             Kernel::SqrtCosine => ("#1f4fd6", ""),
+            Kernel::Phong => ("#ff7f0e", ""),
         };
         let points: Vec<String> = rows
             .iter()

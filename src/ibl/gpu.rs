@@ -80,6 +80,18 @@ struct FilterParams {
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct PhongParams {
+    face: u32,
+    dst_size: u32,
+    src_size: u32,
+    full_sphere: u32,
+    exponent: f32,
+    window: i32,
+    pad: [f32; 2],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct PreviewParams {
     size: [f32; 2],
     level: f32,
@@ -91,6 +103,7 @@ pub struct CubePasses {
     probe: FullscreenPass,
     filter: FullscreenPass,
     mask: FullscreenPass,
+    phong: FullscreenPass,
     preview: FullscreenPass,
 }
 
@@ -100,6 +113,7 @@ impl Default for CubePasses {
             probe: FullscreenPass::new("equirect_to_cube.wgsl"),
             filter: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
             mask: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
+            phong: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_phong"),
             preview: FullscreenPass::new("cube_preview.wgsl"),
         }
     }
@@ -148,6 +162,9 @@ impl CubePasses {
 
     /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl).
     pub fn filter_chain(&mut self, gpu: &GpuContext, cube: &GpuImage, kernel: Kernel) -> anyhow::Result<()> {
+        if kernel == Kernel::Phong {
+            return self.phong_chain(gpu, cube);
+        }
         let w = super::pem::weights(kernel);
         let total: f32 = w.iter().flatten().sum();
         let mut weights = [0.0f32; 28];
@@ -170,6 +187,55 @@ impl CubePasses {
                     &[
                         Bind::Uniform(bytemuck::bytes_of(&params)),
                         Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type),
+                    ],
+                    &[&cube.layer_view(face, mip)],
+                    &[cube.format],
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The Phong prefilter (src/ibl/pem.rs phong_level): a plain chain of level 0 in a pooled
+    /// cube, then every level of `cube` integrated from it.
+    fn phong_chain(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<()> {
+        let plain = gpu.acquire("plain mip chain", cube.desc);
+        gpu.record(|enc| {
+            enc.copy_texture_to_texture(
+                cube.texture.as_image_copy(),
+                plain.texture.as_image_copy(),
+                wgpu::Extent3d { width: cube.width, height: cube.width, depth_or_array_layers: 6 },
+            )
+        });
+        self.filter_chain(gpu, &plain, Kernel::None)?;
+        let size = cube.width as usize;
+        let sample_type = plain.desc.sample_type(false);
+        for mip in 1..cube.desc.mips {
+            let source = super::pem::phong_source(mip as usize) as u32;
+            let view = plain.view_of(crate::gpu::texture::ViewSel {
+                dimension: wgpu::TextureViewDimension::D2Array,
+                base_mip: source,
+                mips: 1,
+                base_layer: 0,
+                layers: 6,
+            });
+            let (dst, src) = (cube.width >> mip, cube.width >> source);
+            let exponent = super::pem::phong_exponent(size, mip as usize);
+            for face in 0..6 {
+                let params = PhongParams {
+                    face,
+                    dst_size: dst,
+                    src_size: src,
+                    full_sphere: u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE),
+                    exponent,
+                    window: super::pem::phong_window(src as usize, exponent),
+                    pad: [0.0; 2],
+                };
+                self.phong.draw(
+                    gpu,
+                    &[
+                        Bind::Uniform(bytemuck::bytes_of(&params)),
+                        Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
                     ],
                     &[&cube.layer_view(face, mip)],
                     &[cube.format],

@@ -30,7 +30,7 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::{Arc, LazyLock, Mutex};
 
-use glam::{Vec3, Vec4};
+use glam::Vec4;
 
 use super::cube::{CubeImage, face_dir, texel_center, texel_dir, texel_solid_angle};
 
@@ -43,17 +43,21 @@ crate::choice!(
         Gaussian = "gaussian",
         Cosine = "cosine",
         SqrtCosine = "sqrt_cosine",
+        /// Not a 5x5 kernel: each level is level 0 convolved with a Phong lobe ([`phong_level`]).
+        Phong = "phong",
     }
 );
 
 impl Kernel {
-    pub const ALL: [Kernel; 5] = [Kernel::None, Kernel::Box, Kernel::Gaussian, Kernel::Cosine, Kernel::SqrtCosine];
+    pub const ALL: [Kernel; 6] =
+        [Kernel::None, Kernel::Box, Kernel::Gaussian, Kernel::Cosine, Kernel::SqrtCosine, Kernel::Phong];
 }
 
-/// The dissertation's choice (§5.2.1: "I have chosen to use the square root cosine filter").
+/// The Phong prefilter: the only kernel that meets the lobe-error aim (docs/ibl.md); the
+/// dissertation's choice, sqrt_cosine, stays selectable.
 impl Default for Kernel {
     fn default() -> Kernel {
-        Kernel::SqrtCosine
+        Kernel::Phong
     }
 }
 
@@ -81,6 +85,8 @@ pub fn weights(kernel: Kernel) -> [[f32; 5]; 5] {
                 Kernel::Gaussian => (-rho * rho / 2.0).exp(),
                 Kernel::Cosine => cosine,
                 Kernel::SqrtCosine => cosine.sqrt(),
+                // Unused: phong levels are not made from the level above (see filter_chain).
+                Kernel::Phong => f32::from(ai == 2 && bi == 2),
             };
         }
     }
@@ -137,12 +143,118 @@ pub fn filter_level(src: &CubeImage, kernel: Kernel) -> CubeImage {
 /// If `level0.size` is not a power of two.
 pub fn filter_chain(level0: &CubeImage, kernel: Kernel) -> Vec<CubeImage> {
     assert!(level0.size.is_power_of_two(), "filter_chain: face size {} is not a power of two", level0.size);
+    if kernel == Kernel::Phong {
+        let plain = filter_chain(level0, Kernel::None);
+        let mut chain = vec![level0.clone()];
+        chain.extend((1..plain.len()).map(|l| phong_level(&plain, l)));
+        return chain;
+    }
     let mut chain = vec![level0.clone()];
     while chain.last().unwrap().size > 1 {
         let next = filter_level(chain.last().unwrap(), kernel);
         chain.push(next);
     }
     chain
+}
+
+/// Lobe volume of a Phong level, in texels of that level: the lobe spans several texels so
+/// that bilinear lookups reconstruct its shape (a plain mip chain's lobe spans about two).
+pub const PHONG_TEXELS_PER_LOBE: f32 = 32.0;
+
+/// Phong levels this small (face size) sum over the whole sphere; larger ones over a window.
+pub const PHONG_FULL_SPHERE_SIZE: usize = 8;
+
+/// The Phong exponent stored at mip level `level` of a chain whose level 0 is `size` wide:
+/// the lobe whose volume 2 pi/(s+1) is [`PHONG_TEXELS_PER_LOBE`] texels of that level (a
+/// texel subtends about 4 pi/(6 S^2) = 2 pi/(3 S^2) at face size S), so
+/// s = 3 S^2/16 - 1, at least 1 (the diffuse lobe); infinite at level 0 (the map itself).
+pub fn phong_exponent(size: usize, level: usize) -> f32 {
+    if level == 0 {
+        return f32::INFINITY;
+    }
+    let s = (size >> level).max(1) as f32;
+    (3.0 * s * s / PHONG_TEXELS_PER_LOBE - 1.0).max(1.0)
+}
+
+/// Half-width in texels of the window a Phong level of face size `n` and exponent `s` sums:
+/// 1.5 tan(theta) / (2/n) + 1, theta where cos^s falls to 1e-3 (the 1.5 covers the gnomonic
+/// plane's compression away from the face centre).
+pub fn phong_window(n: usize, s: f32) -> i32 {
+    let theta = ((1e-3f32).ln() / s).exp().clamp(-1.0, 1.0).acos();
+    ((1.5 * theta.tan() * n as f32 / 2.0).ceil() as i32 + 1).min(64)
+}
+
+/// The plain-chain level a Phong level reads: two levels finer (four times the resolution),
+/// so the lobe is integrated from texels well inside it, and an impulse is not moved to a
+/// coarse texel's centre first.
+pub fn phong_source(level: usize) -> usize {
+    level.saturating_sub(2)
+}
+
+/// The solid angle of a point sample at face coordinates (u, v) spaced `h` apart on a face
+/// plane: h^2 / (1 + u^2 + v^2)^(3/2).
+fn plane_solid_angle(u: f32, v: f32, h: f32) -> f32 {
+    h * h / (1.0 + u * u + v * v).powf(1.5)
+}
+
+/// Level `level` of the Phong prefilter: per texel with direction r, the normalized integral
+/// of the plain (2x2 box) chain's level [`phong_source`] against max(0, r.w)^s, s =
+/// [`phong_exponent`]: a quadrature over that level's texels, each weighted by the lobe and its
+/// solid angle. Destination faces of [`PHONG_FULL_SPHERE_SIZE`] or less sum every source texel
+/// of all six faces; larger ones sum a (2w+1)^2 window ([`phong_window`]) of points spaced one
+/// source texel apart on the face's plane around the texel's centre, extended past
+/// its edges into the neighbouring faces and read with the seamless bilinear lookup. The
+/// weights depend only on geometry, so PEMs filtered this way still sum to the filtered map.
+/// shaders/pem_filter.wgsl `fs_phong` is the GPU version.
+pub fn phong_level(plain: &[CubeImage], level: usize) -> CubeImage {
+    let src = &plain[phong_source(level)];
+    let n = (plain[0].size >> level).max(1);
+    let m = src.size;
+    let s = phong_exponent(plain[0].size, level);
+    let h = 2.0 / m as f32;
+    let run = |face: usize, texels: &mut [Vec4]| {
+        for y in 0..n {
+            for x in 0..n {
+                let (uc, vc) = (texel_center(n, x), texel_center(n, y));
+                let r = face_dir(face, uc, vc).normalize();
+                let (mut sum, mut total) = (Vec4::ZERO, 0.0f32);
+                if n <= PHONG_FULL_SPHERE_SIZE {
+                    for (i, t) in src.texels.iter().enumerate() {
+                        let (f, tx, ty) = (i / (m * m), i % m, (i / m) % m);
+                        let (u, v) = (texel_center(m, tx), texel_center(m, ty));
+                        let c = r.dot(face_dir(f, u, v).normalize());
+                        if c > 0.0 {
+                            let w = c.powf(s) * plane_solid_angle(u, v, h);
+                            sum += w * *t;
+                            total += w;
+                        }
+                    }
+                } else {
+                    let win = phong_window(m, s);
+                    for b in -win..=win {
+                        for a in -win..=win {
+                            let (u, v) = (uc + a as f32 * h, vc + b as f32 * h);
+                            let d = face_dir(face, u, v).normalize();
+                            let c = r.dot(d);
+                            if c > 0.0 {
+                                let w = c.powf(s) * plane_solid_angle(u, v, h);
+                                sum += w * src.sample(d);
+                                total += w;
+                            }
+                        }
+                    }
+                }
+                texels[y * n + x] = sum / total;
+            }
+        }
+    };
+    let mut out = CubeImage::new(n);
+    std::thread::scope(|sc| {
+        for (face, texels) in out.texels.chunks_mut(n * n).enumerate() {
+            sc.spawn(move || run(face, texels));
+        }
+    });
+    out
 }
 
 /// The impulse of the lobe measurements: texel (size/2, size/2) of face +Z (index 4), the
