@@ -355,7 +355,7 @@ pub fn pem_lobes_markdown(rows: &[PemLobeRow]) -> String {
 
 /// The shape error (%) against s on a log axis, one polyline per kernel, as SVG text (colours
 /// as in the dissertation's Fig. 5.20: none dotted violet, gaussian black, box red, cosine
-/// green, sqrt_cosine blue; phong dashed orange).
+/// green, sqrt_cosine blue).
 pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
     use crate::ibl::pem::Kernel;
     use crate::param::Choice as _;
@@ -402,7 +402,6 @@ pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
             Kernel::Gaussian => ("#000000", ""),
             Kernel::Cosine => ("#2ca02c", ""),
             Kernel::SqrtCosine => ("#1f4fd6", ""),
-            Kernel::Phong => ("#ff7f0e", " stroke-dasharray=\"8 3\""),
         };
         let points: Vec<String> = rows
             .iter()

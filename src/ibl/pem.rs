@@ -43,15 +43,11 @@ crate::choice!(
         Gaussian = "gaussian",
         Cosine = "cosine",
         SqrtCosine = "sqrt_cosine",
-        /// Not a 5x5 kernel: each level k >= 1 is level 0 convolved with a normalized Phong
-        /// lobe by filtered importance sampling (see [`phong_level`]).
-        Phong = "phong",
     }
 );
 
 impl Kernel {
-    pub const ALL: [Kernel; 6] =
-        [Kernel::None, Kernel::Box, Kernel::Gaussian, Kernel::Cosine, Kernel::SqrtCosine, Kernel::Phong];
+    pub const ALL: [Kernel; 5] = [Kernel::None, Kernel::Box, Kernel::Gaussian, Kernel::Cosine, Kernel::SqrtCosine];
 }
 
 /// The dissertation's choice (§5.2.1: "I have chosen to use the square root cosine filter").
@@ -65,8 +61,7 @@ impl Default for Kernel {
 /// -2..=2 source texels, with rho = sqrt(a^2 + b^2): none: 1 at the centre, 0 elsewhere;
 /// box: 1; gaussian: exp(-rho^2/2) (sigma = 1 texel); cosine: cos(pi/2 * rho/3) (support
 /// radius 3 texels, so every tap, rho <= sqrt 8, is positive); sqrt_cosine: the square root
-/// of the cosine weight. Not normalized (the filter divides by their sum). `phong` has no 5x5
-/// weights: it returns none's, the plain mip step its importance sampling reads from.
+/// of the cosine weight. Not normalized (the filter divides by their sum).
 pub fn weights(kernel: Kernel) -> [[f32; 5]; 5] {
     let mut w = [[0.0f32; 5]; 5];
     for (bi, row) in w.iter_mut().enumerate() {
@@ -75,7 +70,7 @@ pub fn weights(kernel: Kernel) -> [[f32; 5]; 5] {
             let rho = (a * a + b * b).sqrt();
             let cosine = (std::f32::consts::FRAC_PI_2 * rho / 3.0).cos();
             *wt = match kernel {
-                Kernel::None | Kernel::Phong => {
+                Kernel::None => {
                     if ai == 2 && bi == 2 {
                         1.0
                     } else {
@@ -136,8 +131,7 @@ pub fn filter_level(src: &CubeImage, kernel: Kernel) -> CubeImage {
     out
 }
 
-/// The whole chain: `level0` (cloned) and every filtered level down to 1x1 per face. For
-/// [`Kernel::Phong`], level k >= 1 is [`phong_level`] of the plain (`none`) chain.
+/// The whole chain: `level0` (cloned) and every filtered level down to 1x1 per face.
 ///
 /// # Panics
 /// If `level0.size` is not a power of two.
@@ -148,88 +142,7 @@ pub fn filter_chain(level0: &CubeImage, kernel: Kernel) -> Vec<CubeImage> {
         let next = filter_level(chain.last().unwrap(), kernel);
         chain.push(next);
     }
-    if kernel == Kernel::Phong {
-        let plain = chain;
-        chain = (0..plain.len()).map(|k| if k == 0 { plain[0].clone() } else { phong_level(&plain, k) }).collect();
-    }
     chain
-}
-
-/// The `phong` kernel's lobe size: level k's lobe volume is PHONG_TEXELS mean texel solid
-/// angles of that level (4 pi/(6 S_k^2) for face size S_k), i.e. s_k = 3 S_k^2/PHONG_TEXELS - 1,
-/// at least 1 (the levels above the first with s = 1 repeat s = 1 at lower resolution).
-/// About 1.5 texels of sigma: wide enough for bilinear lookups to follow the lobe.
-pub const PHONG_TEXELS: f32 = 27.0;
-
-/// Importance samples per texel of the `phong` kernel.
-pub const PHONG_SAMPLES: u32 = 64;
-
-/// The Phong exponent of level `k` of a `phong` chain with level-0 face size `size0`.
-pub fn phong_level_exponent(size0: usize, k: usize) -> f32 {
-    let sk = (size0 >> k).max(1) as f32;
-    (3.0 * sk * sk / PHONG_TEXELS - 1.0).max(1.0)
-}
-
-/// Level `k` (>= 1) of the `phong` kernel, by filtered importance sampling (Krivanek & Colbert
-/// 2008) of the plain mip chain `plain` (`plain[0]` = the map, `plain[j]` = the `none`
-/// kernel's levels). For each texel (x, y) of face f at face size S_k = size >> k: axis
-/// `n = texel_dir(S_k, f, x, y)`, basis (t, b) = [`basis`](super::reference::basis)(n),
-/// s = [`phong_level_exponent`]; for i in 0..N (N = PHONG_SAMPLES): (u, v) =
-/// [`hammersley`](super::reference::hammersley)(i, N), direction and cos theta from
-/// [`phong_sample`](super::reference::phong_sample)(n, t, b, s, u, v), pdf = (s+1)/(2 pi)
-/// cos^s theta, lod = 0.5 log2((1/(N pdf)) / (4 pi/(6 size^2))) + 1 clamped to
-/// [0, last level of plain], and the lookup lerp(plain[l].sample(d), plain[l+1].sample(d),
-/// lod - l) with l = floor(lod) (l + 1 clamped to the last level). The texel is the plain mean
-/// of the N lookups (importance sampling of the normalized lobe), so a constant map stays
-/// constant exactly.
-pub fn phong_level(plain: &[CubeImage], k: usize) -> CubeImage {
-    use super::reference::{basis, hammersley, phong_sample};
-    let size0 = plain[0].size;
-    let n = size0 >> k;
-    let s = phong_level_exponent(size0, k);
-    let top = plain.len() - 1;
-    let texel0 = 4.0 * std::f32::consts::PI / (6.0 * (size0 * size0) as f32);
-    let m = PHONG_SAMPLES;
-    // The sample directions and lods in the texel's frame are the same for every texel.
-    // The samples in the texel's frame (t, b, n) and their lods are the same for every texel.
-    let taps: Vec<(Vec3, f32)> = (0..m)
-        .map(|i| {
-            let (u, v) = hammersley(i, m);
-            let (local, cos) = phong_sample(Vec3::Z, Vec3::X, Vec3::Y, s, u, v);
-            let pdf = (s + 1.0) / std::f32::consts::TAU * cos.powf(s);
-            let lod = (0.5 * (1.0 / (m as f32 * pdf) / texel0).log2() + 1.0).clamp(0.0, top as f32);
-            (local, lod)
-        })
-        .collect();
-    let mut out = CubeImage::new(n);
-    let run = |face: usize, texels: &mut [Vec4]| {
-        for y in 0..n {
-            for x in 0..n {
-                let axis = texel_dir(n, face, x, y);
-                let (t, b) = basis(axis);
-                let mut sum = Vec4::ZERO;
-                for &(local, lod) in &taps {
-                    let d = t * local.x + b * local.y + axis * local.z;
-                    let l = (lod.floor() as usize).min(top);
-                    let l1 = (l + 1).min(top);
-                    sum += plain[l].sample(d).lerp(plain[l1].sample(d), lod - l as f32);
-                }
-                texels[y * n + x] = sum / m as f32;
-            }
-        }
-    };
-    if n >= 16 {
-        std::thread::scope(|sc| {
-            for (face, texels) in out.texels.chunks_mut(n * n).enumerate() {
-                sc.spawn(move || run(face, texels));
-            }
-        });
-    } else {
-        for (face, texels) in out.texels.chunks_mut(n * n).enumerate() {
-            run(face, texels);
-        }
-    }
-    out
 }
 
 /// The impulse of the lobe measurements: texel (size/2, size/2) of face +Z (index 4), the
@@ -598,28 +511,5 @@ mod tests {
         }
         assert_eq!(pem_memory_bytes(1, 1), 48);
         assert_eq!(pem_memory_bytes(2, 4), 2 * 6 * 8 * 21);
-    }
-}
-
-#[cfg(test)]
-mod debug_phong {
-    use super::*;
-    #[test]
-    #[ignore]
-    fn print_phong_levels() {
-        for kernel in [Kernel::Phong, Kernel::SqrtCosine] {
-            let m = lobe_model(kernel, 64);
-            for k in 0..=m.top() {
-                let s = phong_level_exponent(64, k);
-                eprintln!(
-                    "{kernel:?} k {k} s_k {s} vol {:.5} phong vol {:.5} shape(s_k) {:.3} peak {:.5} int {:.6}",
-                    m.volume(k as f32),
-                    phong_volume(s),
-                    m.shape_error(k as f32, s),
-                    m.peak(k as f32),
-                    m.integrals[k]
-                );
-            }
-        }
     }
 }

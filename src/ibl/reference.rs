@@ -10,22 +10,12 @@ pub fn hammersley(i: u32, n: u32) -> (f32, f32) {
     ((i as f32 + 0.5) / n as f32, (i.reverse_bits() as f64 / 4294967296.0) as f32)
 }
 
-/// An orthonormal basis (t, b) perpendicular to unit `n` (Duff et al. 2017, "Building an
-/// orthonormal basis, revisited"; the GPU's importance sampling mirrors it).
-pub fn basis(n: Vec3) -> (Vec3, Vec3) {
+/// An orthonormal basis (t, b) perpendicular to unit `n` (Duff et al. 2017).
+fn basis(n: Vec3) -> (Vec3, Vec3) {
     let sign = 1.0f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
     (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
-}
-
-/// The direction of Hammersley point (u, v) under the normalized Phong lobe of exponent `s`
-/// about unit `axis` with basis (t, b): cos theta = u^(1/(s+1)), phi = 2 pi v; and its cos theta.
-pub fn phong_sample(axis: Vec3, t: Vec3, b: Vec3, s: f32, u: f32, v: f32) -> (Vec3, f32) {
-    let cos = u.powf(1.0 / (s + 1.0));
-    let sin = (1.0 - cos * cos).max(0.0).sqrt();
-    let phi = std::f32::consts::TAU * v;
-    (t * (sin * phi.cos()) + b * (sin * phi.sin()) + axis * cos, cos)
 }
 
 /// integral env(w) max(0, r'.w)^s dw / (2 pi/(s+1)) with r' normalized: the Phong lobe of
@@ -40,7 +30,11 @@ pub fn embedded_lobe(cube: &CubeImage, r_prime: Vec3, s: f32, samples: usize) ->
     let mut sum = glam::DVec3::ZERO;
     for i in 0..n {
         let (u, v) = hammersley(i, n);
-        sum += cube.sample(phong_sample(axis, t, b, s, u, v).0).truncate().as_dvec3();
+        let cos = u.powf(1.0 / (s + 1.0));
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = std::f32::consts::TAU * v;
+        let w = t * (sin * phi.cos()) + b * (sin * phi.sin()) + axis * cos;
+        sum += cube.sample(w).truncate().as_dvec3();
     }
     (sum / n as f64).as_vec3()
 }
