@@ -30,7 +30,7 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::{Arc, LazyLock, Mutex};
 
-use glam::{Vec3, Vec4};
+use glam::Vec4;
 
 use super::cube::{CubeImage, face_dir, texel_center, texel_dir, texel_solid_angle};
 
