@@ -5,7 +5,7 @@
 //! nodes/ibl_shading.rs) run the same algorithms; these are their twins and their tests.
 
 pub mod cube;
+pub mod gpu;
 pub mod median_cut;
 pub mod pem;
 pub mod reference;
-pub mod gpu;

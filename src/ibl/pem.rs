@@ -159,7 +159,7 @@ pub fn filter_chain(level0: &CubeImage, kernel: Kernel) -> Vec<CubeImage> {
 
 /// Lobe volume of a Phong level, in texels of that level: the lobe spans several texels so
 /// that bilinear lookups reconstruct its shape (a plain mip chain's lobe spans about two).
-pub const PHONG_TEXELS_PER_LOBE: f32 = 32.0;
+pub const PHONG_TEXELS_PER_LOBE: f32 = 58.0;
 
 /// Phong levels this small (face size) sum over the whole sphere; larger ones over a window.
 pub const PHONG_FULL_SPHERE_SIZE: usize = 8;
