@@ -86,6 +86,7 @@ fn render_rejects_bad_arguments_before_rendering() {
 #[test]
 fn render_writes_frames_and_stats() {
     let out = std::env::temp_dir().join(format!("werkstatt-cli-render-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
     let (code, _, err) = werkstatt(&[
         "render",
         "graphs/default.ron",
@@ -97,9 +98,39 @@ fn render_writes_frames_and_stats() {
         out.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
-    for f in ["image_0000.png", "image_0001.png", "image_0002.png", "stats.json"] {
-        assert!(out.join(f).exists(), "{f} missing");
+    let images = ["image_0000.png", "image_0001.png", "image_0002.png"];
+    for f in images {
+        let png = image::open(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert_eq!((png.width(), png.height()), (64, 48), "{f}");
     }
+    // Exactly the images and stats.json, no temporary left behind.
+    let mut written: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    written.sort();
+    assert_eq!(written, [&images[..], &["stats.json"]].concat());
+
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    assert_eq!((stats["width"].as_u64(), stats["height"].as_u64()), (Some(64), Some(48)));
+    let frames: Vec<i64> =
+        stats["frames"].as_array().expect("frames").iter().map(|f| f["frame"].as_i64().unwrap()).collect();
+    assert_eq!(frames, [0, 1, 2]);
+    for f in stats["frames"].as_array().unwrap() {
+        assert_eq!(f["nodes"]["image"]["ran"], true, "the output node runs every frame: {f}");
+    }
+    let mut files: Vec<&str> = stats["files"].as_array().expect("files").iter().map(|f| f.as_str().unwrap()).collect();
+    files.sort();
+    assert_eq!(files, images);
+    let graph = werkstatt::graph::Graph::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/graphs/default.ron"
+    )))
+    .unwrap();
+    let hash = format!("{:016x}", werkstatt::hash::fnv1a(graph.to_ron().as_bytes()));
+    assert_eq!(stats["graph_hash"].as_str(), Some(hash.as_str()));
+    let adapter = stats["adapter"].as_str().expect("adapter");
+    assert!(!adapter.is_empty());
+    let summary = format!("rendered 3 frame(s) on {adapter}: 3 file(s) and stats.json in {}", out.display());
+    assert!(err.lines().any(|l| l == summary), "no line \"{summary}\" in:\n{err}");
     std::fs::remove_dir_all(out).unwrap();
 }
 

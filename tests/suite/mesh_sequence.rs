@@ -42,7 +42,7 @@ fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
         if s.pending == 0 {
             break;
         }
-        res.wait_idle();
+        crate::common::wait_idle(res);
     }
     ev.report("seq").unwrap().status.clone()
 }
