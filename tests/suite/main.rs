@@ -19,6 +19,7 @@ mod gpu_engine;
 mod graph_errors;
 mod graph_props;
 mod live_link;
+mod loaders;
 mod mesh;
 mod mesh_sequence;
 mod node_contracts;
