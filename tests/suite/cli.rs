@@ -120,11 +120,9 @@ fn render_writes_frames_and_stats() {
     let mut files: Vec<&str> = stats["files"].as_array().expect("files").iter().map(|f| f.as_str().unwrap()).collect();
     files.sort();
     assert_eq!(files, images);
-    let graph = werkstatt::graph::Graph::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/graphs/default.ron"
-    )))
-    .unwrap();
+    let graph =
+        werkstatt::graph::Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron")))
+            .unwrap();
     let hash = format!("{:016x}", werkstatt::hash::fnv1a(graph.to_ron().as_bytes()));
     assert_eq!(stats["graph_hash"].as_str(), Some(hash.as_str()));
     let adapter = stats["adapter"].as_str().expect("adapter");

@@ -26,11 +26,7 @@ pub const LOAD_WAIT: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// `Resources::wait_idle` with a deadline and a clear failure.
 pub fn wait_idle(res: &werkstatt::resources::Resources) {
-    assert!(
-        res.wait_idle_timeout(LOAD_WAIT),
-        "{} resource loads still in flight after {LOAD_WAIT:?}",
-        res.in_flight()
-    );
+    assert!(res.wait_idle_timeout(LOAD_WAIT), "{} resource loads still in flight after {LOAD_WAIT:?}", res.in_flight());
 }
 
 pub fn root() -> PathBuf {

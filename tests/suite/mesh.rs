@@ -147,10 +147,8 @@ fn every_primitive_is_a_valid_closed_or_open_mesh() {
             let open: Vec<_> = edges.keys().filter(|(a, b)| !edges.contains_key(&(*b, *a))).collect();
             assert!(open.is_empty(), "{name}: {} edges have one face, e.g. {:?}", open.len(), open.first());
             // Outward: the signed volume (divergence theorem) is positive and near the solid's.
-            let signed: f32 = tris
-                .iter()
-                .map(|t| m.positions[t[0]].dot(m.positions[t[1]].cross(m.positions[t[2]])) / 6.0)
-                .sum();
+            let signed: f32 =
+                tris.iter().map(|t| m.positions[t[0]].dot(m.positions[t[1]].cross(m.positions[t[2]])) / 6.0).sum();
             assert!(
                 signed > 0.0 && (signed - volume).abs() <= tolerance * volume,
                 "{name}: signed volume {signed}, the solid's {volume}"
