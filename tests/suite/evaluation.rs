@@ -466,3 +466,39 @@ fn a_loader_that_panics_fails_its_file_with_a_message() {
     assert_eq!(res.request(&other, text).1.unwrap().as_str(), "fine");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A file saved broken and then fixed: the node shows the load error naming the file, then
+/// recovers with the fixed contents.
+#[test]
+fn a_failed_reload_recovers_when_the_file_is_fixed() {
+    let dir = temp_dir("recover");
+    let path = dir.join("shape.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let g = mesh_graph(&path);
+    let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
+    let res = Resources::new(true);
+    let s = FrameSettings::default();
+    let until = |ev: &mut Evaluator, what: &str, done: &dyn Fn(&Evaluator) -> bool| {
+        let deadline = Instant::now() + WAIT;
+        loop {
+            ev.evaluate(frame(0), None, &res, &s);
+            if done(ev) {
+                return;
+            }
+            assert!(Instant::now() < deadline, "{what}: status {:?}", ev.report("mesh").unwrap().status);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    until(&mut ev, "the first load", &|ev| triangles(ev) == 1);
+    save_by_rename(&path, "v 0 0 0\nf 1 2 7\n");
+    let name = path.display().to_string();
+    until(
+        &mut ev,
+        "the broken file's error",
+        &|ev| matches!(ev.report("mesh").unwrap().status, NodeStatus::Failed(m) if m.contains(&name)),
+    );
+    save_by_rename(&path, QUAD_OBJ);
+    until(&mut ev, "the fixed file", &|ev| triangles(ev) == 2);
+    assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
+    std::fs::remove_dir_all(dir).unwrap();
+}
