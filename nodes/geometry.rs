@@ -122,12 +122,18 @@ pub fn sphere(r: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
 
 /// Torus around +Y, major radius `big`, tube radius `small`.
 pub fn torus(big: f32, small: f32, su: u32, sv: u32) -> anyhow::Result<Mesh> {
-    grid(su, sv, |u, v| {
+    let mut m = grid(su, sv, |u, v| {
         let (phi, theta) = (u * TAU, v * TAU);
         let ring = Vec3::new(phi.sin(), 0.0, phi.cos());
         let n = ring * theta.cos() + Vec3::Y * theta.sin();
         (ring * big + n * small, n)
-    })
+    })?;
+    // v runs up the outside of the tube, so the grid's triangles would face inwards, against
+    // the normals: turn them around (positions, UVs and tangents stay as they are).
+    for t in m.indices.chunks_exact_mut(3) {
+        t.swap(1, 2);
+    }
+    Ok(m)
 }
 
 /// A closed cuboid; each face its own UV square.

@@ -89,6 +89,8 @@ pub enum ProblemKind {
     Syntax,
     Io,
     VersionTooNew,
+    /// An older format version that no migration upgrades.
+    VersionUnsupported,
     DuplicateId,
     InvalidId,
     UnknownKind,
@@ -438,11 +440,12 @@ impl Graph {
             }
         }
         let mut graph = Graph { version: raw.version, nodes, links };
+        // An older version without a migration is not "too new": it cannot be upgraded.
         migrate(&mut graph, CURRENT_VERSION, MIGRATIONS).map_err(|message| Diagnostic {
             file: PathBuf::new(),
-            line: 1,
+            line: source.lines().position(|l| l.contains("version")).map_or(1, |i| i + 1),
             col: 1,
-            problem: Problem::new(ProblemKind::VersionTooNew, Place::File, message),
+            problem: Problem::new(ProblemKind::VersionUnsupported, Place::File, message),
         })?;
         Ok((graph, problems, link_rows))
     }

@@ -378,7 +378,10 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
     let mut normals = Vec::new();
     let mut indices = Vec::new();
     let (mut all_uvs, mut all_normals) = (true, true);
-    let scene = doc.default_scene().or_else(|| doc.scenes().next()).context("the file has no scene")?;
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .with_context(|| format!("{} has no scene", path.display()))?;
     let mut stack: Vec<(gltf::Node, glam::Mat4)> = scene.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect();
     while let Some((node, parent)) = stack.pop() {
         let world = parent * glam::Mat4::from_cols_array_2d(&node.transform().matrix());

@@ -150,7 +150,8 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
                     failures(&evaluator).join("; ")
                 );
             }
-            resources.wait_idle();
+            // Bounded too: a loader that never returns fails the frame above instead of hanging.
+            resources.wait_idle_timeout(PENDING_LIMIT.saturating_sub(start.elapsed()));
             if resources.in_flight() == 0 {
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }

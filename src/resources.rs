@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 /// Why a resource has no value (yet).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -34,6 +35,10 @@ pub struct Slot {
     pub path: PathBuf,
     state: Mutex<SlotState>,
     version: AtomicU64,
+    /// Loads requested so far, and the request whose result `state` holds: two loads of one
+    /// file can run at once (two quick edits), and the older must not overwrite the newer.
+    requested: AtomicU64,
+    applied: AtomicU64,
     load: LoadFn,
 }
 
@@ -121,6 +126,8 @@ impl Resources {
                         path: path.clone(),
                         state: Mutex::new(SlotState::Pending),
                         version: AtomicU64::new(0),
+                        requested: AtomicU64::new(0),
+                        applied: AtomicU64::new(0),
                         load: Box::new(move |p| loader(p).map(|v| Arc::new(v) as Loaded)),
                     });
                     slots.insert(key, slot.clone());
@@ -161,6 +168,7 @@ impl Resources {
 
     fn enqueue(&self, slot: SlotRef) {
         *self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+        slot.requested.fetch_add(1, Ordering::AcqRel);
         if let Some(tx) = self.inner.jobs.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
             let _ = tx.send(slot);
         }
@@ -172,6 +180,21 @@ impl Resources {
         while *n > 0 {
             n = self.inner.idle.wait(n).unwrap_or_else(|e| e.into_inner());
         }
+    }
+
+    /// `wait_idle` with a deadline: true once nothing is loading, false if loads are still in
+    /// flight after `timeout` (a loader that hangs), so a caller can fail with a message.
+    pub fn wait_idle_timeout(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        let mut n = self.inner.in_flight.lock().unwrap_or_else(|e| e.into_inner());
+        while *n > 0 {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            n = self.inner.idle.wait_timeout(n, left).unwrap_or_else(|e| e.into_inner()).0;
+        }
+        true
     }
 
     /// How many resources are held (loaded, loading or failed).
@@ -247,14 +270,23 @@ fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
             rx.recv()
         };
         let Ok(slot) = job else { return };
+        // Every request up to this one was made before the file is read here.
+        let request = slot.requested.load(Ordering::Acquire);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (slot.load)(&slot.path)));
         let state = match result {
             Ok(Ok(v)) => SlotState::Ready(v),
             Ok(Err(e)) => SlotState::Failed(format!("{}: {e:#}", slot.path.display())),
             Err(_) => SlotState::Failed(format!("{}: the loader crashed on this file", slot.path.display())),
         };
-        *slot.state.lock().unwrap_or_else(|e| e.into_inner()) = state;
-        slot.version.fetch_add(1, Ordering::AcqRel);
+        {
+            let mut current = slot.state.lock().unwrap_or_else(|e| e.into_inner());
+            // A load that read the file after this one did has already landed: keep it.
+            if request >= slot.applied.load(Ordering::Acquire) {
+                *current = state;
+                slot.applied.store(request, Ordering::Release);
+                slot.version.fetch_add(1, Ordering::AcqRel);
+            }
+        }
         let Some(inner) = inner.upgrade() else { return };
         let mut n = inner.in_flight.lock().unwrap_or_else(|e| e.into_inner());
         *n = n.saturating_sub(1);

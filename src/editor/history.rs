@@ -159,11 +159,22 @@ mod tests {
             h.record(before, "add", None);
         }
         assert_eq!(h.len(), 3);
-        h.undo(&mut g);
+        // Only the last three steps are kept: undoing them leaves the first two nodes.
+        for _ in 0..3 {
+            assert_eq!(h.undo(&mut g).as_deref(), Some("add"));
+        }
+        assert_eq!(g.nodes.keys().map(String::as_str).collect::<Vec<_>>(), ["number", "number_2"]);
+        assert!(h.undo(&mut g).is_none(), "the oldest steps were dropped");
+        h.redo(&mut g);
+        h.redo(&mut g);
+        let four = g.clone();
+        assert_eq!(four.nodes.len(), 4);
         assert!(h.can_redo());
         let before = g.clone();
         add_node(&mut g, "Math", [0.0, 0.0]).unwrap();
         h.record(before, "add math", None);
         assert!(!h.can_redo());
+        assert_eq!(h.undo(&mut g).as_deref(), Some("add math"));
+        assert_eq!(g, four);
     }
 }

@@ -76,6 +76,11 @@ fn render_rejects_bad_arguments_before_rendering() {
         (vec!["render", "graphs/default.ron", "--size", "big"], "--size"),
         (vec!["render", "graphs/default.ron", "--set", "camera.fov=500"], "out of range"),
         (vec!["render", "tests/data/bad/cycle.ron"], "cycle"),
+        (vec!["render", "graphs/default.ron", "--size", "0x48"], "each 1..=8192"),
+        (vec!["render", "graphs/default.ron", "--size", "8193x10"], "each 1..=8192"),
+        (vec!["render", "graphs/default.ron", "--fps", "0"], "--fps must be a positive number"),
+        (vec!["render", "graphs/default.ron", "--fps=-30"], "--fps must be a positive number"),
+        (vec!["render", "graphs/default.ron", "--frames", "0..10000000"], "--frames"),
     ] {
         let (code, _, err) = werkstatt(&args);
         assert_eq!(code, 1, "{args:?}");
@@ -86,6 +91,7 @@ fn render_rejects_bad_arguments_before_rendering() {
 #[test]
 fn render_writes_frames_and_stats() {
     let out = std::env::temp_dir().join(format!("werkstatt-cli-render-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
     let (code, _, err) = werkstatt(&[
         "render",
         "graphs/default.ron",
@@ -97,10 +103,105 @@ fn render_writes_frames_and_stats() {
         out.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
-    for f in ["image_0000.png", "image_0001.png", "image_0002.png", "stats.json"] {
-        assert!(out.join(f).exists(), "{f} missing");
+    let images = ["image_0000.png", "image_0001.png", "image_0002.png"];
+    for f in images {
+        let png = image::open(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert_eq!((png.width(), png.height()), (64, 48), "{f}");
     }
+    // Exactly the images and stats.json, no temporary left behind.
+    let mut written: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    written.sort();
+    assert_eq!(written, [&images[..], &["stats.json"]].concat());
+
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    assert_eq!((stats["width"].as_u64(), stats["height"].as_u64()), (Some(64), Some(48)));
+    let frames: Vec<i64> =
+        stats["frames"].as_array().expect("frames").iter().map(|f| f["frame"].as_i64().unwrap()).collect();
+    assert_eq!(frames, [0, 1, 2]);
+    for f in stats["frames"].as_array().unwrap() {
+        assert_eq!(f["nodes"]["image"]["ran"], true, "the output node runs every frame: {f}");
+    }
+    let mut files: Vec<&str> = stats["files"].as_array().expect("files").iter().map(|f| f.as_str().unwrap()).collect();
+    files.sort();
+    assert_eq!(files, images);
+    let graph =
+        werkstatt::graph::Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron")))
+            .unwrap();
+    let hash = format!("{:016x}", werkstatt::hash::fnv1a(graph.to_ron().as_bytes()));
+    assert_eq!(stats["graph_hash"].as_str(), Some(hash.as_str()));
+    let adapter = stats["adapter"].as_str().expect("adapter");
+    assert!(!adapter.is_empty());
+    let summary = format!("rendered 3 frame(s) on {adapter}: 3 file(s) and stats.json in {}", out.display());
+    assert!(err.lines().any(|l| l == summary), "no line \"{summary}\" in:\n{err}");
     std::fs::remove_dir_all(out).unwrap();
+}
+
+/// A temporary folder named after the test, emptied first.
+fn temp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("werkstatt-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn a_graph_without_an_output_node_is_refused() {
+    let dir = temp("no-output");
+    let graph = dir.join("g.ron");
+    std::fs::write(&graph, r#"(version: 1, nodes: {"n": (kind: "Number")}, links: [])"#).unwrap();
+    let out = dir.join("out");
+    let (code, _, err) = werkstatt(&["render", graph.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("has no output node"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A frame that fails stops the render with exit code 1, and stats.json keeps the frames
+/// before it (and the failed one) for CI.
+#[test]
+fn stats_are_kept_when_a_later_frame_fails() {
+    let dir = temp("later-frame-fails");
+    let graph = dir.join("g.ron");
+    // The time passes the Watch's maximum at frame 2 (2/30 s > 0.05).
+    std::fs::write(
+        &graph,
+        r#"(version: 1, nodes: {"t": (kind: "Time"), "w": (kind: "Watch", params: {"max": 0.05})}, links: [("t.seconds", "w.value")])"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let (code, _, err) =
+        werkstatt(&["render", graph.to_str().unwrap(), "--frames", "0..4", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("frame 2") && err.contains("outside the accepted range"), "{err}");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap();
+    let frames: Vec<i64> = stats["frames"].as_array().unwrap().iter().map(|f| f["frame"].as_i64().unwrap()).collect();
+    assert_eq!(frames, [0, 1, 2]);
+    let values: Vec<f64> = stats["values"]["w"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert_eq!(values, [0.0, 1.0 / 30.0]);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn two_processes_render_the_same_bytes() {
+    let dir = temp("two-processes");
+    let render = |name: &str| {
+        let out = dir.join(name);
+        let args =
+            ["render", "graphs/default.ron", "--frames", "0..1", "--size", "64x48", "--out", out.to_str().unwrap()];
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 0, "{err}");
+        out
+    };
+    let (a, b) = (render("a"), render("b"));
+    for f in ["image_0000.png", "image_0001.png"] {
+        assert!(
+            std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(),
+            "{f} differs between processes"
+        );
+    }
+    assert_ne!(std::fs::read(a.join("image_0000.png")).unwrap(), std::fs::read(a.join("image_0001.png")).unwrap());
+    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]

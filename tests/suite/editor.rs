@@ -262,8 +262,9 @@ fn a_failing_node_shows_its_error_on_the_node() {
     assert_eq!(h.state().live.output(&p("divide.result")).map(|v| v.summary()), Some("0.25".into()));
 }
 
-/// UI frame times while editing a 200-node chain. Prints the figures; the bound is loose
-/// because debug builds and a shared machine are slow.
+/// Editing a 200-node chain: idle frames re-run nothing, a parameter change every frame
+/// re-runs the chain every frame, a node drag moves the node. Prints the UI frame times (a
+/// figure, not asserted: a debug build on a loaded machine says nothing about speed).
 #[test]
 fn a_200_node_graph_stays_responsive() {
     let dir = temp_dir("big");
@@ -287,30 +288,29 @@ fn a_200_node_graph_stays_responsive() {
             times.sort_by(f64::total_cmp);
             let (median, p95) = (times[times.len() / 2], times[(times.len() * 95) / 100]);
             eprintln!("200-node graph, {what}: median {median:.1} ms, p95 {p95:.1} ms per UI frame (harness step)");
-            median
         };
-    let idle = measure(&mut h, "idle", &mut |_, _| {});
-    let param = measure(&mut h, "changing a parameter every frame", &mut |h, i| {
+    let last_runs = |h: &Harness<'_, EditorApp>| (h.state().live.runs("m0000"), h.state().live.runs("m0199"));
+    let before = last_runs(&h);
+    assert!(before.1 > 0, "the chain ran");
+    measure(&mut h, "idle", &mut |_, _| {});
+    assert_eq!(last_runs(&h), before, "idle frames must re-run nothing");
+    measure(&mut h, "changing a parameter every frame", &mut |h, i| {
         h.state_mut().state.set_param("m0000", "b", werkstatt::param::ParamValue::Float(i as f64)).unwrap();
     });
+    assert_eq!(last_runs(&h), (before.0 + 30, before.1 + 30), "each change re-runs the chain once");
+    let pos_before = h.state().state.graph.nodes["m0100"].pos;
     let start = h.state().canvas.node_screen_rect("m0100").map(|r| r.left_top() + Vec2::new(20.0, 10.0));
-    let drag_median = match start {
-        Some(start) => {
-            h.hover_at(start);
-            h.step();
-            h.drag_at(start);
-            let m = measure(&mut h, "dragging a node", &mut |h, i| h.hover_at(start + Vec2::new(i as f32 * 3.0, 0.0)));
-            h.drop_at(start + Vec2::new(90.0, 0.0));
-            h.step();
-            m
-        }
-        None => 0.0,
-    };
+    let start = start.expect("node m0100 is on screen");
+    h.hover_at(start);
+    h.step();
+    h.drag_at(start);
+    measure(&mut h, "dragging a node", &mut |h, i| h.hover_at(start + Vec2::new(i as f32 * 3.0, 0.0)));
+    h.drop_at(start + Vec2::new(90.0, 0.0));
+    h.step();
+    let pos_after = h.state().state.graph.nodes["m0100"].pos;
+    assert!(pos_after[0] > pos_before[0] + 10.0 && pos_after[1] == pos_before[1], "{pos_before:?} -> {pos_after:?}");
     let (m, p95, _) = h.state().frame_times.stats().unwrap();
     eprintln!("200-node graph, inside EditorApp::ui (evaluation and layout): median {m:.1} ms, p95 {p95:.1} ms");
-    for t in [idle, param, drag_median] {
-        assert!(t < 250.0, "a UI frame took {t:.1} ms");
-    }
     // The last value is 1 + 199 more additions of 1, plus the b the loop set on the first node.
     assert_eq!(h.state().live.output(&p("m0199.result")).map(|v| v.summary()), Some("228".into()));
 }
@@ -333,13 +333,23 @@ fn the_viewport_shows_the_rendered_graph_and_orbits() {
     settle(&mut h);
     let cam = h.state().live.camera.clone().expect("the drag overrides the camera");
     assert_eq!(cam.node, "camera");
-    assert_ne!(cam.yaw, 35.0);
+    // From yaw 35, pitch 25 (graphs/default.ron), 0.4 degrees per point: 80 points right
+    // turn the yaw to 35 - 32 = 3, 20 points up the pitch to 25 - 8 = 17; no zoom.
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-3;
+    assert!(
+        close(cam.yaw, 3.0) && close(cam.pitch, 17.0) && close(cam.distance, 4.0),
+        "orbit by (80, -20) points: yaw {}, pitch {}, distance {}",
+        cam.yaw,
+        cam.pitch,
+        cam.distance
+    );
     assert!(h.state().live.runs("camera") > runs, "the camera re-ran with the new view");
     assert!(!h.state().state.is_dirty(), "orbiting does not edit the graph");
     h.get_by_role_and_label(Role::Button, "apply to graph").click();
     settle(&mut h);
-    let yaw = h.state().state.graph.param("camera", "yaw").and_then(|v| v.as_f64()).unwrap();
-    assert!((yaw - cam.yaw).abs() < 1e-9, "applied view: yaw {yaw}");
+    let param = |name: &str| h.state().state.graph.param("camera", name).and_then(|v| v.as_f64()).unwrap();
+    let applied = (param("yaw"), param("pitch"), param("distance"));
+    assert_eq!(applied, (cam.yaw, cam.pitch, cam.distance), "the applied view");
     assert!(h.state().state.is_dirty());
 
     // Inspect an intermediate texture: click the G-buffer output of the gbuffer node.

@@ -35,6 +35,12 @@ fn centre(live: &Live, gpu: &GpuContext) -> [f32; 4] {
     [px.rgba[i], px.rgba[i + 1], px.rgba[i + 2], px.rgba[i + 3]]
 }
 
+/// The whole output image.
+fn image(live: &Live, gpu: &GpuContext) -> Vec<f32> {
+    let value = live.output(&PortRef::parse("image.image").unwrap()).expect("the image was rendered");
+    read_back(gpu, value.as_texture().unwrap()).unwrap().rgba
+}
+
 /// Set in the environment of the child process that runs the test body.
 const CHILD: &str = "WERKSTATT_TEST_SHADER_RELOAD_CHILD";
 
@@ -73,6 +79,18 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     settle(&mut live, &gpu);
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let original = std::fs::read_to_string(dir.join("tonemap.wgsl")).unwrap();
+    let exposure = |graph: &mut Graph, live: &mut Live, value: f64, generation: u64| {
+        werkstatt::editor::document::set_param(graph, "tonemap", "exposure", ParamValue::Float(value)).unwrap();
+        live.sync(graph, generation, None);
+        settle(live, &gpu);
+    };
+    // References rendered with the original shader: exposure 0.5, and 0.25 left showing.
+    let default_exposure = image(&live, &gpu);
+    exposure(&mut graph, &mut live, 0.5, 2);
+    let half = image(&live, &gpu);
+    exposure(&mut graph, &mut live, 0.25, 3);
+    let quarter = image(&live, &gpu);
+    assert!(half != default_exposure && half != quarter, "the exposure changes the picture");
     let gbuffer_runs = live.runs("gbuffer");
 
     // A broken shader: the error is reported, the last good pipeline keeps rendering.
@@ -83,11 +101,10 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     assert!(matches!(live.state("tonemap"), NodeState::Failed(ref m) if m.contains("last good pipeline kept")));
     assert_eq!(live.runs("gbuffer"), gbuffer_runs, "a tonemap.wgsl edit re-runs only what uses it");
     let runs = live.runs("tonemap");
-    werkstatt::editor::document::set_param(&mut graph, "tonemap", "exposure", ParamValue::Float(0.5)).unwrap();
-    live.sync(&graph, 2, None);
-    settle(&mut live, &gpu);
+    exposure(&mut graph, &mut live, 0.5, 4);
     assert_eq!(live.runs("tonemap"), runs + 1, "the old node re-ran with its pipeline");
-    assert!(centre(&live, &gpu)[3] > 0.0);
+    // It renders exactly what the original shader rendered at this exposure.
+    assert!(image(&live, &gpu) == half, "the last good pipeline must render as the original shader did");
 
     // A fixed shader that paints everything red, picked up by the file poll.
     let red = original.replace(

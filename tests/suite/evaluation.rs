@@ -6,6 +6,8 @@ use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::graph::Graph;
 use werkstatt::resources::Resources;
 
+use crate::common::wait_idle;
+
 fn graph(text: &str) -> Graph {
     Graph::load_str(text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -178,6 +180,17 @@ fn watch_range_violation_fails() {
 const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n";
 const QUAD_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
 
+/// How long a test waits for loads and file events before it fails.
+const WAIT: Duration = Duration::from_secs(20);
+
+/// Replaces `path` the way editors save: a complete temporary file renamed over it, so no
+/// reader ever sees a truncated file.
+fn save_by_rename(path: &std::path::Path, text: &str) {
+    let tmp = path.with_extension("tmp~");
+    std::fs::write(&tmp, text).unwrap();
+    std::fs::rename(&tmp, path).unwrap();
+}
+
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("werkstatt-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -211,7 +224,7 @@ fn resources_load_lazily_then_the_node_reruns() {
     // The interactive loop does not wait: the node is pending (unless the load won the race).
     if first.pending == 1 {
         assert!(matches!(ev.report("mesh").unwrap().status, NodeStatus::Pending(_)));
-        res.wait_idle();
+        wait_idle(&res);
         ev.evaluate(frame(0), None, &res, &s);
     }
     assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
@@ -232,7 +245,7 @@ fn missing_and_corrupt_files_are_errors_naming_the_path() {
         let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
         let res = Resources::new(false);
         ev.evaluate(frame(0), None, &res, &FrameSettings::default());
-        res.wait_idle();
+        wait_idle(&res);
         ev.evaluate(frame(0), None, &res, &FrameSettings::default());
         match ev.report("mesh").unwrap().status {
             NodeStatus::Failed(m) => assert!(m.contains(&path.display().to_string()), "{m}"),
@@ -252,16 +265,55 @@ fn edited_files_reload_in_watch_mode() {
     let res = Resources::new(true);
     let s = FrameSettings::default();
     ev.evaluate(frame(0), None, &res, &s);
-    res.wait_idle();
+    wait_idle(&res);
     ev.evaluate(frame(0), None, &res, &s);
     assert_eq!(triangles(&ev), 1);
-    std::fs::write(&path, QUAD_OBJ).unwrap();
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while triangles(&ev) != 2 && Instant::now() < deadline {
+    // Saved by rename (one complete file, as editors save), then polled until the reload is
+    // in: no assumption about how many events arrive or in which order loads finish.
+    save_by_rename(&path, QUAD_OBJ);
+    let deadline = Instant::now() + WAIT;
+    while triangles(&ev) != 2 {
+        assert!(
+            Instant::now() < deadline,
+            "the edited file was not reloaded within {WAIT:?}; status {:?}",
+            ev.report("mesh").unwrap().status
+        );
         std::thread::sleep(Duration::from_millis(20));
         ev.evaluate(frame(0), None, &res, &s);
     }
-    assert_eq!(triangles(&ev), 2, "the edited file was not reloaded");
+    assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Two quick edits start two loads of one file; the one that read the older text may finish
+/// last and must not replace the newer value.
+#[test]
+fn an_older_load_finishing_last_keeps_the_newer_value() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static OLD_READ: AtomicBool = AtomicBool::new(false);
+    fn slow_on_old(path: &std::path::Path) -> anyhow::Result<String> {
+        let text = std::fs::read_to_string(path)?;
+        if text == "old" {
+            OLD_READ.store(true, Ordering::SeqCst);
+            std::thread::sleep(Duration::from_millis(600));
+        }
+        Ok(text)
+    }
+    let dir = temp_dir("load-order");
+    let path = std::path::absolute(dir.join("value.txt")).unwrap();
+    std::fs::write(&path, "old").unwrap();
+    let res = Resources::new(false);
+    let _ = res.request(&path, slow_on_old);
+    let deadline = Instant::now() + WAIT;
+    while !OLD_READ.load(Ordering::SeqCst) {
+        assert!(Instant::now() < deadline, "the first load never started");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    save_by_rename(&path, "new");
+    res.reload(&path);
+    wait_idle(&res);
+    let (_, value) = res.request(&path, slow_on_old);
+    assert_eq!(value.unwrap().as_str(), "new", "the older load overwrote the newer one");
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -295,4 +347,158 @@ fn a_refused_update_leaves_the_evaluator_working() {
     ev.evaluate(frame(1), None, &res, &settings);
     assert_eq!(runs(&ev, "sum"), before);
     assert_eq!(ev.report("out").map(|r| r.status.clone()), Some(NodeStatus::Ok));
+}
+
+/// How many nodes the plan of `ev` ran in the last frame, by id.
+fn ran_ids(ev: &Evaluator, ids: &[&str]) -> Vec<String> {
+    ids.iter().filter(|id| ev.report(id).is_some_and(|r| r.ran)).map(|id| id.to_string()).collect()
+}
+
+#[test]
+fn new_frame_settings_rerun_every_planned_node() {
+    let g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let planned = ["x", "y", "sum", "double", "out", "time", "wave", "out_time"];
+    let small = FrameSettings { width: 64, height: 48, ..FrameSettings::default() };
+    assert_eq!(ev.evaluate(frame(0), None, &res, &small).ran, planned.len());
+    assert_eq!(ev.evaluate(frame(0), None, &res, &small).ran, 0, "the same settings run nothing");
+    // Another size, then another folder: nodes may depend on either, so all re-run once.
+    let wider = FrameSettings { width: 65, ..small.clone() };
+    assert_eq!(ev.evaluate(frame(0), None, &res, &wider).ran, planned.len(), "a new size");
+    assert_eq!(ran_ids(&ev, &planned).len(), planned.len());
+    assert_eq!(ev.evaluate(frame(0), None, &res, &wider).ran, 0);
+    let moved = FrameSettings { base_dir: "elsewhere".into(), ..wider.clone() };
+    assert_eq!(ev.evaluate(frame(0), None, &res, &moved).ran, planned.len(), "a new base folder");
+    assert_eq!(ev.evaluate(frame(0), None, &res, &moved).ran, 0);
+    assert_eq!(scalar(&ev, "out"), 10.0);
+}
+
+#[test]
+fn a_link_moved_to_another_output_of_the_same_node_reruns_its_consumer() {
+    let text = r#"(version: 1, nodes: {"t": (kind: "Time"), "w": (kind: "Watch")}, links: [("t.seconds", "w.value")])"#;
+    let mut g = graph(text);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(60), None, &res, &s);
+    assert_eq!(scalar(&ev, "w"), 2.0, "60 frames at 30 fps");
+    g.links[0].from.port = "frame".into();
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(60), None, &res, &s);
+    assert_eq!(scalar(&ev, "w"), 60.0, "the consumer reads the other output now");
+    assert_eq!(runs(&ev, "w"), 2);
+}
+
+#[test]
+fn a_kind_change_under_the_same_id_gets_a_new_node() {
+    let mut g = graph(
+        r#"(version: 1, nodes: {"src": (kind: "Number", params: {"value": 5.0}), "w": (kind: "Watch")}, links: [("src.value", "w.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(90), None, &res, &s);
+    assert_eq!(scalar(&ev, "w"), 5.0);
+    // Same id, another kind (and so another output): the old instance must not be reused.
+    let src = g.nodes.get_mut("src").unwrap();
+    src.kind = "Time".into();
+    src.params.clear();
+    g.links[0].from.port = "seconds".into();
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(90), None, &res, &s);
+    assert_eq!(ev.report("src").unwrap().kind, "Time");
+    assert_eq!(ev.report("src").unwrap().status, &NodeStatus::Ok);
+    assert_eq!(scalar(&ev, "w"), 3.0, "90 frames at 30 fps");
+}
+
+#[test]
+fn unlinking_an_optional_input_falls_back_to_the_parameter() {
+    let mut g = graph(DIAMOND);
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let s = FrameSettings::default();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(scalar(&ev, "out"), 10.0, "(2 + 3) * 2");
+    let sum_runs = runs(&ev, "sum");
+    // sum.b loses its link: the parameter b (default 0) stands in.
+    g.links.retain(|l| !(l.to.node == "sum" && l.to.port == "b"));
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(scalar(&ev, "out"), 4.0, "(2 + 0) * 2");
+    assert_eq!(runs(&ev, "sum"), sum_runs + 1);
+    // Linked again: the input wins over the parameter.
+    g.set_from_cli("sum.b=100").unwrap();
+    g.links.push(werkstatt::graph::Link {
+        from: werkstatt::graph::PortRef::parse("y.value").unwrap(),
+        to: werkstatt::graph::PortRef::parse("sum.b").unwrap(),
+    });
+    ev.update(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &res, &s);
+    assert_eq!(scalar(&ev, "out"), 10.0);
+}
+
+#[test]
+fn a_loader_that_panics_fails_its_file_with_a_message() {
+    fn crashing(_: &std::path::Path) -> anyhow::Result<u32> {
+        panic!("a bug in a loader")
+    }
+    let dir = temp_dir("loader-panic");
+    let path = std::path::absolute(dir.join("any.bin")).unwrap();
+    std::fs::write(&path, b"x").unwrap();
+    let res = Resources::new(false);
+    let _ = res.request(&path, crashing);
+    wait_idle(&res);
+    match res.request(&path, crashing).1 {
+        Err(werkstatt::resources::LoadError::Failed(m)) => {
+            assert!(m.contains("any.bin") && m.contains("the loader crashed"), "{m}")
+        }
+        other => panic!("expected a failed load, got {other:?}"),
+    }
+    // The worker survived: another file still loads.
+    let other = dir.join("other.txt");
+    std::fs::write(&other, "fine").unwrap();
+    fn text(p: &std::path::Path) -> anyhow::Result<String> {
+        Ok(std::fs::read_to_string(p)?)
+    }
+    let _ = res.request(&other, text);
+    wait_idle(&res);
+    assert_eq!(res.request(&other, text).1.unwrap().as_str(), "fine");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A file saved broken and then fixed: the node shows the load error naming the file, then
+/// recovers with the fixed contents.
+#[test]
+fn a_failed_reload_recovers_when_the_file_is_fixed() {
+    let dir = temp_dir("recover");
+    let path = dir.join("shape.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let g = mesh_graph(&path);
+    let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
+    let res = Resources::new(true);
+    let s = FrameSettings::default();
+    let until = |ev: &mut Evaluator, what: &str, done: &dyn Fn(&Evaluator) -> bool| {
+        let deadline = Instant::now() + WAIT;
+        loop {
+            ev.evaluate(frame(0), None, &res, &s);
+            if done(ev) {
+                return;
+            }
+            assert!(Instant::now() < deadline, "{what}: status {:?}", ev.report("mesh").unwrap().status);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    until(&mut ev, "the first load", &|ev| triangles(ev) == 1);
+    save_by_rename(&path, "v 0 0 0\nf 1 2 7\n");
+    let name = path.display().to_string();
+    until(
+        &mut ev,
+        "the broken file's error",
+        &|ev| matches!(ev.report("mesh").unwrap().status, NodeStatus::Failed(m) if m.contains(&name)),
+    );
+    save_by_rename(&path, QUAD_OBJ);
+    until(&mut ev, "the fixed file", &|ev| triangles(ev) == 2);
+    assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
+    std::fs::remove_dir_all(dir).unwrap();
 }

@@ -30,7 +30,7 @@ fn settle(ev: &mut Evaluator, gpu: &GpuContext, res: &Resources, frame: i64, s: 
         if summary.pending == 0 {
             return;
         }
-        res.wait_idle();
+        crate::common::wait_idle(res);
         std::thread::sleep(Duration::from_millis(2));
     }
     panic!("frame {frame} did not settle");

@@ -51,6 +51,14 @@ fn newer_version_is_refused() {
 }
 
 #[test]
+fn an_older_version_without_a_migration_is_not_called_too_new() {
+    let d = only("version_zero.ron", ProblemKind::VersionUnsupported);
+    assert_eq!(d.line, 2);
+    let text = d.to_string();
+    assert!(text.contains("no migration from version 0") && !text.contains("newer"), "{text}");
+}
+
+#[test]
 fn unknown_kind_names_node_and_suggests() {
     let d = only("unknown_kind.ron", ProblemKind::UnknownKind);
     assert_eq!((d.line, d.problem.node.as_deref()), (5, Some("cam")));

@@ -157,7 +157,10 @@ fn check_load(path: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
                         prop_assert!(
                             matches!(
                                 d.problem.kind,
-                                ProblemKind::Syntax | ProblemKind::Io | ProblemKind::VersionTooNew
+                                ProblemKind::Syntax
+                                    | ProblemKind::Io
+                                    | ProblemKind::VersionTooNew
+                                    | ProblemKind::VersionUnsupported
                             ),
                             "a problem of the whole file: {}",
                             shown

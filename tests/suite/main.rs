@@ -20,6 +20,7 @@ mod graph_errors;
 mod graph_props;
 mod ibl;
 mod live_link;
+mod loaders;
 mod mesh;
 mod mesh_sequence;
 mod node_contracts;

@@ -74,16 +74,46 @@ fn cylinder_tangents_match_the_analytic_derivatives() {
     }
 }
 
+/// The triangles of `m` with vertices welded by position (within 1e-5): seams of the UV
+/// layout and per-face corners become one vertex. Triangles that collapse (at a pole) are left
+/// out.
+fn welded_triangles(m: &Mesh) -> Vec<[usize; 3]> {
+    let mut first: Vec<usize> = Vec::with_capacity(m.positions.len());
+    for (i, p) in m.positions.iter().enumerate() {
+        let same = (0..i).find(|&j| (m.positions[j] - *p).length() < 1e-5).map_or(i, |j| first[j]);
+        first.push(same);
+    }
+    m.indices
+        .chunks_exact(3)
+        .map(|t| [first[t[0] as usize], first[t[1] as usize], first[t[2] as usize]])
+        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+        .collect()
+}
+
+/// How often each directed edge occurs.
+fn directed_edges(tris: &[[usize; 3]]) -> std::collections::HashMap<(usize, usize), usize> {
+    let mut edges = std::collections::HashMap::new();
+    for t in tris {
+        for k in 0..3 {
+            *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    edges
+}
+
 #[test]
 fn every_primitive_is_a_valid_closed_or_open_mesh() {
-    for m in [
-        geometry::plane(1.0, 3, 5),
-        geometry::cylinder(0.5, 1.0, 16, 4),
-        geometry::sphere(0.5, 16, 8),
-        geometry::torus(1.0, 0.25, 24, 12),
-        geometry::disc(0.5, 0.1, 24),
-        geometry::cube(1.0),
-    ] {
+    use std::f32::consts::PI;
+    // (name, mesh, closed, analytic volume, relative tolerance of the faceted volume)
+    let cases = [
+        ("plane", geometry::plane(1.0, 3, 5), false, 0.0, 0.0),
+        ("cylinder", geometry::cylinder(0.5, 1.0, 16, 4), false, 0.0, 0.0),
+        ("sphere", geometry::sphere(0.5, 16, 8), true, 4.0 / 3.0 * PI * 0.125, 0.08),
+        ("torus", geometry::torus(1.0, 0.25, 24, 12), true, 2.0 * PI * PI * 1.0 * 0.0625, 0.08),
+        ("disc", geometry::disc(0.5, 0.1, 24), true, PI * 0.25 * 0.1, 0.03),
+        ("cube", geometry::cube(1.0), true, 1.0, 1e-5),
+    ];
+    for (name, m, closed, volume, tolerance) in cases {
         let m = m.unwrap();
         assert!(m.triangle_count() > 0);
         let n = m.positions.len();
@@ -91,6 +121,41 @@ fn every_primitive_is_a_valid_closed_or_open_mesh() {
         for i in 0..n {
             assert!((m.normals[i].length() - 1.0).abs() < 1e-4);
             assert!(m.normals[i].dot(m.tangents_u[i]).abs() < 1e-4);
+        }
+        // Consistently wound: no directed edge occurs twice (two faces disagreeing on it).
+        let tris = welded_triangles(&m);
+        let edges = directed_edges(&tris);
+        assert!(edges.values().all(|&c| c == 1), "{name}: a directed edge is shared by two faces");
+        // The winding agrees with the vertex normals (front faces are the normals' side).
+        for t in m.indices.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| m.positions[i as usize]);
+            let face = (b - a).cross(c - a);
+            // Collapsed triangles at a pole have no direction of their own.
+            if face.length() < 1e-6 {
+                continue;
+            }
+            for &i in t {
+                assert!(
+                    face.normalize().dot(m.normals[i as usize]) > 0.0,
+                    "{name}: face {t:?} at {a}, {b}, {c} winds against the normal {} of vertex {i}",
+                    m.normals[i as usize]
+                );
+            }
+        }
+        if closed {
+            // Closed: every edge has exactly two faces, one on each side (its reverse occurs).
+            let open: Vec<_> = edges.keys().filter(|(a, b)| !edges.contains_key(&(*b, *a))).collect();
+            assert!(open.is_empty(), "{name}: {} edges have one face, e.g. {:?}", open.len(), open.first());
+            // Outward: the signed volume (divergence theorem) is positive and near the solid's.
+            let signed: f32 =
+                tris.iter().map(|t| m.positions[t[0]].dot(m.positions[t[1]].cross(m.positions[t[2]])) / 6.0).sum();
+            assert!(
+                signed > 0.0 && (signed - volume).abs() <= tolerance * volume,
+                "{name}: signed volume {signed}, the solid's {volume}"
+            );
+        } else {
+            let boundary = edges.keys().filter(|(a, b)| !edges.contains_key(&(*b, *a))).count();
+            assert!(boundary > 0, "{name} is an open surface");
         }
     }
 }

@@ -42,7 +42,7 @@ fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
         if s.pending == 0 {
             break;
         }
-        res.wait_idle();
+        crate::common::wait_idle(res);
     }
     ev.report("seq").unwrap().status.clone()
 }
@@ -307,4 +307,30 @@ fn batch_render_of_the_sequence_graph_moves_and_is_deterministic() {
     let last = common::read_png(&a.join("image_0002.png"));
     let changed = first.pixels().zip(last.pixels()).filter(|(p, q)| p != q).count();
     assert!(changed > 100, "the cloth should move between frames 0 and 2: {changed} pixels changed");
+}
+
+#[test]
+fn bad_sequences_are_errors_naming_the_file() {
+    let fails = |path: &Path, needles: &[&str]| {
+        let res = Resources::new(false);
+        let mut ev = sequence_graph(path, r#""fps": 30.0"#);
+        match settle(&mut ev, &res, 0) {
+            NodeStatus::Failed(m) => assert!(needles.iter().all(|n| m.contains(n)), "{needles:?} not all in: {m}"),
+            other => panic!("{}: expected an error, got {other:?}", path.display()),
+        }
+    };
+    // Two files with one frame number.
+    let dir = temp_dir("duplicates");
+    write_grid_sequence(&dir, [1, 2]);
+    std::fs::write(dir.join("frame_001.obj"), grid_obj(5.0)).unwrap();
+    fails(&dir.join("frame_*.obj"), &["frame_001.obj", "frame_0001.obj", "the same frame number 1"]);
+    // A frame without faces, and one without UVs.
+    let dir = temp_dir("no-faces");
+    write_grid_sequence(&dir, [2]);
+    std::fs::write(dir.join("frame_0001.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+    fails(&dir, &["frame_0001.obj", "no faces"]);
+    let dir = temp_dir("no-uvs");
+    write_grid_sequence(&dir, [2]);
+    std::fs::write(dir.join("frame_0001.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    fails(&dir, &["frame_0001.obj", "no texture coordinates"]);
 }

@@ -101,7 +101,7 @@ fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
             if summary.pending == 0 || resources.in_flight() == 0 || std::time::Instant::now() > deadline {
                 break;
             }
-            resources.wait_idle();
+            common::wait_idle(&resources);
         }
     }
     let target = ev.report(&id).expect("the node under test");
