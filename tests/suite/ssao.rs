@@ -357,3 +357,26 @@ fn reference_occlusion_is_deterministic() {
     let c = factor(&run(&g, 64, 48), "reference", "occlusion");
     assert_ne!(a, c, "the seed changes nothing");
 }
+
+#[test]
+fn fig5_25_graph_ssao_is_closer_to_the_ray_traced_reference_than_no_occlusion() {
+    let out = out_dir("ssao_fig5_25");
+    let (w, h) = (320, 240);
+    render_graph(&root().join("graphs/fig5_25_occlusion.ron"), &out, (0, 0), (w, h), &[], &[]).unwrap();
+    let reference = read_exr(&out.join("ray_traced_0000.exr"));
+    let mse = |name: &str| -> f64 {
+        let img = read_exr(&out.join(format!("{name}_0000.exr")));
+        let sum: f64 = img
+            .rgba
+            .chunks_exact(4)
+            .zip(reference.rgba.chunks_exact(4))
+            .map(|(a, b)| ((a[0] - b[0]) as f64).powi(2))
+            .sum();
+        sum / (w * h) as f64
+    };
+    let none: f64 = reference.rgba.chunks_exact(4).map(|b| ((1.0 - b[0]) as f64).powi(2)).sum::<f64>() / (w * h) as f64;
+    let (sphere, horizon) = (mse("local"), mse("local_horizon"));
+    eprintln!("MSE against the reference: no occlusion {none:.5}, sphere {sphere:.5}, horizon {horizon:.5}");
+    assert!(none > 1e-3, "the reference shows no occlusion");
+    assert!(sphere < none && horizon < none, "SSAO is farther from the reference than no occlusion at all");
+}
