@@ -18,7 +18,9 @@ pub mod mesh_sequence;
 pub mod output;
 pub mod pems;
 pub mod placements;
+pub mod reference_occlusion;
 pub mod scene;
+pub mod ssao;
 pub mod tonemap;
 
 use crate::node::prelude::*;
@@ -53,6 +55,8 @@ pub static ALL: &[&NodeSpec] = &[
     &median_cut::MEDIAN_CUT,
     &pems::PEMS,
     &ibl_shading::IBL_SHADING,
+    &ssao::SSAO,
+    &reference_occlusion::REFERENCE_OCCLUSION,
     &tonemap::TONEMAP,
     &output::IMAGE_WRITE,
     &output::PREVIEW,

@@ -548,3 +548,88 @@ pub fn pem_memory_markdown() -> String {
     }
     out
 }
+
+/// One row of `werkstatt bench ssao`.
+#[derive(Debug, serde::Serialize)]
+pub struct SsaoRow {
+    pub mode: &'static str,
+    pub half_resolution: bool,
+    pub samples: u32,
+    /// The Ssao passes alone (estimate, 4x4 filter, upsampling), median ms per frame.
+    pub ms_per_frame: f64,
+}
+
+/// The spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron (five spheres of radius
+/// 0.15-0.3 on a 4 x 4 plane, camera 35 degrees down): its world draw items and camera.
+pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::scene::Camera)> {
+    use std::sync::Arc;
+
+    use glam::{Mat4, Vec3};
+
+    use crate::nodes::geometry;
+    use crate::scene::{Camera, DrawItem, Material};
+
+    let material = Arc::new(Material::default());
+    let item = |mesh: &Arc<crate::mesh::Mesh>, model: Mat4| DrawItem {
+        mesh: mesh.clone(),
+        material: material.clone(),
+        model,
+        detail: false,
+        attached: None,
+    };
+    let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
+    let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
+    let mut items = vec![item(&floor, Mat4::IDENTITY)];
+    for (x, z, r) in [(-0.9, 0.3, 0.3), (-0.35, -0.25, 0.2), (0.15, 0.15, 0.25), (0.62, -0.2, 0.15), (0.7, 0.45, 0.22)]
+    {
+        items.push(item(
+            &ball,
+            Mat4::from_scale_rotation_translation(Vec3::splat(r), Default::default(), Vec3::new(x, r, z)),
+        ));
+    }
+    let (yaw, pitch) = (20f32.to_radians(), 35f32.to_radians());
+    let target = Vec3::new(0.0, 0.1, 0.05);
+    let eye = target + Vec3::new(yaw.sin() * pitch.cos(), pitch.sin(), yaw.cos() * pitch.cos()) * 3.2;
+    Ok((items, Camera { eye, target, up: Vec3::Y, fov_y_degrees: 40.0, near: 0.05, far: 100.0 }))
+}
+
+/// SSAO cost per frame on the spheres scene: each mode at full and half resolution, the
+/// G-buffer drawn once, then the median of `frames` runs of the Ssao passes (each waited for).
+pub fn ssao(
+    gpu: &crate::gpu::GpuContext,
+    samples: u32,
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&SsaoRow),
+) -> anyhow::Result<Vec<SsaoRow>> {
+    use crate::draw::{SceneDrawer, render_gbuffer};
+    use crate::nodes::ssao::{SsaoMode, SsaoRunner, SsaoSettings};
+
+    let (items, camera) = occlusion_scene()?;
+    let mut drawer = SceneDrawer::default();
+    let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
+    gpu.submit_checked()?;
+    gpu.wait_idle();
+    let mut runner = SsaoRunner::default();
+    let mut rows = Vec::new();
+    for (mode, name) in [(SsaoMode::Sphere, "sphere"), (SsaoMode::Horizon, "horizon")] {
+        for half_resolution in [false, true] {
+            let settings = SsaoSettings { mode, radius: 0.3, samples, half_resolution, blur: true, strength: 1.0 };
+            let mut once = || -> anyhow::Result<f64> {
+                let t = Instant::now();
+                let out = runner.occlusion(gpu, &g, &settings)?;
+                gpu.submit_checked()?;
+                gpu.wait_idle();
+                drop(out);
+                Ok(t.elapsed().as_secs_f64() * 1e3)
+            };
+            once()?;
+            let mut samples_ms = (0..frames.max(1)).map(|_| once()).collect::<anyhow::Result<Vec<f64>>>()?;
+            samples_ms.sort_by(f64::total_cmp);
+            let row = SsaoRow { mode: name, half_resolution, samples, ms_per_frame: samples_ms[samples_ms.len() / 2] };
+            report(&row);
+            rows.push(row);
+        }
+    }
+    Ok(rows)
+}

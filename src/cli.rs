@@ -121,6 +121,23 @@ enum BenchWhat {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
+    /// ms per frame of the Ssao passes for each mode at full and half resolution.
+    Ssao {
+        /// Depth taps per pixel.
+        #[arg(long, default_value_t = 16)]
+        samples: u32,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 10)]
+        frames: usize,
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
     /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
     Attachments {
@@ -336,6 +353,25 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let rows = crate::bench::ibl(&gpu, &regions, frames, size, |r| {
                 let n = if r.regions == 0 { "full map".to_string() } else { r.regions.to_string() };
                 println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
+            })?;
+            if let Some(path) = json {
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Ssao { samples, frames, size, json, backend } } => {
+            let size = parse_size(&size)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            println!(
+                "adapter: {}, {}x{}, {samples} samples, median of {frames} frame(s)",
+                gpu.adapter_name(),
+                size.0,
+                size.1
+            );
+            println!("| mode | resolution | ms/frame (Ssao passes) |\n|---|---|---:|");
+            let rows = crate::bench::ssao(&gpu, samples, frames, size, |r| {
+                let res = if r.half_resolution { "half" } else { "full" };
+                println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
             })?;
             if let Some(path) = json {
                 crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;

@@ -28,6 +28,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("pem_filter.wgsl", include_str!("../shaders/pem_filter.wgsl")),
     ("cube_preview.wgsl", include_str!("../shaders/cube_preview.wgsl")),
     ("ibl_shading.wgsl", include_str!("../shaders/ibl_shading.wgsl")),
+    ("ssao.wgsl", include_str!("../shaders/ssao.wgsl")),
 ];
 
 pub fn names() -> impl Iterator<Item = &'static str> {

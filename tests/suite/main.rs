@@ -27,6 +27,7 @@ mod node_contracts;
 mod render;
 mod roundtrip;
 mod scene_drawer;
+mod ssao;
 mod warping;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be
