@@ -2,15 +2,15 @@
 
 use std::sync::Arc;
 
-use crate::ibl::cube::EquirectImage;
-use crate::ibl::gpu::{CubePasses, EnvMap, cube_target, read_cube_level0};
+use crate::ibl::cube::{CubeImage, EquirectImage, cube_from_equirect};
+use crate::ibl::gpu::{CubePasses, EnvMap, cube_target};
 use crate::ibl::pem::Kernel;
 use crate::node::prelude::*;
 
 pub static ENVIRONMENT_MAP: NodeSpec = NodeSpec {
     kind: "EnvironmentMap",
     category: Category::Lighting,
-    doc: "Loads an equirectangular light probe (Radiance .hdr or OpenEXR .exr, on a worker thread) and resamples it on the GPU into a cube map with a full mip chain; rotation about +Y and an intensity scale. The map's centre column looks down -Z.",
+    doc: "Loads an equirectangular light probe (Radiance .hdr or OpenEXR .exr, on a worker thread), resamples it into a cube map (4x4 bilinear lookups per texel) and builds its full mip chain on the GPU; rotation about +Y and an intensity scale. The map's centre column looks down -Z.",
     inputs: &[],
     outputs: &[
         PortSpec::output(
@@ -63,13 +63,22 @@ impl Node for EnvironmentMapNode {
         }
         let path = cx.path("path");
         let probe = cx.load(&path, EquirectImage::load)?;
-        let cube = cube_target(gpu, "environment map", size as u32);
-        self.passes.resample_probe(gpu, &probe, &cube, cx.f32("rotation"), cx.f32("intensity"))?;
+        // Resampled on the CPU (src/ibl/cube.rs): exact, the same bytes on every backend, and the
+        // median cut needs the texels here anyway; the mip chain is filtered on the GPU.
+        let texels = cube_from_equirect(&probe, size as usize, cx.f32("rotation"), cx.f32("intensity"));
+        // What the GPU stores (half floats), so the median cut and the references see it too.
+        let texels = CubeImage { size: texels.size, texels: texels.texels.iter().map(|t| round_half(*t)).collect() };
+        let cube = cube_target(gpu, "environment map", size as u32)?;
+        self.passes.upload_level0(gpu, &texels, &cube);
         self.passes.filter_chain(gpu, &cube, Kernel::None)?;
-        let texels = read_cube_level0(gpu, &cube)?;
         let preview = self.passes.preview(gpu, &cube, 0.0, 1.0)?;
         cx.set("preview", Arc::new(preview.share()));
         cx.set("environment", Arc::new(EnvMap { cube, texels: Arc::new(texels), preview, source: path }));
         Ok(())
     }
+}
+
+/// `v` rounded to half precision per channel (clamped to the half range).
+fn round_half(v: glam::Vec4) -> glam::Vec4 {
+    glam::Vec4::from_array(v.to_array().map(|c| half::f16::from_f32(c.min(65504.0)).to_f32()))
 }

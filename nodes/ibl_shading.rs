@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
+use crate::gpu::{Bind, FullscreenPass, GpuImage};
 use crate::ibl::gpu::{PemSet, cube_target};
 use crate::ibl::pem::TABLE;
 use crate::node::prelude::*;
@@ -89,7 +89,10 @@ impl Node for IblShadingNode {
         let mode: IblMode = cx.choice("mode");
         let background: Background = cx.choice("background");
         let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("ibl_shading.wgsl"));
-        let empty = self.empty_cube.get_or_insert_with(|| cube_target(gpu, "empty cube", 1));
+        if self.empty_cube.is_none() {
+            self.empty_cube = Some(cube_target(gpu, "empty cube", 1)?);
+        }
+        let empty = self.empty_cube.as_ref().expect("made above");
 
         let mut levels = [0.0f32; 36];
         levels[..TABLE].copy_from_slice(&pems.calibration.levels);
@@ -106,7 +109,12 @@ impl Node for IblShadingNode {
                 inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
                 size: [w as f32, h as f32, batch.len() as f32, if i == 0 { 1.0 } else { 0.0 }],
                 background: [bg.x, bg.y, bg.z, if background == Background::Environment { 1.0 } else { 0.0 }],
-                misc: [cx.f32("background_level").min(top), top, if mode == IblMode::Full { 1.0 } else { 0.0 }, 0.0],
+                misc: [
+                    cx.f32("background_level").min(top),
+                    top,
+                    if mode == IblMode::Full { 1.0 } else { 0.0 },
+                    pems.full.width as f32,
+                ],
                 levels,
             };
             let out = GpuImage::target(gpu, "ibl shading", w, h, gpu.formats().hdr);
@@ -116,7 +124,6 @@ impl Node for IblShadingNode {
                 Bind::Texture(&g.normal),
                 Bind::Texture(&g.depth),
                 Bind::Texture(previous.as_ref().unwrap_or(&g.color)),
-                Bind::Sampler(SamplerKind::LinearClamp),
                 Bind::Texture(&pems.full),
             ];
             binds.extend((0..PEMS_PER_PASS).map(|k| Bind::Texture(batch.get(k).unwrap_or(empty))));

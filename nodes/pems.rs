@@ -76,7 +76,7 @@ impl Node for PemsNode {
             4,
             bytemuck::cast_slice(&regions.ids),
         );
-        let full = cube_target(gpu, "filtered environment", size);
+        let full = cube_target(gpu, "filtered environment", size)?;
         gpu.record(|enc| {
             enc.copy_texture_to_texture(
                 env.cube.texture.as_image_copy(),
@@ -87,7 +87,7 @@ impl Node for PemsNode {
         self.passes.filter_chain(gpu, &full, kernel)?;
         let mut pems = Vec::with_capacity(regions.lights.len());
         for region in 0..regions.lights.len() {
-            let pem = cube_target(gpu, "PEM", size);
+            let pem = cube_target(gpu, "PEM", size)?;
             self.passes.mask(gpu, &env.cube, &ids, region as u32, &pem)?;
             self.passes.filter_chain(gpu, &pem, kernel)?;
             pems.push(pem);

@@ -37,22 +37,26 @@ fn texel_center(size: u32, i: u32) -> f32 {
     return 2.0 * (f32(i) + 0.5) / f32(size) - 1.0;
 }
 
-// Texel (x, y) of `face` in one mip of a cube seen as a 2D array; a coordinate one past the
-// edge continues onto the neighbouring face (CubeImage::tap).
-fn cube_tap(tex: texture_2d_array<f32>, size: u32, face: u32, x: i32, y: i32) -> vec4<f32> {
+// Cube maps are stored as 2D arrays of six layers (faces in the order above) with mips:
+// every pass reads them with textureLoad, so no backend has to reinterpret a cube texture
+// as an array (OpenGL cannot), and CPU twins reproduce the lookups exactly.
+
+// Texel (x, y) of `face` at mip `level` (face size `size`); a coordinate one past the edge
+// continues onto the neighbouring face (CubeImage::tap).
+fn cube_tap(tex: texture_2d_array<f32>, size: u32, level: i32, face: u32, x: i32, y: i32) -> vec4<f32> {
     let n = i32(size);
     if x >= 0 && x < n && y >= 0 && y < n {
-        return textureLoad(tex, vec2<i32>(x, y), i32(face), 0);
+        return textureLoad(tex, vec2<i32>(x, y), i32(face), level);
     }
     let centre = (2.0 * (vec2<f32>(f32(x), f32(y)) + vec2<f32>(0.5))) / f32(size) - vec2<f32>(1.0);
     let f = dir_to_face(face_dir(face, centre.x, centre.y));
     let t = clamp(vec2<i32>(floor((f.uv + vec2<f32>(1.0)) * 0.5 * f32(size))), vec2<i32>(0), vec2<i32>(n - 1));
-    return textureLoad(tex, t, i32(f.face), 0);
+    return textureLoad(tex, t, i32(f.face), level);
 }
 
-// Bilinear lookup along `d`, seamless like the hardware's cube sampling: taps off the face
+// Seamless bilinear lookup along `d` at mip `level` of face size `size`: taps off the face
 // come from the neighbouring face (CubeImage::sample).
-fn cube_bilinear(tex: texture_2d_array<f32>, size: u32, d: vec3<f32>) -> vec4<f32> {
+fn cube_bilinear_level(tex: texture_2d_array<f32>, size: u32, level: i32, d: vec3<f32>) -> vec4<f32> {
     let f = dir_to_face(d);
     let s = f32(size);
     let p = (f.uv + vec2<f32>(1.0)) * 0.5 * s - vec2<f32>(0.5);
@@ -60,9 +64,26 @@ fn cube_bilinear(tex: texture_2d_array<f32>, size: u32, d: vec3<f32>) -> vec4<f3
     let t = p - fl;
     let x0 = i32(fl.x);
     let y0 = i32(fl.y);
-    let top = mix(cube_tap(tex, size, f.face, x0, y0), cube_tap(tex, size, f.face, x0 + 1, y0), t.x);
-    let bottom = mix(cube_tap(tex, size, f.face, x0, y0 + 1), cube_tap(tex, size, f.face, x0 + 1, y0 + 1), t.x);
+    let top = mix(cube_tap(tex, size, level, f.face, x0, y0), cube_tap(tex, size, level, f.face, x0 + 1, y0), t.x);
+    let bottom =
+        mix(cube_tap(tex, size, level, f.face, x0, y0 + 1), cube_tap(tex, size, level, f.face, x0 + 1, y0 + 1), t.x);
     return mix(top, bottom, t.y);
+}
+
+// Level 0 of a view (the one-mip views the filters read).
+fn cube_bilinear(tex: texture_2d_array<f32>, size: u32, d: vec3<f32>) -> vec4<f32> {
+    return cube_bilinear_level(tex, size, 0, d);
+}
+
+// Trilinear lookup at fractional `lod` in a chain whose level 0 is `size` wide and whose
+// last level is `top` (pem::sample_chain).
+fn cube_trilinear(tex: texture_2d_array<f32>, size: u32, top: f32, d: vec3<f32>, lod: f32) -> vec4<f32> {
+    let l = clamp(lod, 0.0, top);
+    let l0 = u32(floor(l));
+    let l1 = min(l0 + 1u, u32(top));
+    let a = cube_bilinear_level(tex, max(size >> l0, 1u), i32(l0), d);
+    let b = cube_bilinear_level(tex, max(size >> l1, 1u), i32(l1), d);
+    return mix(a, b, l - f32(l0));
 }
 
 const TAU: f32 = 6.28318530718;

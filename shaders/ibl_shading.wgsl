@@ -12,7 +12,7 @@ struct Ibl {
     // rgb: background colour; w: background mode (0 colour, 1 the environment map).
     background: vec4<f32>,
     // x: background mip level, y: top mip level, z: 1 to shade with the full filtered map
-    // (one lookup, no partition), w: unused.
+    // (one lookup, no partition), w: face size of level 0.
     misc: vec4<f32>,
     // Mip level for s = 2^(i * 10 / 32), i = 0..32 (33 entries).
     levels: array<vec4<f32>, 9>,
@@ -23,18 +23,23 @@ struct Ibl {
 @group(0) @binding(2) var g_normal: texture_2d<f32>;
 @group(0) @binding(3) var g_depth: texture_2d<f32>;
 @group(0) @binding(4) var previous: texture_2d<f32>;
-@group(0) @binding(5) var samp: sampler;
-@group(0) @binding(6) var env: texture_cube<f32>;
-@group(0) @binding(7) var pem0: texture_cube<f32>;
-@group(0) @binding(8) var pem1: texture_cube<f32>;
-@group(0) @binding(9) var pem2: texture_cube<f32>;
-@group(0) @binding(10) var pem3: texture_cube<f32>;
-@group(0) @binding(11) var pem4: texture_cube<f32>;
-@group(0) @binding(12) var pem5: texture_cube<f32>;
-@group(0) @binding(13) var pem6: texture_cube<f32>;
-@group(0) @binding(14) var pem7: texture_cube<f32>;
+// Cube maps as six-layer arrays with mips (shaders/cube.wgsl).
+@group(0) @binding(5) var env: texture_2d_array<f32>;
+@group(0) @binding(6) var pem0: texture_2d_array<f32>;
+@group(0) @binding(7) var pem1: texture_2d_array<f32>;
+@group(0) @binding(8) var pem2: texture_2d_array<f32>;
+@group(0) @binding(9) var pem3: texture_2d_array<f32>;
+@group(0) @binding(10) var pem4: texture_2d_array<f32>;
+@group(0) @binding(11) var pem5: texture_2d_array<f32>;
+@group(0) @binding(12) var pem6: texture_2d_array<f32>;
+@group(0) @binding(13) var pem7: texture_2d_array<f32>;
 
 // #include "fullscreen.wgsl"
+// #include "cube.wgsl"
+
+fn lookup(tex: texture_2d_array<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
+    return cube_trilinear(tex, u32(ibl.misc.w), ibl.misc.y, d, lod).rgb;
+}
 
 fn table(i: u32) -> f32 {
     return ibl.levels[i / 4u][i % 4u];
@@ -72,7 +77,7 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             return vec4<f32>(prior, 1.0);
         }
         if ibl.background.w > 0.5 {
-            return vec4<f32>(textureSampleLevel(env, samp, ray, ibl.misc.x).rgb, 1.0);
+            return vec4<f32>(lookup(env, ray, ibl.misc.x), 1.0);
         }
         return vec4<f32>(ibl.background.rgb, 1.0);
     }
@@ -86,18 +91,18 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 
     var sum = vec3<f32>(0.0);
     if ibl.misc.z > 0.5 {
-        sum = textureSampleLevel(env, samp, sample_dir, level).rgb;
+        sum = lookup(env, sample_dir, level);
     } else {
         let count = u32(ibl.size.z);
         // Eq. 3.43 with VIS_i = 1.
-        if count > 0u { sum += textureSampleLevel(pem0, samp, sample_dir, level).rgb; }
-        if count > 1u { sum += textureSampleLevel(pem1, samp, sample_dir, level).rgb; }
-        if count > 2u { sum += textureSampleLevel(pem2, samp, sample_dir, level).rgb; }
-        if count > 3u { sum += textureSampleLevel(pem3, samp, sample_dir, level).rgb; }
-        if count > 4u { sum += textureSampleLevel(pem4, samp, sample_dir, level).rgb; }
-        if count > 5u { sum += textureSampleLevel(pem5, samp, sample_dir, level).rgb; }
-        if count > 6u { sum += textureSampleLevel(pem6, samp, sample_dir, level).rgb; }
-        if count > 7u { sum += textureSampleLevel(pem7, samp, sample_dir, level).rgb; }
+        if count > 0u { sum += lookup(pem0, sample_dir, level); }
+        if count > 1u { sum += lookup(pem1, sample_dir, level); }
+        if count > 2u { sum += lookup(pem2, sample_dir, level); }
+        if count > 3u { sum += lookup(pem3, sample_dir, level); }
+        if count > 4u { sum += lookup(pem4, sample_dir, level); }
+        if count > 5u { sum += lookup(pem5, sample_dir, level); }
+        if count > 6u { sum += lookup(pem6, sample_dir, level); }
+        if count > 7u { sum += lookup(pem7, sample_dir, level); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }

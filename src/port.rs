@@ -217,7 +217,7 @@ mod tests {
     #[test]
     fn viewable_types_are_those_with_textures() {
         let viewable: Vec<_> = PortType::ALL.iter().filter(|t| t.viewable()).map(|t| t.name()).collect();
-        assert_eq!(viewable, ["Texture", "GBuffer", "MatrixTexture"]);
+        assert_eq!(viewable, ["Texture", "GBuffer", "MatrixTexture", "Environment", "Lights", "Pems"]);
     }
 
     #[test]

@@ -24,7 +24,6 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),
     ("attach_resolve.wgsl", include_str!("../shaders/attach_resolve.wgsl")),
     ("cube.wgsl", include_str!("../shaders/cube.wgsl")),
-    ("equirect_to_cube.wgsl", include_str!("../shaders/equirect_to_cube.wgsl")),
     ("pem_filter.wgsl", include_str!("../shaders/pem_filter.wgsl")),
     ("cube_preview.wgsl", include_str!("../shaders/cube_preview.wgsl")),
     ("ibl_shading.wgsl", include_str!("../shaders/ibl_shading.wgsl")),

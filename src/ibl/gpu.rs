@@ -4,10 +4,10 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use super::cube::{CubeImage, EquirectImage};
+use super::cube::CubeImage;
 use super::median_cut::{RegionLight, Regions};
 use super::pem::{Calibration, Kernel};
-use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, SamplerKind, TextureDesc};
+use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
 
 /// A light probe as a cube map (`EnvironmentMap`'s output).
 pub struct EnvMap {
@@ -49,24 +49,21 @@ pub struct PemSet {
     pub bytes: u64,
 }
 
-/// A cube map texture of `size` for rendering into faces and levels and sampling.
-pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> GpuImage {
+/// A cube map of face size `size` with its full mip chain, stored as a 2D array of six layers
+/// (shaders/cube.wgsl reads it with `textureLoad`: OpenGL cannot view a cube texture as an
+/// array, and the CPU twins then match exactly), for rendering into faces and levels.
+pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> anyhow::Result<GpuImage> {
+    anyhow::ensure!(gpu.info.backend != wgpu::Backend::Gl, "{GL_UNSUPPORTED}");
     let usage =
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-    GpuImage::create(gpu, label, TextureDesc::cube(size, gpu.formats().hdr, usage).with_full_mips())
+    Ok(GpuImage::create(gpu, label, TextureDesc::array(size, size, 6, gpu.formats().hdr, usage).with_full_mips()))
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct ProbeParams {
-    face: u32,
-    size: u32,
-    probe_width: u32,
-    probe_height: u32,
-    rotation: [f32; 2],
-    intensity: f32,
-    pad: f32,
-}
+/// Why the IBL nodes refuse the GL backend: there, the six-layer mip-mapped arrays they keep
+/// cube maps in read back and sample as zero (uploaded, copied or rendered alike), so every
+/// IBL image would be black. Not yet understood; Vulkan (lavapipe or a GPU) is exact.
+pub const GL_UNSUPPORTED: &str = "image-based lighting does not run on the GL backend yet (its cube-map arrays read \
+     back as zero there); render with Vulkan (WERKSTATT_BACKEND=vulkan: lavapipe or a GPU)";
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -96,11 +93,13 @@ struct PreviewParams {
     size: [f32; 2],
     level: f32,
     scale: f32,
+    face_size: u32,
+    top: f32,
+    pad: [f32; 2],
 }
 
-/// The passes that build cube maps: probe resampling, masking, the mip filter, previews.
+/// The passes that build cube maps: level 0 uploads, masking, the mip filters, previews.
 pub struct CubePasses {
-    probe: FullscreenPass,
     filter: FullscreenPass,
     mask: FullscreenPass,
     phong: FullscreenPass,
@@ -110,7 +109,6 @@ pub struct CubePasses {
 impl Default for CubePasses {
     fn default() -> Self {
         CubePasses {
-            probe: FullscreenPass::new("equirect_to_cube.wgsl"),
             filter: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
             mask: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
             phong: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_phong"),
@@ -120,44 +118,30 @@ impl Default for CubePasses {
 }
 
 impl CubePasses {
-    /// Resamples `probe` into level 0 of `cube` (shaders/equirect_to_cube.wgsl).
-    pub fn resample_probe(
-        &mut self,
-        gpu: &GpuContext,
-        probe: &EquirectImage,
-        cube: &GpuImage,
-        rotation_deg: f32,
-        intensity: f32,
-    ) -> anyhow::Result<()> {
-        let texels: Vec<[f32; 4]> = probe.rgb.iter().map(|c| [c.x, c.y, c.z, 1.0]).collect();
-        let source = GpuImage::upload(
-            gpu,
-            "light probe",
-            probe.width as u32,
-            probe.height as u32,
-            wgpu::TextureFormat::Rgba32Float,
-            16,
-            bytemuck::cast_slice(&texels),
-        );
-        let angle = (-rotation_deg).to_radians();
-        for face in 0..6 {
-            let params = ProbeParams {
-                face,
-                size: cube.width,
-                probe_width: probe.width as u32,
-                probe_height: probe.height as u32,
-                rotation: [angle.cos(), angle.sin()],
-                intensity,
-                pad: 0.0,
-            };
-            self.probe.draw(
-                gpu,
-                &[Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Texture(&source)],
-                &[&cube.layer_view(face, 0)],
-                &[cube.format],
-            )?;
+    /// Writes `texels` (a CPU cube map, e.g. the resampled probe) into level 0 of `cube`.
+    pub fn upload_level0(&self, gpu: &GpuContext, texels: &CubeImage, cube: &GpuImage) {
+        let size = texels.size as u32;
+        let data: Vec<u16> = texels
+            .texels
+            .iter()
+            .flat_map(|t| t.to_array())
+            .map(|v| half::f16::from_f32(v.min(65504.0)).to_bits())
+            .collect();
+        // One layer per write: the GL backend mishandles multi-layer writes.
+        let face_bytes = (8 * size * size) as usize;
+        for (face, bytes) in bytemuck::cast_slice::<u16, u8>(&data).chunks_exact(face_bytes).enumerate() {
+            gpu.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &cube.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y: 0, z: face as u32 },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytes,
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(8 * size), rows_per_image: Some(size) },
+                wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+            );
         }
-        Ok(())
     }
 
     /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl).
@@ -283,26 +267,15 @@ impl CubePasses {
     pub fn preview(&mut self, gpu: &GpuContext, cube: &GpuImage, level: f32, scale: f32) -> anyhow::Result<GpuImage> {
         let (w, h) = (2 * cube.width.max(16), cube.width.max(16));
         let out = GpuImage::create(gpu, "cube preview", TextureDesc::target(w, h, gpu.formats().hdr));
-        let params = PreviewParams { size: [w as f32, h as f32], level, scale };
+        let top = (cube.desc.mips - 1) as f32;
+        let params =
+            PreviewParams { size: [w as f32, h as f32], level, scale, face_size: cube.width, top, pad: [0.0; 2] };
         self.preview.draw(
             gpu,
-            &[Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Texture(cube), Bind::Sampler(SamplerKind::LinearClamp)],
+            &[Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Texture(cube)],
             &[&out.view],
             &[out.format],
         )?;
         Ok(out)
     }
-}
-
-/// Level 0 of a cube map read back to the CPU.
-pub fn read_cube_level0(gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<CubeImage> {
-    let size = cube.width as usize;
-    let mut out = CubeImage::new(size);
-    for face in 0..6 {
-        let px = crate::gpu::readback::read_back_layer(gpu, cube, face as u32, 0)?;
-        for (i, t) in px.rgba.chunks_exact(4).enumerate() {
-            out.texels[face * size * size + i] = glam::Vec4::new(t[0], t[1], t[2], t[3]);
-        }
-    }
-    Ok(out)
 }

@@ -159,10 +159,10 @@ pub fn filter_chain(level0: &CubeImage, kernel: Kernel) -> Vec<CubeImage> {
 
 /// Lobe volume of a Phong level, in texels of that level: the lobe spans several texels so
 /// that bilinear lookups reconstruct its shape (a plain mip chain's lobe spans about two).
-pub const PHONG_TEXELS_PER_LOBE: f32 = 58.0;
+pub const PHONG_TEXELS_PER_LOBE: f32 = 54.0;
 
 /// Phong levels this small (face size) sum over the whole sphere; larger ones over a window.
-pub const PHONG_FULL_SPHERE_SIZE: usize = 8;
+pub const PHONG_FULL_SPHERE_SIZE: usize = 16;
 
 /// The Phong exponent stored at mip level `level` of a chain whose level 0 is `size` wide:
 /// the lobe whose volume 2 pi/(s+1) is [`PHONG_TEXELS_PER_LOBE`] texels of that level (a
@@ -177,18 +177,18 @@ pub fn phong_exponent(size: usize, level: usize) -> f32 {
 }
 
 /// Half-width in texels of the window a Phong level of face size `n` and exponent `s` sums:
-/// 1.5 tan(theta) / (2/n) + 1, theta where cos^s falls to 1e-3 (the 1.5 covers the gnomonic
-/// plane's compression away from the face centre).
+/// 1.25 tan(theta) / (2/n) + 1, theta where cos^s falls to 1% of its peak (the 1.25 covers
+/// the gnomonic plane's compression away from the face centre).
 pub fn phong_window(n: usize, s: f32) -> i32 {
-    let theta = ((1e-3f32).ln() / s).exp().clamp(-1.0, 1.0).acos();
-    ((1.5 * theta.tan() * n as f32 / 2.0).ceil() as i32 + 1).min(64)
+    let theta = ((0.01f32).ln() / s).exp().clamp(-1.0, 1.0).acos();
+    ((1.25 * theta.tan() * n as f32 / 2.0).ceil() as i32 + 1).min(64)
 }
 
-/// The plain-chain level a Phong level reads: two levels finer (four times the resolution),
-/// so the lobe is integrated from texels well inside it, and an impulse is not moved to a
-/// coarse texel's centre first.
+/// The plain-chain level a Phong level reads: its own. With [`PHONG_TEXELS_PER_LOBE`] texels
+/// per lobe volume the lobe's sigma spans about three of them, so the 2x2 box pre-filter of
+/// the plain chain widens it by under 2%, and finer sources would cost 4x per level.
 pub fn phong_source(level: usize) -> usize {
-    level.saturating_sub(2)
+    level
 }
 
 /// The solid angle of a point sample at face coordinates (u, v) spaced `h` apart on a face

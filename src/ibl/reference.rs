@@ -102,8 +102,8 @@ mod tests {
             let axis = Vec3::new(0.2, 0.3, 0.9);
             let exact = embedded_lobe_quadrature(&map, axis, s);
             let err = |n| (embedded_lobe(&map, axis, s, n) - exact).abs().max_element() / exact.max_element();
-            assert!(err(16384) < 0.01, "s {s}: {} off with 16384 samples", err(16384));
-            assert!(err(16384) < err(64).max(1e-4), "s {s}: no convergence");
+            assert!(err(256) < 0.05, "s {s}: {} off with 256 samples", err(256));
+            assert!(err(16384) < 0.005, "s {s}: {} off with 16384 samples", err(16384));
         }
     }
 
