@@ -57,8 +57,16 @@ fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options
 }
 
 /// Runs frames until the canvas has laid out and the evaluation has settled.
+/// Steps the UI at least six frames and until no file is loading (the default graph's light
+/// probe loads on a worker thread), with a 60 s deadline.
 fn settle(h: &mut Harness<'_, EditorApp>) {
     for _ in 0..6 {
+        h.step();
+    }
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while h.state().live.last_summary.pending > 0 {
+        assert!(std::time::Instant::now() < deadline, "the editor's graph still waits for files after 60 s");
+        std::thread::sleep(std::time::Duration::from_millis(5));
         h.step();
     }
 }
@@ -103,9 +111,14 @@ fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
     h.step();
 }
 
+/// graphs/default.ron copied into `dir`, its light probe path made absolute (it is relative
+/// to graphs/).
 fn copy_default(dir: &Path) -> PathBuf {
     let path = dir.join("default.ron");
-    std::fs::copy(root().join("graphs/default.ron"), &path).unwrap();
+    let text = std::fs::read_to_string(root().join("graphs/default.ron")).unwrap();
+    let assets = root().join("assets").display().to_string();
+    assert!(text.contains("\"../assets/"), "default.ron no longer names ../assets/");
+    std::fs::write(&path, text.replace("\"../assets/", &format!("\"{assets}/"))).unwrap();
     path
 }
 
