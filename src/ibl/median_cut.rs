@@ -27,11 +27,7 @@ use anyhow::bail;
 use glam::Vec3;
 
 use super::cube::{CubeImage, texel_dir, texel_solid_angle};
-
-/// Rec. 709 luminance of linear RGB.
-pub fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
+use crate::color::luminance;
 
 /// One region's light.
 #[derive(Clone, Copy, Debug, PartialEq)]

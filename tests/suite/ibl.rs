@@ -184,7 +184,10 @@ fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_le
             if mip == 0 {
                 // Every texel is in exactly one region: the others contribute exact zeros.
                 assert_eq!(sum.truncate(), env.texels.texels[i].truncate(), "texel {i} at level 0");
-                assert_eq!(parts.iter().filter(|p| p.texels[i].truncate() != Vec3::ZERO).count() <= 1, true);
+                assert!(
+                    parts.iter().filter(|p| p.texels[i].truncate() != Vec3::ZERO).count() <= 1,
+                    "texel {i} is in two regions"
+                );
             } else {
                 let want = full.texels[i].truncate();
                 let tol = want.max_element() * (mip as f32 + 1.0) * 2f32.powi(-10) + 1e-6;
