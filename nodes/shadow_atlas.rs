@@ -21,8 +21,10 @@
 //!   tan(theta) d_ref, so sigma = blur_scale tan(theta) d_ref / texel (texel = 2R / inner
 //!   tile width, world units), clamped so that 3 sigma <= guard. The blur's taps are clamped
 //!   to the tile (guard included): it never reads another tile.
-//! - **Guard**: `guard` = -1 derives it: ceil(3 sigma_max) for the widest light's unclamped
-//!   sigma at texel 2R / tile_size, at most tile_size / 4.
+//! - **Guard**: `guard` = -1 derives it: ceil(3 sigma_max), sigma_max the widest unclamped
+//!   sigma (at texel 2R / tile_size) among the lights carrying at least the mean energy
+//!   (regions over dark parts of a map are huge but nearly black: they take the clamp), at
+//!   most tile_size / 8. An explicit guard is at most tile_size / 4.
 
 use std::sync::Arc;
 
@@ -67,7 +69,7 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
         ParamSpec::new(
             "guard",
             ParamKind::Int { default: -1, min: -1, max: 256 },
-            "Guard band per tile side in texels; -1 derives it from the widest blur (ceil 3 sigma, at most tile/4).",
+            "Guard band per tile side in texels; -1 derives it: ceil(3 sigma) of the widest blur among lights with at least the mean energy, at most tile/8.",
         ),
         ParamSpec::new(
             "coarse_only",
@@ -309,12 +311,21 @@ impl AtlasBuilder {
         anyhow::ensure!((1..=MAX_LIGHTS).contains(&n), "the atlas holds 1 to {MAX_LIGHTS} lights, not {n}");
         let t = s.tile_size.max(16);
         let (center, radius) = bounding_sphere(items);
+        // The guard fits the widest blur among the lights that carry at least the mean
+        // energy: median-cut regions over dark parts of a map are huge (and their sigmas with
+        // them) but carry little light; they get the guard's clamp.
+        let mean_energy = lights.lights.iter().map(|l| l.energy).sum::<f32>() / n as f32;
         let max_sigma = |texel: f32| {
-            lights.lights.iter().map(|l| blur_sigma(l.solid_angle, radius, texel, s.blur_scale)).fold(0.0, f32::max)
+            lights
+                .lights
+                .iter()
+                .filter(|l| l.energy >= mean_energy)
+                .map(|l| blur_sigma(l.solid_angle, radius, texel, s.blur_scale))
+                .fold(0.0, f32::max)
         };
         let guard = match s.guard {
             Some(g) => g.min(t / 4),
-            None => ((3.0 * max_sigma(2.0 * radius / t as f32)).ceil() as u32).min(t / 4),
+            None => ((3.0 * max_sigma(2.0 * radius / t as f32)).ceil() as u32).min(t / 8),
         };
         let texel_world = 2.0 * radius / (t - 2 * guard) as f32;
         let (columns, rows) = grid(n);

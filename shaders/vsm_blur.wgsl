@@ -6,7 +6,7 @@
 
 struct Blur {
     // x: tile size (texels), y: columns of tiles, z: tiles in this texture, w: 0 horizontal, 1 vertical.
-    layout: vec4<f32>,
+    grid: vec4<f32>,
     // Sigma (texels) per tile, 4 per entry.
     sigma: array<vec4<f32>, 16>,
 };
@@ -17,10 +17,10 @@ struct Blur {
 @fragment
 fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
-    let t = i32(blur.layout.x);
+    let t = i32(blur.grid.x);
     let tile = px / t;
-    let j = tile.y * i32(blur.layout.y) + tile.x;
-    if j >= i32(blur.layout.z) {
+    let j = tile.y * i32(blur.grid.y) + tile.x;
+    if j >= i32(blur.grid.z) {
         return vec4<f32>(1.0, 1.0, 0.0, 0.0);
     }
     let sigma = blur.sigma[j / 4][j % 4];
@@ -30,7 +30,7 @@ fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
     let lo = tile * t;
     let hi = lo + vec2<i32>(t - 1);
-    let dir = select(vec2<i32>(1, 0), vec2<i32>(0, 1), blur.layout.w > 0.5);
+    let dir = select(vec2<i32>(1, 0), vec2<i32>(0, 1), blur.grid.w > 0.5);
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
     for (var k = -r; k <= r; k++) {
