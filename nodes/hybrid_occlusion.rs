@@ -71,8 +71,11 @@ impl Node for HybridOcclusionNode {
         }
         let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("hybrid_occlusion.wgsl"));
         let err = |e: anyhow::Error| NodeError::msg(e.to_string());
-        let combined =
-            if cx.bool("local") { Arc::new(modulate(gpu, pass, &global, &local).map_err(err)?) } else { global.clone() };
+        let combined = if cx.bool("local") {
+            Arc::new(modulate(gpu, pass, &global, &local).map_err(err)?)
+        } else {
+            global.clone()
+        };
         let local_only = match &unshadowed {
             Some(u) => Arc::new(modulate(gpu, pass, u, &local).map_err(err)?),
             None => local.clone(),

@@ -5,8 +5,8 @@ use std::sync::Arc;
 use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
 use crate::ibl::gpu::{PemSet, cube_target};
 use crate::ibl::pem::TABLE;
-use crate::nodes::shadow_atlas::ShadowAtlas;
 use crate::node::prelude::*;
+use crate::nodes::shadow_atlas::ShadowAtlas;
 use crate::scene::GBuffer;
 
 crate::choice!(

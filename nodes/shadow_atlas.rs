@@ -284,14 +284,18 @@ impl AtlasBuilder {
         for (j, s) in sigmas.iter().enumerate() {
             sigma[j / 4][j % 4] = *s;
         }
-        let uniform =
-            |dir: f32| BlurUniform { layout: [tile as f32, columns as f32, sigmas.len() as f32, dir], sigma };
+        let uniform = |dir: f32| BlurUniform { layout: [tile as f32, columns as f32, sigmas.len() as f32, dir], sigma };
         let mut input = src;
         let mut outputs = Vec::new();
         for dir in [0.0, 1.0] {
             let out = GpuImage::target(gpu, "vsm blur", src.width, src.height, format);
             let u = uniform(dir);
-            self.blur.draw(gpu, &[Bind::Uniform(bytemuck::bytes_of(&u)), Bind::Texture(input)], &[&out.view], &[format])?;
+            self.blur.draw(
+                gpu,
+                &[Bind::Uniform(bytemuck::bytes_of(&u)), Bind::Texture(input)],
+                &[&out.view],
+                &[format],
+            )?;
             outputs.push(out);
             input = outputs.last().expect("pushed");
         }
@@ -345,7 +349,13 @@ impl AtlasBuilder {
                 let view_proj = light_view_proj(l.direction, center, radius, t, guard);
                 let sigma = blur_sigma(l.solid_angle, radius, texel_world, s.blur_scale).min(guard as f32 / 3.0);
                 let direction = l.direction.normalize_or(Vec3::Y);
-                ShadowLight { direction, view_proj, to_atlas: clip_to_atlas(rect, width, height) * view_proj, rect, sigma }
+                ShadowLight {
+                    direction,
+                    view_proj,
+                    to_atlas: clip_to_atlas(rect, width, height) * view_proj,
+                    rect,
+                    sigma,
+                }
             })
             .collect();
 
@@ -452,7 +462,8 @@ impl Node for ShadowAtlasNode {
             normal_offset: cx.f32("normal_offset"),
             depth_bias: cx.f32("depth_bias"),
         };
-        let atlas = self.builder.build(gpu, &items, &lights, &settings, params).map_err(|e| NodeError::msg(e.to_string()))?;
+        let atlas =
+            self.builder.build(gpu, &items, &lights, &settings, params).map_err(|e| NodeError::msg(e.to_string()))?;
         cx.set("memory_mb", atlas.bytes as f64 / (1u64 << 20) as f64);
         cx.set("atlas", Arc::new(atlas.atlas.share()));
         cx.set("shadows", Arc::new(atlas));
