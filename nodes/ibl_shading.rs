@@ -2,10 +2,11 @@
 
 use std::sync::Arc;
 
-use crate::gpu::{Bind, FullscreenPass, GpuImage};
+use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
 use crate::ibl::gpu::{PemSet, cube_target};
 use crate::ibl::pem::TABLE;
 use crate::node::prelude::*;
+use crate::nodes::shadow_atlas::ShadowAtlas;
 use crate::scene::GBuffer;
 
 crate::choice!(
@@ -32,10 +33,15 @@ pub const PEMS_PER_PASS: usize = 8;
 pub static IBL_SHADING: NodeSpec = NodeSpec {
     kind: "IblShading",
     category: Category::Lighting,
-    doc: "Deferred image-based lighting (eq. 3.43): per pixel, albedo x the sum over regions of VIS_i x PEM_i, each looked up along r' = n(1-g) + r g at the mip level calibrated for glossiness g (s = 1/(1-g), lobe volumes matched). VIS_i = 1 until a shadow atlas is connected. Cloth and detail geometry alike; the G-buffer's glossiness (and its parameter maps) drive it.",
+    doc: "Deferred image-based lighting (eq. 3.43): per pixel, albedo x the sum over regions of VIS_i x PEM_i, each looked up along r' = n(1-g) + r g at the mip level calibrated for glossiness g (s = 1/(1-g), lobe volumes matched). VIS_i = 1 unless a shadow atlas (of the same lights, in the same order) is connected: then, per pixel, the world position from the G-buffer depth, moved along the normal by `normal_offset`, is transformed into light i's tile, the blurred moments (mu, E[d^2]) sampled bilinearly (clamped to the tile, optionally jittered), and VIS_i = 1 for t <= mu, else linstep(bleed_reduction, 1, var / (var + (t - mu)^2)) with var = max(E[d^2] - mu^2, min_variance) and t the receiver's light depth minus depth_bias. Cloth and detail geometry alike; the G-buffer's glossiness (and its parameter maps) drive it.",
     inputs: &[
         PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer to shade."),
         PortSpec::required("pems", PortType::Pems, "The filtered partial environment maps."),
+        PortSpec::optional(
+            "shadows",
+            PortType::ShadowAtlas,
+            "Variance shadow maps of the PEMs' lights (ShadowAtlas): VIS_i by Chebyshev's inequality; unconnected, every VIS_i is 1.",
+        ),
     ],
     outputs: &[PortSpec::output("image", PortType::Texture, "Linear HDR radiance.")],
     params: &[
@@ -74,6 +80,41 @@ struct IblUniform {
     levels: [f32; 36],
 }
 
+/// shaders/ibl_shading.wgsl `Shadow`: the lights of one pass (world to atlas coordinates,
+/// their tiles in atlas coordinates inset by half a texel) and the lookup settings.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ShadowUniform {
+    to_atlas: [[[f32; 4]; 4]; PEMS_PER_PASS],
+    rect: [[f32; 4]; PEMS_PER_PASS],
+    /// min variance, bleed reduction, jitter (texels), 1 when shadows are on.
+    params: [f32; 4],
+    /// atlas width, height (texels), normal offset (world), depth bias.
+    bias: [f32; 4],
+    eye: [f32; 4],
+    forward: [f32; 4],
+}
+
+impl ShadowUniform {
+    fn new(atlas: Option<&ShadowAtlas>, first: usize, g: &GBuffer) -> ShadowUniform {
+        let mut u: ShadowUniform = bytemuck::Zeroable::zeroed();
+        let Some(a) = atlas else { return u };
+        let (w, h) = (a.atlas.width as f32, a.atlas.height as f32);
+        for (k, l) in a.lights.iter().skip(first).take(PEMS_PER_PASS).enumerate() {
+            u.to_atlas[k] = l.to_atlas.to_cols_array_2d();
+            let [x, y, tw, th] = l.rect.map(|v| v as f32);
+            u.rect[k] = [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h];
+        }
+        let p = &a.params;
+        u.params = [p.min_variance, p.bleed_reduction, p.jitter, 1.0];
+        u.bias = [w, h, p.normal_offset, p.depth_bias];
+        let forward = g.view.inv_view.transform_vector3(glam::Vec3::NEG_Z).normalize();
+        u.eye = g.view.eye.extend(1.0).to_array();
+        u.forward = forward.extend(0.0).to_array();
+        u
+    }
+}
+
 #[derive(Default)]
 struct IblShadingNode {
     pass: Option<FullscreenPass>,
@@ -87,6 +128,19 @@ impl Node for IblShadingNode {
         let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let pems: Arc<PemSet> = cx.input("pems")?;
         let mode: IblMode = cx.choice("mode");
+        let mut shadows: Option<Arc<ShadowAtlas>> = cx.optional("shadows");
+        if let Some(s) = &shadows {
+            if mode == IblMode::Full {
+                cx.warn("mode full looks up the filtered full map once: the shadow atlas is ignored (use mode pems)");
+                shadows = None;
+            } else if s.lights.len() != pems.pems.len() {
+                return Err(NodeError::msg(format!(
+                    "the shadow atlas has {} lights but there are {} PEMs: feed both from the same MedianCut",
+                    s.lights.len(),
+                    pems.pems.len()
+                )));
+            }
+        }
         let background: Background = cx.choice("background");
         let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("ibl_shading.wgsl"));
         if self.empty_cube.is_none() {
@@ -127,6 +181,11 @@ impl Node for IblShadingNode {
                 Bind::Texture(&pems.full),
             ];
             binds.extend((0..PEMS_PER_PASS).map(|k| Bind::Texture(batch.get(k).unwrap_or(empty))));
+            let shadow = ShadowUniform::new(shadows.as_deref(), i * PEMS_PER_PASS, &g);
+            // Without an atlas the G-buffer's colour stands in for it (never read).
+            binds.push(Bind::Texture(shadows.as_ref().map_or(&g.color, |s| &s.atlas)));
+            binds.push(Bind::Uniform(bytemuck::bytes_of(&shadow)));
+            binds.push(Bind::Sampler(SamplerKind::LinearClamp));
             pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
             previous = Some(out);
         }

@@ -10,6 +10,7 @@ pub mod environment_map;
 pub mod export;
 pub mod gbuffer;
 pub mod geometry;
+pub mod hybrid_occlusion;
 pub mod ibl_shading;
 pub mod live_link;
 pub mod matrix_texture;
@@ -20,6 +21,7 @@ pub mod pems;
 pub mod placements;
 pub mod reference_occlusion;
 pub mod scene;
+pub mod shadow_atlas;
 pub mod ssao;
 pub mod tonemap;
 
@@ -54,8 +56,10 @@ pub static ALL: &[&NodeSpec] = &[
     &environment_map::ENVIRONMENT_MAP,
     &median_cut::MEDIAN_CUT,
     &pems::PEMS,
+    &shadow_atlas::SHADOW_ATLAS,
     &ibl_shading::IBL_SHADING,
     &ssao::SSAO,
+    &hybrid_occlusion::HYBRID_OCCLUSION,
     &reference_occlusion::REFERENCE_OCCLUSION,
     &tonemap::TONEMAP,
     &output::IMAGE_WRITE,

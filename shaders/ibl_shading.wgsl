@@ -3,7 +3,8 @@
 // g the G-buffer's glossiness, level(g) the mip level whose filtered lobe matches the volume
 // of the Phong lobe of exponent s = 1 / (1 - g) (src/ibl/pem.rs Calibration). Up to 8 PEMs
 // per pass; passes accumulate through `previous`, so any number of regions works.
-// Until the shadow atlas lands every VIS_i is 1.
+// VIS_i is 1 without a shadow atlas; with one (nodes/shadow_atlas.rs), Chebyshev's upper
+// bound on the blurred moments of light i's tile, with light-bleeding reduction.
 
 struct Ibl {
     inv_view_proj: mat4x4<f32>,
@@ -33,6 +34,23 @@ struct Ibl {
 @group(0) @binding(11) var pem5: texture_2d_array<f32>;
 @group(0) @binding(12) var pem6: texture_2d_array<f32>;
 @group(0) @binding(13) var pem7: texture_2d_array<f32>;
+@group(0) @binding(14) var atlas: texture_2d<f32>;
+
+struct Shadow {
+    // World to atlas coordinates (xy in [0, 1] over the atlas, z the light's depth), per PEM of the pass.
+    to_atlas: array<mat4x4<f32>, 8>,
+    // Each tile in atlas coordinates, inset by half a texel: x0, y0, x1, y1.
+    rect: array<vec4<f32>, 8>,
+    // x: min variance, y: bleed reduction, z: jitter (texels), w: 1 when shadows are on.
+    params: vec4<f32>,
+    // x, y: atlas size (texels), z: normal offset (world), w: depth bias.
+    bias: vec4<f32>,
+    eye: vec4<f32>,
+    forward: vec4<f32>,
+};
+@group(0) @binding(15) var<uniform> shadow: Shadow;
+// Bilinear lookups of the shadow atlas's moments.
+@group(0) @binding(16) var samp: sampler;
 
 // #include "fullscreen.wgsl"
 // #include "cube.wgsl"
@@ -57,6 +75,40 @@ fn level_for_glossiness(g: f32) -> f32 {
     let i = min(u32(floor(x)), 31u);
     let l = table(i) + (table(i + 1u) - table(i)) * (x - f32(i));
     return clamp(l, 0.0, ibl.misc.y);
+}
+
+fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
+    var h = p.x * 73856093u ^ p.y * 19349663u ^ k * 83492791u;
+    h = (h ^ (h >> 16u)) * 0x45d9f3bu;
+    h = (h ^ (h >> 16u)) * 0x45d9f3bu;
+    h = h ^ (h >> 16u);
+    return vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65535.0;
+}
+
+// VIS_k of the pass's light k at world position p (pixel px for the jitter).
+fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
+    if shadow.params.w < 0.5 {
+        return 1.0;
+    }
+    let c = shadow.to_atlas[k] * vec4<f32>(p, 1.0);
+    var uv = c.xy;
+    if shadow.params.z > 0.0 {
+        // A 4x4 tiled hash per light (Fig. 4.13): a different pattern for each light.
+        let n = hash2(vec2<u32>(px) % vec2<u32>(4u), k + 1u) * 2.0 - 1.0;
+        uv += n * shadow.params.z / shadow.bias.xy;
+    }
+    let r = shadow.rect[k];
+    uv = clamp(uv, r.xy, r.zw);
+    let m = textureSampleLevel(atlas, samp, uv, 0.0).xy;
+    let t = c.z - shadow.bias.w;
+    if t <= m.x {
+        return 1.0;
+    }
+    let variance = max(m.y - m.x * m.x, shadow.params.x);
+    let d = t - m.x;
+    let p_max = variance / (variance + d * d);
+    let b = shadow.params.y;
+    return clamp((p_max - b) / (1.0 - b), 0.0, 1.0);
 }
 
 @fragment
@@ -94,15 +146,17 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         sum = lookup(env, sample_dir, level);
     } else {
         let count = u32(ibl.size.z);
-        // Eq. 3.43 with VIS_i = 1.
-        if count > 0u { sum += lookup(pem0, sample_dir, level); }
-        if count > 1u { sum += lookup(pem1, sample_dir, level); }
-        if count > 2u { sum += lookup(pem2, sample_dir, level); }
-        if count > 3u { sum += lookup(pem3, sample_dir, level); }
-        if count > 4u { sum += lookup(pem4, sample_dir, level); }
-        if count > 5u { sum += lookup(pem5, sample_dir, level); }
-        if count > 6u { sum += lookup(pem6, sample_dir, level); }
-        if count > 7u { sum += lookup(pem7, sample_dir, level); }
+        // World position: depth is the linear view depth along the camera's forward axis.
+        let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz)) + n * shadow.bias.z;
+        // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
+        if count > 0u { sum += visibility(0u, p, px) * lookup(pem0, sample_dir, level); }
+        if count > 1u { sum += visibility(1u, p, px) * lookup(pem1, sample_dir, level); }
+        if count > 2u { sum += visibility(2u, p, px) * lookup(pem2, sample_dir, level); }
+        if count > 3u { sum += visibility(3u, p, px) * lookup(pem3, sample_dir, level); }
+        if count > 4u { sum += visibility(4u, p, px) * lookup(pem4, sample_dir, level); }
+        if count > 5u { sum += visibility(5u, p, px) * lookup(pem5, sample_dir, level); }
+        if count > 6u { sum += visibility(6u, p, px) * lookup(pem6, sample_dir, level); }
+        if count > 7u { sum += visibility(7u, p, px) * lookup(pem7, sample_dir, level); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }

@@ -633,3 +633,121 @@ pub fn ssao(
     }
     Ok(rows)
 }
+
+/// One row of `werkstatt bench shadows`.
+#[derive(Debug, serde::Serialize)]
+pub struct ShadowRow {
+    pub lights: usize,
+    pub tile: u32,
+    pub atlas_width: u32,
+    pub atlas_height: u32,
+    /// Atlas memory (MiB): its texels x 4 bytes (Rg16Float).
+    pub atlas_mib: f64,
+    /// The dissertation's Table 5.1 rule for VSMs: N x res^2 x 4 bytes (MiB).
+    pub table_mib: f64,
+    /// Median frame time (ms); None where skipped.
+    pub ms_per_frame: Option<f64>,
+    pub note: String,
+}
+
+/// Frame time against light count and atlas tile size on graphs/fig5_24_shadows.ron (its
+/// unshadowed IblShading removed): each timed frame moves a sphere a little, so the G-buffer,
+/// the shadow atlas, the shadowed IBL, SSAO and the combination all run; the PEMs (which do
+/// not depend on the scene) are rebuilt, untimed, when the light count changes. Atlases
+/// wider than the device's texture limit are skipped.
+pub fn shadows(
+    gpu: &crate::gpu::GpuContext,
+    lights: &[usize],
+    tiles: &[u32],
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&ShadowRow),
+) -> anyhow::Result<Vec<ShadowRow>> {
+    use crate::eval::NodeStatus;
+
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
+    let mut graph = Graph::load(&dir.join("fig5_24_shadows.ron")).map_err(|e| anyhow::anyhow!("{e}"))?;
+    graph.nodes.remove("unshadowed");
+    graph.links.retain(|l| l.from.node != "unshadowed" && l.to.node != "unshadowed");
+    let set = |graph: &mut Graph, node: &str, param: &str, value: ParamValue| -> anyhow::Result<()> {
+        graph
+            .nodes
+            .get_mut(node)
+            .ok_or_else(|| anyhow::anyhow!("fig5_24_shadows.ron has no node {node}"))?
+            .params
+            .insert(param.into(), value);
+        Ok(())
+    };
+    let resources = Resources::new(false);
+    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir };
+    let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+    let mut frame = 0i64;
+    let mut step = |ev: &mut Evaluator, graph: &mut Graph| -> anyhow::Result<()> {
+        // Move a sphere by a hair: the scene changes, so everything downstream of it re-runs.
+        let y = 0.3 + 1e-4 * (frame % 2) as f64;
+        set(graph, "sphere_0", "translate", ParamValue::Vec(vec![-0.9, y, 0.3]))?;
+        ev.update(graph, &[]).map_err(anyhow::Error::msg)?;
+        let deadline = Instant::now() + std::time::Duration::from_secs(600);
+        loop {
+            let s = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), &resources, &settings);
+            gpu.wait_idle();
+            if s.failed > 0 {
+                let why: Vec<String> = ev
+                    .reports()
+                    .filter(|r| !matches!(r.status, NodeStatus::Ok))
+                    .map(|r| format!("{}: {:?}", r.id, r.status))
+                    .collect();
+                anyhow::bail!("the shadow graph failed: {}", why.join("; "));
+            }
+            if s.pending == 0 {
+                break;
+            }
+            anyhow::ensure!(Instant::now() < deadline, "the light probe did not load within 600 s");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        frame += 1;
+        Ok(())
+    };
+    let max_dim = gpu.limits.max_texture_dimension_2d;
+    let mut rows = Vec::new();
+    for &n in lights {
+        for &tile in tiles {
+            let (columns, rows_) = crate::nodes::shadow_atlas::grid(n);
+            let (w, h) = (columns * tile, rows_ * tile);
+            let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+            let mut row = ShadowRow {
+                lights: n,
+                tile,
+                atlas_width: w,
+                atlas_height: h,
+                atlas_mib: mib(w as u64 * h as u64 * 4),
+                table_mib: mib(n as u64 * tile as u64 * tile as u64 * 4),
+                ms_per_frame: None,
+                note: String::new(),
+            };
+            if w > max_dim.min(8192) || h > max_dim.min(8192) {
+                row.note = format!("atlas wider than {} texels", max_dim.min(8192));
+                report(&row);
+                rows.push(row);
+                continue;
+            }
+            set(&mut graph, "median_cut", "count", ParamValue::Int(n as i64))?;
+            set(&mut graph, "shadow_atlas", "tile_size", ParamValue::Int(tile as i64))?;
+            step(&mut ev, &mut graph)?;
+            let mut samples = Vec::new();
+            for _ in 0..frames.max(1) {
+                let t = Instant::now();
+                step(&mut ev, &mut graph)?;
+                samples.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            samples.sort_by(f64::total_cmp);
+            row.ms_per_frame = Some(samples[samples.len() / 2]);
+            if let Some(crate::port::Value::Scalar(m)) = ev.output("shadow_atlas", "memory_mb") {
+                row.atlas_mib = *m;
+            }
+            report(&row);
+            rows.push(row);
+        }
+    }
+    Ok(rows)
+}

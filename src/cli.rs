@@ -138,6 +138,28 @@ enum BenchWhat {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// Global occlusion (graphs/fig5_24_shadows.ron without its unshadowed pass): frame time
+    /// (G-buffer, shadow atlas, shadowed IBL, SSAO, hybrid, tone mapping; a sphere moves every
+    /// frame so the atlas is redrawn) against the number of lights and the atlas tile size,
+    /// and the atlas memory.
+    Shadows {
+        /// Light counts, comma-separated.
+        #[arg(long, default_value = "16,64,128,256,512", value_delimiter = ',')]
+        lights: Vec<usize>,
+        /// Tile sizes (texels, guard band included), comma-separated.
+        #[arg(long, default_value = "64,128,256,512", value_delimiter = ',')]
+        tiles: Vec<u32>,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
     /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
     Attachments {
@@ -372,6 +394,25 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let rows = crate::bench::ssao(&gpu, samples, frames, size, |r| {
                 let res = if r.half_resolution { "half" } else { "full" };
                 println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
+            })?;
+            if let Some(path) = json {
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Shadows { lights, tiles, frames, size, json, backend } } => {
+            let size = parse_size(&size)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| lights | tile | atlas | atlas MiB | N x tile^2 x 4 B (Table 5.1) MiB | ms/frame |\n|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| {
+                let ms = r.ms_per_frame.map_or_else(|| format!("skipped ({})", r.note), |ms| format!("{ms:.1}"));
+                println!(
+                    "| {} | {} | {}x{} | {:.1} | {:.1} | {ms} |",
+                    r.lights, r.tile, r.atlas_width, r.atlas_height, r.atlas_mib, r.table_mib
+                );
             })?;
             if let Some(path) = json {
                 crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;

@@ -14,6 +14,7 @@ use glam::Vec3;
 use crate::gpu::GpuImage;
 use crate::ibl::gpu::{EnvMap, Lights, PemSet};
 use crate::mesh::Mesh;
+use crate::nodes::shadow_atlas::ShadowAtlas;
 use crate::scene::{Camera, DrawItem, GBuffer, Material};
 use crate::warp::{Curves, MatrixTexture, Placement};
 
@@ -101,6 +102,8 @@ port_types! {
     Lights(Arc<Lights>) { color: [250, 240, 170], view: Some(|l| l.preview.as_ref()) };
     /// Filtered partial environment maps, one per region; viewed as the chosen preview.
     Pems(Arc<PemSet>) { color: [240, 160, 50], view: Some(|p| Some(&p.preview)) };
+    /// Variance shadow maps of many lights in one atlas, with each light's matrices; viewed as the atlas.
+    ShadowAtlas(Arc<ShadowAtlas>) { color: [120, 120, 200], view: Some(|s| Some(&s.atlas)) };
 }
 
 impl PortType {
@@ -139,6 +142,14 @@ impl Value {
             Value::Environment(e) => format!("environment {0}x{0} from {1}", e.size(), e.source.display()),
             Value::Lights(l) => format!("{} lights", l.lights.len()),
             Value::Pems(p) => format!("{} PEMs, {:.1} MiB", p.pems.len(), p.bytes as f64 / (1u64 << 20) as f64),
+            Value::ShadowAtlas(s) => format!(
+                "{} shadow tiles of {}, {}x{}, {:.1} MiB",
+                s.lights.len(),
+                s.tile_size,
+                s.atlas.width,
+                s.atlas.height,
+                s.bytes as f64 / (1u64 << 20) as f64
+            ),
         }
     }
 }
@@ -201,6 +212,7 @@ typed!(Arc<Curves>: Curves);
 typed!(Arc<EnvMap>: Environment);
 typed!(Arc<Lights>: Lights);
 typed!(Arc<PemSet>: Pems);
+typed!(Arc<ShadowAtlas>: ShadowAtlas);
 
 #[cfg(test)]
 mod tests {

@@ -28,6 +28,9 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("cube_preview.wgsl", include_str!("../shaders/cube_preview.wgsl")),
     ("ibl_shading.wgsl", include_str!("../shaders/ibl_shading.wgsl")),
     ("ssao.wgsl", include_str!("../shaders/ssao.wgsl")),
+    ("vsm.wgsl", include_str!("../shaders/vsm.wgsl")),
+    ("vsm_blur.wgsl", include_str!("../shaders/vsm_blur.wgsl")),
+    ("hybrid_occlusion.wgsl", include_str!("../shaders/hybrid_occlusion.wgsl")),
 ];
 
 pub fn names() -> impl Iterator<Item = &'static str> {

@@ -82,6 +82,7 @@ pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32)
         F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb => (4, 4),
         F::Rgba16Float => (8, 4),
         F::R16Float => (2, 1),
+        F::Rg16Float => (4, 2),
         F::Rgba32Float => (16, 4),
         F::R32Float | F::Depth32Float => (4, 1),
         F::Rg32Float => (8, 2),
@@ -140,7 +141,7 @@ pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32)
                         texel[3] as f32 / 255.0,
                     ];
                 }
-                F::Rgba16Float | F::R16Float => {
+                F::Rgba16Float | F::R16Float | F::Rg16Float => {
                     for c in 0..channels {
                         px[c] = half::f16::from_le_bytes([texel[2 * c], texel[2 * c + 1]]).to_f32();
                     }

@@ -27,6 +27,7 @@ mod node_contracts;
 mod render;
 mod roundtrip;
 mod scene_drawer;
+mod shadow;
 mod ssao;
 mod warping;
 

@@ -34,6 +34,7 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
         PortType::Environment => ("EnvironmentMap", "environment", vec![]),
         PortType::Lights => ("MedianCut", "lights", vec![]),
         PortType::Pems => ("Pems", "pems", vec![]),
+        PortType::ShadowAtlas => ("ShadowAtlas", "shadows", vec![("tile_size", ParamValue::Int(32))]),
         PortType::Vector | PortType::Color => return None,
     })
 }
