@@ -13,8 +13,8 @@ use glam::Vec3;
 
 use crate::gpu::GpuImage;
 use crate::ibl::gpu::{EnvMap, Lights, PemSet};
+use crate::ibl::shadow::ShadowAtlas;
 use crate::mesh::Mesh;
-use crate::nodes::shadow_atlas::ShadowAtlas;
 use crate::scene::{Camera, DrawItem, GBuffer, Material};
 use crate::warp::{Curves, MatrixTexture, Placement};
 
@@ -229,7 +229,7 @@ mod tests {
     #[test]
     fn viewable_types_are_those_with_textures() {
         let viewable: Vec<_> = PortType::ALL.iter().filter(|t| t.viewable()).map(|t| t.name()).collect();
-        assert_eq!(viewable, ["Texture", "GBuffer", "MatrixTexture", "Environment", "Lights", "Pems"]);
+        assert_eq!(viewable, ["Texture", "GBuffer", "MatrixTexture", "Environment", "Lights", "Pems", "ShadowAtlas"]);
     }
 
     #[test]

@@ -9,3 +9,4 @@ pub mod gpu;
 pub mod median_cut;
 pub mod pem;
 pub mod reference;
+pub mod shadow;
