@@ -290,6 +290,37 @@ pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
         .collect()
 }
 
+/// Evaluates `frame` until nothing is pending (the light probe loads first), waiting for the
+/// GPU after each pass; a failed node or a load taking over 600 s is an error naming `what`.
+fn settle_frame(
+    ev: &mut Evaluator,
+    gpu: &crate::gpu::GpuContext,
+    resources: &Resources,
+    settings: &FrameSettings,
+    frame: i64,
+    what: &str,
+) -> anyhow::Result<()> {
+    use crate::eval::NodeStatus;
+    let deadline = Instant::now() + std::time::Duration::from_secs(600);
+    loop {
+        let s = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), resources, settings);
+        gpu.wait_idle();
+        if s.failed > 0 {
+            let why: Vec<String> = ev
+                .reports()
+                .filter(|r| !matches!(r.status, NodeStatus::Ok))
+                .map(|r| format!("{}: {:?}", r.id, r.status))
+                .collect();
+            anyhow::bail!("{what} failed: {}", why.join("; "));
+        }
+        if s.pending == 0 {
+            return Ok(());
+        }
+        anyhow::ensure!(Instant::now() < deadline, "{what}: files did not load within 600 s");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
 /// One row of `werkstatt bench ibl`.
 #[derive(Debug, serde::Serialize)]
 pub struct IblRow {
@@ -312,8 +343,6 @@ pub fn ibl(
     size: (u32, u32),
     mut report: impl FnMut(&IblRow),
 ) -> anyhow::Result<Vec<IblRow>> {
-    use crate::eval::NodeStatus;
-
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
     let mut graph = Graph::load(&dir.join("fig3_13_glossiness.ron")).map_err(|e| anyhow::anyhow!("{e}"))?;
     let set = |graph: &mut Graph, node: &str, param: &str, value: ParamValue| -> anyhow::Result<()> {
@@ -331,24 +360,7 @@ pub fn ibl(
     let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
     let mut frame = 0i64;
     let mut step = |ev: &mut Evaluator| -> anyhow::Result<()> {
-        let deadline = Instant::now() + std::time::Duration::from_secs(300);
-        loop {
-            let s = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), &resources, &settings);
-            gpu.wait_idle();
-            if s.failed > 0 {
-                let why: Vec<String> = ev
-                    .reports()
-                    .filter(|r| !matches!(r.status, NodeStatus::Ok))
-                    .map(|r| format!("{}: {:?}", r.id, r.status))
-                    .collect();
-                anyhow::bail!("the IBL graph failed: {}", why.join("; "));
-            }
-            if s.pending == 0 {
-                break;
-            }
-            anyhow::ensure!(Instant::now() < deadline, "the light probe did not load within 300 s");
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
+        settle_frame(ev, gpu, &resources, &settings, frame, "the IBL graph")?;
         frame += 1;
         Ok(())
     };
@@ -663,8 +675,6 @@ pub fn shadows(
     size: (u32, u32),
     mut report: impl FnMut(&ShadowRow),
 ) -> anyhow::Result<Vec<ShadowRow>> {
-    use crate::eval::NodeStatus;
-
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
     let mut graph = Graph::load(&dir.join("fig5_24_shadows.ron")).map_err(|e| anyhow::anyhow!("{e}"))?;
     graph.nodes.remove("unshadowed");
@@ -687,24 +697,7 @@ pub fn shadows(
         let y = 0.3 + 1e-4 * (frame % 2) as f64;
         set(graph, "sphere_0", "translate", ParamValue::Vec(vec![-0.9, y, 0.3]))?;
         ev.update(graph, &[]).map_err(anyhow::Error::msg)?;
-        let deadline = Instant::now() + std::time::Duration::from_secs(600);
-        loop {
-            let s = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(gpu), &resources, &settings);
-            gpu.wait_idle();
-            if s.failed > 0 {
-                let why: Vec<String> = ev
-                    .reports()
-                    .filter(|r| !matches!(r.status, NodeStatus::Ok))
-                    .map(|r| format!("{}: {:?}", r.id, r.status))
-                    .collect();
-                anyhow::bail!("the shadow graph failed: {}", why.join("; "));
-            }
-            if s.pending == 0 {
-                break;
-            }
-            anyhow::ensure!(Instant::now() < deadline, "the light probe did not load within 600 s");
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
+        settle_frame(ev, gpu, &resources, &settings, frame, "the shadow graph")?;
         frame += 1;
         Ok(())
     };
