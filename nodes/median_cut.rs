@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use crate::ibl::cube::{dir_to_face, equirect_uv};
+use crate::ibl::cube::{dir_to_face, equirect_dir, equirect_uv};
 use crate::ibl::gpu::{EnvMap, Lights};
 use crate::ibl::median_cut::{Regions, median_cut};
 use crate::node::prelude::*;
@@ -65,11 +65,7 @@ fn region_image(env: &EnvMap, regions: &Regions) -> (u32, u32, Vec<u8>) {
         let index = env.texels.index(face, texel(u), texel(v));
         (regions.ids[index], env.texels.texels[index].truncate())
     };
-    let dir_at = |x: usize, y: usize| {
-        let (u, v) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
-        let (phi, theta) = ((u - 0.5) * std::f32::consts::TAU, v * std::f32::consts::PI);
-        Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())
-    };
+    let dir_at = |x: usize, y: usize| equirect_dir((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
     let ids: Vec<(u32, Vec3)> =
         (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| id_at(dir_at(x, y))).collect();
     let mut rgba = vec![0u8; w * h * 4];

@@ -89,13 +89,7 @@ fn cube_trilinear(tex: texture_2d_array<f32>, size: u32, top: f32, d: vec3<f32>,
 const TAU: f32 = 6.28318530718;
 const PI_F: f32 = 3.14159265359;
 
-// Where direction `d` falls in an equirectangular map (src/ibl/cube.rs equirect_uv).
-fn equirect_uv(d: vec3<f32>) -> vec2<f32> {
-    let n = normalize(d);
-    return vec2<f32>(0.5 + atan2(n.x, -n.z) / TAU, acos(clamp(n.y, -1.0, 1.0)) / PI_F);
-}
-
-// The direction at equirectangular coordinates `uv` (inverse of equirect_uv).
+// The direction at equirectangular coordinates `uv` (inverse of src/ibl/cube.rs equirect_uv).
 fn equirect_dir(uv: vec2<f32>) -> vec3<f32> {
     let phi = (uv.x - 0.5) * TAU;
     let theta = uv.y * PI_F;

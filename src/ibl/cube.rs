@@ -142,6 +142,13 @@ pub fn equirect_uv(d: Vec3) -> (f32, f32) {
     (u, v)
 }
 
+/// The direction at equirectangular coordinates (u, v): the inverse of [`equirect_uv`]
+/// (shaders/cube.wgsl `equirect_dir`).
+pub fn equirect_dir(u: f32, v: f32) -> Vec3 {
+    let (phi, theta) = ((u - 0.5) * std::f32::consts::TAU, v * std::f32::consts::PI);
+    Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())
+}
+
 impl EquirectImage {
     /// Loads a Radiance .hdr or an OpenEXR .exr (RGB(A), any float type the decoder reads).
     pub fn load(path: &Path) -> anyhow::Result<EquirectImage> {
@@ -215,7 +222,7 @@ pub fn rotate_y(d: Vec3, degrees: f32) -> Vec3 {
 /// skip some of a small sun's texels and change its energy.
 pub const SUPERSAMPLE: usize = 4;
 
-/// The CPU twin of shaders/equirect_to_cube.wgsl: each texel the mean of SUPERSAMPLE^2
+/// A probe resampled into a cube map (what `EnvironmentMap` uploads): each texel the mean of SUPERSAMPLE^2
 /// bilinear lookups spread evenly over it, times `intensity`.
 pub fn cube_from_equirect(eq: &EquirectImage, size: usize, rotation_deg: f32, intensity: f32) -> CubeImage {
     let n = SUPERSAMPLE;
@@ -281,6 +288,9 @@ mod tests {
         let (u, v) = equirect_uv(Vec3::new(0.0, 0.0, -1.0));
         assert!((u - 0.5).abs() < 1e-6 && (v - 0.5).abs() < 1e-6);
         let (u, _) = equirect_uv(Vec3::new(1.0, 0.0, 0.0));
+        let d = Vec3::new(0.3, -0.4, 0.5).normalize();
+        let (du, dv) = equirect_uv(d);
+        assert!((equirect_dir(du, dv) - d).length() < 1e-5);
         assert!((u - 0.75).abs() < 1e-6);
         assert!(equirect_uv(Vec3::Y).1 < 1e-6);
     }
