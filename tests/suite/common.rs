@@ -182,3 +182,33 @@ pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
         );
     }
 }
+
+/// Evaluates frame 0 of `graph` on the test GPU until nothing is pending (deadline 300 s) and
+/// checks that every node ran fine (NotRun: a node no output pulls from).
+pub fn run_graph(graph: &werkstatt::graph::Graph, width: u32, height: u32) -> werkstatt::eval::Evaluator {
+    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    let mut ev = Evaluator::new(graph, &[]).unwrap();
+    let res = werkstatt::resources::Resources::new(false);
+    let settings = FrameSettings { width, height, base_dir: root() };
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
+    loop {
+        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);
+        if summary.pending == 0 {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "the graph did not finish within 300 s");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    for id in graph.nodes.keys() {
+        if let Some(r) = ev.report(id) {
+            assert!(matches!(r.status, NodeStatus::Ok | NodeStatus::NotRun), "node {id}: {:?}", r.status);
+        }
+    }
+    ev
+}
+
+/// Channel 0 of the texture on `node.port`, row-major.
+pub fn channel0(ev: &werkstatt::eval::Evaluator, node: &str, port: &str) -> Vec<f32> {
+    let value = ev.output(node, port).and_then(werkstatt::port::Value::as_texture).expect("a texture");
+    werkstatt::gpu::read_back(gpu(), value).unwrap().rgba.chunks_exact(4).map(|c| c[0]).collect()
+}

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::{Vec3, Vec4};
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
 use werkstatt::gpu::readback::read_back_layer;
 use werkstatt::gpu::{GpuContext, GpuImage, read_back};
 use werkstatt::graph::Graph;
@@ -78,29 +78,6 @@ fn sphere_graph(probe: &Path, size: u32, count: usize, gloss: &[f32], albedo: f3
     Graph::load_str(&text, "ibl-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
-/// Evaluates frame 0 until nothing is pending (deadline: 120 s) and checks every node ran fine.
-fn run(graph: &Graph, width: u32, height: u32) -> Evaluator {
-    let gpu = gpu();
-    let mut ev = Evaluator::new(graph, &[]).unwrap();
-    let res = Resources::new(false);
-    let settings = FrameSettings { width, height, base_dir: root() };
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu), &res, &settings);
-        if summary.pending == 0 {
-            break;
-        }
-        assert!(Instant::now() < deadline, "the IBL graph did not finish loading within 120 s");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    for id in graph.nodes.keys() {
-        if let Some(r) = ev.report(id) {
-            assert!(matches!(r.status, NodeStatus::Ok), "node {id}: {:?}", r.status);
-        }
-    }
-    ev
-}
-
 fn env_of(ev: &Evaluator) -> Arc<EnvMap> {
     match ev.output("env", "environment") {
         Some(Value::Environment(e)) => e.clone(),
@@ -145,7 +122,7 @@ fn the_probe_becomes_the_cube_map_its_cpu_twin_computes() {
     let env_node = graph.nodes.get_mut("env").unwrap();
     env_node.params.insert("rotation".into(), werkstatt::param::ParamValue::Float(30.0));
     env_node.params.insert("intensity".into(), werkstatt::param::ParamValue::Float(2.0));
-    let ev = run(&graph, 32, 32);
+    let ev = run_graph(&graph, 32, 32);
     let env = env_of(&ev);
     let cpu = cube_from_equirect(&EquirectImage::load(&probe).unwrap(), 16, 30.0, 2.0);
     assert_eq!(env.texels.texels.len(), 6 * 16 * 16);
@@ -170,7 +147,7 @@ fn the_probe_becomes_the_cube_map_its_cpu_twin_computes() {
 #[test]
 fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_level() {
     let graph = sphere_graph(&forest(), 32, 5, &[0.5], 1.0, "", "");
-    let ev = run(&graph, 32, 32);
+    let ev = run_graph(&graph, 32, 32);
     let (env, pems) = (env_of(&ev), pems_of(&ev));
     assert_eq!(pems.pems.len(), 5);
     let gpu = gpu();
@@ -209,7 +186,7 @@ fn a_white_furnace_stays_white_at_every_glossiness_and_level() {
     let gloss = [0.0, 0.25, 0.5, 0.75, 0.9, 1.0];
     for mode in ["pems", "full"] {
         let graph = sphere_graph(&probe, 16, 11, &gloss, 1.0, &format!(r#""mode": "{mode}""#), r#""kernel": "box""#);
-        let ev = run(&graph, 6 * 48, 48);
+        let ev = run_graph(&graph, 6 * 48, 48);
         let pems = pems_of(&ev);
         for mip in 0..pems.full.desc.mips {
             let level = read_level(gpu(), &pems.full, mip);
@@ -240,8 +217,8 @@ fn gbuffer_of(ev: &Evaluator) -> Arc<werkstatt::scene::GBuffer> {
 fn summing_the_pems_equals_one_lookup_into_the_filtered_map() {
     // 12 regions: two passes (8 + 4), so the accumulation across passes is covered.
     let gloss = [0.0, 0.5, 0.8, 0.95];
-    let a = image_of(&run(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "pems""#, ""), 4 * 48, 48));
-    let b = image_of(&run(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "full""#, ""), 4 * 48, 48));
+    let a = image_of(&run_graph(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "pems""#, ""), 4 * 48, 48));
+    let b = image_of(&run_graph(&sphere_graph(&forest(), 32, 12, &gloss, 0.9, r#""mode": "full""#, ""), 4 * 48, 48));
     assert_eq!((a.width, a.height), (b.width, b.height));
     let mut worst = 0.0f32;
     for (x, y) in a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)) {
@@ -299,12 +276,12 @@ fn agreement(ev: &Evaluator, albedo: f32, expect: impl Fn(Vec3, Vec3) -> Vec3, t
 #[test]
 fn glossiness_0_looks_up_along_the_normal_and_1_returns_the_map_along_the_reflection() {
     let gpu = gpu();
-    let diffuse = run(&sphere_graph(&forest(), 32, 4, &[0.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+    let diffuse = run_graph(&sphere_graph(&forest(), 32, 4, &[0.0], 1.0, r#""mode": "full""#, ""), 64, 64);
     let pems = pems_of(&diffuse);
     let levels: Vec<CubeImage> = (0..pems.full.desc.mips).map(|m| read_level(gpu, &pems.full, m)).collect();
     let l = pems.calibration.level_for_glossiness(0.0);
     let reflect_first = {
-        let mirror = run(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+        let mirror = run_graph(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
         let env = env_of(&mirror);
         agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02)
     };
@@ -317,7 +294,7 @@ fn glossiness_0_looks_up_along_the_normal_and_1_returns_the_map_along_the_reflec
     let wrong = agreement(&diffuse, 1.0, |ray, n| trilinear(&levels, ray.reflect(n), l), 0.05);
     assert!(wrong < 0.8, "the reflection direction matches as well ({wrong}): the test cannot tell them apart");
 
-    let mirror = run(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
+    let mirror = run_graph(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
     let env = env_of(&mirror);
     let reflect = agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02);
     assert!(reflect > 0.97, "g = 1: {reflect} of the pixels match the map along the reflection");
@@ -403,7 +380,7 @@ fn ibl_figure_graphs_match_their_goldens() {
 fn shaded_spheres_match_the_monte_carlo_reference_of_eq_3_42() {
     use werkstatt::ibl::reference::shade;
     let gloss = [0.0, 0.25, 0.5, 0.75, 0.9];
-    let ev = run(&sphere_graph(&forest(), 64, 4, &gloss, 1.0, r#""mode": "pems""#, ""), 5 * 48, 48);
+    let ev = run_graph(&sphere_graph(&forest(), 64, 4, &gloss, 1.0, r#""mode": "pems""#, ""), 5 * 48, 48);
     let env = env_of(&ev);
     let img = image_of(&ev);
     let color = read_back(gpu(), &gbuffer_of(&ev).color).unwrap();
@@ -444,7 +421,7 @@ fn the_gpu_filters_match_their_cpu_twins() {
     use werkstatt::param::Choice;
     for kernel in [Kernel::SqrtCosine, Kernel::Phong] {
         let graph = sphere_graph(&forest(), 32, 3, &[0.5], 1.0, "", &format!(r#""kernel": "{}""#, kernel.name()));
-        let ev = run(&graph, 16, 16);
+        let ev = run_graph(&graph, 16, 16);
         let (env, pems) = (env_of(&ev), pems_of(&ev));
         let cpu = filter_chain(&env.texels, kernel);
         for (mip, want) in cpu.iter().enumerate() {

@@ -13,12 +13,12 @@
 
 use std::path::Path;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use glam::{Mat4, Vec3};
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::eval::Evaluator;
 use werkstatt::gpu::{GpuImage, read_back};
 use werkstatt::graph::Graph;
 use werkstatt::ibl::gpu::Lights;
@@ -26,7 +26,6 @@ use werkstatt::ibl::median_cut::RegionLight;
 use werkstatt::nodes::reference_occlusion::world_position;
 use werkstatt::nodes::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
 use werkstatt::port::Value;
-use werkstatt::resources::Resources;
 use werkstatt::scene::{DrawItem, GBuffer, Material};
 
 /// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
@@ -103,34 +102,6 @@ fn graph(s: &Setup<'_>) -> Graph {
     Graph::load_str(&text, "shadow-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
-/// Evaluates frame 0 until nothing is pending and checks every node ran fine.
-fn run(graph: &Graph, width: u32, height: u32) -> Evaluator {
-    let mut ev = Evaluator::new(graph, &[]).unwrap();
-    let res = Resources::new(false);
-    let settings = FrameSettings { width, height, base_dir: root() };
-    let deadline = Instant::now() + Duration::from_secs(300);
-    loop {
-        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);
-        if summary.pending == 0 {
-            break;
-        }
-        assert!(Instant::now() < deadline, "the graph did not finish within 300 s");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    for id in graph.nodes.keys() {
-        if let Some(r) = ev.report(id) {
-            assert!(matches!(r.status, NodeStatus::Ok | NodeStatus::NotRun), "node {id}: {:?}", r.status);
-        }
-    }
-    ev
-}
-
-/// Channel 0 of `node.port`, row-major.
-fn channel0(ev: &Evaluator, node: &str, port: &str) -> Vec<f32> {
-    let px = read_back(gpu(), ev.output(node, port).and_then(Value::as_texture).expect("a texture")).unwrap();
-    px.rgba.chunks_exact(4).map(|c| c[0]).collect()
-}
-
 fn rgba(ev: &Evaluator, node: &str, port: &str) -> Vec<f32> {
     read_back(gpu(), ev.output(node, port).and_then(Value::as_texture).expect("a texture")).unwrap().rgba
 }
@@ -199,7 +170,7 @@ fn an_unoccluded_plane_has_visibility_one() {
         hybrid: "",
         reference: None,
     };
-    let ev = run(&graph(&s), 96, 72);
+    let ev = run_graph(&graph(&s), 96, 72);
     let pos = positions(&ev);
     let (lit, plain) = (channel0(&ev, "ibl", "image"), channel0(&ev, "ibl_plain", "image"));
     let mut worst = 0.0f32;
@@ -236,7 +207,7 @@ fn a_planar_occluder_blocks_lights_from_above_under_its_middle_only() {
         hybrid: "",
         reference: None,
     };
-    let ev = run(&graph(&s), 160, 120);
+    let ev = run_graph(&graph(&s), 160, 120);
     let pos = positions(&ev);
     let vis = visibility(&ev);
     let on_floor = |p: Vec3| p.y.abs() < 1e-3;
@@ -383,14 +354,14 @@ fn hybrid_with_the_local_part_off_is_the_global_part_bit_for_bit() {
         hybrid: r#""local": false"#,
         reference: None,
     };
-    let ev = run(&graph(&s), 96, 72);
+    let ev = run_graph(&graph(&s), 96, 72);
     let global = rgba(&ev, "ibl", "image");
     let combined = rgba(&ev, "hybrid", "combined");
     assert!(global.iter().zip(&combined).all(|(a, b)| a.to_bits() == b.to_bits()), "local off changed the image");
     assert!(global.iter().zip(rgba(&ev, "hybrid", "global").iter()).all(|(a, b)| a.to_bits() == b.to_bits()));
     // With the local part on: global x local, never brighter than global.
     s.hybrid = "";
-    let ev = run(&graph(&s), 96, 72);
+    let ev = run_graph(&graph(&s), 96, 72);
     let (global, local, combined) =
         (rgba(&ev, "ibl", "image"), rgba(&ev, "ssao", "occlusion"), rgba(&ev, "hybrid", "combined"));
     let plain = rgba(&ev, "ibl_plain", "image");
@@ -437,7 +408,7 @@ fn spheres_errors(probe: &Path, lights: usize, size: (u32, u32)) -> (f64, f64, f
         reference: Some(r#""samples": 128, "max_distance": 10.0"#),
     };
     let t = Instant::now();
-    let ev = run(&graph(&s), size.0, size.1);
+    let ev = run_graph(&graph(&s), size.0, size.1);
     let pos = positions(&ev);
     let global = visibility(&ev);
     let local = channel0(&ev, "ssao", "occlusion");

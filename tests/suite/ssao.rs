@@ -8,17 +8,15 @@
 //! image away from its borders.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use glam::Vec3;
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::eval::Evaluator;
 use werkstatt::gpu::read_back;
 use werkstatt::graph::Graph;
 use werkstatt::nodes::reference_occlusion::{SceneBvh, world_position};
 use werkstatt::port::Value;
-use werkstatt::resources::Resources;
 use werkstatt::scene::GBuffer;
 
 /// A plane's (translate, rotate) for Draw.
@@ -79,35 +77,6 @@ fn graph(
     }
     let text = format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])");
     Graph::load_str(&text, "ssao-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
-}
-
-/// Evaluates frame 0 until nothing is pending and checks every node ran fine.
-fn run(graph: &Graph, width: u32, height: u32) -> Evaluator {
-    let mut ev = Evaluator::new(graph, &[]).unwrap();
-    let res = Resources::new(false);
-    let settings = FrameSettings { width, height, base_dir: root() };
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);
-        if summary.pending == 0 {
-            break;
-        }
-        assert!(Instant::now() < deadline, "the graph did not finish within 120 s");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    for id in graph.nodes.keys() {
-        if let Some(r) = ev.report(id) {
-            // NotRun: a node no output pulls from (the shared plane in a scene without planes).
-            assert!(matches!(r.status, NodeStatus::Ok | NodeStatus::NotRun), "node {id}: {:?}", r.status);
-        }
-    }
-    ev
-}
-
-/// Channel 0 of `node.port`, row-major.
-fn factor(ev: &Evaluator, node: &str, port: &str) -> Vec<f32> {
-    let px = read_back(gpu(), ev.output(node, port).and_then(Value::as_texture).expect("a texture")).unwrap();
-    px.rgba.chunks_exact(4).map(|c| c[0]).collect()
 }
 
 /// Per pixel, the world position (None where nothing was drawn or near the border).
@@ -185,9 +154,9 @@ const FINE: (u32, u32) = (320, 240);
 fn an_open_plane_is_unoccluded_in_both_modes() {
     for ssao in variants() {
         let g = graph(&[FLOOR], "", "", &[], r#""distance": 3.0, "pitch": 40.0, "yaw": 20.0"#, &ssao, None);
-        let ev = run(&g, SIZE.0, SIZE.1);
+        let ev = run_graph(&g, SIZE.0, SIZE.1);
         let pos = positions(&ev);
-        let (mean, min, n) = stats(&factor(&ev, "ssao", "occlusion"), &pos, |_| true);
+        let (mean, min, n) = stats(&channel0(&ev, "ssao", "occlusion"), &pos, |_| true);
         eprintln!("plane {ssao}: mean {mean:.4}, min {min:.4} over {n} pixels");
         assert!(n > 5000);
         // Sphere mode's estimate is unbiased at half the samples occluded, so its noise
@@ -201,10 +170,10 @@ fn an_open_plane_is_unoccluded_in_both_modes() {
 fn edge_values(ssao: &str) -> (f32, f32, usize) {
     let ssao = &format!(r#"{ssao}, "radius": 0.6"#);
     let g = graph(&[FLOOR, WALL_X], "", "", &[], r#""distance": 3.0, "pitch": 35.0, "yaw": 90.0"#, ssao, None);
-    let ev = run(&g, FINE.0, FINE.1);
+    let ev = run_graph(&g, FINE.0, FINE.1);
     let pos = positions(&ev);
     // Within 0.01 (1/30 of the radius) of the edge line, away from the planes' ends.
-    let values = factor(&ev, "ssao", "occlusion");
+    let values = channel0(&ev, "ssao", "occlusion");
     profile(&format!("edge profile {ssao}"), &values, &pos, |p| if p.z.abs() < 0.8 { p.x.hypot(p.y) } else { 1.0 });
     stats(&values, &pos, |p| p.x.hypot(p.y) < 0.01 && p.z.abs() < 0.8)
 }
@@ -234,9 +203,9 @@ fn a_corner_gives_one_quarter_in_both_modes() {
         let camera = r#""distance": 3.0, "pitch": 35.26, "yaw": 45.0"#;
         let ssao = format!(r#"{ssao}, "radius": 0.6"#);
         let g = graph(&[FLOOR, WALL_X, WALL_Z], "", "", &[], camera, &ssao, None);
-        let ev = run(&g, FINE.0, FINE.1);
+        let ev = run_graph(&g, FINE.0, FINE.1);
         let pos = positions(&ev);
-        let values = factor(&ev, "ssao", "occlusion");
+        let values = channel0(&ev, "ssao", "occlusion");
         profile(&format!("corner profile {ssao}"), &values, &pos, |p| p.length());
         let (mean, min, n) = stats(&values, &pos, |p| p.length() < 0.02);
         eprintln!("corner {ssao}: mean {mean:.4}, min {min:.4} over {n} pixels");
@@ -254,9 +223,9 @@ fn a_convex_sphere_is_unoccluded_in_both_modes() {
             "ball_draw": (kind: "Draw"),"#;
         let link = r#"("ball.mesh", "ball_draw.mesh"),"#;
         let g = graph(&[], sphere, link, &["ball_draw"], r#""distance": 3.0, "pitch": 20.0"#, &ssao, None);
-        let ev = run(&g, SIZE.0, SIZE.1);
+        let ev = run_graph(&g, SIZE.0, SIZE.1);
         let pos = positions(&ev);
-        let values = factor(&ev, "ssao", "occlusion");
+        let values = channel0(&ev, "ssao", "occlusion");
         let (mean, min, n) = stats(&values, &pos, |_| true);
         eprintln!("sphere {ssao}: mean {mean:.4}, min {min:.4} over {n} pixels");
         assert!(n > 1000);
@@ -273,8 +242,8 @@ fn a_convex_sphere_is_unoccluded_in_both_modes() {
 fn ssao_is_deterministic_and_multiplies_an_image() {
     let ssao = r#""mode": "sphere""#;
     let g = graph(&[FLOOR, WALL_X], "", "", &[], r#""distance": 3.0, "pitch": 35.0, "yaw": 90.0"#, ssao, None);
-    let a = factor(&run(&g, SIZE.0, SIZE.1), "ssao", "occlusion");
-    let b = factor(&run(&g, SIZE.0, SIZE.1), "ssao", "occlusion");
+    let a = channel0(&run_graph(&g, SIZE.0, SIZE.1), "ssao", "occlusion");
+    let b = channel0(&run_graph(&g, SIZE.0, SIZE.1), "ssao", "occlusion");
     assert_eq!(a, b);
     // The G-buffer's colour times the factor.
     let mut g = g;
@@ -282,7 +251,7 @@ fn ssao_is_deterministic_and_multiplies_an_image() {
         from: werkstatt::graph::PortRef { node: "gbuffer".into(), port: "color".into() },
         to: werkstatt::graph::PortRef { node: "ssao".into(), port: "image".into() },
     });
-    let ev = run(&g, SIZE.0, SIZE.1);
+    let ev = run_graph(&g, SIZE.0, SIZE.1);
     let color = read_back(gpu(), ev.output("gbuffer", "color").and_then(Value::as_texture).unwrap()).unwrap();
     let product = read_back(gpu(), ev.output("ssao", "image").and_then(Value::as_texture).unwrap()).unwrap();
     for (i, v) in a.iter().enumerate() {
@@ -306,8 +275,8 @@ fn reference_occlusion_matches_the_form_factor_of_a_square_and_one_on_a_plane() 
     let reference = r#""samples": 256, "max_distance": 2.0"#;
     // A plane alone: no ray can hit anything.
     let g = graph(&[FLOOR], "", "", &[], r#""distance": 3.0, "pitch": 40.0"#, "", Some(reference));
-    let ev = run(&g, 64, 48);
-    let vis = factor(&ev, "reference", "occlusion");
+    let ev = run_graph(&g, 64, 48);
+    let vis = channel0(&ev, "reference", "occlusion");
     assert!(vis.iter().all(|&v| v == 1.0), "an open plane is occluded somewhere");
     // A unit box whose bottom face is 0.5 above the floor, seen from low enough to see under it.
     let boxes = r#""cube": (kind: "Primitive", params: { "shape": "box", "size": 1.0 }),
@@ -315,9 +284,9 @@ fn reference_occlusion_matches_the_form_factor_of_a_square_and_one_on_a_plane() 
     let link = r#"("cube.mesh", "cube_draw.mesh"),"#;
     let camera = r#""distance": 3.0, "pitch": 8.0, "fov": 30.0"#;
     let g = graph(&[FLOOR], boxes, link, &["cube_draw"], camera, "", Some(reference));
-    let ev = run(&g, 160, 120);
+    let ev = run_graph(&g, 160, 120);
     let pos = positions(&ev);
-    let vis = factor(&ev, "reference", "occlusion");
+    let vis = channel0(&ev, "reference", "occlusion");
     let want = 1.0 - square_form_factor(0.5, 0.5);
     let (mean, _, n) = stats(&vis, &pos, |p| p.y.abs() < 1e-3 && p.x.hypot(p.z) < 0.05);
     eprintln!("under the box: {mean:.4} over {n} pixels, expected {want:.4}");
@@ -348,13 +317,13 @@ fn reference_occlusion_is_deterministic() {
         "",
         Some(reference),
     );
-    let a = factor(&run(&g, 64, 48), "reference", "occlusion");
-    let b = factor(&run(&g, 64, 48), "reference", "occlusion");
+    let a = channel0(&run_graph(&g, 64, 48), "reference", "occlusion");
+    let b = channel0(&run_graph(&g, 64, 48), "reference", "occlusion");
     assert_eq!(a, b, "the same input gave different values");
     assert!(a.iter().any(|&v| v < 0.5), "the corner is not occluded");
     let mut g = g;
     g.nodes.get_mut("reference").unwrap().params.insert("seed".into(), werkstatt::param::ParamValue::Int(8));
-    let c = factor(&run(&g, 64, 48), "reference", "occlusion");
+    let c = channel0(&run_graph(&g, 64, 48), "reference", "occlusion");
     assert_ne!(a, c, "the seed changes nothing");
 }
 
