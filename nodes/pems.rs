@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use crate::gpu::GpuImage;
-use crate::ibl::gpu::{CubePasses, EnvMap, Lights, PemSet, cube_target};
+use crate::ibl::gpu::{CubePasses, EnvMap, Footprint, Lights, PemSet, cube_target};
 use crate::ibl::pem::{Kernel, calibration};
 use crate::node::prelude::*;
 
@@ -84,12 +84,13 @@ impl Node for PemsNode {
                 wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 6 },
             )
         });
-        self.passes.filter_chain(gpu, &full, kernel)?;
+        self.passes.filter_chain(gpu, &full, kernel, &Footprint::whole(size))?;
         let mut pems = Vec::with_capacity(regions.lights.len());
         for region in 0..regions.lights.len() {
             let pem = cube_target(gpu, "PEM", size)?;
             self.passes.mask(gpu, &env.cube, &ids, region as u32, &pem)?;
-            self.passes.filter_chain(gpu, &pem, kernel)?;
+            let footprint = Footprint::of_region(&regions.ids, size as usize, region as u32);
+            self.passes.filter_chain(gpu, &pem, kernel, &footprint)?;
             pems.push(pem);
         }
         let bytes = pem_bytes(&full) * pems.len() as u64;

@@ -4,7 +4,11 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use super::cube::CubeImage;
+use std::f32::consts::{PI, SQRT_2};
+
+use glam::Vec3;
+
+use super::cube::{CubeImage, face_dir, texel_center};
 use super::median_cut::{RegionLight, Regions};
 use super::pem::{Calibration, Kernel};
 use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
@@ -85,6 +89,79 @@ struct PhongParams {
     exponent: f32,
     window: i32,
     pad: [f32; 2],
+    bounds: FaceBounds,
+    /// Axis and cos of the half-angle outside which the level is black ([`Footprint::cone`]).
+    cone: [f32; 4],
+}
+
+/// Where a cube map's level 0 may be non-zero (a PEM is black outside its region): the Phong
+/// prefilter sums only these texels on its whole-sphere levels and returns black, without
+/// summing, for destination texels whose window cannot reach them.
+#[derive(Clone, Copy, Debug)]
+pub struct Footprint {
+    /// Per face, (x0, y0, x1, y1) inclusive; empty when x0 > x1.
+    pub faces: FaceBounds,
+    /// A cone holding every non-zero texel: its axis and half-angle (radians; pi: everything).
+    pub axis: Vec3,
+    pub angle: f32,
+}
+
+pub type FaceBounds = [[u32; 4]; 6];
+
+/// A cone that skips nothing.
+const NO_CONE: [f32; 4] = [0.0, 0.0, 1.0, -2.0];
+
+impl Footprint {
+    /// Every texel of a face-size `size` map.
+    pub fn whole(size: u32) -> Footprint {
+        Footprint { faces: [[0, 0, size - 1, size - 1]; 6], axis: Vec3::Z, angle: PI }
+    }
+
+    /// The texels of `ids` (a cube's region ids, faces stacked vertically) equal to `region`.
+    pub fn of_region(ids: &[u32], size: usize, region: u32) -> Footprint {
+        let mut faces = [[u32::MAX, u32::MAX, 0, 0]; 6];
+        let mut dirs = Vec::new();
+        for (i, _) in ids.iter().enumerate().filter(|(_, id)| **id == region) {
+            let (face, y, x) = (i / (size * size), (i / size) % size, i % size);
+            let b = &mut faces[face];
+            *b = [b[0].min(x as u32), b[1].min(y as u32), b[2].max(x as u32), b[3].max(y as u32)];
+            dirs.push(face_dir(face, texel_center(size, x), texel_center(size, y)).normalize());
+        }
+        let axis = dirs.iter().sum::<Vec3>().normalize_or_zero();
+        // Half a texel's diagonal (on the face plane, an upper bound of the angle) beyond the
+        // farthest texel centre.
+        let farthest = dirs.iter().map(|d| d.dot(axis).clamp(-1.0, 1.0).acos()).fold(0.0f32, f32::max);
+        let angle = if axis == Vec3::ZERO { PI } else { (farthest + SQRT_2 / size as f32).min(PI) };
+        Footprint { faces, axis, angle }
+    }
+
+    /// The cone (axis, cos of the half-angle) outside which a Phong level of a plain-chain
+    /// source of face size `src` and window `window` is exactly black: the window reaches
+    /// sqrt(2) window texels on the face plane, each bilinear lookup one texel further, and
+    /// the plain chain's box filter spreads the footprint by one more (angles on the sphere are
+    /// at most distances on a face plane). -2 where the cone covers everything.
+    fn cone(&self, src: u32, window: i32) -> [f32; 4] {
+        let h = 2.0 / src as f32;
+        let angle = self.angle + SQRT_2 * h * (window.max(0) as f32 + 2.0);
+        if angle >= PI {
+            return NO_CONE;
+        }
+        [self.axis.x, self.axis.y, self.axis.z, angle.cos()]
+    }
+}
+
+/// `bounds` at mip `level` of the plain (2x2 box) chain: each level-0 rectangle halved per
+/// level, widened by a texel against any rounding in the box filter's lookups.
+fn bounds_at_level(bounds: &FaceBounds, level: u32, size: u32) -> FaceBounds {
+    let last = (size >> level).max(1) - 1;
+    bounds.map(|[x0, y0, x1, y1]| {
+        if x0 > x1 {
+            return [1, 1, 0, 0];
+        }
+        let lo = |c: u32| (c >> level).saturating_sub(1);
+        let hi = |c: u32| ((c >> level) + 1).min(last);
+        [lo(x0), lo(y0), hi(x1), hi(y1)]
+    })
 }
 
 #[repr(C)]
@@ -103,6 +180,10 @@ pub struct CubePasses {
     filter: FullscreenPass,
     mask: FullscreenPass,
     phong: FullscreenPass,
+    phong_norm: FullscreenPass,
+    /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
+    /// only on the geometry, and every PEM of a set shares it.
+    norms: Option<GpuImage>,
     preview: FullscreenPass,
 }
 
@@ -111,7 +192,9 @@ impl Default for CubePasses {
         CubePasses {
             filter: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
             mask: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
-            phong: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_phong"),
+            phong: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
+            phong_norm: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong_norm"),
+            norms: None,
             preview: FullscreenPass::new("cube_preview.wgsl"),
         }
     }
@@ -144,10 +227,17 @@ impl CubePasses {
         }
     }
 
-    /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl).
-    pub fn filter_chain(&mut self, gpu: &GpuContext, cube: &GpuImage, kernel: Kernel) -> anyhow::Result<()> {
+    /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl,
+    /// pem_phong.wgsl); level 0 is black outside `bounds`.
+    pub fn filter_chain(
+        &mut self,
+        gpu: &GpuContext,
+        cube: &GpuImage,
+        kernel: Kernel,
+        footprint: &Footprint,
+    ) -> anyhow::Result<()> {
         if kernel == Kernel::Phong {
-            return self.phong_chain(gpu, cube);
+            return self.phong_chain(gpu, cube, footprint);
         }
         let w = super::pem::weights(kernel);
         let total: f32 = w.iter().flatten().sum();
@@ -182,7 +272,7 @@ impl CubePasses {
 
     /// The Phong prefilter (src/ibl/pem.rs phong_level): a plain chain of level 0 in a pooled
     /// cube, then every level of `cube` integrated from it.
-    fn phong_chain(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<()> {
+    fn phong_chain(&mut self, gpu: &GpuContext, cube: &GpuImage, footprint: &Footprint) -> anyhow::Result<()> {
         let plain = gpu.acquire("plain mip chain", cube.desc);
         gpu.record(|enc| {
             enc.copy_texture_to_texture(
@@ -191,7 +281,8 @@ impl CubePasses {
                 wgpu::Extent3d { width: cube.width, height: cube.width, depth_or_array_layers: 6 },
             )
         });
-        self.filter_chain(gpu, &plain, Kernel::None)?;
+        self.filter_chain(gpu, &plain, Kernel::None, footprint)?;
+        let norms = self.phong_norms(gpu, cube)?;
         let size = cube.width as usize;
         let sample_type = plain.desc.sample_type(false);
         for mip in 1..cube.desc.mips {
@@ -203,23 +294,36 @@ impl CubePasses {
                 base_layer: 0,
                 layers: 6,
             });
+            let norm_view = norms.view_of(crate::gpu::texture::ViewSel {
+                dimension: wgpu::TextureViewDimension::D2Array,
+                base_mip: mip,
+                mips: 1,
+                base_layer: 0,
+                layers: 6,
+            });
             let (dst, src) = (cube.width >> mip, cube.width >> source);
             let exponent = super::pem::phong_exponent(size, mip as usize);
+            let full_sphere = u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE);
+            let window = super::pem::phong_window(src as usize, exponent);
             for face in 0..6 {
                 let params = PhongParams {
                     face,
                     dst_size: dst,
                     src_size: src,
-                    full_sphere: u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE),
+                    full_sphere,
                     exponent,
-                    window: super::pem::phong_window(src as usize, exponent),
+                    window,
                     pad: [0.0; 2],
+                    bounds: bounds_at_level(&footprint.faces, source, cube.width),
+                    // The whole-sphere sum reaches every texel in front of r: no cone there.
+                    cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, window) },
                 };
                 self.phong.draw(
                     gpu,
                     &[
                         Bind::Uniform(bytemuck::bytes_of(&params)),
                         Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
+                        Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
                     ],
                     &[&cube.layer_view(face, mip)],
                     &[cube.format],
@@ -227,6 +331,47 @@ impl CubePasses {
             }
         }
         Ok(())
+    }
+
+    /// The Phong weights' sum per texel of every whole-sphere level of a face-size
+    /// `cube.width` chain (fs_phong_norm), computed once per size.
+    fn phong_norms(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<GpuImage> {
+        if let Some(norms) = self.norms.as_ref().filter(|n| n.width == cube.width) {
+            return Ok(norms.share());
+        }
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let desc = TextureDesc::array(cube.width, cube.width, 6, wgpu::TextureFormat::R32Float, usage)
+            .with_mips(cube.desc.mips);
+        let norms = GpuImage::create(gpu, "Phong normalization", desc);
+        let size = cube.width as usize;
+        for mip in 1..cube.desc.mips {
+            let source = super::pem::phong_source(mip as usize) as u32;
+            let (dst, src) = (cube.width >> mip, cube.width >> source);
+            if dst as usize > super::pem::PHONG_FULL_SPHERE_SIZE {
+                continue;
+            }
+            for face in 0..6 {
+                let params = PhongParams {
+                    face,
+                    dst_size: dst,
+                    src_size: src,
+                    full_sphere: 1,
+                    exponent: super::pem::phong_exponent(size, mip as usize),
+                    window: 0,
+                    pad: [0.0; 2],
+                    bounds: Footprint::whole(src).faces,
+                    cone: NO_CONE,
+                };
+                self.phong_norm.draw(
+                    gpu,
+                    &[Bind::Uniform(bytemuck::bytes_of(&params))],
+                    &[&norms.layer_view(face, mip)],
+                    &[norms.format],
+                )?;
+            }
+        }
+        self.norms = Some(norms.share());
+        Ok(norms)
     }
 
     /// Level 0 of `dst`: level 0 of `src` where `regions` (faces stacked vertically) holds
