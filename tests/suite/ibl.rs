@@ -150,9 +150,19 @@ fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_le
     let ev = run_graph(&graph, 32, 32);
     let (env, pems) = (env_of(&ev), pems_of(&ev));
     assert_eq!(pems.pems.len(), 5);
+    assert_eq!(pems.full.desc.mips, 6, "32 -> 1 is six levels");
+    assert_pems_sum_to_the_filtered_map(&env, &pems);
+    // The memory output counts N cubes with their mip chains.
+    let expected = 5 * 6 * 8 * (32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) as u64;
+    assert_eq!(pems.bytes, expected);
+}
+
+/// Level 0: every texel in exactly one PEM; every further level: the PEMs sum to the filtered
+/// map within half-float rounding (the filters are linear, and the Phong prefilter's region
+/// footprints skip only exact zeros).
+fn assert_pems_sum_to_the_filtered_map(env: &EnvMap, pems: &PemSet) {
     let gpu = gpu();
     let mips = pems.full.desc.mips;
-    assert_eq!(mips, 6, "32 -> 1 is six levels");
     for mip in 0..mips {
         let full = read_level(gpu, &pems.full, mip);
         let parts: Vec<CubeImage> = pems.pems.iter().map(|p| read_level(gpu, p, mip)).collect();
@@ -173,9 +183,17 @@ fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_le
             }
         }
     }
-    // The memory output counts N cubes with their mip chains.
-    let expected = 5 * 6 * 8 * (32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) as u64;
-    assert_eq!(pems.bytes, expected);
+}
+
+#[test]
+fn pems_of_many_small_regions_sum_to_the_filtered_map_on_windowed_levels_too() {
+    // 64^2: level 1 (32^2) sums a window, not the whole sphere; 48 regions are small enough
+    // that most destination texels lie outside a region's cone.
+    let graph = sphere_graph(&forest(), 64, 48, &[0.5], 1.0, "", "");
+    let ev = run_graph(&graph, 16, 16);
+    let (env, pems) = (env_of(&ev), pems_of(&ev));
+    assert_eq!(pems.pems.len(), 48);
+    assert_pems_sum_to_the_filtered_map(&env, &pems);
 }
 
 #[test]
