@@ -12,7 +12,7 @@
 //!   radius R) of the drawn items' transformed mesh bounds: the inner square spans [-R, R]
 //!   across, depth [0, 1] spans 2R (near plane R in front of c, far plane R behind it).
 //! - **Drawing**: `SceneDrawer::depth_tiles`, one instanced draw per batch of <= 64 lights,
-//!   then a moments pass writes (d, d^2) (Rg16Float) and a separable Gaussian blurs each
+//!   then a moments pass writes (c, c^2) of the centred depth c = d - 1/2 (Rg16Float) and a separable Gaussian blurs each
 //!   tile; more than 64 lights draw batch by batch into a batch texture whose tiles are
 //!   copied into the atlas.
 //! - **Blur width** (an area light of the region's size): the region's solid angle Omega is a
@@ -48,7 +48,7 @@ pub static SHADOW_ATLAS: NodeSpec = NodeSpec {
     doc: "Variance shadow maps of many directional lights (one per median-cut region) in one atlas texture (Fig. 4.11), for IblShading's \
 visibility term (eq. 3.43). Per light an orthographic view along -direction fitted to the bounding sphere (c, R) of the drawn items; \
 the inner tile (tile minus `guard` texels per side) spans [-R, R], the guard band holds real geometry. Depth drawn with one instanced \
-draw per batch of 64 lights, moments (d, d^2) in Rg16Float, then a separable Gaussian per tile whose sigma models an area light of \
+draw per batch of 64 lights, moments (c, c^2) of the centred depth c = d - 1/2 in Rg16Float (finer half floats near the scene), then a separable Gaussian per tile whose sigma models an area light of \
 the region's solid angle Omega: theta = acos(1 - Omega / 2pi), sigma = blur_scale tan(theta) 0.25 R / texel, clamped to 3 sigma <= guard; \
 taps are clamped to the tile, so no blur reads another tile. Memory: atlas texels x 4 bytes (Table 5.1: N x res^2 x 4 B).",
     inputs: &[
@@ -57,7 +57,11 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
     ],
     outputs: &[
         PortSpec::output("shadows", PortType::ShadowAtlas, "The atlas with each light's matrices and tile."),
-        PortSpec::output("atlas", PortType::Texture, "The atlas itself (Rg16Float moments: d, d^2), for inspection."),
+        PortSpec::output(
+            "atlas",
+            PortType::Texture,
+            "The atlas itself (Rg16Float moments of the centred depth d - 1/2), for inspection.",
+        ),
         PortSpec::output("memory_mb", PortType::Scalar, "Atlas memory in MiB (texels x 4 bytes)."),
     ],
     params: &[
@@ -225,7 +229,7 @@ fn moments_format(gpu: &GpuContext) -> wgpu::TextureFormat {
 impl AtlasBuilder {
     /// The separable per-tile Gaussian (shaders/vsm_blur.wgsl) of `src`, a grid of `tile`-texel
     /// tiles, `columns` wide, tile j blurred with `sigmas[j]` (texels; at most 64 tiles), taps
-    /// clamped to the tile. Slots past the last tile become far (1, 1). Returns a new texture
+    /// clamped to the tile. Slots past the last tile become far (0.5, 0.25: centred depth 1/2). Returns a new texture
     /// of the atlas format.
     pub fn blur(
         &mut self,

@@ -100,7 +100,8 @@ fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
     let r = shadow.rect[k];
     uv = clamp(uv, r.xy, r.zw);
     let m = textureSampleLevel(atlas, samp, uv, 0.0).xy;
-    let t = c.z - shadow.bias.w;
+    // The atlas holds moments of the centred depth (shaders/vsm.wgsl).
+    let t = c.z - shadow.bias.w - 0.5;
     if t <= m.x {
         return 1.0;
     }

@@ -21,7 +21,8 @@ fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let tile = px / t;
     let j = tile.y * i32(blur.grid.y) + tile.x;
     if j >= i32(blur.grid.z) {
-        return vec4<f32>(1.0, 1.0, 0.0, 0.0);
+        // No tile: far (centred depth 1/2, shaders/vsm.wgsl).
+        return vec4<f32>(0.5, 0.25, 0.0, 0.0);
     }
     let sigma = blur.sigma[j / 4][j % 4];
     let r = min(i32(ceil(3.0 * sigma)), t);

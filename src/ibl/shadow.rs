@@ -35,7 +35,7 @@ pub struct VsmParams {
 
 /// `ShadowAtlas`'s output: the moments texture and every light's tile.
 pub struct ShadowAtlas {
-    /// Rg16Float (d, d^2), blurred per tile.
+    /// Rg16Float moments (c, c^2) of the centred depth c = d - 1/2, blurred per tile.
     pub atlas: GpuImage,
     pub lights: Vec<ShadowLight>,
     pub tile_size: u32,

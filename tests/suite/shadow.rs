@@ -227,6 +227,77 @@ fn a_planar_occluder_blocks_lights_from_above_under_its_middle_only() {
     );
 }
 
+/// The standard normal CDF (Abramowitz and Stegun 7.1.26, error under 1.5e-7).
+fn normal_cdf(x: f32) -> f32 {
+    let z = (x.abs() / std::f32::consts::SQRT_2) as f64;
+    let t = 1.0 / (1.0 + 0.3275911 * z);
+    let poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+    let erf = 1.0 - poly * (-z * z).exp();
+    (0.5 * (1.0 + x.signum() as f64 * erf)) as f32
+}
+
+#[test]
+fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
+    // One light straight down (a cap symmetric about the zenith: one median-cut region whose
+    // centroid is the zenith), pure Chebyshev (no bleed reduction, bias or normal offset).
+    // With two depths under the kernel, the blurred moments give p_max = 1 - a exactly, a the
+    // occluded fraction of the kernel; the occluder is the half-plane x < 0 at height 0.5,
+    // so along x the lit fraction is the Gaussian CDF Phi(x / sigma) of the tile's blur.
+    let out = out_dir("shadow_lit_fraction");
+    let probe = probe(&out, 20.0);
+    let scene = r#""floor": (kind: "Primitive", params: { "shape": "plane", "size": 4.0, "segments_u": 1, "segments_v": 1 }),
+        "floor_draw": (kind: "Draw"),
+        "board": (kind: "Primitive", params: { "shape": "plane", "size": 2.0, "segments_u": 1, "segments_v": 1 }),
+        "board_draw": (kind: "Draw", params: { "translate": [-1.0, 0.5, 0.0] }),
+        "all": (kind: "Merge"),"#;
+    let links = r#"("floor.mesh", "floor_draw.mesh"), ("m.material", "floor_draw.material"), ("floor_draw.scene", "all.a"),
+        ("board.mesh", "board_draw.mesh"), ("m.material", "board_draw.material"), ("board_draw.scene", "all.b"),"#;
+    let s = Setup {
+        scene,
+        links,
+        // Low, from +x: the floor under the board's edge is in view.
+        camera: r#""distance": 3.0, "pitch": 4.0, "yaw": 90.0, "fov": 40.0, "target": [0.0, 0.0, 0.0]"#,
+        probe: &probe,
+        lights: 1,
+        atlas: r#""bleed_reduction": 0.0, "depth_bias": 0.0, "normal_offset": 0.0"#,
+        hybrid: "",
+        reference: None,
+    };
+    let ev = run_graph(&graph(&s), 160, 120);
+    let atlas = match ev.output("atlas", "shadows") {
+        Some(Value::ShadowAtlas(a)) => a.clone(),
+        _ => panic!("no shadow atlas"),
+    };
+    let light = &atlas.lights[0];
+    assert!(light.direction.angle_between(Vec3::Y) < 1e-3, "the light is not straight up: {}", light.direction);
+    let sigma = light.sigma * atlas.texel_world;
+    assert!(sigma > 0.05, "the blur is too narrow to measure a penumbra: sigma {sigma}");
+    let (pos, vis) = (positions(&ev), visibility(&ev));
+    let (mut worst, mut n, mut sides) = (0.0f32, 0, [0, 0]);
+    for (p, v) in pos.iter().zip(&vis) {
+        let Some(p) = p else { continue };
+        if p.y.abs() > 1e-3 || p.z.abs() > 0.4 || p.x.abs() > 3.0 * sigma {
+            continue;
+        }
+        let want = normal_cdf(p.x / sigma);
+        worst = worst.max((v - want).abs());
+        n += 1;
+        if p.x.abs() > 0.3 * sigma {
+            sides[usize::from(p.x > 0.0)] += 1;
+        }
+    }
+    eprintln!(
+        "sigma {sigma:.4} (world), {} texels; {n} floor pixels in the penumbra; worst |VIS - Phi| {worst:.4}",
+        light.sigma
+    );
+    assert!(n > 200 && sides[0] > 20 && sides[1] > 20, "too few penumbra pixels: {n} ({sides:?} in shadow, lit)");
+    // Rasterizing the edge at texel centres shifts it by up to half a texel: Phi's slope times
+    // that (about 0.04 at this sigma of 5 texels), plus half-float moments. (Uncentred
+    // moments, before shaders/vsm.wgsl centred them, gave 0.05 here.)
+    let tol = 0.4 * 0.5 / light.sigma + 0.005;
+    assert!(worst <= tol, "VIS departs from the lit fraction by {worst} (tolerance {tol})");
+}
+
 fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
     let material = Arc::new(Material::default());
     meshes
@@ -249,8 +320,9 @@ fn light(direction: Vec3) -> RegionLight {
 fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
     let gpu = gpu();
     let mut builder = AtlasBuilder::default();
-    // A synthetic grid of 5 tiles of 16 texels, 3 columns: tile 0 far (1, 1), tiles 1..5
-    // dark (0, 0) but for a bright texel column at their left edge (next to tile 0 or 3).
+    // A synthetic grid of 5 tiles of 16 texels, 3 columns: tile 0 far (centred depth 0.5:
+    // (0.5, 0.25)), tiles 1..5 dark (0, 0) but for a bright (0.25) texel column at their left
+    // edge (next to tile 0 or 3).
     let (t, columns) = (16u32, 3u32);
     let (w, h) = (columns * t, 2 * t);
     let mut texels = vec![[0.0f32; 4]; (w * h) as usize];
@@ -258,9 +330,9 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
         for x in 0..w {
             let j = (y / t) * columns + x / t;
             let v = if j == 0 || j >= 5 {
-                1.0
-            } else if x % t == 0 {
                 0.5
+            } else if x % t == 0 {
+                0.25
             } else {
                 0.0
             };
@@ -277,11 +349,11 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
             let (m1, m2) = (out.rgba[i], out.rgba[i + 1]);
             match j {
                 // Far tiles (and the empty slot) stay exactly far.
-                0 | 5 => assert!(m1 == 1.0 && m2 == 1.0, "tile {j} texel ({x}, {y}): ({m1}, {m2})"),
-                // Dark tiles only ever see their own bright column, so they stay below 0.5 and
+                0 | 5 => assert!(m1 == 0.5 && m2 == 0.25, "tile {j} texel ({x}, {y}): ({m1}, {m2})"),
+                // Dark tiles only ever see their own bright column, so they stay below 0.25 and
                 // their right halves (> 3 sigma from it) stay exactly dark.
                 _ => {
-                    assert!(m1 <= 0.5, "tile {j} texel ({x}, {y}) read another tile: {m1}");
+                    assert!(m1 <= 0.25, "tile {j} texel ({x}, {y}) read another tile: {m1}");
                     if x % t >= 16 {
                         assert_eq!(m1, 0.0);
                     }
@@ -322,15 +394,15 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
             .collect()
     };
     for k in [1, 3] {
-        assert!(tile_values(k).iter().all(|&(m1, m2)| m1 == 1.0 && m2 == 1.0), "edge-on tile {k} is not all far");
+        assert!(tile_values(k).iter().all(|&(m1, m2)| m1 == 0.5 && m2 == 0.25), "edge-on tile {k} is not all far");
     }
     for k in [0, 2] {
-        let dark = tile_values(k).iter().filter(|(m1, _)| *m1 < 0.9).count();
+        let dark = tile_values(k).iter().filter(|(m1, _)| *m1 < 0.4).count();
         assert!(dark > 100, "tile {k} shows no floor ({dark} texels)");
     }
-    // The floor seen from straight above lies at mid depth (0.5).
+    // The floor seen from straight above lies at mid depth (0.5: centred, 0).
     let (m1, _) = tile_values(0)[(16 * 32 + 16) as usize];
-    assert!((m1 - 0.5).abs() < 2e-3, "mid depth {m1}");
+    assert!(m1.abs() < 2e-3, "mid depth {m1}");
 }
 
 #[test]
@@ -392,11 +464,11 @@ const SPHERE_LINKS: &str = r#"("floor.mesh", "floor_draw.mesh"), ("m.material", 
     ("m.material", "s4.material"), ("s0.scene", "sa.a"), ("s1.scene", "sa.b"), ("s2.scene", "sa.c"), ("s3.scene", "sa.d"),
     ("s4.scene", "sb.a"), ("floor_draw.scene", "sb.b"), ("sa.scene", "all.a"), ("sb.scene", "all.b"),"#;
 
-/// MSEs against the ray-traced reference on the spheres scene with `lights` lights: (global,
-/// local, hybrid). `SHADOW_ATLAS` (RON parameters, e.g. `"blur_scale": 0.25`) overrides the
-/// atlas's defaults, for exploring.
-fn spheres_errors(probe: &Path, lights: usize, size: (u32, u32)) -> (f64, f64, f64) {
-    let atlas = std::env::var("SHADOW_ATLAS").unwrap_or_default();
+/// MSEs against the ray-traced reference on the spheres scene with `lights` lights and the
+/// atlas parameters `atlas` (RON): (global, local, hybrid). `SHADOW_ATLAS` replaces `atlas`,
+/// for exploring.
+fn spheres_errors(probe: &Path, lights: usize, size: (u32, u32), atlas: &str) -> (f64, f64, f64) {
+    let atlas = std::env::var("SHADOW_ATLAS").unwrap_or(atlas.to_string());
     let s = Setup {
         scene: SPHERES,
         links: SPHERE_LINKS,
@@ -452,22 +524,27 @@ fn spheres_errors(probe: &Path, lights: usize, size: (u32, u32)) -> (f64, f64, f
 
 #[test]
 fn hybrid_occlusion_is_closer_to_the_ray_traced_reference_than_either_part() {
+    // The dissertation's regime: deliberately low-resolution shadow maps (32^2 tiles), whose
+    // blur loses the contact shadows that the local pass restores. (With 128^2 tiles the
+    // global part alone resolves the contacts and the local part over-occludes them: hybrid
+    // 0.0050 against global 0.0046; docs/occlusion.md.)
     let out = out_dir("shadow_spheres");
     let probe = probe(&out, 180.0);
     let size = (160, 120);
-    let (global, local, hybrid) = spheres_errors(&probe, 128, size);
+    let low_res = r#""tile_size": 32"#;
+    let (global, local, hybrid) = spheres_errors(&probe, 128, size, low_res);
     eprintln!(
         "hybrid MSE is {:.0}% below global's and {:.0}% below SSAO's",
         100.0 * (1.0 - hybrid / global),
         100.0 * (1.0 - hybrid / local)
     );
-    assert!(hybrid < global && hybrid < local, "hybrid {hybrid} is not below global {global} and local {local}");
+    assert!(hybrid <= 0.7 * global, "hybrid {hybrid} is not 30% below global {global}");
+    assert!(hybrid <= 0.7 * local, "hybrid {hybrid} is not 30% below SSAO {local}");
     // More lights, smaller regions, narrower blurs: the global part alone gets closer.
-    let (global_many, _, hybrid_many) = spheres_errors(&probe, 512, size);
+    let (global_many, _, hybrid_many) = spheres_errors(&probe, 512, size, low_res);
     assert!(global_many < global, "global-only at 512 lights {global_many} is not below 128 lights {global}");
-    // The dissertation's claim (hybrid at 128 lights no worse than global-only at 512) does
-    // not hold here: every sphere is in the atlas, so the global part already has the contact
-    // shadows and SSAO counts them twice. Printed for the record, not asserted.
+    // The dissertation's claim (hybrid at 128 lights no worse than global-only at 512) is
+    // close but not met here: printed for the record, not asserted.
     eprintln!(
         "hybrid at 128 lights {hybrid:.5} against global-only at 512 {global_many:.5} (hybrid at 512: {hybrid_many:.5})"
     );
