@@ -204,8 +204,8 @@ fn add_connect_edit_undo_redo_and_save() {
             &format!("{preview}        \"scene\": ("),
         )
         .replace(
-            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {},",
-            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1200.0, 200.0),\n            params: {\n                \"operator\": \"reinhard\",\n            },",
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1440.0, 200.0),\n            params: {},",
+            "        \"tonemap\": (\n            kind: \"Tonemap\",\n            pos: (1440.0, 200.0),\n            params: {\n                \"operator\": \"reinhard\",\n            },",
         )
         .replace(
             "        (\"tonemap.image\", \"image.image\"),\n",
@@ -564,15 +564,15 @@ fn a_node_dropped_on_a_wire_is_inserted() {
     let dir = temp_dir("insert");
     let path = copy_default(&dir);
     let mut h = editor(&path);
-    // A free Tonemap below the light -> tonemap wire, then dragged onto it.
+    // A free Tonemap below the hybrid -> tonemap wire, then dragged onto it.
     let below = {
         let app = h.state();
-        let r = app.canvas.node_screen_rect("light").unwrap();
+        let r = app.canvas.node_screen_rect("hybrid").unwrap();
         app.canvas.graph_pos(Some(r.left_bottom() + Vec2::new(0.0, 200.0)))
     };
     h.state_mut().state.add_node("Tonemap", below).unwrap();
     settle(&mut h);
-    let a = pin(&h, "light.image", false);
+    let a = pin(&h, "hybrid.combined", false);
     let b = pin(&h, "tonemap.image", true);
     let rect = h.state().canvas.node_screen_rect("tonemap_2").unwrap();
     let grab = rect.left_top() + Vec2::new(rect.width() * 0.5, 8.0);
@@ -601,9 +601,9 @@ fn a_node_dropped_on_a_wire_is_inserted() {
     });
     settle(&mut h);
     let g = &h.state().state.graph;
-    assert!(g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap_2.image")), "{:?}", g.links);
+    assert!(g.links.iter().any(|l| l.from == p("hybrid.combined") && l.to == p("tonemap_2.image")), "{:?}", g.links);
     assert!(g.links.iter().any(|l| l.from == p("tonemap_2.image") && l.to == p("tonemap.image")));
-    assert!(!g.links.iter().any(|l| l.from == p("light.image") && l.to == p("tonemap.image")));
+    assert!(!g.links.iter().any(|l| l.from == p("hybrid.combined") && l.to == p("tonemap.image")));
 }
 
 #[test]
