@@ -236,14 +236,13 @@ fn normal_cdf(x: f32) -> f32 {
     (0.5 * (1.0 + x.signum() as f64 * erf)) as f32
 }
 
-#[test]
-fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
-    // One light straight down (a cap symmetric about the zenith: one median-cut region whose
-    // centroid is the zenith), pure Chebyshev (no bleed reduction, bias or normal offset).
-    // With two depths under the kernel, the blurred moments give p_max = 1 - a exactly, a the
-    // occluded fraction of the kernel; the occluder is the half-plane x < 0 at height 0.5,
-    // so along x the lit fraction is the Gaussian CDF Phi(x / sigma) of the tile's blur.
-    let out = out_dir("shadow_lit_fraction");
+/// The floor under the edge of a half-plane occluder (x < 0, height 0.5), lit by one light
+/// straight down (a cap symmetric about the zenith: one median-cut region whose centroid is
+/// the zenith) with pure Chebyshev (no bleed reduction, bias or normal offset) and `jitter`:
+/// per floor pixel within 3 sigma of the edge, (x, VIS), and the tile's sigma in world units
+/// and in texels.
+fn half_plane_penumbra(jitter: f32) -> (Vec<(f32, f32)>, f32, f32) {
+    let out = out_dir(&format!("shadow_lit_fraction_{jitter}"));
     let probe = probe(&out, 20.0);
     let scene = r#""floor": (kind: "Primitive", params: { "shape": "plane", "size": 4.0, "segments_u": 1, "segments_v": 1 }),
         "floor_draw": (kind: "Draw"),
@@ -252,6 +251,7 @@ fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
         "all": (kind: "Merge"),"#;
     let links = r#"("floor.mesh", "floor_draw.mesh"), ("m.material", "floor_draw.material"), ("floor_draw.scene", "all.a"),
         ("board.mesh", "board_draw.mesh"), ("m.material", "board_draw.material"), ("board_draw.scene", "all.b"),"#;
+    let atlas = format!(r#""bleed_reduction": 0.0, "depth_bias": 0.0, "normal_offset": 0.0, "jitter": {jitter:?}"#);
     let s = Setup {
         scene,
         links,
@@ -259,7 +259,7 @@ fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
         camera: r#""distance": 3.0, "pitch": 4.0, "yaw": 90.0, "fov": 40.0, "target": [0.0, 0.0, 0.0]"#,
         probe: &probe,
         lights: 1,
-        atlas: r#""bleed_reduction": 0.0, "depth_bias": 0.0, "normal_offset": 0.0"#,
+        atlas: &atlas,
         hybrid: "",
         reference: None,
     };
@@ -273,29 +273,60 @@ fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
     let sigma = light.sigma * atlas.texel_world;
     assert!(sigma > 0.05, "the blur is too narrow to measure a penumbra: sigma {sigma}");
     let (pos, vis) = (positions(&ev), visibility(&ev));
-    let (mut worst, mut n, mut sides) = (0.0f32, 0, [0, 0]);
-    for (p, v) in pos.iter().zip(&vis) {
-        let Some(p) = p else { continue };
-        if p.y.abs() > 1e-3 || p.z.abs() > 0.4 || p.x.abs() > 3.0 * sigma {
-            continue;
-        }
-        let want = normal_cdf(p.x / sigma);
-        worst = worst.max((v - want).abs());
-        n += 1;
-        if p.x.abs() > 0.3 * sigma {
-            sides[usize::from(p.x > 0.0)] += 1;
-        }
-    }
-    eprintln!(
-        "sigma {sigma:.4} (world), {} texels; {n} floor pixels in the penumbra; worst |VIS - Phi| {worst:.4}",
-        light.sigma
+    let picked: Vec<(f32, f32)> = pos
+        .iter()
+        .zip(&vis)
+        .filter_map(|(p, v)| p.map(|p| (p, *v)))
+        .filter(|(p, _)| p.y.abs() < 1e-3 && p.z.abs() < 0.4 && p.x.abs() < 3.0 * sigma)
+        .map(|(p, v)| (p.x, v))
+        .collect();
+    let side = |lit: bool| picked.iter().filter(|(x, _)| x.abs() > 0.3 * sigma && (*x > 0.0) == lit).count();
+    assert!(
+        picked.len() > 200 && side(false) > 20 && side(true) > 20,
+        "too few penumbra pixels: {} ({} in shadow, {} lit)",
+        picked.len(),
+        side(false),
+        side(true)
     );
-    assert!(n > 200 && sides[0] > 20 && sides[1] > 20, "too few penumbra pixels: {n} ({sides:?} in shadow, lit)");
+    (picked, sigma, light.sigma)
+}
+
+/// The largest |VIS - Phi(x / sigma)| over `pixels`.
+fn worst_against_phi(pixels: &[(f32, f32)], sigma: f32) -> f32 {
+    pixels.iter().map(|(x, v)| (v - normal_cdf(x / sigma)).abs()).fold(0.0, f32::max)
+}
+
+#[test]
+fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
+    // With two depths under the kernel, the blurred moments give p_max = 1 - a exactly, a the
+    // occluded fraction of the kernel: along x the lit fraction is the Gaussian CDF
+    // Phi(x / sigma) of the tile's blur.
+    let (pixels, sigma, sigma_texels) = half_plane_penumbra(0.0);
+    let worst = worst_against_phi(&pixels, sigma);
+    eprintln!("sigma {sigma:.4} (world), {sigma_texels} texels; {} pixels; worst |VIS - Phi| {worst:.4}", pixels.len());
     // Rasterizing the edge at texel centres shifts it by up to half a texel: Phi's slope times
     // that (about 0.04 at this sigma of 5 texels), plus half-float moments. (Uncentred
     // moments, before shaders/vsm.wgsl centred them, gave 0.05 here.)
-    let tol = 0.4 * 0.5 / light.sigma + 0.005;
+    let tol = 0.4 * 0.5 / sigma_texels + 0.005;
     assert!(worst <= tol, "VIS departs from the lit fraction by {worst} (tolerance {tol})");
+}
+
+#[test]
+fn the_jittered_lookup_is_deterministic_and_moves_each_pixel_at_most_its_radius() {
+    // Fig. 4.13: each pixel's lookup moves by up to `jitter` texels per axis, so its VIS is the
+    // lit fraction at a point at most that far away (Phi's slope times the distance), and the
+    // 4x4 pattern is a fixed function of the pixel: the same image twice.
+    let jitter = 1.5;
+    let (plain, sigma, sigma_texels) = half_plane_penumbra(0.0);
+    let (jittered, _, _) = half_plane_penumbra(jitter);
+    assert_eq!(jittered, half_plane_penumbra(jitter).0, "the jittered lookup is not deterministic");
+    assert_eq!(plain.len(), jittered.len());
+    let worst = worst_against_phi(&jittered, sigma);
+    let tol = 0.4 * (0.5 + jitter * std::f32::consts::SQRT_2) / sigma_texels + 0.005;
+    eprintln!("jitter {jitter}: worst |VIS - Phi| {worst:.4} (tolerance {tol:.4})");
+    assert!(worst <= tol, "a jittered lookup lands farther than its radius: {worst} (tolerance {tol})");
+    let moved = plain.iter().zip(&jittered).filter(|(a, b)| (a.1 - b.1).abs() > 0.01).count();
+    assert!(moved > plain.len() / 4, "the jitter moves only {moved} of {} penumbra pixels", plain.len());
 }
 
 fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
