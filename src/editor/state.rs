@@ -382,6 +382,41 @@ mod tests {
     }
 
     #[test]
+    fn undo_and_redo_across_a_save_track_dirtiness_and_the_inspected_node() {
+        let dir = std::env::temp_dir().join(format!("werkstatt-undo-save-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("g.ron");
+        let mut s = EditorState::default();
+        let a = s.add_node("Number", [0.0, 0.0]).unwrap();
+        s.set_param(&a, "value", ParamValue::Float(4.0)).unwrap();
+        s.save_as(&path).unwrap();
+        assert!(!s.is_dirty());
+        // Undo after a save: the graph differs from the file again.
+        assert!(s.undo());
+        assert!(s.is_dirty(), "undo after save leaves the document clean");
+        assert_eq!(s.graph.nodes[&a].params.get("value"), None, "undo did not restore the default");
+        // Redo back to the saved state: clean again, and the title says so.
+        assert!(s.redo());
+        assert!(!s.is_dirty(), "redo to the saved graph leaves it dirty");
+        assert_eq!(s.title(), "g.ron - werkstatt");
+        assert!(!s.redo(), "nothing left to redo");
+        // Undoing the step that added the inspected node stops inspecting it.
+        let b = s.add_node("Number", [100.0, 0.0]).unwrap();
+        s.inspected = Some(PortRef { node: b.clone(), port: "value".into() });
+        assert!(s.undo());
+        assert!(!s.graph.nodes.contains_key(&b));
+        assert_eq!(s.inspected, None, "the inspector still shows a node that undo removed");
+        // A reload from disk is one undoable step, and undoing it brings the edit back.
+        s.set_param(&a, "value", ParamValue::Float(9.0)).unwrap();
+        let on_disk = Graph::load(&path).unwrap();
+        s.replace_graph(on_disk, "reload from disk");
+        assert_eq!(s.graph.nodes[&a].params["value"], ParamValue::Float(4.0));
+        assert!(s.undo());
+        assert_eq!(s.graph.nodes[&a].params["value"], ParamValue::Float(9.0));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn refused_edits_leave_a_message_and_no_step() {
         let mut s = EditorState::default();
         let cam = s.add_node("OrbitCamera", [0.0, 0.0]).unwrap();
