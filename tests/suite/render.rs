@@ -131,3 +131,20 @@ fn gloss_map_sets_two_gloss_levels_in_the_gbuffer() {
     let (low, high) = (near(0.1), near(0.9));
     assert!(low > 200 && high > 200, "gloss levels: {low} pixels at 0.1, {high} at 0.9");
 }
+
+/// `ImageWrite` with `format: exr` writes the same pixels as the PNG, as floats: every
+/// channel of the EXR rounds to the PNG's byte (the tone-mapped image is display-encoded, so
+/// neither file re-encodes it).
+#[test]
+fn image_write_exr_holds_the_pngs_pixels_as_floats() {
+    let (png_dir, exr_dir) = (out_dir("image-write-png"), out_dir("image-write-exr"));
+    render_graph(&default_graph(), &png_dir, (0, 0), (64, 48), &[], &[]).unwrap();
+    let stats = render_graph(&default_graph(), &exr_dir, (0, 0), (64, 48), &["image.format=exr"], &[]).unwrap();
+    assert_eq!(stats.files, ["image_0000.exr"]);
+    let png = read_png(&png_dir.join("image_0000.png"));
+    let exr = read_exr(&exr_dir.join("image_0000.exr"));
+    assert_eq!((exr.width, exr.height), png.dimensions());
+    assert_eq!(exr.rgba.len(), png.as_raw().len());
+    let differing = exr.rgba.iter().zip(png.as_raw()).filter(|(f, b)| (*f * 255.0).round() as u8 != **b).count();
+    assert_eq!(differing, 0, "{differing} channels of the EXR do not match the PNG");
+}
