@@ -191,6 +191,7 @@ pub fn attachments(
                 model: Mat4::IDENTITY,
                 detail: true,
                 attached: Some(Arc::new(draw)),
+                cuboid: None,
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -224,6 +225,7 @@ pub fn attachments(
                     model: Mat4::IDENTITY,
                     detail: true,
                     attached: None,
+                    cuboid: None,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -588,6 +590,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
         model,
         detail: false,
         attached: None,
+        cuboid: None,
     };
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
