@@ -17,7 +17,8 @@ fn vs_main(v: VertexIn) -> VertexOut {
     let world = vec4<f32>(d.position, 1.0);
     var out: VertexOut;
     out.clip = frame.view_proj * world;
-    out.normal = cuboid_normal(d.jacobian, (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz);
+    // Normalized per vertex: J scales normals differently at each vertex.
+    out.normal = normalize(cuboid_normal(d.jacobian, (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz));
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
     return out;
