@@ -1,7 +1,7 @@
 // The trilinear (cuboid grid) transform of a draw item (src/cuboid.rs, dissertation eq. 3.4):
-// group 2 holds the grid's box, its cells and its corner positions, z slices stacked in rows
-// of a 2D Rgba32Float texture (read with textureLoad: 32-bit floats are not filterable
-// everywhere, and eq. 3.4 needs the cell's corners anyway).
+// group 2 holds the grid's box, its cells and its corner positions (x fastest, then y, then z)
+// in a storage buffer: the dissertation's 3D texture of positions, read as memory since eq.
+// 3.4 needs the cell's 8 corners anyway (and texel fetches are slow in lavapipe's vertex stage).
 
 struct CuboidGrid {
     // xyz: the content box's minimum; w: normal method (0 tangent space, 1 direct).
@@ -13,7 +13,7 @@ struct CuboidGrid {
 };
 
 @group(2) @binding(0) var<uniform> cuboid: CuboidGrid;
-@group(2) @binding(1) var cuboid_corners: texture_2d<f32>;
+@group(2) @binding(1) var<storage, read> cuboid_corners: array<vec4<f32>>;
 
 struct Deformed {
     position: vec3<f32>,
@@ -22,8 +22,9 @@ struct Deformed {
 };
 
 fn cuboid_corner(c: vec3<i32>) -> vec3<f32> {
-    let rows = i32(cuboid.cells.y) + 1;
-    return textureLoad(cuboid_corners, vec2<i32>(c.x, c.y + rows * c.z), 0).xyz;
+    let nx = i32(cuboid.cells.x) + 1;
+    let ny = i32(cuboid.cells.y) + 1;
+    return cuboid_corners[c.x + nx * (c.y + ny * c.z)].xyz;
 }
 
 // Maps `p` (after the model matrix) through the grid: into the box's unit cube, into its

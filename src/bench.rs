@@ -787,7 +787,14 @@ pub fn cuboids(
         Ok(Arc::new(crate::nodes::geometry::sphere(1.0, 2 * v, v)?))
     }
     let material = Arc::new(Material::default());
-    let camera = Camera { eye: Vec3::new(0.0, 3.0, 9.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 45.0, near: 0.1, far: 50.0 };
+    let camera = Camera {
+        eye: Vec3::new(0.0, 3.0, 9.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        near: 0.1,
+        far: 50.0,
+    };
     let mut drawer = SceneDrawer::default();
     // Median frames per second of `frame(i)` (compose, draw, wait), after one untimed frame.
     let mut fps = |make: &dyn Fn(usize) -> Vec<DrawItem>| -> anyhow::Result<f64> {
@@ -887,8 +894,9 @@ pub fn cuboids(
                         let (c, radial) = frame_at(u.x);
                         c + radial * (u.y - 0.5) * 2.0 * r + DVec3::Y * (u.z - 0.5) * 2.0 * r
                     };
-                    let grid = CuboidGrid::from_fn(-DVec3::ONE, DVec3::ONE, [1, 1, 1], NormalMethod::TangentSpace, corner)
-                        .expect("a valid box");
+                    let grid =
+                        CuboidGrid::from_fn(-DVec3::ONE, DVec3::ONE, [1, 1, 1], NormalMethod::TangentSpace, corner)
+                            .expect("a valid box");
                     let t = if linear {
                         // The parallelepiped of the cuboid's right half: the helix's frame at s.
                         let c = grid.cell(0, 0, 0).coefficients();

@@ -426,7 +426,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let pair = |s: &str| -> anyhow::Result<(usize, usize)> {
                 let bad = || anyhow::anyhow!("expected COUNTxTRIANGLES such as 185x2000, not {s:?}");
                 let (a, b) = s.split_once('x').ok_or_else(bad)?;
-                let (a, b): (usize, usize) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+                let (a, b): (usize, usize) =
+                    (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
                 if a == 0 || b == 0 {
                     return Err(bad());
                 }
@@ -436,7 +437,9 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let helices = helices.iter().map(|h| pair(h)).collect::<anyhow::Result<Vec<_>>>()?;
             let gpu = GpuContext::headless(pick_backend(backend)?)?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!("| scene | objects | triangles | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|");
+            println!(
+                "| scene | objects | triangles | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|"
+            );
             let rows = crate::bench::cuboids(&gpu, spheres, &helices, frames, size, |r| {
                 println!(
                     "| {} | {} | {} | {:.1} | {:.1} | {:.0}% |",

@@ -18,7 +18,7 @@ use std::sync::{Arc, OnceLock};
 
 use glam::{DMat3, DMat4, DVec3, Mat4, Vec3};
 
-use crate::gpu::{GpuContext, GpuImage};
+use crate::gpu::GpuContext;
 use crate::mesh::Mesh;
 
 /// The unit-cube position of corner `i` (eq. 3.1's order).
@@ -174,7 +174,7 @@ pub struct CuboidGrid {
     pub corners: Vec<DVec3>,
     /// How normals are transformed when drawn.
     pub normals: NormalMethod,
-    gpu: OnceLock<GpuImage>,
+    gpu: OnceLock<wgpu::Buffer>,
 }
 
 impl Clone for CuboidGrid {
@@ -347,29 +347,15 @@ impl CuboidGrid {
         .expect("a resampled grid keeps a valid box")
     }
 
-    /// Corner positions as an `(n_x+1) x (n_y+1)(n_z+1)` Rgba32Float texture (z slices stacked
-    /// in rows): the 3D texture of the dissertation, read with `textureLoad` since 32-bit floats
-    /// are not filterable everywhere (shaders/cuboid.wgsl does the trilinear step, eq. 3.4).
-    pub fn gpu(&self, gpu: &GpuContext) -> &GpuImage {
+    /// Corner positions as a read-only storage buffer of `vec4<f32>` in corner order: the
+    /// dissertation's 3D texture of positions, but read as plain memory (shaders/cuboid.wgsl
+    /// does the trilinear step, eq. 3.4, itself; texel fetches in the vertex stage cost
+    /// lavapipe far more than buffer loads, and 32-bit floats are not filterable everywhere).
+    pub fn gpu(&self, gpu: &GpuContext) -> &wgpu::Buffer {
         self.gpu.get_or_init(|| {
             let texels: Vec<[f32; 4]> = self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()).collect();
-            let (w, h) = self.texture_size();
-            GpuImage::upload(
-                gpu,
-                "cuboid grid",
-                w,
-                h,
-                wgpu::TextureFormat::Rgba32Float,
-                16,
-                bytemuck::cast_slice(&texels),
-            )
+            gpu.create_buffer_init("cuboid grid", bytemuck::cast_slice(&texels), wgpu::BufferUsages::STORAGE)
         })
-    }
-
-    /// The corner texture's width and height.
-    pub fn texture_size(&self) -> (u32, u32) {
-        let [nx, ny, nz] = self.cells;
-        ((nx + 1) as u32, ((ny + 1) * (nz + 1)) as u32)
     }
 
     /// The uniform block of shaders/cuboid.wgsl: box origin (w: normal method), 1/box size,

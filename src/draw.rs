@@ -144,7 +144,7 @@ struct Prepared {
 
 /// The group-2 binds of shaders/cuboid.wgsl for `grid`.
 fn cuboid_binds<'a>(gpu: &GpuContext, grid: &'a CuboidGrid, uniform: &'a [[f32; 4]; 3]) -> [Bind<'a>; 2] {
-    [Bind::Uniform(bytemuck::cast_slice(uniform)), Bind::Texture(grid.gpu(gpu))]
+    [Bind::Uniform(bytemuck::cast_slice(uniform)), Bind::Storage(grid.gpu(gpu))]
 }
 
 /// Whether any item still needs the trilinear vertex stage after the linear fast path.
