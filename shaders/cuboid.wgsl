@@ -68,11 +68,9 @@ fn cuboid_deform(p: vec3<f32>) -> Deformed {
 }
 
 // Fig. 4.5's two methods: the tangent space (cofactor of J: orthogonal to the deformed
-// surface), or the normal directly (J n: smoother across cell borders).
+// surface), or the normal directly (J n: smoother across cell borders). A blend, not a
+// branch: lavapipe recompiles a shader for every value of a uniform that steers control flow.
 fn cuboid_normal(j: mat3x3<f32>, n: vec3<f32>) -> vec3<f32> {
-    if cuboid.box_min.w > 0.5 {
-        return j * n;
-    }
     let cof = mat3x3<f32>(cross(j[1], j[2]), cross(j[2], j[0]), cross(j[0], j[1]));
-    return cof * n;
+    return mix(cof * n, j * n, cuboid.box_min.w);
 }
