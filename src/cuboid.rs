@@ -214,7 +214,7 @@ impl CuboidGrid {
             return Err(format!("a cuboid grid needs at least one cell per axis, not {cells:?}"));
         }
         let size = box_max - box_min;
-        if !(size.min_element() > 0.0) || !size.is_finite() {
+        if !size.cmpgt(DVec3::ZERO).all() || !size.is_finite() {
             return Err(format!(
                 "the bounding box {:?}..{:?} must have a positive, finite size on every axis",
                 box_min.to_array(),
