@@ -210,7 +210,7 @@ impl CuboidGrid {
         corners: Vec<DVec3>,
         normals: NormalMethod,
     ) -> Result<CuboidGrid, String> {
-        if cells.iter().any(|&n| n == 0) {
+        if cells.contains(&0) {
             return Err(format!("a cuboid grid needs at least one cell per axis, not {cells:?}"));
         }
         let size = box_max - box_min;
