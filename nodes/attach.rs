@@ -54,6 +54,7 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
         model: Mat4::IDENTITY,
         detail: true,
         attached: Some(Arc::new(attached)),
+        cuboid: None,
     };
     cx.set("scene", Arc::new(vec![item]));
 }

@@ -4,6 +4,8 @@ pub mod attach;
 pub mod basic;
 pub mod camera;
 pub mod cloth;
+pub mod cuboid;
+pub mod cuboid_grid;
 pub mod curves;
 pub mod direct_light;
 pub mod environment_map;
@@ -41,6 +43,9 @@ pub static ALL: &[&NodeSpec] = &[
     &scene::MATERIAL,
     &scene::DRAW,
     &scene::MERGE,
+    &cuboid::CUBOID,
+    &cuboid_grid::CUBOID_GRID,
+    &cuboid::DEFORM,
     &camera::ORBIT_CAMERA,
     &matrix_texture::MATRIX_TEXTURE,
     &placements::SCATTER,

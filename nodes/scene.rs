@@ -173,7 +173,7 @@ impl Node for DrawNode {
         if model.determinant().abs() < 1e-12 {
             return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
         }
-        let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None };
+        let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None, cuboid: None };
         cx.set("scene", Arc::new(vec![item]));
         Ok(())
     }

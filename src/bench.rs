@@ -191,6 +191,7 @@ pub fn attachments(
                 model: Mat4::IDENTITY,
                 detail: true,
                 attached: Some(Arc::new(draw)),
+                cuboid: None,
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -224,6 +225,7 @@ pub fn attachments(
                     model: Mat4::IDENTITY,
                     detail: true,
                     attached: None,
+                    cuboid: None,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -588,6 +590,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
         model,
         detail: false,
         attached: None,
+        cuboid: None,
     };
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
@@ -741,6 +744,175 @@ pub fn shadows(
             report(&row);
             rows.push(row);
         }
+    }
+    Ok(rows)
+}
+
+/// One row of `werkstatt bench cuboids` (the dissertation's table in section 5.1.1).
+#[derive(Debug, serde::Serialize)]
+pub struct CuboidRow {
+    pub scene: &'static str,
+    pub objects: usize,
+    pub triangles: usize,
+    /// Frames per second with linear (affine, fast path) and trilinear transforms: each
+    /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.
+    pub fps_linear: f64,
+    pub fps_trilinear: f64,
+    /// fps_trilinear / fps_linear.
+    pub ratio: f64,
+}
+
+/// The dissertation's cuboid measurements (section 5.1.1) on this machine: `spheres` spheres
+/// of about `sphere_triangles` triangles each on an animated object (one transform for all,
+/// composed per frame: an animated rotation, or an animated bend grid), and helices of small
+/// objects, each with its own transform composed on the CPU every frame (an affine frame along
+/// the helix, or a cuboid sampled from the helix's curve, so each one is trilinear).
+pub fn cuboids(
+    gpu: &crate::gpu::GpuContext,
+    spheres: (usize, usize),
+    helices: &[(usize, usize)],
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&CuboidRow),
+) -> anyhow::Result<Vec<CuboidRow>> {
+    use crate::cuboid::{CuboidGrid, NormalMethod, Transform, bend, compose};
+    use crate::draw::{SceneDrawer, render_gbuffer};
+    use crate::scene::{Camera, DrawItem, Material};
+    use glam::{DMat4, DVec3, Mat4, Vec3};
+    use std::sync::Arc;
+
+    /// A UV sphere of about `triangles` triangles.
+    fn ball(triangles: usize) -> anyhow::Result<Arc<crate::mesh::Mesh>> {
+        let v = ((triangles as f64 / 4.0).sqrt().round() as u32).max(2);
+        Ok(Arc::new(crate::nodes::geometry::sphere(1.0, 2 * v, v)?))
+    }
+    let material = Arc::new(Material::default());
+    let camera = Camera {
+        eye: Vec3::new(0.0, 3.0, 9.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        near: 0.1,
+        far: 50.0,
+    };
+    let mut drawer = SceneDrawer::default();
+    // Median frames per second of `frame(i)` (compose, draw, wait), after one untimed frame.
+    let mut fps = |make: &dyn Fn(usize) -> Vec<DrawItem>| -> anyhow::Result<f64> {
+        let mut once = |i: usize| -> anyhow::Result<f64> {
+            let t = Instant::now();
+            let items = make(i);
+            let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
+            gpu.submit_checked()?;
+            gpu.wait_idle();
+            drop(g);
+            Ok(t.elapsed().as_secs_f64())
+        };
+        once(0)?;
+        let mut s = (1..=frames.max(1)).map(&mut once).collect::<anyhow::Result<Vec<f64>>>()?;
+        s.sort_by(f64::total_cmp);
+        Ok(1.0 / s[s.len() / 2])
+    };
+    let mut rows = Vec::new();
+    let mut push = |row: CuboidRow| {
+        report(&row);
+        rows.push(row);
+    };
+
+    // Spheres on an animated object: a 6 x 6 (x 6, cut to the count) block in a box.
+    let (count, tris) = spheres;
+    let mesh = ball(tris)?;
+    let (lo, hi) = (DVec3::new(-3.0, -1.0, -1.0), DVec3::new(3.0, 1.0, 1.0));
+    let placed: Vec<DrawItem> = (0..count)
+        .map(|i| {
+            let (x, y, z) = (i % 8, (i / 8) % 4, i / 32);
+            let p = Vec3::new(-2.8 + 0.8 * x as f32, -0.8 + 0.5 * y as f32, -0.8 + 0.3 * (z % 6) as f32);
+            DrawItem {
+                mesh: mesh.clone(),
+                material: material.clone(),
+                model: Mat4::from_scale_rotation_translation(Vec3::splat(0.18), Default::default(), p),
+                detail: false,
+                attached: None,
+                cuboid: None,
+            }
+        })
+        .collect();
+    let animate = |linear: bool, i: usize| -> Vec<DrawItem> {
+        let angle = 40.0 + 10.0 * (i as f64 * 0.3).sin();
+        let t = if linear {
+            Transform::Affine(DMat4::from_rotation_z(angle.to_radians() * 0.2))
+        } else {
+            let f = bend(lo, hi, angle);
+            Transform::from_grid(
+                CuboidGrid::from_fn(lo, hi, [8, 1, 1], NormalMethod::TangentSpace, |u| f(lo + u * (hi - lo)))
+                    .expect("a valid box"),
+            )
+        };
+        placed
+            .iter()
+            .map(|item| {
+                let (model, cuboid) = compose(item.model, None, &t);
+                DrawItem { model, cuboid, ..item.clone() }
+            })
+            .collect()
+    };
+    let triangles = count * mesh.indices.len() / 3;
+    let (l, t) = (fps(&|i| animate(true, i))?, fps(&|i| animate(false, i))?);
+    push(CuboidRow { scene: "spheres", objects: count, triangles, fps_linear: l, fps_trilinear: t, ratio: t / l });
+
+    // Helices: object k sits at parameter s_k; its transform is the helix's frame there
+    // (linear) or the cuboid whose corners follow the helix over the object's extent.
+    for &(count, tris) in helices {
+        let mesh = ball(tris)?;
+        let base = DrawItem {
+            mesh: mesh.clone(),
+            material: material.clone(),
+            model: Mat4::IDENTITY,
+            detail: false,
+            attached: None,
+            cuboid: None,
+        };
+        let turns = 6.0;
+        let helix = |s: f64, phase: f64| {
+            let a = s * turns * std::f64::consts::TAU + phase;
+            DVec3::new(2.5 * a.cos(), -2.5 + 5.0 * s, 2.5 * a.sin())
+        };
+        let r = 0.7 * 5.0 / count as f64 * turns.max(1.0);
+        let make = |linear: bool, i: usize| -> Vec<DrawItem> {
+            let phase = 0.05 * i as f64;
+            (0..count)
+                .map(|k| {
+                    let s = (k as f64 + 0.5) / count as f64;
+                    let ds = 1.0 / count as f64;
+                    // The object's box -1..1 spans the helix from s - ds/2 to s + ds/2 (x), and
+                    // r across it (y radial, z along the tangent's normal).
+                    let frame_at = |u: f64| {
+                        let c = helix(s + (u - 0.5) * ds, phase);
+                        let radial = DVec3::new(c.x, 0.0, c.z).normalize();
+                        (c, radial)
+                    };
+                    let corner = |u: DVec3| {
+                        let (c, radial) = frame_at(u.x);
+                        c + radial * (u.y - 0.5) * 2.0 * r + DVec3::Y * (u.z - 0.5) * 2.0 * r
+                    };
+                    let grid =
+                        CuboidGrid::from_fn(-DVec3::ONE, DVec3::ONE, [1, 1, 1], NormalMethod::TangentSpace, corner)
+                            .expect("a valid box");
+                    let t = if linear {
+                        // The parallelepiped of the cuboid's right half: the helix's frame at s.
+                        let c = grid.cell(0, 0, 0).coefficients();
+                        let unit = DMat4::from_translation(DVec3::splat(0.5)) * DMat4::from_scale(DVec3::splat(0.5));
+                        Transform::Affine(c.affine_part() * unit)
+                    } else {
+                        Transform::from_grid(grid)
+                    };
+                    let (model, cuboid) = compose(Mat4::IDENTITY, None, &t);
+                    DrawItem { model, cuboid, ..base.clone() }
+                })
+                .collect()
+        };
+        let triangles = count * mesh.indices.len() / 3;
+        let (l, t) = (fps(&|i| make(true, i))?, fps(&|i| make(false, i))?);
+        push(CuboidRow { scene: "helix", objects: count, triangles, fps_linear: l, fps_trilinear: t, ratio: t / l });
     }
     Ok(rows)
 }

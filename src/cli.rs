@@ -180,6 +180,27 @@ enum BenchWhat {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
+    /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
+    /// object and helices of small objects, and their ratio.
+    Cuboids {
+        /// Spheres on the animated object: count x triangles per sphere.
+        #[arg(long, default_value = "185x2000")]
+        spheres: String,
+        /// Helices: count x triangles per object, comma-separated.
+        #[arg(long, default_value = "4617x36,2566x256", value_delimiter = ',')]
+        helices: Vec<String>,
+        /// Timed frames per measurement (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// The dissertation's Figs. 5.19/5.20 on the CPU: for each PEM filter kernel and Phong
     /// exponent, the volume-matched mip level and the lobe's shape error; also the default
     /// kernel's calibration table and the PEM memory table.
@@ -394,6 +415,41 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let rows = crate::bench::ssao(&gpu, samples, frames, size, |r| {
                 let res = if r.half_resolution { "half" } else { "full" };
                 println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
+            })?;
+            if let Some(path) = json {
+                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, size, json, backend } } => {
+            let size = parse_size(&size)?;
+            let pair = |s: &str| -> anyhow::Result<(usize, usize)> {
+                let bad = || anyhow::anyhow!("expected COUNTxTRIANGLES such as 185x2000, not {s:?}");
+                let (a, b) = s.split_once('x').ok_or_else(bad)?;
+                let (a, b): (usize, usize) =
+                    (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+                if a == 0 || b == 0 {
+                    return Err(bad());
+                }
+                Ok((a, b))
+            };
+            let spheres = pair(&spheres)?;
+            let helices = helices.iter().map(|h| pair(h)).collect::<anyhow::Result<Vec<_>>>()?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| scene | objects | triangles | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::cuboids(&gpu, spheres, &helices, frames, size, |r| {
+                println!(
+                    "| {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
+                    r.scene,
+                    r.objects,
+                    r.triangles,
+                    r.fps_linear,
+                    r.fps_trilinear,
+                    100.0 * r.ratio
+                );
             })?;
             if let Some(path) = json {
                 crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;

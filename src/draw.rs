@@ -10,6 +10,7 @@
 
 use glam::{Mat4, Vec4};
 
+use crate::cuboid::{CuboidGrid, LINEAR_TOLERANCE, fast_path};
 use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
 use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc};
 use crate::mesh::Vertex;
@@ -115,11 +116,13 @@ impl InstanceResolver {
     }
 }
 
-fn object_uniform(item: &DrawItem) -> ObjectUniform {
+/// `model` is the item's own matrix, or the composed one where the linear fast path folded
+/// an affine cuboid grid into it.
+fn object_uniform(item: &DrawItem, model: Mat4) -> ObjectUniform {
     let m = &item.material;
     ObjectUniform {
-        model: item.model.to_cols_array_2d(),
-        normal_matrix: item.model.inverse().transpose().to_cols_array_2d(),
+        model: model.to_cols_array_2d(),
+        normal_matrix: model.inverse().transpose().to_cols_array_2d(),
         base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
         params: [
             m.uv_scale,
@@ -131,11 +134,22 @@ fn object_uniform(item: &DrawItem) -> ObjectUniform {
     }
 }
 
-/// An item's bind groups for one draw: its object group, and for attachments the warp group
-/// and the instance buffer.
+/// An item's bind groups for one draw: its object group, for attachments the warp group
+/// and the instance buffer, for non-linear cuboid transforms the grid's group.
 struct Prepared {
     object: wgpu::BindGroup,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
+    cuboid: Option<wgpu::BindGroup>,
+}
+
+/// The group-2 binds of shaders/cuboid.wgsl for `grid`.
+fn cuboid_binds<'a>(gpu: &GpuContext, grid: &'a CuboidGrid, uniform: &'a [[f32; 4]; 3]) -> [Bind<'a>; 2] {
+    [Bind::Uniform(bytemuck::cast_slice(uniform)), Bind::Storage(grid.gpu(gpu))]
+}
+
+/// Whether any item still needs the trilinear vertex stage after the linear fast path.
+fn any_nonlinear(items: &[DrawItem]) -> bool {
+    items.iter().any(|i| i.cuboid.as_ref().is_some_and(|g| g.as_affine(LINEAR_TOLERANCE).is_none()))
 }
 
 /// What a pass that draws scenes keeps between frames: per item its uniform buffers and
@@ -147,6 +161,7 @@ pub struct SceneDrawer {
     tile_index: Bindings,
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
+    cuboids: Vec<Bindings>,
     white: Image8,
     resolver: InstanceResolver,
 }
@@ -159,6 +174,7 @@ impl Default for SceneDrawer {
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
             objects: Vec::new(),
             warps: Vec::new(),
+            cuboids: Vec::new(),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
         }
@@ -176,6 +192,13 @@ impl SceneDrawer {
         Bindings::new(OBJECT_VISIBILITY).layout(gpu, &shape)
     }
 
+    /// The layout of group 2 for cuboid items (a grid's uniform and corner texture).
+    fn cuboid_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
+        let identity = CuboidGrid::identity(glam::DVec3::ZERO, glam::DVec3::ONE, [1, 1, 1]).expect("unit box");
+        let uniform = identity.uniform();
+        Bindings::new(wgpu::ShaderStages::VERTEX).layout(gpu, &cuboid_binds(gpu, &identity, &uniform))
+    }
+
     /// Bind groups for every item (resolving point attachments' frames on first use).
     fn prepare(
         &mut self,
@@ -183,15 +206,19 @@ impl SceneDrawer {
         items: &[DrawItem],
         object_layout: &wgpu::BindGroupLayout,
         warp_layout: Option<&wgpu::BindGroupLayout>,
+        cuboid_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
         while self.objects.len() < items.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
+            self.cuboids.push(Bindings::new(wgpu::ShaderStages::VERTEX));
         }
         let mut prepared = Vec::with_capacity(items.len());
         for (i, item) in items.iter().enumerate() {
             let m = &item.material;
-            let uniform = object_uniform(item);
+            // The linear fast path, tested once per composed transform right before drawing.
+            let (model, grid) = fast_path(item.model, item.cuboid.clone());
+            let uniform = object_uniform(item, model);
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
             let binds = [
@@ -210,7 +237,14 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            prepared.push(Prepared { object, warp });
+            let cuboid = match (&grid, cuboid_layout) {
+                (Some(g), Some(layout)) => {
+                    let u = g.uniform();
+                    Some(self.cuboids[i].bind_group(gpu, layout, &cuboid_binds(gpu, g, &u)))
+                }
+                _ => None,
+            };
+            prepared.push(Prepared { object, warp, cuboid });
         }
         Ok(prepared)
     }
@@ -259,7 +293,20 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref())?;
+        let cuboid_layout = any_nonlinear(items).then(|| self.cuboid_layout(gpu));
+        let trilinear = match &cuboid_layout {
+            Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+                depth: depth_test,
+                ..RenderPipelineDesc::new(
+                    "cuboid_gbuffer.wgsl",
+                    &[Some(&frame_layout), Some(&object_layout), Some(layout)],
+                    &vertex,
+                    &targets,
+                )
+            })?),
+            None => None,
+        };
+        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref())?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -275,7 +322,8 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &frame_bg, &[]);
-            draw_items(gpu, &mut pass, items, &prepared, &plain, 1, attached.as_ref(), &[]);
+            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref() };
+            draw_items(gpu, &mut pass, items, &prepared, &pipelines, 1, &[]);
         });
         Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
     }
@@ -343,7 +391,20 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref())?;
+        let cuboid_layout = any_nonlinear(items).then(|| self.cuboid_layout(gpu));
+        let trilinear = match &cuboid_layout {
+            Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+                depth: depth_test,
+                ..RenderPipelineDesc::new(
+                    "cuboid_depth.wgsl",
+                    &[Some(&tiles_layout), Some(&object_layout), Some(layout)],
+                    &[Some(Vertex::layout())],
+                    &[],
+                )
+            })?),
+            None => None,
+        };
+        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref())?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
@@ -370,24 +431,31 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &tiles_bg, &[]);
-            draw_items(gpu, &mut pass, items, &prepared, &plain, tiles.len() as u32, attached.as_ref(), &index_bgs);
+            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref() };
+            draw_items(gpu, &mut pass, items, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
         });
         Ok(target)
     }
 }
 
-/// Records the draws of `items`: plain ones with `plain`, `plain_instances` instances each
-/// (one per tile of a depth target); attached ones with `attached`, once, or once per bind
-/// group of `per_draw` (bound as group 3) where there are some.
-#[allow(clippy::too_many_arguments)]
+/// The pipelines of one target: plain meshes, deferred-warped attachments and items under a
+/// non-linear cuboid transform (the latter two only where the scene has such items).
+struct Pipelines<'a> {
+    plain: &'a wgpu::RenderPipeline,
+    attached: Option<&'a wgpu::RenderPipeline>,
+    trilinear: Option<&'a wgpu::RenderPipeline>,
+}
+
+/// Records the draws of `items`: plain and cuboid ones `plain_instances` instances each
+/// (one per tile of a depth target); attached ones once, or once per bind group of
+/// `per_draw` (bound as group 3) where there are some.
 fn draw_items(
     gpu: &GpuContext,
     pass: &mut wgpu::RenderPass<'_>,
     items: &[DrawItem],
     prepared: &[Prepared],
-    plain: &wgpu::RenderPipeline,
+    pipelines: &Pipelines<'_>,
     plain_instances: u32,
-    attached: Option<&wgpu::RenderPipeline>,
     per_draw: &[wgpu::BindGroup],
 ) {
     for (item, p) in items.iter().zip(prepared) {
@@ -395,7 +463,13 @@ fn draw_items(
         pass.set_bind_group(1, &p.object, &[]);
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        match (&item.attached, &p.warp, attached) {
+        if let (Some(group), Some(pipeline)) = (&p.cuboid, pipelines.trilinear) {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(2, group, &[]);
+            pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
+            continue;
+        }
+        match (&item.attached, &p.warp, pipelines.attached) {
             (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
                 if a.instances.is_empty() {
                     continue;
@@ -413,7 +487,7 @@ fn draw_items(
                 }
             }
             _ => {
-                pass.set_pipeline(plain);
+                pass.set_pipeline(pipelines.plain);
                 pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             }
         }

@@ -8,6 +8,7 @@ pub mod atomic;
 pub mod bench;
 pub mod cli;
 pub mod color;
+pub mod cuboid;
 pub mod docs;
 pub mod draw;
 #[cfg(feature = "editor")]

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::cuboid::Transform as CuboidTransform;
 use crate::gpu::GpuImage;
 use crate::ibl::gpu::{EnvMap, Lights, PemSet};
 use crate::ibl::shadow::ShadowAtlas;
@@ -104,6 +105,8 @@ port_types! {
     Pems(Arc<PemSet>) { color: [240, 160, 50], view: Some(|p| Some(&p.preview)) };
     /// Variance shadow maps of many lights in one atlas, with each light's matrices; viewed as the atlas.
     ShadowAtlas(Arc<ShadowAtlas>) { color: [120, 120, 200], view: Some(|s| Some(&s.atlas)) };
+    /// A cuboid (trilinear) transform or grid of them over a bounding box; affine where linear.
+    CuboidTransform(Arc<CuboidTransform>) { color: [200, 120, 255], view: None };
 }
 
 impl PortType {
@@ -150,6 +153,10 @@ impl Value {
                 s.atlas.height,
                 s.bytes as f64 / (1u64 << 20) as f64
             ),
+            Value::CuboidTransform(t) => match &**t {
+                CuboidTransform::Affine(_) => "affine cuboid (linear fast path)".into(),
+                CuboidTransform::Grid(g) => format!("{g:?}"),
+            },
         }
     }
 }
@@ -213,6 +220,7 @@ typed!(Arc<EnvMap>: Environment);
 typed!(Arc<Lights>: Lights);
 typed!(Arc<PemSet>: Pems);
 typed!(Arc<ShadowAtlas>: ShadowAtlas);
+typed!(Arc<CuboidTransform>: CuboidTransform);
 
 #[cfg(test)]
 mod tests {

@@ -143,6 +143,9 @@ pub struct DrawItem {
     pub detail: bool,
     /// Set for deferred-warped detail geometry: drawn instanced through the matrix texture.
     pub attached: Option<Arc<crate::warp::AttachedDraw>>,
+    /// A non-linear (cuboid grid) transform applied after `model`: the vertex lands at
+    /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
+    pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
 }
 
 /// The deferred renderer's multiple render targets.

@@ -32,6 +32,9 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("vsm.wgsl", include_str!("../shaders/vsm.wgsl")),
     ("vsm_blur.wgsl", include_str!("../shaders/vsm_blur.wgsl")),
     ("hybrid_occlusion.wgsl", include_str!("../shaders/hybrid_occlusion.wgsl")),
+    ("cuboid.wgsl", include_str!("../shaders/cuboid.wgsl")),
+    ("cuboid_gbuffer.wgsl", include_str!("../shaders/cuboid_gbuffer.wgsl")),
+    ("cuboid_depth.wgsl", include_str!("../shaders/cuboid_depth.wgsl")),
 ];
 
 pub fn names() -> impl Iterator<Item = &'static str> {

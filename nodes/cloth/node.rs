@@ -118,6 +118,7 @@ fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
         model,
         detail: false,
         attached: None,
+        cuboid: None,
     };
     let mut items = Vec::new();
     for c in colliders {

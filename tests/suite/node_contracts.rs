@@ -35,6 +35,7 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
         PortType::Lights => ("MedianCut", "lights", vec![]),
         PortType::Pems => ("Pems", "pems", vec![]),
         PortType::ShadowAtlas => ("ShadowAtlas", "shadows", vec![("tile_size", ParamValue::Int(32))]),
+        PortType::CuboidTransform => ("Cuboid", "transform", vec![]),
         PortType::Vector | PortType::Color => return None,
     })
 }

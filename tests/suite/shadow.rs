@@ -339,6 +339,7 @@ fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
             model: *model,
             detail: false,
             attached: None,
+            cuboid: None,
         })
         .collect()
 }

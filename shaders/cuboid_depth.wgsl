@@ -1,0 +1,41 @@
+// Depth tiles (shaders/depth.wgsl) for items under a non-linear cuboid transform: drawn
+// instanced once per tile like plain meshes, the vertex deformed by the grid first.
+
+// #include "object.wgsl"
+// #include "vertex_in.wgsl"
+// #include "cuboid.wgsl"
+
+// As in depth.wgsl (src/draw.rs `TileUniform`).
+struct TileView {
+    to_tile: mat4x4<f32>,
+    rect: vec4<f32>,
+};
+
+struct Tiles {
+    tiles: array<TileView, 64>,
+};
+
+@group(0) @binding(0) var<uniform> views: Tiles;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) tile: u32,
+};
+
+@vertex
+fn vs_main(v: VertexIn, @builtin(instance_index) tile: u32) -> VertexOut {
+    let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
+    var out: VertexOut;
+    out.clip = views.tiles[tile].to_tile * vec4<f32>(d.position, 1.0);
+    out.tile = tile;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) {
+    let r = views.tiles[in.tile].rect;
+    let p = in.clip.xy;
+    if p.x < r.x || p.y < r.y || p.x >= r.z || p.y >= r.w {
+        discard;
+    }
+}

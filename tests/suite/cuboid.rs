@@ -1,0 +1,325 @@
+//! The cuboid scene graph (dissertation section 3.1.1, src/cuboid.rs): eq. 3.1 against eq.
+//! 3.4, the linear fast path, C0 grids, composition against an analytic bend, anchors under a
+//! rigid motion, the nodes, and the trilinear vertex stage against the CPU transform.
+
+use crate::common;
+
+use std::sync::Arc;
+
+use glam::{DMat4, DQuat, DVec2, DVec3, Mat4, Vec3};
+use proptest::prelude::*;
+use werkstatt::cuboid::{
+    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, bend, compose, unit_corner,
+};
+use werkstatt::draw::SceneDrawer;
+use werkstatt::gpu::read_back;
+use werkstatt::graph::Graph;
+use werkstatt::mesh::Mesh;
+use werkstatt::port::Value;
+use werkstatt::scene::{Camera, DrawItem, Material, View};
+
+fn vec3() -> impl Strategy<Value = DVec3> {
+    (-10.0..10.0f64, -10.0..10.0f64, -10.0..10.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z))
+}
+
+fn affine() -> impl Strategy<Value = DMat4> {
+    (vec3(), vec3(), 0.2..3.0f64, 0.2..3.0f64, 0.2..3.0f64).prop_map(|(axis, t, sx, sy, sz)| {
+        let rotation = DQuat::from_scaled_axis(axis * 0.3);
+        DMat4::from_translation(t) * DMat4::from_quat(rotation) * DMat4::from_scale(DVec3::new(sx, sy, sz))
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn corners_map_to_their_points_and_eq_3_1_equals_eq_3_4(
+        corners in prop::array::uniform8(vec3()),
+        points in prop::collection::vec((0.0..1.0f64, 0.0..1.0f64, 0.0..1.0f64), 50),
+    ) {
+        let c = Cuboid { corners };
+        for (i, p) in corners.iter().enumerate() {
+            prop_assert!(c.eval(unit_corner(i)).distance(*p) < 1e-9);
+        }
+        for (x, y, z) in points {
+            let p = DVec3::new(x, y, z);
+            prop_assert!(c.eval(p).distance(c.eval_corners(p)) < 1e-6);
+        }
+    }
+
+    #[test]
+    fn affine_corners_have_a_zero_left_half_and_one_moved_corner_switches_the_path(
+        m in affine(),
+        corner in 0usize..8,
+        nudge in vec3(),
+        points in prop::collection::vec((0.0..1.0f64, 0.0..1.0f64, 0.0..1.0f64), 20),
+    ) {
+        let c = Cuboid::from_affine(m);
+        let coefficients = c.coefficients();
+        for column in &coefficients.0[..4] {
+            prop_assert!(column.length() < 1e-6, "left half {:?}", coefficients.0);
+        }
+        let fast = c.as_affine(LINEAR_TOLERANCE).expect("an affine cuboid takes the fast path");
+        prop_assert!(fast.abs_diff_eq(m, 1e-9));
+        for (x, y, z) in points {
+            let p = DVec3::new(x, y, z);
+            prop_assert!(fast.transform_point3(p).distance(c.eval(p)) < 1e-9);
+        }
+        // A corner moved by 1e-3 of the cuboid's size makes it trilinear.
+        let mut moved = c;
+        let size = m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length());
+        moved.corners[corner] += nudge.normalize_or(DVec3::X) * 1e-3 * size;
+        prop_assert!(moved.as_affine(LINEAR_TOLERANCE).is_none());
+        let grid = CuboidGrid::single(-DVec3::ONE, DVec3::ONE, moved, NormalMethod::Direct).unwrap();
+        prop_assert!(matches!(Transform::from_grid(grid), Transform::Grid(_)));
+    }
+}
+
+#[test]
+fn affine_after_affine_is_the_matrix_product_and_a_grid_that_becomes_affine_drops_to_the_fast_path() {
+    let a = DMat4::from_rotation_y(0.4) * DMat4::from_translation(DVec3::new(1.0, 2.0, 3.0));
+    let b = DMat4::from_scale(DVec3::new(2.0, 1.0, 0.5));
+    let model = Mat4::from_translation(Vec3::new(0.5, 0.0, 0.0));
+    let (m1, g1) = compose(model, None, &Transform::Affine(b));
+    let (m2, g2) = compose(m1, g1.as_ref(), &Transform::Affine(a));
+    assert!(g2.is_none());
+    assert!(m2.abs_diff_eq((a * b).as_mat4() * model, 1e-5));
+    // A twisted cuboid, then its own corners moved back onto a parallelepiped by an affine
+    // map, is still a grid; a grid whose corners are affine images is folded into the model.
+    let lo = -DVec3::ONE;
+    let affine_grid =
+        CuboidGrid::from_fn(lo, DVec3::ONE, [3, 2, 2], NormalMethod::Direct, |u| a.transform_point3(lo + 2.0 * u))
+            .unwrap();
+    let (m3, g3) = compose(model, None, &Transform::Grid(Arc::new(affine_grid)));
+    assert!(g3.is_none(), "an affine 3x2x2 grid takes the fast path");
+    assert!(m3.abs_diff_eq(a.as_mat4() * model, 1e-5));
+}
+
+#[test]
+fn points_on_a_face_shared_by_two_cells_map_identically_from_both() {
+    let (lo, hi) = (DVec3::new(-2.0, -0.5, -0.5), DVec3::new(2.0, 0.5, 0.5));
+    let grid =
+        CuboidGrid::from_fn(lo, hi, [2, 1, 1], NormalMethod::TangentSpace, |u| bend(lo, hi, 120.0)(lo + u * (hi - lo)))
+            .unwrap();
+    let (left, right) = (grid.cell(0, 0, 0), grid.cell(1, 0, 0));
+    let mut worst: f64 = 0.0;
+    for i in 0..=20 {
+        for j in 0..=20 {
+            let (y, z) = (i as f64 / 20.0, j as f64 / 20.0);
+            let a = left.eval(DVec3::new(1.0, y, z));
+            let b = right.eval(DVec3::new(0.0, y, z));
+            worst = worst.max(a.distance(b));
+        }
+    }
+    assert!(worst < 1e-12, "cells disagree on their shared face by {worst}");
+    // Just off the face the two cells' polynomials differ (C0, not C1): the check above sees a
+    // real seam, not two copies of one cell.
+    let d = left.coefficients().jacobian(DVec3::new(1.0, 0.5, 0.5))
+        - right.coefficients().jacobian(DVec3::new(0.0, 0.5, 0.5));
+    assert!(d.x_axis.length() > 1e-3, "the cells' x derivatives agree: {d:?}");
+}
+
+#[test]
+fn composition_error_against_an_analytic_bend_falls_as_the_grid_is_refined() {
+    // Inner: a mildly trilinear cuboid over a small box; outer: a bend grid over a larger box.
+    let (lo, hi) = (DVec3::new(-2.0, -0.5, -0.5), DVec3::new(2.0, 0.5, 0.5));
+    let mut inner_cuboid = Cuboid::from_affine(
+        DMat4::from_translation(DVec3::new(-1.5, -0.4, -0.4)) * DMat4::from_scale(DVec3::new(3.0, 0.8, 0.8)),
+    );
+    inner_cuboid.corners[7] += DVec3::new(0.1, 0.05, 0.0);
+    let inner = CuboidGrid::single(DVec3::ZERO, DVec3::ONE, inner_cuboid, NormalMethod::Direct).unwrap();
+    let exact = bend(lo, hi, 150.0);
+    let mut errors = Vec::new();
+    for n in [2usize, 4, 8, 16] {
+        let outer =
+            CuboidGrid::from_fn(lo, hi, [n, n, 1], NormalMethod::Direct, |u| exact(lo + u * (hi - lo))).unwrap();
+        let composed = inner.then_grid(&outer);
+        assert_eq!(composed.cells, [n, n, 1], "composition keeps the finer resolution");
+        let mut worst: f64 = 0.0;
+        for i in 0..=30 {
+            for j in 0..=6 {
+                let p = DVec3::new(i as f64 / 30.0, j as f64 / 6.0, 0.37);
+                worst = worst.max(composed.eval(p).distance(exact(inner.eval(p))));
+            }
+        }
+        errors.push(worst);
+    }
+    assert!(errors.windows(2).all(|w| w[1] < w[0]), "errors {errors:?} do not fall");
+    assert!(errors[3] < errors[0] / 10.0, "errors {errors:?} fall too slowly");
+}
+
+fn rotate_mesh(mesh: &Mesh, r: DQuat, t: DVec3) -> Mesh {
+    let mut moved = mesh.clone();
+    for p in &mut moved.positions {
+        *p = (r * p.as_dvec3() + t).as_vec3();
+    }
+    moved
+}
+
+#[test]
+fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
+    let body = werkstatt::nodes::geometry::sphere(1.0, 24, 16).unwrap();
+    let (cols, rows) = (3, 3);
+    let frames_on = |mesh: &Mesh| {
+        let mut frames = Vec::new();
+        for j in 0..rows {
+            for i in 0..cols {
+                let uv = DVec2::new(0.3 + 0.05 * i as f64, 0.4 + 0.05 * j as f64);
+                let anchor = Anchor::at_uv(&body, uv, 0.01).unwrap();
+                frames.push(anchor.frame(mesh).unwrap());
+            }
+        }
+        frames
+    };
+    let grid_on = |mesh: &Mesh| {
+        anchor_grid(&frames_on(mesh), cols, rows, 0.2, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap()
+    };
+    let (r, t) = (DQuat::from_scaled_axis(DVec3::new(0.3, -1.1, 0.5)), DVec3::new(0.7, -2.0, 1.3));
+    let before = grid_on(&body);
+    let after = grid_on(&rotate_mesh(&body, r, t));
+    assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the anchored grid follows the sphere's curvature");
+    let object = werkstatt::nodes::geometry::cube(1.5).unwrap();
+    let size = before.corners.iter().fold(0.0f64, |m, c| m.max(c.length()));
+    let mut worst: f64 = 0.0;
+    for p in &object.positions {
+        let expected = r * before.eval(p.as_dvec3()) + t;
+        worst = worst.max(after.eval(p.as_dvec3()).distance(expected) / size);
+    }
+    assert!(worst < 1e-5, "relative error {worst}");
+}
+
+fn graph(text: &str) -> Graph {
+    Graph::load_str(text, &common::root().join("graphs/test.ron")).unwrap()
+}
+
+/// Evaluates frame 0 of `text`, pulling from `targets`.
+fn evaluate(text: &str, targets: &[&str]) -> werkstatt::eval::Evaluator {
+    let targets: Vec<String> = targets.iter().map(|t| t.to_string()).collect();
+    let mut ev = werkstatt::eval::Evaluator::new(&graph(text), &targets).unwrap();
+    let res = werkstatt::resources::Resources::new(false);
+    let settings = werkstatt::eval::FrameSettings { width: 8, height: 8, base_dir: common::root() };
+    ev.evaluate(werkstatt::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings);
+    ev
+}
+
+/// A sphere under a Cuboid node with the given corner-7 offset, through Deform.
+fn deformed_scene(offset7: [f64; 3]) -> Arc<Vec<DrawItem>> {
+    let text = format!(
+        r#"(version: 1, nodes: {{
+            "mesh": (kind: "Primitive", pos: (0.0, 0.0), params: {{}}),
+            "draw": (kind: "Draw", pos: (0.0, 0.0), params: {{}}),
+            "cuboid": (kind: "Cuboid", pos: (0.0, 0.0), params: {{"rotate": [0.0, 30.0, 0.0], "offset7": {offset7:?}}}),
+            "deform": (kind: "Deform", pos: (0.0, 0.0), params: {{}}),
+        }}, links: [("mesh.mesh", "draw.mesh"), ("draw.scene", "deform.scene"), ("cuboid.transform", "deform.transform")])"#
+    );
+    let ev = evaluate(&text, &["deform"]);
+    let Some(Value::Scene(scene)) = ev.output("deform", "scene").cloned() else { panic!("no scene") };
+    scene
+}
+
+#[test]
+fn the_deform_node_takes_the_fast_path_until_a_corner_moves() {
+    let linear = deformed_scene([0.0, 0.0, 0.0]);
+    assert!(linear[0].cuboid.is_none());
+    assert!(linear[0].model.abs_diff_eq(Mat4::from_rotation_y(30f32.to_radians()), 1e-5));
+    let trilinear = deformed_scene([0.0, 0.5, 0.0]);
+    let grid = trilinear[0].cuboid.as_ref().expect("a moved corner keeps the grid");
+    assert!(
+        grid.eval(DVec3::ONE).distance(
+            DMat4::from_rotation_y(30f64.to_radians()).transform_point3(DVec3::ONE) + DVec3::new(0.0, 0.5, 0.0)
+        ) < 1e-6
+    );
+}
+
+#[test]
+fn bad_cuboid_parameters_are_node_errors() {
+    let text = r#"(version: 1, nodes: {
+        "grid": (kind: "CuboidGrid", pos: (0.0, 0.0), params: {"source": "anchors"}),
+        "box": (kind: "Cuboid", pos: (0.0, 0.0), params: {"box_min": [1.0, 0.0, 0.0], "box_max": [0.0, 1.0, 1.0]}),
+    }, links: [])"#;
+    let ev = evaluate(text, &["grid", "box"]);
+    for (node, needle) in [("grid", "needs a mesh"), ("box", "must exceed box_min")] {
+        let status = format!("{:?}", ev.report(node).unwrap().status);
+        assert!(status.contains(needle), "{node}: {status}");
+    }
+}
+
+/// A tessellated plate under a bend grid: drawn by the trilinear vertex stage, and drawn
+/// again as a mesh deformed on the CPU, must give the same G-buffer depth and normals (and the
+/// same shadow-tile depth).
+#[test]
+fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
+    let gpu = common::gpu();
+    let plate = werkstatt::nodes::geometry::plane(2.0, 24, 24).unwrap();
+    let model = Mat4::from_rotation_x(0.3);
+    let (lo, hi) = (DVec3::new(-1.0, -0.6, -1.0), DVec3::new(1.0, 0.6, 1.0));
+    let camera = Camera {
+        eye: Vec3::new(0.3, 2.2, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        near: 0.1,
+        far: 20.0,
+    };
+    let (w, h) = (64u32, 64u32);
+    let view = View::new(&camera, w, h);
+    for method in [NormalMethod::TangentSpace, NormalMethod::Direct] {
+        let grid = Arc::new(
+            CuboidGrid::from_fn(lo, hi, [3, 2, 1], method, |u| {
+                let b = bend(lo, hi, 100.0)(lo + u * (hi - lo));
+                b + DVec3::new(0.0, 0.15 * (6.0 * u.z).sin() * u.x, 0.0)
+            })
+            .unwrap(),
+        );
+        let mut cpu = plate.clone();
+        for ((p, n), p0) in cpu.positions.iter_mut().zip(&mut cpu.normals).zip(&plate.positions) {
+            let q = model.as_dmat4().transform_point3(p0.as_dvec3());
+            let n0 = model.as_dmat4().inverse().transpose().transform_vector3(n.as_dvec3());
+            *p = grid.eval(q).as_vec3();
+            *n = grid.normal(q, n0).as_vec3();
+        }
+        let material = Arc::new(Material::default());
+        let item = |mesh: Mesh, model: Mat4, cuboid| DrawItem {
+            mesh: Arc::new(mesh),
+            material: material.clone(),
+            model,
+            detail: false,
+            attached: None,
+            cuboid,
+        };
+        let on_gpu = [item(plate.clone(), model, Some(grid.clone()))];
+        let on_cpu = [item(cpu, Mat4::IDENTITY, None)];
+        let mut drawer = SceneDrawer::default();
+        let a = drawer.gbuffer(gpu, &on_gpu, camera, view).unwrap();
+        let b = drawer.gbuffer(gpu, &on_cpu, camera, view).unwrap();
+        let tile = [werkstatt::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w, h] }];
+        let sa = drawer.depth_tiles(gpu, &on_gpu, &tile, w, h).unwrap();
+        let sb = drawer.depth_tiles(gpu, &on_cpu, &tile, w, h).unwrap();
+        gpu.submit_checked().unwrap();
+        let (da, db) = (read_back(gpu, &a.depth).unwrap().rgba, read_back(gpu, &b.depth).unwrap().rgba);
+        let (na, nb) = (read_back(gpu, &a.normal).unwrap().rgba, read_back(gpu, &b.normal).unwrap().rgba);
+        let (covered, mut mismatched, mut worst_depth, mut worst_normal) =
+            (da.chunks(4).filter(|c| c[0] > 0.0).count(), 0, 0.0f32, 0.0f32);
+        for px in 0..(w * h) as usize {
+            let (za, zb) = (da[4 * px], db[4 * px]);
+            if (za > 0.0) != (zb > 0.0) {
+                mismatched += 1;
+                continue;
+            }
+            if za > 0.0 {
+                worst_depth = worst_depth.max((za - zb).abs() / zb);
+                let (ma, mb) = (Vec3::from_slice(&na[4 * px..]), Vec3::from_slice(&nb[4 * px..]));
+                worst_normal = worst_normal.max(ma.distance(mb));
+            }
+        }
+        assert!(covered > 800, "{method:?}: the plate covers only {covered} pixels");
+        assert!(mismatched <= 4, "{method:?}: coverage differs in {mismatched} pixels");
+        assert!(worst_depth < 1e-3, "{method:?}: depth differs by {worst_depth} (relative)");
+        // Normals are interpolated per vertex in both; Rgba16Float stores them to ~1e-3.
+        assert!(worst_normal < 1e-2, "{method:?}: normals differ by {worst_normal}");
+        let (ta, tb) = (read_back(gpu, &sa).unwrap().rgba, read_back(gpu, &sb).unwrap().rgba);
+        let worst_tile = ta.iter().zip(&tb).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        let diff = ta.iter().zip(&tb).filter(|(x, y)| (*x - *y).abs() > 1e-4).count();
+        assert!(diff <= 4, "{method:?}: shadow-tile depth differs in {diff} texels (worst {worst_tile})");
+    }
+}
