@@ -30,6 +30,11 @@ pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
             ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
             "Degrees of yaw added per second of animation.",
         ),
+        ParamSpec::new(
+            "turntable",
+            ParamKind::Bool { default: false },
+            "Exactly one revolution over the rendered frames (`render --frames A..B`: frame A at yaw, B one step short of a full turn; the editor's play range), instead of orbit_speed.",
+        ),
         ParamSpec::new("near", ParamKind::Float { default: 0.05, min: 1e-5, max: 1e4 }, "Near clipping distance."),
         ParamSpec::new("far", ParamKind::Float { default: 100.0, min: 1e-3, max: 1e7 }, "Far clipping distance."),
     ],
@@ -42,7 +47,18 @@ impl Node for OrbitCameraNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let speed = cx.f64("orbit_speed");
         // Only an animated camera reads the time, so a still one is not re-run every frame.
-        let yaw = cx.f64("yaw") + if speed != 0.0 { speed * cx.time().seconds() } else { 0.0 };
+        let turn = if cx.bool("turntable") {
+            let frame = cx.time().frame;
+            let Some((first, last)) = cx.settings.frames else {
+                return Err(NodeError::msg("turntable needs a frame range, and this evaluation has none"));
+            };
+            360.0 * (frame - first) as f64 / (last - first + 1) as f64
+        } else if speed != 0.0 {
+            speed * cx.time().seconds()
+        } else {
+            0.0
+        };
+        let yaw = cx.f64("yaw") + turn;
         let (near, far) = (cx.f32("near"), cx.f32("far"));
         if near >= far {
             return Err(NodeError::msg(format!("near ({near}) must be less than far ({far})")));

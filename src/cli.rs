@@ -69,10 +69,19 @@ enum Command {
         #[arg(required = true)]
         graphs: Vec<PathBuf>,
     },
-    /// List node kinds, or write the Markdown reference (docs/nodes.md).
+    /// List node kinds, or describe one in full (ports, parameters with defaults and ranges).
     Nodes {
-        #[arg(long)]
+        /// One node kind to describe, e.g. Material.
+        kind: Option<String>,
+        /// Print as JSON (all kinds, or KIND), for tools.
+        #[arg(long, conflicts_with = "markdown")]
+        json: bool,
+        /// Print the Markdown node reference (the text of docs/nodes.md) to stdout, or to --out.
+        #[arg(long, conflicts_with = "kind")]
         markdown: bool,
+        /// Write the output to this file instead of stdout.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Print the GPU adapters wgpu finds.
     Info {
@@ -247,9 +256,6 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             if !(fps > 0.0 && fps.is_finite()) {
                 anyhow::bail!("--fps must be a positive number");
             }
-            // Validate before touching the GPU, so a bad graph fails fast and clearly.
-            let loaded = crate::render::load_with_overrides(&graph, &sets)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
             let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
             let opts = crate::render::RenderOptions {
                 graph_path: graph,
@@ -261,7 +267,12 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 sets,
                 dumps,
                 progress,
+                command: std::env::args().collect(),
             };
+            // Validate before touching the GPU, so a bad graph fails fast and clearly.
+            let prepared = crate::render::load_with_overrides(&opts.graph_path, &opts.sets)
+                .and_then(|g| Ok((g, GpuContext::headless(pick_backend(backend)?)?)));
+            let (loaded, gpu) = prepared.inspect_err(|e| crate::render::record_failure(&opts, e))?;
             let stats = crate::render::render_graph(&opts, &loaded, &gpu)?;
             eprintln!(
                 "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
@@ -281,7 +292,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let mut failed = 0;
             for path in &graphs {
                 match Graph::load(path) {
-                    Ok(g) => println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len()),
+                    Ok(g) => {
+                        println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
+                        let base = path.parent().unwrap_or(std::path::Path::new(""));
+                        for w in g.warnings(base) {
+                            eprintln!("{}: warning: {w}", path.display());
+                        }
+                    }
                     Err(e) => {
                         failed += 1;
                         eprintln!("{e}");
@@ -319,8 +336,19 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(if bad > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
-        Command::Nodes { markdown } => {
-            print!("{}", if markdown { crate::docs::markdown() } else { crate::docs::listing() });
+        Command::Nodes { kind, json, markdown, out } => {
+            let spec = kind.as_deref().map(crate::docs::find).transpose().map_err(anyhow::Error::msg)?;
+            let text = match (spec, json) {
+                (Some(s), true) => serde_json::to_string_pretty(&crate::docs::node_json(s))? + "\n",
+                (None, true) => serde_json::to_string_pretty(&crate::docs::json())? + "\n",
+                (Some(s), false) => crate::docs::describe(s),
+                (None, false) if markdown => crate::docs::markdown(),
+                (None, false) => crate::docs::listing(),
+            };
+            match out {
+                Some(path) => crate::atomic::write_atomic(&path, text.as_bytes())?,
+                None => print!("{text}"),
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Info { backend } => {

@@ -39,6 +39,8 @@ struct NodeState {
     touched: Vec<(SlotRef, u64)>,
     signals: Vec<(ChangeSignal, u64)>,
     warnings: Vec<String>,
+    /// Counts its last run reported (`EvalCx::count`).
+    counts: Vec<(&'static str, u64)>,
     /// Shaders of its last run that failed to compile (it ran on the last good pipelines, or failed).
     shader_errors: Vec<ShaderError>,
     /// What the last successful run emitted for the batch runner.
@@ -90,6 +92,7 @@ pub struct NodeReport<'a> {
     pub cpu: Duration,
     pub status: &'a NodeStatus,
     pub warnings: &'a [String],
+    pub counts: &'a [(&'static str, u64)],
     /// Shader files that failed to compile when it last ran: with status `Ok` it rendered
     /// with the last good pipeline.
     pub shader_errors: &'a [ShaderError],
@@ -190,6 +193,7 @@ impl Evaluator {
                     touched: Vec::new(),
                     signals: Vec::new(),
                     warnings: Vec::new(),
+                    counts: Vec::new(),
                     shader_errors: Vec::new(),
                     products: Vec::new(),
                     last_cpu: Duration::ZERO,
@@ -287,7 +291,10 @@ impl Evaluator {
         let mut summary = FrameSummary::default();
         self.settings_hash = {
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            std::hash::Hash::hash(&(settings.width, settings.height, &settings.base_dir, gpu.is_some()), &mut h);
+            std::hash::Hash::hash(
+                &(settings.width, settings.height, &settings.base_dir, settings.frames, gpu.is_some()),
+                &mut h,
+            );
             std::hash::Hasher::finish(&h)
         };
         self.released.iter_mut().for_each(|r| *r = false);
@@ -387,6 +394,7 @@ impl Evaluator {
         state.touched.clear();
         state.signals.clear();
         state.warnings.clear();
+        state.counts.clear();
         let mut products = Vec::new();
         // The node's GPU work runs in its own validation error scope.
         let scope = gpu.map(|g| g.begin_node(&self.ids[n]));
@@ -405,6 +413,7 @@ impl Evaluator {
                 touched: &mut state.touched,
                 signals: &mut state.signals,
                 warnings: &mut state.warnings,
+                counts: &mut state.counts,
                 products: &mut products,
                 misuse: RefCell::new(Vec::new()),
                 settings,
@@ -526,6 +535,7 @@ impl Evaluator {
             cpu: s.last_cpu,
             status: &s.status,
             warnings: &s.warnings,
+            counts: &s.counts,
             shader_errors: &s.shader_errors,
             runs: s.runs,
         }

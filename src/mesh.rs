@@ -247,6 +247,18 @@ impl Mesh {
             .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
     }
 
+    /// Each pattern piece's UV bounding rectangle `(piece, lo, hi)`, by piece id; a mesh
+    /// without piece ids is one piece 0. Where to put placements, in numbers.
+    pub fn piece_uv_rects(&self) -> Vec<(u32, glam::Vec2, glam::Vec2)> {
+        let mut rects: std::collections::BTreeMap<u32, (glam::Vec2, glam::Vec2)> = Default::default();
+        for (i, uv) in self.uvs.iter().enumerate() {
+            let piece = self.piece_ids.get(i).copied().unwrap_or(0);
+            let r = rects.entry(piece).or_insert((*uv, *uv));
+            *r = (r.0.min(*uv), r.1.max(*uv));
+        }
+        rects.into_iter().map(|(p, (lo, hi))| (p, lo, hi)).collect()
+    }
+
     pub fn gpu(&self, gpu: &crate::gpu::GpuContext) -> &GpuMesh {
         self.gpu.get_or_init(|| {
             let verts: Vec<Vertex> = (0..self.positions.len())

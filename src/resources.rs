@@ -273,7 +273,10 @@ fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
         // Every request up to this one was made before the file is read here.
         let request = slot.requested.load(Ordering::Acquire);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (slot.load)(&slot.path)));
+        // Say plainly that the file is missing: loaders word it their own way ("open file failed").
+        let missing = !slot.path.exists();
         let state = match result {
+            Ok(Err(_)) if missing => SlotState::Failed(format!("no such file: {}", slot.path.display())),
             Ok(Ok(v)) => SlotState::Ready(v),
             Ok(Err(e)) => SlotState::Failed(format!("{}: {e:#}", slot.path.display())),
             Err(_) => SlotState::Failed(format!("{}: the loader crashed on this file", slot.path.display())),

@@ -20,7 +20,7 @@ fn fresh_gpu() -> GpuContext {
 }
 
 fn settings(width: u32, height: u32) -> FrameSettings {
-    FrameSettings { width, height, base_dir: root().join("graphs") }
+    FrameSettings { width, height, base_dir: root().join("graphs"), frames: None }
 }
 
 /// Evaluates `frame` until nothing is pending.
@@ -81,6 +81,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         sets: Vec::new(),
         dumps: Vec::new(),
         progress: false,
+        command: Vec::new(),
     };
     render(&opts, &gpu).unwrap();
     let json: serde_json::Value =
@@ -120,6 +121,7 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             sets: Vec::new(),
             dumps: Vec::new(),
             progress: false,
+            command: Vec::new(),
         };
         render(&opts, &gpu).unwrap()
     };
