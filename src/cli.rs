@@ -44,6 +44,10 @@ enum Command {
         /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
         #[arg(long = "dump", value_name = "NODE.PORT")]
         dumps: Vec<String>,
+        /// File format of --dump: png (8-bit; float textures tone mapped with x/(1+x), then sRGB)
+        /// or exr (values as they are). Default: png for 8-bit textures, exr for float ones.
+        #[arg(long, value_parser = ["png", "exr"])]
+        dump_format: Option<String>,
         /// GPU backend (or WERKSTATT_BACKEND).
         #[arg(long, value_enum)]
         backend: Option<Backend>,
@@ -250,7 +254,12 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Render { graph, frames, fps, size, out, sets, dumps, backend } => {
+        Command::Render { graph, frames, fps, size, out, sets, dumps, dump_format, backend } => {
+            use crate::param::Choice as _;
+            let dump_format = dump_format.map(|name| {
+                let i = crate::image_io::ImageFormat::OPTIONS.iter().position(|o| *o == name).expect("clap checked it");
+                crate::image_io::ImageFormat::from_index(i).expect("an index of OPTIONS")
+            });
             let frames = parse_frames(&frames)?;
             let (width, height) = parse_size(&size)?;
             if !(fps > 0.0 && fps.is_finite()) {
@@ -266,6 +275,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 out_dir: out.clone(),
                 sets,
                 dumps,
+                dump_format,
                 progress,
                 command: std::env::args().collect(),
             };

@@ -34,6 +34,21 @@ pub fn write_png(path: &Path, px: &Pixels) -> anyhow::Result<()> {
     crate::atomic::write_atomic(path, encoded.get_ref()).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Tone maps HDR colour (not alpha) with x / (1 + x) so a float texture dumped as PNG keeps
+/// its highlights instead of clipping at 1; negative values go to 0. LDR pixels are left as
+/// they are.
+pub fn tonemap_for_png(px: &mut Pixels) {
+    if px.is_ldr {
+        return;
+    }
+    for (i, v) in px.rgba.iter_mut().enumerate() {
+        if i % 4 != 3 {
+            let x = v.max(0.0);
+            *v = x / (1.0 + x);
+        }
+    }
+}
+
 pub fn to_rgba8(px: &Pixels) -> Vec<u8> {
     px.rgba
         .iter()

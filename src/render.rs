@@ -30,6 +30,8 @@ pub struct RenderOptions {
     pub sets: Vec<String>,
     /// `node.port` texture outputs to write besides the output nodes.
     pub dumps: Vec<String>,
+    /// The format of `dumps`; `None`: PNG for 8-bit textures, EXR for float ones.
+    pub dump_format: Option<ImageFormat>,
     pub progress: bool,
     /// The command line that asked for the run, recorded in `stats.json` (empty from code).
     pub command: Vec<String>,
@@ -305,12 +307,16 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
             let Some(img) = value.and_then(Value::as_texture) else {
                 bail!("--dump {d}: the port holds no texture this frame");
             };
-            let format = match img.format {
+            let format = opts.dump_format.unwrap_or(match img.format {
                 wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm => ImageFormat::Png,
                 _ => ImageFormat::Exr,
-            };
+            });
             let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
-            image_io::write_image(&opts.out_dir.join(&name), &gpu::read_back(gpu, img)?, format)?;
+            let mut px = gpu::read_back(gpu, img)?;
+            if format == ImageFormat::Png {
+                image_io::tonemap_for_png(&mut px);
+            }
+            image_io::write_image(&opts.out_dir.join(&name), &px, format)?;
             stats.files.push(name);
         }
         let gpu_created = gpu.created().since(created_before);

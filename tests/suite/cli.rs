@@ -429,3 +429,24 @@ fn set_typos_get_did_you_mean() {
         assert!(err.contains(needle), "{set}: {err}");
     }
 }
+
+#[test]
+fn dump_format_chooses_png_tone_mapped_or_exr() {
+    let dir = temp("dump-format");
+    let render = |extra: &[&str]| {
+        let out = dir.join(extra.join("-"));
+        let mut args = vec!["render", "graphs/default.ron", "--size", "32x24", "--dump", "gbuffer.depth"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 0, "{err}");
+        out
+    };
+    // Float textures default to EXR.
+    assert!(render(&[]).join("gbuffer.depth_0000.exr").exists());
+    let png = image::open(render(&["--dump-format", "png"]).join("gbuffer.depth_0000.png")).unwrap().to_rgba8();
+    // Depths of a few metres would all clip to white; tone mapped they stay below it.
+    let covered: Vec<u8> = png.pixels().map(|p| p[0]).filter(|&r| r > 0).collect();
+    assert!(!covered.is_empty() && covered.iter().all(|&r| r < 255), "{covered:?}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -57,6 +57,7 @@ pub fn render_graph(
         out_dir: out.to_path_buf(),
         sets: sets.iter().map(|s| s.to_string()).collect(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        dump_format: None,
         progress: false,
         command: Vec::new(),
     };

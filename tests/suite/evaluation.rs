@@ -502,3 +502,51 @@ fn a_failed_reload_recovers_when_the_file_is_fixed() {
     assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The camera's eye at `frame` of a turntable rendered over `range`.
+fn turntable_eye(range: (i64, i64), frame_no: i64) -> glam::Vec3 {
+    let g = graph(
+        r#"(version: 1, nodes: {"cam": (kind: "OrbitCamera", params: {"turntable": true, "yaw": 0.0, "pitch": 0.0, "distance": 2.0})}, links: [])"#,
+    );
+    let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
+    let settings = FrameSettings { frames: Some(range), ..FrameSettings::default() };
+    ev.evaluate(frame(frame_no), None, &Resources::new(false), &settings);
+    match ev.output("cam", "camera") {
+        Some(werkstatt::port::Value::Camera(c)) => c.eye,
+        _ => panic!("no camera output"),
+    }
+}
+
+#[test]
+fn a_turntable_turns_once_over_the_rendered_frames() {
+    let close = |a: glam::Vec3, b: glam::Vec3| a.distance(b) < 1e-4;
+    // Frames 10..13: four steps of 90 degrees, the last one short of the start.
+    assert!(close(turntable_eye((10, 13), 10), glam::Vec3::new(0.0, 0.0, 2.0)));
+    assert!(close(turntable_eye((10, 13), 11), glam::Vec3::new(2.0, 0.0, 0.0)));
+    assert!(close(turntable_eye((10, 13), 12), glam::Vec3::new(0.0, 0.0, -2.0)));
+    // A longer range turns slower: a quarter turn takes 25 of 100 frames.
+    assert!(close(turntable_eye((0, 99), 25), glam::Vec3::new(2.0, 0.0, 0.0)));
+}
+
+#[test]
+fn a_grid_over_the_whole_uv_square_reports_what_fell_off_the_flag() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 100, "warmup": 0.0}),
+            "grid": (kind: "GridPlacement", params: {"columns": 8, "rows": 5}),
+            "out": (kind: "Watch"),
+        }, links: [("cloth.surface", "grid.surface"), ("grid.count", "out.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
+    let count = match ev.output("grid", "count") {
+        Some(werkstatt::port::Value::Scalar(n)) => *n,
+        _ => panic!("no count output"),
+    };
+    let report = ev.report("grid").unwrap();
+    assert!(count > 0.0 && count < 40.0, "{count}");
+    assert_eq!(report.counts, [("placements", count as u64)]);
+    let warning = report.warnings.iter().find(|w| w.contains("fall off the pattern pieces")).expect("a warning");
+    assert!(warning.starts_with(&format!("{} of 40 placements", 40 - count as usize)), "{warning}");
+    assert!(warning.contains("the pieces cover piece 0: u "), "{warning}");
+}

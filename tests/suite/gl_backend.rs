@@ -56,6 +56,7 @@ fn render_on(
         out_dir: out.to_path_buf(),
         sets: Vec::new(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        dump_format: None,
         progress: false,
         command: Vec::new(),
     };

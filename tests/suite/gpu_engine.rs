@@ -80,6 +80,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         out_dir: out.clone(),
         sets: Vec::new(),
         dumps: Vec::new(),
+        dump_format: None,
         progress: false,
         command: Vec::new(),
     };
@@ -120,6 +121,7 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             out_dir: out.to_path_buf(),
             sets: Vec::new(),
             dumps: Vec::new(),
+            dump_format: None,
             progress: false,
             command: Vec::new(),
         };
