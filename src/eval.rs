@@ -59,6 +59,8 @@ pub struct Evaluator {
     param_hash: Vec<u64>,
     /// Per node, per input port: the source node and its output index.
     sources: Vec<Vec<Option<(usize, usize)>>>,
+    /// Per node, per output port: whether a link leaves it (`EvalCx::output_linked`).
+    linked: Vec<Vec<bool>>,
     /// Nodes that feed a root, sources first.
     order: Vec<usize>,
     /// Per node: the nodes its outputs feed, and whether it is in `order`.
@@ -115,6 +117,7 @@ impl Evaluator {
             params: Vec::new(),
             param_hash: Vec::new(),
             sources: Vec::new(),
+            linked: Vec::new(),
             order: Vec::new(),
             consumers: Vec::new(),
             planned: Vec::new(),
@@ -216,6 +219,14 @@ impl Evaluator {
             let (out, _) = self.specs[from].output(&link.from.port).ok_or("unknown output")?;
             let (inp, _) = self.specs[to].input(&link.to.port).ok_or("unknown input")?;
             self.sources[to][inp] = Some((from, out));
+        }
+        self.linked = self.specs.iter().map(|s| vec![false; s.outputs.len()]).collect();
+        for (from, out) in self.sources.iter().flatten().flatten() {
+            self.linked[*from][*out] = true;
+        }
+        // A node that behaves differently by what is linked re-runs when that changes.
+        for (h, linked) in self.param_hash.iter_mut().zip(&self.linked) {
+            *h = mix(*h, linked.iter().fold(0u64, |m, &l| (m << 1) | u64::from(l)));
         }
         self.roots = (0..self.ids.len()).filter(|&i| self.specs[i].is_output).collect();
         for id in extra_roots {
@@ -414,6 +425,7 @@ impl Evaluator {
                 signals: &mut state.signals,
                 warnings: &mut state.warnings,
                 counts: &mut state.counts,
+                linked: &self.linked[n],
                 products: &mut products,
                 misuse: RefCell::new(Vec::new()),
                 settings,

@@ -202,6 +202,7 @@ pub struct EvalCx<'a> {
     pub(crate) signals: &'a mut Vec<(ChangeSignal, u64)>,
     pub(crate) warnings: &'a mut Vec<String>,
     pub(crate) counts: &'a mut Vec<(&'static str, u64)>,
+    pub(crate) linked: &'a [bool],
     pub(crate) products: &'a mut Vec<Product>,
     /// Programming errors found while the node ran (see [`INTERNAL_ERROR`]).
     pub(crate) misuse: RefCell<Vec<String>>,
@@ -362,6 +363,19 @@ impl<'a> EvalCx<'a> {
 
     pub fn warn(&mut self, message: impl Into<String>) {
         self.warnings.push(message.into());
+    }
+
+    /// Whether a link leaves output `name`: for a check that only matters to consumers of
+    /// that output (MeshFile's surface needs UVs, its mesh does not). The node re-runs
+    /// when this changes.
+    pub fn output_linked(&self, name: &str) -> bool {
+        match self.spec.output(name) {
+            Some((i, _)) => self.linked.get(i).copied().unwrap_or(false),
+            None => {
+                self.misuse(format!("asks about undeclared output \"{name}\""));
+                false
+            }
+        }
     }
 
     /// Reports a count for `stats.json` and the editor (placements, instances, triangles):

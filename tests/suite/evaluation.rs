@@ -550,3 +550,51 @@ fn a_grid_over_the_whole_uv_square_reports_what_fell_off_the_flag() {
     assert!(warning.starts_with(&format!("{} of 40 placements", 40 - count as usize)), "{warning}");
     assert!(warning.contains("the pieces cover piece 0: u "), "{warning}");
 }
+
+/// Two UV-mapped OBJ objects: "left" covers u 0-0.5 (all of v), "right" u 0.5-1, v 0.5-1 (v down).
+const TWO_PIECE_OBJ: &str = "o left\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n\
+o right\nv 2 0 0\nv 3 0 0\nv 3 1 0\nv 2 1 0\nvt 0.5 0\nvt 1 0\nvt 1 0.5\nvt 0.5 0.5\nf 5/5 6/6 7/7 8/8\n";
+
+/// Evaluates until the loads settle; returns the grid's report text (count and warnings) or the failure.
+fn grid_on_mesh_file(obj: &str, name: &str) -> Result<(f64, Vec<String>), String> {
+    let dir = std::env::temp_dir().join(format!("werkstatt-meshfile-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("garment.obj"), obj).unwrap();
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "m": (kind: "MeshFile", params: {"path": "garment.obj", "normalize": false}),
+            "grid": (kind: "GridPlacement", params: {"columns": 2, "rows": 2}),
+            "out": (kind: "Watch"),
+        }, links: [("m.surface", "grid.surface"), ("grid.count", "out.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let settings = FrameSettings { base_dir: dir.clone(), ..FrameSettings::default() };
+    ev.evaluate(frame(0), None, &res, &settings);
+    wait_idle(&res);
+    ev.evaluate(frame(0), None, &res, &settings);
+    let _ = std::fs::remove_dir_all(&dir);
+    if let NodeStatus::Failed(m) = ev.report("m").unwrap().status {
+        return Err(m.clone());
+    }
+    match ev.output("grid", "count") {
+        Some(werkstatt::port::Value::Scalar(n)) => Ok((*n, ev.report("grid").unwrap().warnings.to_vec())),
+        _ => panic!("no count output"),
+    }
+}
+
+#[test]
+fn a_uv_mapped_mesh_file_is_a_surface_with_a_piece_per_object() {
+    let (count, warnings) = grid_on_mesh_file(TWO_PIECE_OBJ, "pieces").unwrap();
+    // Cell centres (0.25, 0.25) and (0.25, 0.75) are on "left", (0.75, 0.75) on "right".
+    assert_eq!(count, 3.0);
+    assert_eq!(
+        warnings,
+        [
+            "1 of 4 placements fall off the pattern pieces and were dropped; the pieces cover piece 0: u 0.000-0.500, v 0.000-1.000; piece 1: u 0.500-1.000, v 0.500-1.000"
+        ]
+    );
+    let no_uvs = "o flat\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n";
+    let err = grid_on_mesh_file(no_uvs, "no-uvs").unwrap_err();
+    assert!(err.contains("garment.obj has no UVs, so it cannot be a surface"), "{err}");
+}
