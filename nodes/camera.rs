@@ -2,14 +2,39 @@
 
 use glam::Vec3;
 
+use std::sync::Arc;
+
 use crate::node::prelude::*;
-use crate::scene::Camera;
+use crate::scene::{Camera, DrawItem};
+
+/// World bounds of a scene's plain items (model matrix applied to their box corners);
+/// attached detail lies on a surface that is itself drawn, so it is left out. None when empty.
+pub fn scene_bounds(items: &[DrawItem]) -> Option<(Vec3, Vec3)> {
+    let mut bounds: Option<(Vec3, Vec3)> = None;
+    for item in items.iter().filter(|i| i.attached.is_none()) {
+        let (lo, hi) = item.mesh.bounds();
+        for i in 0..8 {
+            let corner = Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            let p = item.model.transform_point3(corner);
+            bounds = Some(bounds.map_or((p, p), |(a, b)| (a.min(p), b.max(p))));
+        }
+    }
+    bounds
+}
 
 pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
     kind: "OrbitCamera",
     category: Category::Scene,
     doc: "A perspective camera orbiting a target; with orbit_speed it turns around the object over the frames.",
-    inputs: &[],
+    inputs: &[PortSpec::optional(
+        "fit",
+        PortType::Scene,
+        "When linked, the camera frames this scene: it looks at the centre of its bounds, from the distance at which their bounding sphere fills the view (target and distance are ignored; yaw, pitch and the turntable apply). Attachments count by the surface they sit on.",
+    )],
     outputs: &[PortSpec::output("camera", PortType::Camera, "The camera.")],
     params: &[
         ParamSpec::new("target", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "The point looked at."),
@@ -65,17 +90,19 @@ impl Node for OrbitCameraNode {
         }
         let (yaw, pitch) = ((yaw as f32).to_radians(), cx.f32("pitch").to_radians());
         let dir = Vec3::new(yaw.sin() * pitch.cos(), pitch.sin(), yaw.cos() * pitch.cos());
-        let target = cx.vec3("target");
+        let fov = cx.f32("fov");
+        let (target, distance) = match cx.optional::<Arc<Vec<DrawItem>>>("fit") {
+            Some(scene) => {
+                let (lo, hi) = scene_bounds(&scene)
+                    .ok_or_else(|| NodeError::msg("input \"fit\": the scene has no plain geometry to frame"))?;
+                let radius = ((hi - lo).length() * 0.5).max(1e-4);
+                ((lo + hi) * 0.5, radius / (fov.to_radians() * 0.5).sin())
+            }
+            None => (cx.vec3("target"), cx.f32("distance")),
+        };
         cx.set(
             "camera",
-            Value::Camera(Camera {
-                eye: target + dir * cx.f32("distance"),
-                target,
-                up: Vec3::Y,
-                fov_y_degrees: cx.f32("fov"),
-                near,
-                far,
-            }),
+            Value::Camera(Camera { eye: target + dir * distance, target, up: Vec3::Y, fov_y_degrees: fov, near, far }),
         );
         Ok(())
     }

@@ -83,6 +83,9 @@ enum Command {
         /// Print the Markdown node reference (the text of docs/nodes.md) to stdout, or to --out.
         #[arg(long, conflicts_with = "kind")]
         markdown: bool,
+        /// Print the ClothSim presets' bounds and pattern pieces' UV rectangles (docs/presets.md).
+        #[arg(long, conflicts_with_all = ["kind", "json", "markdown"])]
+        presets: bool,
         /// Write the output to this file instead of stdout.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -346,13 +349,14 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(if bad > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
-        Command::Nodes { kind, json, markdown, out } => {
+        Command::Nodes { kind, json, markdown, presets, out } => {
             let spec = kind.as_deref().map(crate::docs::find).transpose().map_err(anyhow::Error::msg)?;
             let text = match (spec, json) {
                 (Some(s), true) => serde_json::to_string_pretty(&crate::docs::node_json(s))? + "\n",
                 (None, true) => serde_json::to_string_pretty(&crate::docs::json())? + "\n",
                 (Some(s), false) => crate::docs::describe(s),
                 (None, false) if markdown => crate::docs::markdown(),
+                (None, false) if presets => crate::nodes::cloth::node::presets_markdown()?,
                 (None, false) => crate::docs::listing(),
             };
             match out {

@@ -70,6 +70,18 @@ fn nodes_markdown_prints_or_writes_the_reference() {
 }
 
 #[test]
+fn docs_presets_are_up_to_date() {
+    let expected = werkstatt::nodes::cloth::node::presets_markdown().unwrap();
+    let actual = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/presets.md")).unwrap_or_default();
+    assert!(
+        actual == expected,
+        "docs/presets.md is out of date: run `cargo run -- nodes --presets --out docs/presets.md`"
+    );
+    // The flag's one piece covers only part of the UV square: the number the issue asked for.
+    assert!(expected.contains("## `flag`"), "{expected}");
+}
+
+#[test]
 fn every_node_kind_is_documented_and_used_by_a_graph() {
     let graphs: String = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs"))
         .unwrap()

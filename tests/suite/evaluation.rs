@@ -598,3 +598,20 @@ fn a_uv_mapped_mesh_file_is_a_surface_with_a_piece_per_object() {
     let err = grid_on_mesh_file(no_uvs, "no-uvs").unwrap_err();
     assert!(err.contains("garment.obj has no UVs, so it cannot be a surface"), "{err}");
 }
+
+#[test]
+fn an_orbit_camera_with_fit_frames_the_scene_bounds() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "box": (kind: "Primitive", params: {"shape": "box", "size": 2.0}),
+            "draw": (kind: "Draw", params: {"translate": [5.0, 1.0, 0.0]}),
+            "cam": (kind: "OrbitCamera", params: {"yaw": 0.0, "pitch": 0.0, "fov": 60.0, "target": [9.0, 9.0, 9.0]}),
+        }, links: [("box.mesh", "draw.mesh"), ("draw.scene", "cam.fit")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
+    ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
+    let Some(werkstatt::port::Value::Camera(c)) = ev.output("cam", "camera") else { panic!("no camera output") };
+    // A 2 m cube at (5, 1, 0): bounding sphere radius sqrt(3), seen at 60 degrees from 2 sqrt(3).
+    assert!(c.target.distance(glam::Vec3::new(5.0, 1.0, 0.0)) < 1e-4, "{:?}", c.target);
+    assert!((c.eye.distance(c.target) - 2.0 * 3f32.sqrt()).abs() < 1e-3, "{:?}", c.eye);
+}
