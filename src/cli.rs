@@ -38,6 +38,10 @@ enum Command {
         /// Output folder.
         #[arg(long, default_value = "out")]
         out: PathBuf,
+        /// Anti-aliasing by supersampling: render every pass at N x the size (N^2 the pixels)
+        /// and box-filter the written images down to it.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+        ssaa: u32,
         /// Override a parameter: node.param=value (repeatable).
         #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
         sets: Vec<String>,
@@ -257,7 +261,7 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Render { graph, frames, fps, size, out, sets, dumps, dump_format, backend } => {
+        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, backend } => {
             use crate::param::Choice as _;
             let dump_format = dump_format.map(|name| {
                 let i = crate::image_io::ImageFormat::OPTIONS.iter().position(|o| *o == name).expect("clap checked it");
@@ -265,6 +269,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             });
             let frames = parse_frames(&frames)?;
             let (width, height) = parse_size(&size)?;
+            if width.max(height) * ssaa > 8192 {
+                anyhow::bail!(
+                    "--size {size} with --ssaa {ssaa} renders {}x{}, over the limit of 8192",
+                    width * ssaa,
+                    height * ssaa
+                );
+            }
             if !(fps > 0.0 && fps.is_finite()) {
                 anyhow::bail!("--fps must be a positive number");
             }
@@ -279,6 +290,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 sets,
                 dumps,
                 dump_format,
+                ssaa,
                 progress,
                 command: std::env::args().collect(),
             };

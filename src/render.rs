@@ -30,6 +30,9 @@ pub struct RenderOptions {
     pub sets: Vec<String>,
     /// `node.port` texture outputs to write besides the output nodes.
     pub dumps: Vec<String>,
+    /// Supersampling: passes render at `ssaa` x the size and written images are box-filtered
+    /// down to it (1: off).
+    pub ssaa: u32,
     /// The format of `dumps`; `None`: PNG for 8-bit textures, EXR for float ones.
     pub dump_format: Option<ImageFormat>,
     pub progress: bool,
@@ -79,6 +82,8 @@ pub struct Stats {
     pub adapter: String,
     pub width: u32,
     pub height: u32,
+    /// Supersampling factor per axis (1: none).
+    pub ssaa: u32,
     pub frames: Vec<FrameStats>,
     /// Values reported by Watch nodes, one per frame.
     pub values: BTreeMap<String, Vec<f64>>,
@@ -106,6 +111,7 @@ impl Stats {
             adapter: String::new(),
             width: opts.width,
             height: opts.height,
+            ssaa: opts.ssaa,
             frames: Vec::new(),
             values: BTreeMap::new(),
             files: Vec::new(),
@@ -200,8 +206,8 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
     std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("cannot create {}", opts.out_dir.display()))?;
     let resources = Resources::new(false);
     let settings = FrameSettings {
-        width: opts.width,
-        height: opts.height,
+        width: opts.width * opts.ssaa.max(1),
+        height: opts.height * opts.ssaa.max(1),
         frames: Some(opts.frames),
         base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
     };
@@ -289,7 +295,7 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 match product {
                     Product::Image { image, format } => {
                         let name = name(format.name());
-                        let px = gpu::read_back(gpu, image)?;
+                        let px = resolve(gpu, image, opts)?;
                         image_io::write_image(&opts.out_dir.join(&name), &px, *format)?;
                         stats.files.push(name);
                     }
@@ -312,7 +318,7 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 _ => ImageFormat::Exr,
             });
             let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
-            let mut px = gpu::read_back(gpu, img)?;
+            let mut px = resolve(gpu, img, opts)?;
             if format == ImageFormat::Png {
                 image_io::tonemap_for_png(&mut px);
             }
@@ -329,6 +335,19 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
         b.finish_and_clear();
     }
     Ok(())
+}
+
+/// Reads an image back at the output size: a supersampled frame-sized image is box-filtered
+/// down; other sizes (a matrix texture, a shadow atlas) do not scale with the frame and are
+/// written as they are.
+fn resolve(gpu: &GpuContext, image: &gpu::GpuImage, opts: &RenderOptions) -> anyhow::Result<gpu::Pixels> {
+    let px = gpu::read_back(gpu, image)?;
+    let n = opts.ssaa.max(1);
+    Ok(if n > 1 && (px.width, px.height) == (opts.width * n, opts.height * n) {
+        image_io::downsample_box(&px, n)
+    } else {
+        px
+    })
 }
 
 fn write_stats(dir: &Path, stats: &Stats) -> anyhow::Result<()> {

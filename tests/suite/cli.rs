@@ -462,3 +462,34 @@ fn dump_format_chooses_png_tone_mapped_or_exr() {
     assert!(!covered.is_empty() && covered.iter().all(|&r| r < 255), "{covered:?}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// --ssaa renders at N x the size and writes images at the asked size, box-filtered: a
+/// silhouette gets intermediate values that a 1-sample render never has.
+#[test]
+fn ssaa_writes_the_asked_size_with_smoothed_edges() {
+    let dir = temp("ssaa");
+    let total_variation = |ssaa: &str| {
+        let out = dir.join(ssaa);
+        let args = ["render", "graphs/default.ron", "--size", "40x30", "--ssaa", ssaa, "--out", out.to_str().unwrap()];
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 0, "{err}");
+        let png = image::open(out.join("image_0000.png")).unwrap().to_rgba8();
+        assert_eq!((png.width(), png.height()), (40, 30));
+        assert_eq!(read_stats(&out)["ssaa"], ssaa.parse::<u64>().unwrap());
+        // Total variation: the sum of steps between horizontal neighbours; stair steps add to it.
+        let mut tv = 0u64;
+        for y in 0..png.height() {
+            for x in 1..png.width() {
+                let (a, b) = (png.get_pixel(x - 1, y).0, png.get_pixel(x, y).0);
+                tv += (0..3).map(|c| a[c].abs_diff(b[c]) as u64).sum::<u64>();
+            }
+        }
+        tv
+    };
+    let (plain, smooth) = (total_variation("1"), total_variation("3"));
+    assert!(smooth * 10 < plain * 9, "total variation {plain} without SSAA, {smooth} with");
+    let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--size", "4000x100", "--ssaa", "3"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("over the limit of 8192"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -58,6 +58,7 @@ pub fn render_graph(
         sets: sets.iter().map(|s| s.to_string()).collect(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
         dump_format: None,
+        ssaa: 1,
         progress: false,
         command: Vec::new(),
     };

@@ -57,6 +57,7 @@ fn render_on(
         sets: Vec::new(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
         dump_format: None,
+        ssaa: 1,
         progress: false,
         command: Vec::new(),
     };

@@ -81,6 +81,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         sets: Vec::new(),
         dumps: Vec::new(),
         dump_format: None,
+        ssaa: 1,
         progress: false,
         command: Vec::new(),
     };
@@ -122,6 +123,7 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             sets: Vec::new(),
             dumps: Vec::new(),
             dump_format: None,
+            ssaa: 1,
             progress: false,
             command: Vec::new(),
         };
