@@ -652,7 +652,7 @@ impl Graph {
                 }
                 let path = base_dir.join(text);
                 // A sequence pattern (frame_%04d.obj, frame_####.obj, frame_*.obj) names its folder.
-                let is_pattern = text.contains(['%', '#', '*']);
+                let is_pattern = crate::resources::is_file_pattern(text);
                 let must_exist = if is_pattern { path.parent().unwrap_or(base_dir) } else { &path };
                 if !must_exist.exists() {
                     out.push(format!(
