@@ -615,3 +615,28 @@ fn an_orbit_camera_with_fit_frames_the_scene_bounds() {
     assert!(c.target.distance(glam::Vec3::new(5.0, 1.0, 0.0)) < 1e-4, "{:?}", c.target);
     assert!((c.eye.distance(c.target) - 2.0 * 3f32.sqrt()).abs() < 1e-3, "{:?}", c.eye);
 }
+
+/// An export fixed at frame 0 does not warp again on later frames: its `mesh` stays the
+/// frame-0 export while the cloth moves on.
+#[test]
+fn a_fixed_frame_export_skips_its_work_on_other_frames() {
+    use werkstatt::port::Value;
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 100}),
+            "draw": (kind: "Draw"),
+            "export": (kind: "ExportGeometry", params: {"frame": 0}),
+        }, links: [("cloth.surface", "draw.mesh"), ("draw.scene", "export.scene")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let (res, settings, gpu) = (Resources::new(false), FrameSettings::default(), crate::common::gpu());
+    let positions = |ev: &Evaluator, id: &str, port: &str| match ev.output(id, port) {
+        Some(Value::Mesh(m) | Value::Surface(m)) => m.positions.clone(),
+        _ => panic!("no {id}.{port}"),
+    };
+    ev.evaluate(frame(0), Some(gpu), &res, &settings);
+    let (export0, cloth0) = (positions(&ev, "export", "mesh"), positions(&ev, "cloth", "surface"));
+    ev.evaluate(frame(3), Some(gpu), &res, &settings);
+    assert!(positions(&ev, "cloth", "surface") != cloth0, "the flag should move in the wind");
+    assert!(positions(&ev, "export", "mesh") == export0, "the export ran again on frame 3");
+}
