@@ -47,6 +47,8 @@ fn common(cx: &EvalCx<'_>) -> Result<Common, NodeError> {
 
 fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceData>) {
     let settings = WarpSettings { mode, gravity: cx.f32("gravity"), min_weight: cx.f32("min_weight") };
+    cx.count("instances", instances.len());
+    cx.count("triangles", instances.len() * c.mesh.triangle_count());
     let attached = AttachedDraw::new(c.matrix, settings, instances);
     let item = DrawItem {
         mesh: c.mesh,

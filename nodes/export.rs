@@ -41,6 +41,8 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
 #[derive(Default)]
 struct ExportNode {
     warper: GpuWarper,
+    /// The last export, the `mesh` output on frames a fixed-frame export skips.
+    last: Option<Arc<Mesh>>,
 }
 
 impl Node for ExportNode {
@@ -50,9 +52,17 @@ impl Node for ExportNode {
         let wanted = cx.int("frame");
         // Only a chosen frame makes the node read the time (and re-run every frame).
         let export = wanted < 0 || cx.time().frame == wanted;
-        let mesh = Arc::new(flatten(gpu, &mut self.warper, &items)?);
+        // A fixed-frame export skips the warp on other frames (the batch runner warns when
+        // its frame is outside the rendered range); `mesh` is then the last export, or the
+        // scene of this frame before the first one.
+        let mesh = match &self.last {
+            Some(last) if !export => last.clone(),
+            _ => Arc::new(flatten(gpu, &mut self.warper, &items)?),
+        };
         if export {
+            cx.count("triangles", mesh.triangle_count());
             cx.emit(Product::Geometry { mesh: mesh.clone(), format: cx.choice("format") });
+            self.last = Some(mesh.clone());
         }
         cx.set("mesh", mesh);
         Ok(())

@@ -184,9 +184,16 @@ pub fn disc(r: f32, h: f32, segments: u32) -> anyhow::Result<Mesh> {
 pub static MESH_FILE: NodeSpec = NodeSpec {
     kind: "MeshFile",
     category: Category::Geometry,
-    doc: "Loads a mesh from an OBJ or glTF file (on a worker thread); missing normals and tangents are computed, broken triangles repaired with a warning.",
+    doc: "Loads a mesh from an OBJ or glTF file (on a worker thread); missing normals and tangents are computed, broken triangles repaired with a warning. A UV-mapped garment from any tool is also a Surface that takes attachments: one pattern piece per OBJ object or group, or per glTF primitive.",
     inputs: &[],
-    outputs: &[PortSpec::output("mesh", PortType::Mesh, "The loaded mesh.")],
+    outputs: &[
+        PortSpec::output("mesh", PortType::Mesh, "The loaded mesh."),
+        PortSpec::output(
+            "surface",
+            PortType::Surface,
+            "The same mesh as a Surface (UVs are the pattern coordinates, v down); linking it requires UVs in the file.",
+        ),
+    ],
     params: &[
         ParamSpec::new(
             "path",
@@ -220,6 +227,14 @@ impl Node for MeshFileNode {
         } else {
             loaded
         };
+        if cx.output_linked("surface") && mesh.uvs_generated() {
+            return Err(NodeError::msg(format!(
+                "{} has no UVs, so it cannot be a surface (attachments are placed by UV); UV-map it in the modelling tool, or link \"mesh\" instead",
+                path.display()
+            )));
+        }
+        cx.count("triangles", mesh.triangle_count());
+        cx.set("surface", mesh.clone());
         cx.set("mesh", mesh);
         Ok(())
     }

@@ -86,6 +86,32 @@ fn surface_input(cx: &EvalCx<'_>) -> Option<Arc<Mesh>> {
     cx.optional("surface")
 }
 
+const PLACEMENTS: PortSpec = PortSpec::output("placements", PortType::Instances, "The placements.");
+const COUNT: PortSpec = PortSpec::output("count", PortType::Scalar, "How many placements there are.");
+
+/// Sets the outputs and reports the count; `dropped` placements fell off the surface's
+/// pieces, which a user must hear about (a grid over the whole UV square silently lost
+/// most of its buttons on the flag).
+fn finish(cx: &mut EvalCx<'_>, out: Vec<Placement>, dropped: usize, surface: Option<&Mesh>) {
+    if dropped > 0
+        && let Some(mesh) = surface
+    {
+        let rects: Vec<String> = mesh
+            .piece_uv_rects()
+            .iter()
+            .map(|(p, lo, hi)| format!("piece {p}: u {:.3}-{:.3}, v {:.3}-{:.3}", lo.x, hi.x, lo.y, hi.y))
+            .collect();
+        cx.warn(format!(
+            "{dropped} of {} placements fall off the pattern pieces and were dropped; the pieces cover {}",
+            out.len() + dropped,
+            rects.join("; ")
+        ));
+    }
+    cx.count("placements", out.len());
+    cx.set("count", out.len() as f64);
+    cx.set("placements", Arc::new(out));
+}
+
 pub static SCATTER: NodeSpec = NodeSpec {
     kind: "Scatter",
     category: Category::Attachment,
@@ -95,7 +121,7 @@ pub static SCATTER: NodeSpec = NodeSpec {
         PortType::Surface,
         "Keeps placements on the pieces and records their piece id.",
     )],
-    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    outputs: &[PLACEMENTS, COUNT],
     params: &[
         ParamSpec::new(
             "count",
@@ -134,6 +160,7 @@ impl Node for ScatterNode {
         let cell = spacing.max(1e-6);
         let mut grid: std::collections::BTreeMap<(i32, i32), Vec<Vec2>> = Default::default();
         let mut out = Vec::with_capacity(count);
+        let mut dropped = 0;
         let attempts = count.saturating_mul(if spacing > 0.0 { 30 } else { 4 }).max(count);
         for _ in 0..attempts {
             if out.len() >= count {
@@ -141,7 +168,10 @@ impl Node for ScatterNode {
             }
             let uv = lo + (hi - lo) * Vec2::new(rng.next_f32(), rng.next_f32());
             let (angle, scale) = (rng.next_f32() * 360.0, smin + (smax - smin) * rng.next_f32());
-            let Some(piece) = piece_at(&coverage, uv) else { continue };
+            let Some(piece) = piece_at(&coverage, uv) else {
+                dropped += 1;
+                continue;
+            };
             if spacing > 0.0 {
                 let key = ((uv.x / cell).floor() as i32, (uv.y / cell).floor() as i32);
                 let near = (-1..=1).any(|dy| {
@@ -166,7 +196,9 @@ impl Node for ScatterNode {
         if out.len() < count {
             cx.warn(format!("placed {} of {count}: the region is full at this spacing or coverage", out.len()));
         }
-        cx.set("placements", Arc::new(out));
+        // Scatter retries misses, so only a region with no piece in it counts as falling off.
+        let dropped = if out.is_empty() { dropped } else { 0 };
+        finish(cx, out, dropped, surface.as_deref());
         Ok(())
     }
 }
@@ -180,7 +212,7 @@ pub static GRID_PLACEMENT: NodeSpec = NodeSpec {
         PortType::Surface,
         "Keeps placements on the pieces and records their piece id.",
     )],
-    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    outputs: &[PLACEMENTS, COUNT],
     params: &[
         ParamSpec::new("columns", ParamKind::Int { default: 8, min: 1, max: 100_000 }, "Cells along u."),
         ParamSpec::new("rows", ParamKind::Int { default: 8, min: 1, max: 100_000 }, "Cells along v."),
@@ -210,14 +242,18 @@ impl Node for GridNode {
             return Err(NodeError::msg(format!("{cols} x {rows} placements is more than the limit of 10 million")));
         }
         let mut out = Vec::with_capacity(cols * rows);
+        let mut dropped = 0;
         for r in 0..rows {
             for c in 0..cols {
                 let uv = lo + (hi - lo) * Vec2::new((c as f32 + 0.5) / cols as f32, (r as f32 + 0.5) / rows as f32);
-                let Some(piece) = piece_at(&coverage, uv) else { continue };
+                let Some(piece) = piece_at(&coverage, uv) else {
+                    dropped += 1;
+                    continue;
+                };
                 out.push(Placement { piece, u: uv.x, v: uv.y, angle: cx.f32("angle"), scale: cx.f32("scale") });
             }
         }
-        cx.set("placements", Arc::new(out));
+        finish(cx, out, dropped, surface.as_deref());
         Ok(())
     }
 }
@@ -227,7 +263,7 @@ pub static CURVE_PLACEMENT: NodeSpec = NodeSpec {
     category: Category::Attachment,
     doc: "Placements at equal arc-length steps along curves (buttons along a placket), turned to the curve direction.",
     inputs: &[PortSpec::required("curves", PortType::Curves, "Curves in UV space.")],
-    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    outputs: &[PLACEMENTS, COUNT],
     params: &[
         ParamSpec::new(
             "spacing",
@@ -263,7 +299,7 @@ impl Node for CurvePlacementNode {
                 out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
             }
         }
-        cx.set("placements", Arc::new(out));
+        finish(cx, out, 0, None);
         Ok(())
     }
 }
@@ -273,7 +309,7 @@ pub static PLACEMENT_FILE: NodeSpec = NodeSpec {
     category: Category::Attachment,
     doc: "Loads a designer's layout: CSV with a header `piece,u,v,angle,scale` (angle in degrees), or RON: a list of (piece, u, v, angle, scale).",
     inputs: &[],
-    outputs: &[PortSpec::output("placements", PortType::Instances, "The placements.")],
+    outputs: &[PLACEMENTS, COUNT],
     params: &[ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["csv", "ron"] }, "The layout file.")],
     is_output: false,
     create: || Box::new(PlacementFileNode),
@@ -287,7 +323,7 @@ impl Node for PlacementFileNode {
         }
         let path = cx.path("path");
         let placements = cx.load(&path, load_placements)?;
-        cx.set("placements", Arc::new((*placements).clone()));
+        finish(cx, (*placements).clone(), 0, None);
         Ok(())
     }
 }

@@ -155,7 +155,7 @@ pub static DRAW: NodeSpec = NodeSpec {
         ParamSpec::new(
             "detail",
             ParamKind::Bool { default: false },
-            "Mark as detail geometry in the G-buffer (for the local AO pass).",
+            "Mark as detail geometry: the G-buffer normal's alpha is 1 (no pass reads the flag yet).",
         ),
     ],
     is_output: false,
@@ -173,6 +173,7 @@ impl Node for DrawNode {
         if model.determinant().abs() < 1e-12 {
             return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
         }
+        cx.count("triangles", mesh.triangle_count());
         let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None, cuboid: None };
         cx.set("scene", Arc::new(vec![item]));
         Ok(())

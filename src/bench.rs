@@ -358,7 +358,7 @@ pub fn ibl(
     };
     set(&mut graph, "camera", "orbit_speed", ParamValue::Float(30.0))?;
     let resources = Resources::new(false);
-    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir };
+    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir, frames: None };
     let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
     let mut frame = 0i64;
     let mut step = |ev: &mut Evaluator| -> anyhow::Result<()> {
@@ -692,7 +692,7 @@ pub fn shadows(
         Ok(())
     };
     let resources = Resources::new(false);
-    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir };
+    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir, frames: None };
     let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
     let mut frame = 0i64;
     let mut step = |ev: &mut Evaluator, graph: &mut Graph| -> anyhow::Result<()> {

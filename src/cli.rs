@@ -38,12 +38,20 @@ enum Command {
         /// Output folder.
         #[arg(long, default_value = "out")]
         out: PathBuf,
+        /// Anti-aliasing by supersampling: render every pass at N x the size (N^2 the pixels)
+        /// and box-filter the written images down to it.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+        ssaa: u32,
         /// Override a parameter: node.param=value (repeatable).
         #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
         sets: Vec<String>,
         /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
         #[arg(long = "dump", value_name = "NODE.PORT")]
         dumps: Vec<String>,
+        /// File format of --dump: png (8-bit; float textures tone mapped with x/(1+x), then sRGB)
+        /// or exr (values as they are). Default: png for 8-bit textures, exr for float ones.
+        #[arg(long, value_parser = ["png", "exr"])]
+        dump_format: Option<String>,
         /// GPU backend (or WERKSTATT_BACKEND).
         #[arg(long, value_enum)]
         backend: Option<Backend>,
@@ -69,10 +77,22 @@ enum Command {
         #[arg(required = true)]
         graphs: Vec<PathBuf>,
     },
-    /// List node kinds, or write the Markdown reference (docs/nodes.md).
+    /// List node kinds, or describe one in full (ports, parameters with defaults and ranges).
     Nodes {
-        #[arg(long)]
+        /// One node kind to describe, e.g. Material.
+        kind: Option<String>,
+        /// Print as JSON (all kinds, or KIND), for tools.
+        #[arg(long, conflicts_with = "markdown")]
+        json: bool,
+        /// Print the Markdown node reference (the text of docs/nodes.md) to stdout, or to --out.
+        #[arg(long, conflicts_with = "kind")]
         markdown: bool,
+        /// Print the ClothSim presets' bounds and pattern pieces' UV rectangles (docs/presets.md).
+        #[arg(long, conflicts_with_all = ["kind", "json", "markdown"])]
+        presets: bool,
+        /// Write the output to this file instead of stdout.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Print the GPU adapters wgpu finds.
     Info {
@@ -262,15 +282,24 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Render { graph, frames, fps, size, out, sets, dumps, backend } => {
+        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, backend } => {
+            use crate::param::Choice as _;
+            let dump_format = dump_format.map(|name| {
+                let i = crate::image_io::ImageFormat::OPTIONS.iter().position(|o| *o == name).expect("clap checked it");
+                crate::image_io::ImageFormat::from_index(i).expect("an index of OPTIONS")
+            });
             let frames = parse_frames(&frames)?;
             let (width, height) = parse_size(&size)?;
+            if width.max(height) * ssaa > 8192 {
+                anyhow::bail!(
+                    "--size {size} with --ssaa {ssaa} renders {}x{}, over the limit of 8192",
+                    width * ssaa,
+                    height * ssaa
+                );
+            }
             if !(fps > 0.0 && fps.is_finite()) {
                 anyhow::bail!("--fps must be a positive number");
             }
-            // Validate before touching the GPU, so a bad graph fails fast and clearly.
-            let loaded = crate::render::load_with_overrides(&graph, &sets)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
             let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
             let opts = crate::render::RenderOptions {
                 graph_path: graph,
@@ -281,8 +310,15 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 out_dir: out.clone(),
                 sets,
                 dumps,
+                dump_format,
+                ssaa,
                 progress,
+                command: std::env::args().collect(),
             };
+            // Validate before touching the GPU, so a bad graph fails fast and clearly.
+            let prepared = crate::render::load_with_overrides(&opts.graph_path, &opts.sets)
+                .and_then(|g| Ok((g, GpuContext::headless(pick_backend(backend)?)?)));
+            let (loaded, gpu) = prepared.inspect_err(|e| crate::render::record_failure(&opts, e))?;
             let stats = crate::render::render_graph(&opts, &loaded, &gpu)?;
             eprintln!(
                 "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
@@ -302,7 +338,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let mut failed = 0;
             for path in &graphs {
                 match Graph::load(path) {
-                    Ok(g) => println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len()),
+                    Ok(g) => {
+                        println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
+                        let base = path.parent().unwrap_or(std::path::Path::new(""));
+                        for w in g.warnings(base) {
+                            eprintln!("{}: warning: {w}", path.display());
+                        }
+                    }
                     Err(e) => {
                         failed += 1;
                         eprintln!("{e}");
@@ -340,8 +382,20 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(if bad > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
-        Command::Nodes { markdown } => {
-            print!("{}", if markdown { crate::docs::markdown() } else { crate::docs::listing() });
+        Command::Nodes { kind, json, markdown, presets, out } => {
+            let spec = kind.as_deref().map(crate::docs::find).transpose().map_err(anyhow::Error::msg)?;
+            let text = match (spec, json) {
+                (Some(s), true) => serde_json::to_string_pretty(&crate::docs::node_json(s))? + "\n",
+                (None, true) => serde_json::to_string_pretty(&crate::docs::json())? + "\n",
+                (Some(s), false) => crate::docs::describe(s),
+                (None, false) if markdown => crate::docs::markdown(),
+                (None, false) if presets => crate::nodes::cloth::node::presets_markdown()?,
+                (None, false) => crate::docs::listing(),
+            };
+            match out {
+                Some(path) => crate::atomic::write_atomic(&path, text.as_bytes())?,
+                None => print!("{text}"),
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Info { backend } => {

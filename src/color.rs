@@ -6,6 +6,11 @@ pub fn linear_to_srgb(c: f32) -> f32 {
 }
 
 /// Rec. 709 luminance of a linear RGB colour.
+/// The inverse of [`linear_to_srgb`].
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
 pub fn luminance(c: glam::Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }

@@ -1,4 +1,5 @@
-//! The node reference, generated from the registry (`werkstatt nodes --markdown`).
+//! The node reference, generated from the registry: `werkstatt nodes` (all kinds),
+//! `werkstatt nodes KIND` (one, in full), `--json` (for tools), `--markdown` (docs/nodes.md).
 
 use std::fmt::Write as _;
 
@@ -69,9 +70,9 @@ pub fn markdown() -> String {
     out
 }
 
-/// The plain-text listing of `werkstatt nodes`.
+/// The plain-text listing of `werkstatt nodes`: optional inputs are marked `?`.
 pub fn listing() -> String {
-    let mut out = String::new();
+    let mut out = String::from("Inputs marked ? are optional; `werkstatt nodes KIND` shows a kind's parameters.\n\n");
     for cat in Category::ALL {
         let specs: Vec<_> = spec::all().iter().filter(|s| s.category == cat).collect();
         if specs.is_empty() {
@@ -79,12 +80,108 @@ pub fn listing() -> String {
         }
         let _ = writeln!(out, "{cat}:");
         for s in specs {
-            let ports = |ps: &[crate::node::PortSpec]| {
-                ps.iter().map(|p| format!("{}: {}", p.name, p.ty)).collect::<Vec<_>>().join(", ")
+            // Output ports are never "required": only inputs get the mark.
+            let ports = |ps: &[crate::node::PortSpec], inputs: bool| {
+                ps.iter()
+                    .map(|p| format!("{}{}: {}", p.name, if inputs && !p.required { "?" } else { "" }, p.ty))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             };
             let _ = writeln!(out, "  {:<14} {}", s.kind, s.doc);
-            let _ = writeln!(out, "  {:<14} in ({}) -> out ({})", "", ports(s.inputs), ports(s.outputs));
+            let _ = writeln!(out, "  {:<14} in ({}) -> out ({})", "", ports(s.inputs, true), ports(s.outputs, false));
         }
     }
     out
+}
+
+/// A kind by name; an unknown one is an error with the closest known kind.
+pub fn find(kind: &str) -> Result<&'static crate::node::NodeSpec, String> {
+    spec::find(kind).ok_or_else(|| {
+        let hint = match spec::closest(kind, spec::all().iter().map(|s| s.kind)) {
+            Some(k) => format!("did you mean \"{k}\"? "),
+            None => String::new(),
+        };
+        format!("unknown node kind \"{kind}\"; {hint}(`werkstatt nodes` lists all kinds)")
+    })
+}
+
+/// One node in full (`werkstatt nodes KIND`): ports with required marks, parameters with
+/// type, default, range and doc.
+pub fn describe(s: &crate::node::NodeSpec) -> String {
+    let mut out =
+        format!("{} ({}{})\n  {}\n", s.kind, s.category, if s.is_output { ", output node" } else { "" }, s.doc);
+    let width = |names: &mut dyn Iterator<Item = &str>| names.map(str::len).max().unwrap_or(0);
+    if !s.inputs.is_empty() {
+        out.push_str("\ninputs:\n");
+        let w = width(&mut s.inputs.iter().map(|p| p.name));
+        for p in s.inputs {
+            let req = if p.required { "required" } else { "optional" };
+            let _ = writeln!(out, "  {:<w$}  {} ({req})  {}", p.name, p.ty, p.doc);
+        }
+    }
+    if !s.outputs.is_empty() {
+        out.push_str("\noutputs:\n");
+        let w = width(&mut s.outputs.iter().map(|p| p.name));
+        for p in s.outputs {
+            let _ = writeln!(out, "  {:<w$}  {}  {}", p.name, p.ty, p.doc);
+        }
+    }
+    if !s.params.is_empty() {
+        out.push_str("\nparameters:\n");
+        let w = width(&mut s.params.iter().map(|p| p.name));
+        for p in s.params {
+            let (ty, default) = kind_text(&p.kind);
+            let _ = writeln!(out, "  {:<w$}  {ty} = {default}  {}", p.name, p.doc);
+        }
+    }
+    out
+}
+
+fn param_json(p: &crate::param::ParamSpec) -> serde_json::Value {
+    use serde_json::json;
+    let mut v = match &p.kind {
+        ParamKind::Float { default, min, max } => json!({"type": "float", "default": default, "min": min, "max": max}),
+        ParamKind::Int { default, min, max } => json!({"type": "int", "default": default, "min": min, "max": max}),
+        ParamKind::Bool { default } => json!({"type": "bool", "default": default}),
+        ParamKind::Vec3 { default } => json!({"type": "vec3", "default": default}),
+        ParamKind::Color { default } => json!({"type": "color", "default": default}),
+        ParamKind::Text { default } => json!({"type": "string", "default": default}),
+        ParamKind::Path { default, extensions } => {
+            json!({"type": "path", "default": default, "extensions": extensions})
+        }
+        ParamKind::Choice { default, options } => json!({"type": "choice", "default": default, "options": options}),
+    };
+    v["name"] = json!(p.name);
+    v["doc"] = json!(p.doc);
+    v
+}
+
+/// One node as JSON: what `werkstatt nodes --json` lists for tools.
+pub fn node_json(s: &crate::node::NodeSpec) -> serde_json::Value {
+    use serde_json::json;
+    let ports = |ps: &[crate::node::PortSpec], inputs: bool| -> Vec<serde_json::Value> {
+        ps.iter()
+            .map(|p| {
+                let mut v = json!({"name": p.name, "type": p.ty.to_string(), "doc": p.doc});
+                if inputs {
+                    v["required"] = json!(p.required);
+                }
+                v
+            })
+            .collect()
+    };
+    json!({
+        "kind": s.kind,
+        "category": s.category.to_string(),
+        "doc": s.doc,
+        "output_node": s.is_output,
+        "inputs": ports(s.inputs, true),
+        "outputs": ports(s.outputs, false),
+        "params": s.params.iter().map(param_json).collect::<Vec<_>>(),
+    })
+}
+
+/// Every node kind as a JSON array, in registry order.
+pub fn json() -> serde_json::Value {
+    serde_json::Value::Array(spec::all().iter().map(|s| node_json(s)).collect())
 }

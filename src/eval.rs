@@ -39,6 +39,8 @@ struct NodeState {
     touched: Vec<(SlotRef, u64)>,
     signals: Vec<(ChangeSignal, u64)>,
     warnings: Vec<String>,
+    /// Counts its last run reported (`EvalCx::count`).
+    counts: Vec<(&'static str, u64)>,
     /// Shaders of its last run that failed to compile (it ran on the last good pipelines, or failed).
     shader_errors: Vec<ShaderError>,
     /// What the last successful run emitted for the batch runner.
@@ -57,6 +59,8 @@ pub struct Evaluator {
     param_hash: Vec<u64>,
     /// Per node, per input port: the source node and its output index.
     sources: Vec<Vec<Option<(usize, usize)>>>,
+    /// Per node, per output port: whether a link leaves it (`EvalCx::output_linked`).
+    linked: Vec<Vec<bool>>,
     /// Nodes that feed a root, sources first.
     order: Vec<usize>,
     /// Per node: the nodes its outputs feed, and whether it is in `order`.
@@ -90,6 +94,7 @@ pub struct NodeReport<'a> {
     pub cpu: Duration,
     pub status: &'a NodeStatus,
     pub warnings: &'a [String],
+    pub counts: &'a [(&'static str, u64)],
     /// Shader files that failed to compile when it last ran: with status `Ok` it rendered
     /// with the last good pipeline.
     pub shader_errors: &'a [ShaderError],
@@ -112,6 +117,7 @@ impl Evaluator {
             params: Vec::new(),
             param_hash: Vec::new(),
             sources: Vec::new(),
+            linked: Vec::new(),
             order: Vec::new(),
             consumers: Vec::new(),
             planned: Vec::new(),
@@ -190,6 +196,7 @@ impl Evaluator {
                     touched: Vec::new(),
                     signals: Vec::new(),
                     warnings: Vec::new(),
+                    counts: Vec::new(),
                     shader_errors: Vec::new(),
                     products: Vec::new(),
                     last_cpu: Duration::ZERO,
@@ -212,6 +219,14 @@ impl Evaluator {
             let (out, _) = self.specs[from].output(&link.from.port).ok_or("unknown output")?;
             let (inp, _) = self.specs[to].input(&link.to.port).ok_or("unknown input")?;
             self.sources[to][inp] = Some((from, out));
+        }
+        self.linked = self.specs.iter().map(|s| vec![false; s.outputs.len()]).collect();
+        for (from, out) in self.sources.iter().flatten().flatten() {
+            self.linked[*from][*out] = true;
+        }
+        // A node that behaves differently by what is linked re-runs when that changes.
+        for (h, linked) in self.param_hash.iter_mut().zip(&self.linked) {
+            *h = mix(*h, linked.iter().fold(0u64, |m, &l| (m << 1) | u64::from(l)));
         }
         self.roots = (0..self.ids.len()).filter(|&i| self.specs[i].is_output).collect();
         for id in extra_roots {
@@ -287,7 +302,10 @@ impl Evaluator {
         let mut summary = FrameSummary::default();
         self.settings_hash = {
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            std::hash::Hash::hash(&(settings.width, settings.height, &settings.base_dir, gpu.is_some()), &mut h);
+            std::hash::Hash::hash(
+                &(settings.width, settings.height, &settings.base_dir, settings.frames, gpu.is_some()),
+                &mut h,
+            );
             std::hash::Hasher::finish(&h)
         };
         self.released.iter_mut().for_each(|r| *r = false);
@@ -387,6 +405,7 @@ impl Evaluator {
         state.touched.clear();
         state.signals.clear();
         state.warnings.clear();
+        state.counts.clear();
         let mut products = Vec::new();
         // The node's GPU work runs in its own validation error scope.
         let scope = gpu.map(|g| g.begin_node(&self.ids[n]));
@@ -405,6 +424,8 @@ impl Evaluator {
                 touched: &mut state.touched,
                 signals: &mut state.signals,
                 warnings: &mut state.warnings,
+                counts: &mut state.counts,
+                linked: &self.linked[n],
                 products: &mut products,
                 misuse: RefCell::new(Vec::new()),
                 settings,
@@ -526,6 +547,7 @@ impl Evaluator {
             cpu: s.last_cpu,
             status: &s.status,
             warnings: &s.warnings,
+            counts: &s.counts,
             shader_errors: &s.shader_errors,
             runs: s.runs,
         }

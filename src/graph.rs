@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 
-use crate::param::ParamValue;
+use crate::param::{ParamKind, ParamValue};
 use crate::spec;
 
 /// The file format version this build writes.
@@ -518,14 +518,16 @@ impl Graph {
             if let (Some(a), Some(b)) = (from_ty, to_ty)
                 && !b.accepts(a)
             {
-                problems.push(
-                    Problem::new(
-                        ProblemKind::LinkTypeMismatch,
-                        place.clone(),
-                        format!("cannot link {} ({a}) to {} ({b})", link.from, link.to),
-                    )
-                    .port(&link.to.node, &link.to.port),
-                );
+                let mut problem = Problem::new(
+                    ProblemKind::LinkTypeMismatch,
+                    place.clone(),
+                    format!("cannot link {} ({a}) to {} ({b})", link.from, link.to),
+                )
+                .port(&link.to.node, &link.to.port);
+                if let Some(help) = self.compatible_port(link, a, b) {
+                    problem = problem.help(help);
+                }
+                problems.push(problem);
             }
             if let Some(first) = fed.insert((&link.to.node, &link.to.port), i) {
                 problems.push(
@@ -610,6 +612,64 @@ impl Graph {
                 None
             }
         }
+    }
+
+    /// For a link of mismatched types, the port that would fit: an input of the target node
+    /// that takes the source's type, else an output of the source node the target takes.
+    fn compatible_port(&self, link: &Link, from: crate::port::PortType, to: crate::port::PortType) -> Option<String> {
+        let spec_of = |id: &str| self.nodes.get(id).and_then(|n| spec::find(&n.kind));
+        let inputs: Vec<String> = spec_of(&link.to.node)?
+            .inputs
+            .iter()
+            .filter(|p| p.ty.accepts(from))
+            .map(|p| format!("{}.{}", link.to.node, p.name))
+            .collect();
+        let outputs: Vec<String> = spec_of(&link.from.node)?
+            .outputs
+            .iter()
+            .filter(|p| to.accepts(p.ty))
+            .map(|p| format!("{}.{}", link.from.node, p.name))
+            .collect();
+        let (fits, what) = if inputs.is_empty() { (outputs, format!("a {to}")) } else { (inputs, format!("a {from}")) };
+        match fits.as_slice() {
+            [] => None,
+            [one] => Some(format!("did you mean {one}? (it takes {what})")),
+            many => Some(format!("ports that fit {what}: {}", many.join(", "))),
+        }
+    }
+
+    /// What `check` warns about but does not fail on: files a path parameter names that do
+    /// not exist (yet: a simulator may write them later), and nodes that cannot finish a batch
+    /// render. Paths are resolved against `base_dir`, the graph's folder, as rendering does.
+    pub fn warnings(&self, base_dir: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        for (id, node) in &self.nodes {
+            let Some(spec) = spec::find(&node.kind) else { continue };
+            for p in spec.params.iter().filter(|p| matches!(p.kind, ParamKind::Path { .. })) {
+                let Some(ParamValue::Str(text)) = node.params.get(p.name) else { continue };
+                if text.is_empty() {
+                    continue;
+                }
+                let path = base_dir.join(text);
+                // A sequence pattern (frame_%04d.obj, frame_####.obj, frame_*.obj) names its folder.
+                let is_pattern = crate::resources::is_file_pattern(text);
+                let must_exist = if is_pattern { path.parent().unwrap_or(base_dir) } else { &path };
+                if !must_exist.exists() {
+                    out.push(format!(
+                        "node \"{id}\" ({}): parameter \"{}\": no such file: {}",
+                        spec.kind,
+                        p.name,
+                        must_exist.display()
+                    ));
+                }
+            }
+            if spec.kind == crate::nodes::live_link::LIVE_LINK.kind {
+                out.push(format!(
+                    "node \"{id}\" (LiveLink) waits for a simulator to connect: `werkstatt render` fails unless one sends frames; for batch renders record the frames as OBJ files and read them with MeshSequence"
+                ));
+            }
+        }
+        out
     }
 
     /// A cycle through the links, as the node ids along it, if there is one.
@@ -712,16 +772,24 @@ impl Graph {
             assignment.split_once('=').ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
         let (id, name) =
             target.split_once('.').ok_or_else(|| format!("--set \"{assignment}\": expected node.param=value"))?;
-        let node = self.nodes.get_mut(id).ok_or_else(|| format!("--set: there is no node \"{id}\""))?;
+        let hint = |wanted: &str, names: Vec<&str>| match spec::closest(wanted, names.iter().copied()) {
+            Some(n) => format!("did you mean \"{n}\"?"),
+            None => format!("the choices are: {}", names.join(", ")),
+        };
+        let ids: Vec<&str> = self.nodes.keys().map(String::as_str).collect();
+        let Some(node) = self.nodes.get(id) else {
+            return Err(format!("--set {target}: there is no node \"{id}\"; {}", hint(id, ids)));
+        };
         let spec =
             spec::find(&node.kind).ok_or_else(|| format!("--set: node \"{id}\" has unknown kind {}", node.kind))?;
         let (_, ps) = spec.param(name).ok_or_else(|| {
             format!(
-                "--set: {} (node \"{id}\") has no parameter \"{name}\"; its parameters are: {}",
+                "--set {target}: {} (node \"{id}\") has no parameter \"{name}\"; {}",
                 spec.kind,
-                spec.params.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+                hint(name, spec.params.iter().map(|p| p.name).collect())
             )
         })?;
+        let node = self.nodes.get_mut(id).expect("found above");
         let parsed = ps.kind.parse_cli(value).map_err(|e| format!("--set {id}.{name}: {e}"))?;
         node.params.insert(name.to_string(), parsed);
         Ok(())

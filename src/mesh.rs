@@ -140,11 +140,11 @@ impl Mesh {
         let uvs = match uvs {
             Some(u) if u.len() == n && u.iter().all(|x| x.is_finite()) => u,
             Some(_) => {
-                repairs.push("UVs were incomplete or not finite; replaced by a planar projection".into());
+                repairs.push(REPAIR_BAD_UVS.into());
                 planar_uvs(&positions)
             }
             None => {
-                repairs.push("no UVs; generated a planar projection".into());
+                repairs.push(REPAIR_NO_UVS.into());
                 planar_uvs(&positions)
             }
         };
@@ -247,6 +247,24 @@ impl Mesh {
             .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
     }
 
+    /// Whether `build` made the UVs up (a planar projection): such a mesh has no pattern
+    /// coordinates to attach detail by.
+    pub fn uvs_generated(&self) -> bool {
+        self.repairs.iter().any(|r| r == REPAIR_NO_UVS || r == REPAIR_BAD_UVS)
+    }
+
+    /// Each pattern piece's UV bounding rectangle `(piece, lo, hi)`, by piece id; a mesh
+    /// without piece ids is one piece 0. Where to put placements, in numbers.
+    pub fn piece_uv_rects(&self) -> Vec<(u32, glam::Vec2, glam::Vec2)> {
+        let mut rects: std::collections::BTreeMap<u32, (glam::Vec2, glam::Vec2)> = Default::default();
+        for (i, uv) in self.uvs.iter().enumerate() {
+            let piece = self.piece_ids.get(i).copied().unwrap_or(0);
+            let r = rects.entry(piece).or_insert((*uv, *uv));
+            *r = (r.0.min(*uv), r.1.max(*uv));
+        }
+        rects.into_iter().map(|(p, (lo, hi))| (p, lo, hi)).collect()
+    }
+
     pub fn gpu(&self, gpu: &crate::gpu::GpuContext) -> &GpuMesh {
         self.gpu.get_or_init(|| {
             let verts: Vec<Vertex> = (0..self.positions.len())
@@ -320,6 +338,20 @@ pub fn uv_tangents(positions: &[Vec3], normals: &[Vec3], uvs: &[Vec2], indices: 
     (tu, tv)
 }
 
+const REPAIR_NO_UVS: &str = "no UVs; generated a planar projection";
+const REPAIR_BAD_UVS: &str = "UVs were incomplete or not finite; replaced by a planar projection";
+
+/// Sets one pattern piece per part (OBJ object or group, glTF primitive), from each part's
+/// first vertex, as MeshSequence does for OBJ objects; a single part is no piece list.
+/// `build` keeps every vertex, so the ids line up.
+fn with_pieces(mut mesh: Mesh, part_starts: &[usize]) -> Mesh {
+    if part_starts.len() > 1 {
+        let n = mesh.positions.len();
+        mesh.piece_ids = (0..n).map(|v| (part_starts.partition_point(|&s| s <= v) - 1) as u32).collect();
+    }
+    mesh
+}
+
 /// UVs from the two largest extents of the bounding box.
 fn planar_uvs(positions: &[Vec3]) -> Vec<Vec2> {
     let (lo, hi) =
@@ -345,8 +377,10 @@ pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
     let mut normals = Vec::new();
     let mut indices = Vec::new();
     let (mut all_uvs, mut all_normals) = (true, true);
-    for m in &models {
+    let mut part_starts = Vec::new();
+    for m in models.iter().filter(|m| !m.mesh.positions.is_empty()) {
         let mesh = &m.mesh;
+        part_starts.push(positions.len());
         let base = positions.len() as u32;
         let count = mesh.positions.len() / 3;
         positions.extend(mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
@@ -367,6 +401,7 @@ pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
         bail!("{} contains no geometry", path.display());
     }
     Mesh::build(positions, all_uvs.then_some(uvs), all_normals.then_some(normals), indices)
+        .map(|m| with_pieces(m, &part_starts))
         .with_context(|| format!("invalid mesh in {}", path.display()))
 }
 
@@ -378,6 +413,7 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
     let mut normals = Vec::new();
     let mut indices = Vec::new();
     let (mut all_uvs, mut all_normals) = (true, true);
+    let mut part_starts = Vec::new();
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
@@ -396,6 +432,7 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
             let Some(pos) = reader.read_positions() else { continue };
             let base = positions.len() as u32;
             let before = positions.len();
+            part_starts.push(before);
             positions.extend(pos.map(|p| world.transform_point3(Vec3::from(p))));
             let count = positions.len() - before;
             match reader.read_tex_coords(0) {
@@ -416,6 +453,7 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
         bail!("{} contains no triangle geometry", path.display());
     }
     Mesh::build(positions, all_uvs.then_some(uvs), all_normals.then_some(normals), indices)
+        .map(|m| with_pieces(m, &part_starts))
         .with_context(|| format!("invalid mesh in {}", path.display()))
 }
 

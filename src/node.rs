@@ -143,11 +143,14 @@ pub struct FrameSettings {
     pub height: u32,
     /// Folder that relative resource paths are resolved against (the graph file's folder).
     pub base_dir: PathBuf,
+    /// The inclusive frame range being rendered or played, when there is one (a turntable
+    /// turns once over it).
+    pub frames: Option<(i64, i64)>,
 }
 
 impl Default for FrameSettings {
     fn default() -> Self {
-        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from(".") }
+        FrameSettings { width: 320, height: 240, base_dir: PathBuf::from("."), frames: None }
     }
 }
 
@@ -198,6 +201,8 @@ pub struct EvalCx<'a> {
     pub(crate) touched: &'a mut Vec<(SlotRef, u64)>,
     pub(crate) signals: &'a mut Vec<(ChangeSignal, u64)>,
     pub(crate) warnings: &'a mut Vec<String>,
+    pub(crate) counts: &'a mut Vec<(&'static str, u64)>,
+    pub(crate) linked: &'a [bool],
     pub(crate) products: &'a mut Vec<Product>,
     /// Programming errors found while the node ran (see [`INTERNAL_ERROR`]).
     pub(crate) misuse: RefCell<Vec<String>>,
@@ -358,6 +363,25 @@ impl<'a> EvalCx<'a> {
 
     pub fn warn(&mut self, message: impl Into<String>) {
         self.warnings.push(message.into());
+    }
+
+    /// Whether a link leaves output `name`: for a check that only matters to consumers of
+    /// that output (MeshFile's surface needs UVs, its mesh does not). The node re-runs
+    /// when this changes.
+    pub fn output_linked(&self, name: &str) -> bool {
+        match self.spec.output(name) {
+            Some((i, _)) => self.linked.get(i).copied().unwrap_or(false),
+            None => {
+                self.misuse(format!("asks about undeclared output \"{name}\""));
+                false
+            }
+        }
+    }
+
+    /// Reports a count for `stats.json` and the editor (placements, instances, triangles):
+    /// what a user checks first when a result looks sparse.
+    pub fn count(&mut self, name: &'static str, n: usize) {
+        self.counts.push((name, n as u64));
     }
 
     /// Hands the batch runner something to write this frame (output nodes only).

@@ -30,7 +30,14 @@ pub struct RenderOptions {
     pub sets: Vec<String>,
     /// `node.port` texture outputs to write besides the output nodes.
     pub dumps: Vec<String>,
+    /// Supersampling: passes render at `ssaa` x the size and written images are box-filtered
+    /// down to it (1: off).
+    pub ssaa: u32,
+    /// The format of `dumps`; `None`: PNG for 8-bit textures, EXR for float ones.
+    pub dump_format: Option<ImageFormat>,
     pub progress: bool,
+    /// The command line that asked for the run, recorded in `stats.json` (empty from code).
+    pub command: Vec<String>,
 }
 
 #[derive(Serialize, Debug)]
@@ -40,6 +47,9 @@ pub struct NodeTiming {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_ms: Option<f64>,
     pub ran: bool,
+    /// What the node counted in its last run (placements, instances, triangles).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub counts: BTreeMap<&'static str, u64>,
 }
 
 #[derive(Serialize, Debug)]
@@ -54,17 +64,72 @@ pub struct FrameStats {
 
 #[derive(Serialize, Debug)]
 pub struct Stats {
+    /// The command line of the run, so that stats.json alone says how to repeat it.
+    pub command: Vec<String>,
+    pub version: &'static str,
+    /// The commit the binary was built from, when it was built in a git checkout.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub git_commit: Option<&'static str>,
     pub graph: String,
-    /// FNV-1a 64 of the graph's canonical text (after --set), hex.
-    pub graph_hash: String,
+    /// FNV-1a 64 of the graph's canonical text (after --set), hex; absent when it did not load.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub graph_hash: Option<String>,
+    /// The `--set` overrides, as given.
+    pub sets: Vec<String>,
+    /// The inclusive frame range asked for.
+    pub frame_range: [i64; 2],
+    pub fps: f64,
     pub adapter: String,
     pub width: u32,
     pub height: u32,
+    /// Supersampling factor per axis (1: none).
+    pub ssaa: u32,
     pub frames: Vec<FrameStats>,
     /// Values reported by Watch nodes, one per frame.
     pub values: BTreeMap<String, Vec<f64>>,
     /// Files written, relative to the output folder.
     pub files: Vec<String>,
+    /// Warnings about the run as a whole (first frame's node warnings included).
+    pub warnings: Vec<String>,
+    /// Why the run failed; absent when it succeeded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl Stats {
+    /// The record of a run before anything rendered: what was asked for.
+    pub fn new(opts: &RenderOptions) -> Stats {
+        Stats {
+            command: opts.command.clone(),
+            version: env!("CARGO_PKG_VERSION"),
+            git_commit: option_env!("WERKSTATT_GIT_COMMIT"),
+            graph: opts.graph_path.display().to_string(),
+            graph_hash: None,
+            sets: opts.sets.clone(),
+            frame_range: [opts.frames.0, opts.frames.1],
+            fps: opts.fps,
+            adapter: String::new(),
+            width: opts.width,
+            height: opts.height,
+            ssaa: opts.ssaa,
+            frames: Vec::new(),
+            values: BTreeMap::new(),
+            files: Vec::new(),
+            warnings: Vec::new(),
+            error: None,
+        }
+    }
+}
+
+/// Writes a stats.json that records a run which failed before rendering (the graph did not
+/// load, no GPU), so CI finds the reason where it looks for results. Best effort: the
+/// original error is what the caller reports.
+pub fn record_failure(opts: &RenderOptions, error: &anyhow::Error) {
+    let mut stats = Stats::new(opts);
+    stats.error = Some(format!("{error:#}"));
+    if std::fs::create_dir_all(&opts.out_dir).is_ok() {
+        let _ = write_stats(&opts.out_dir, &stats);
+    }
 }
 
 /// How long batch rendering waits for one frame's pending nodes before failing.
@@ -80,14 +145,55 @@ pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph
 }
 
 /// Loads the graph (with `--set` overrides) and renders the frames; returns the statistics
-/// (also written to `stats.json`).
+/// (also written to `stats.json`, with an `error` when the run fails).
 pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
-    let graph = load_with_overrides(&opts.graph_path, &opts.sets)?;
+    let graph = load_with_overrides(&opts.graph_path, &opts.sets).inspect_err(|e| record_failure(opts, e))?;
     render_graph(opts, &graph, gpu)
 }
 
-/// Renders the frames of a loaded graph (`opts.sets` already applied).
+/// Renders the frames of a loaded graph (`opts.sets` already applied). On failure stats.json
+/// keeps the frames that rendered and says why the run stopped.
 pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> anyhow::Result<Stats> {
+    let mut stats = Stats::new(opts);
+    stats.graph_hash = Some(format!("{:016x}", crate::hash::fnv1a(graph.to_ron().as_bytes())));
+    stats.adapter = gpu.adapter_name();
+    match render_frames(opts, graph, gpu, &mut stats) {
+        Ok(()) => {
+            write_stats(&opts.out_dir, &stats)?;
+            Ok(stats)
+        }
+        Err(e) => {
+            stats.error = Some(format!("{e:#}"));
+            if std::fs::create_dir_all(&opts.out_dir).is_ok() {
+                let _ = write_stats(&opts.out_dir, &stats);
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Frames of an output node with a fixed `frame` parameter (ExportGeometry's `frame: 24`)
+/// that the range never reaches: the node would write nothing, which must not pass silently.
+fn fixed_frame_warnings(graph: &Graph, (first, last): (i64, i64)) -> Vec<String> {
+    let mut out = Vec::new();
+    for (id, node) in &graph.nodes {
+        let Some(spec) = crate::spec::find(&node.kind).filter(|s| s.is_output) else { continue };
+        let Some((_, p)) = spec.param("frame") else { continue };
+        let frame = node.params.get("frame").and_then(crate::param::ParamValue::as_f64).unwrap_or(match p.kind {
+            crate::param::ParamKind::Int { default, .. } => default as f64,
+            _ => -1.0,
+        }) as i64;
+        if frame >= 0 && !(first..=last).contains(&frame) {
+            out.push(format!(
+                "node \"{id}\" ({}) writes only frame {frame}, outside the rendered frames {first}..{last}: it writes nothing",
+                spec.kind
+            ));
+        }
+    }
+    out
+}
+
+fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &mut Stats) -> anyhow::Result<()> {
     let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(graph, d)).collect::<anyhow::Result<_>>()?;
     let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
     let mut evaluator = Evaluator::new(graph, &extra_roots).map_err(anyhow::Error::msg)?;
@@ -100,21 +206,16 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
     std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("cannot create {}", opts.out_dir.display()))?;
     let resources = Resources::new(false);
     let settings = FrameSettings {
-        width: opts.width,
-        height: opts.height,
+        width: opts.width * opts.ssaa.max(1),
+        height: opts.height * opts.ssaa.max(1),
+        frames: Some(opts.frames),
         base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
     };
-    let mut stats = Stats {
-        graph: opts.graph_path.display().to_string(),
-        graph_hash: format!("{:016x}", crate::hash::fnv1a(graph.to_ron().as_bytes())),
-        adapter: gpu.adapter_name(),
-        width: opts.width,
-        height: opts.height,
-        frames: Vec::new(),
-        values: BTreeMap::new(),
-        files: Vec::new(),
-    };
     let (first, last) = opts.frames;
+    for w in fixed_frame_warnings(graph, opts.frames) {
+        eprintln!("warning: {w}");
+        stats.warnings.push(w);
+    }
     let bar = opts.progress.then(|| {
         let bar = indicatif::ProgressBar::new(last.saturating_sub(first).saturating_add(1) as u64);
         bar.set_style(
@@ -132,9 +233,15 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
         loop {
             let summary = evaluator.evaluate(time, Some(gpu), &resources, &settings);
             for r in evaluator.reports() {
-                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming { cpu_ms: 0.0, gpu_ms: None, ran: false });
+                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming {
+                    cpu_ms: 0.0,
+                    gpu_ms: None,
+                    ran: false,
+                    counts: BTreeMap::new(),
+                });
                 t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
                 t.ran |= r.ran;
+                t.counts = r.counts.iter().copied().collect();
             }
             if summary.pending == 0 {
                 break;
@@ -170,13 +277,14 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
             // Keep the statistics of the frames that worked: CI wants them most when a frame fails.
             let gpu_created = gpu.created().since(created_before);
             stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
-            let _ = write_stats(&opts.out_dir, &stats);
             bail!("frame {frame}: {}", failures.join("\n  "));
         }
         for r in evaluator.reports() {
             for w in r.warnings {
                 if frame == first {
-                    eprintln!("warning: node \"{}\" ({}): {w}", r.id, r.kind);
+                    let w = format!("node \"{}\" ({}): {w}", r.id, r.kind);
+                    eprintln!("warning: {w}");
+                    stats.warnings.push(w);
                 }
             }
         }
@@ -187,7 +295,7 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
                 match product {
                     Product::Image { image, format } => {
                         let name = name(format.name());
-                        let px = gpu::read_back(gpu, image)?;
+                        let px = resolve(gpu, image, opts)?;
                         image_io::write_image(&opts.out_dir.join(&name), &px, *format)?;
                         stats.files.push(name);
                     }
@@ -205,12 +313,16 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
             let Some(img) = value.and_then(Value::as_texture) else {
                 bail!("--dump {d}: the port holds no texture this frame");
             };
-            let format = match img.format {
+            let format = opts.dump_format.unwrap_or(match img.format {
                 wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm => ImageFormat::Png,
                 _ => ImageFormat::Exr,
-            };
+            });
             let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
-            image_io::write_image(&opts.out_dir.join(&name), &gpu::read_back(gpu, img)?, format)?;
+            let mut px = resolve(gpu, img, opts)?;
+            if format == ImageFormat::Png {
+                image_io::tonemap_for_png(&mut px);
+            }
+            image_io::write_image(&opts.out_dir.join(&name), &px, format)?;
             stats.files.push(name);
         }
         let gpu_created = gpu.created().since(created_before);
@@ -222,8 +334,20 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    write_stats(&opts.out_dir, &stats)?;
-    Ok(stats)
+    Ok(())
+}
+
+/// Reads an image back at the output size: a supersampled frame-sized image is box-filtered
+/// down; other sizes (a matrix texture, a shadow atlas) do not scale with the frame and are
+/// written as they are.
+fn resolve(gpu: &GpuContext, image: &gpu::GpuImage, opts: &RenderOptions) -> anyhow::Result<gpu::Pixels> {
+    let px = gpu::read_back(gpu, image)?;
+    let n = opts.ssaa.max(1);
+    Ok(if n > 1 && (px.width, px.height) == (opts.width * n, opts.height * n) {
+        image_io::downsample_box(&px, n)
+    } else {
+        px
+    })
 }
 
 fn write_stats(dir: &Path, stats: &Stats) -> anyhow::Result<()> {

@@ -263,6 +263,12 @@ impl Drop for Inner {
     }
 }
 
+/// Whether a path parameter names a file sequence (frame_%04d.obj, frame_####.obj,
+/// frame_*.obj) rather than one file.
+pub fn is_file_pattern(path: &str) -> bool {
+    path.contains(['%', '#', '*'])
+}
+
 fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
     loop {
         let job = {
@@ -273,7 +279,11 @@ fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
         // Every request up to this one was made before the file is read here.
         let request = slot.requested.load(Ordering::Acquire);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (slot.load)(&slot.path)));
+        // Say plainly that the file is missing: loaders word it their own way ("open file
+        // failed"). A sequence pattern never exists as such; its loader explains what matched.
+        let missing = !slot.path.exists() && !is_file_pattern(&slot.path.to_string_lossy());
         let state = match result {
+            Ok(Err(_)) if missing => SlotState::Failed(format!("no such file: {}", slot.path.display())),
             Ok(Ok(v)) => SlotState::Ready(v),
             Ok(Err(e)) => SlotState::Failed(format!("{}: {e:#}", slot.path.display())),
             Err(_) => SlotState::Failed(format!("{}: the loader crashed on this file", slot.path.display())),

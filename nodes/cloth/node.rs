@@ -20,12 +20,22 @@ pub static CLOTH_SIM: NodeSpec = NodeSpec {
         PortSpec::output("surface", PortType::Surface, "The cloth at the current time."),
         PortSpec::output("colliders", PortType::Scene, "The collision bodies, to draw them."),
         PortSpec::output("max_strain", PortType::Scalar, "The largest edge strain (stretch) this frame."),
+        PortSpec::output(
+            "bounds_min",
+            PortType::Vector,
+            "Lowest corner of the cloth's bounding box this frame (metres).",
+        ),
+        PortSpec::output(
+            "bounds_max",
+            PortType::Vector,
+            "Highest corner of the cloth's bounding box this frame (metres).",
+        ),
     ],
     params: &[
         ParamSpec::new(
             "preset",
             ParamKind::Choice { default: "tablecloth", options: PresetKind::OPTIONS },
-            "The scene.",
+            "The scene; docs/presets.md (`werkstatt nodes --presets`) gives each preset's bounds and each pattern piece's UV rectangle.",
         ),
         ParamSpec::new("triangles", ParamKind::Int { default: 4000, min: 100, max: 200_000 }, "Target triangle count."),
         ParamSpec::new(
@@ -66,11 +76,7 @@ crate::choice!(
 impl Node for ClothSimNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let (triangles, seed) = (cx.int("triangles") as usize, cx.int("seed") as u64);
-        let preset = match cx.choice::<PresetKind>("preset") {
-            PresetKind::Flag => Preset::Flag(FlagParams { triangles, seed, wind_speed: cx.f32("wind_speed") }),
-            PresetKind::Skirt => Preset::Skirt(SkirtParams { triangles, seed, ..Default::default() }),
-            PresetKind::Tablecloth => Preset::Tablecloth(TableclothParams { triangles, seed, ..Default::default() }),
-        };
+        let preset = preset_of(cx.choice::<PresetKind>("preset"), triangles, seed, cx.f32("wind_speed"));
         let key = format!("{preset:?}");
         let time = cx.time();
         let target = ((cx.f64("warmup") + time.seconds()) / FRAME_DT as f64).round().max(0.0) as u64;
@@ -87,26 +93,81 @@ impl Node for ClothSimNode {
             cloth.step_frame(FRAME_DT);
             *step += 1;
         }
-        let frame = cloth.surface();
-        let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
-        let mut mesh = Mesh::from_parts(
-            v3(&frame.positions),
-            Some(v3(&frame.normals)),
-            frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
-            frame.indices,
-            frame.piece_ids,
-        )
-        .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
-        mesh.seams = cloth.pattern().seam_pairs().to_vec();
+        let mesh = surface_mesh(cloth)
+            .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
         let strain = cloth.max_strain() as f64;
         if self.colliders.as_ref().is_none_or(|(k, _)| *k != key) {
             self.colliders = Some((key, Arc::new(collider_items(cloth.colliders())?)));
         }
+        let (lo, hi) = mesh.bounds();
+        cx.count("triangles", mesh.triangle_count());
+        cx.set("bounds_min", lo);
+        cx.set("bounds_max", hi);
         cx.set("surface", Arc::new(mesh));
         cx.set("colliders", self.colliders.as_ref().expect("set above").1.clone());
         cx.set("max_strain", strain);
         Ok(())
     }
+}
+
+fn preset_of(kind: PresetKind, triangles: usize, seed: u64, wind_speed: f32) -> Preset {
+    match kind {
+        PresetKind::Flag => Preset::Flag(FlagParams { triangles, seed, wind_speed }),
+        PresetKind::Skirt => Preset::Skirt(SkirtParams { triangles, seed, ..Default::default() }),
+        PresetKind::Tablecloth => Preset::Tablecloth(TableclothParams { triangles, seed, ..Default::default() }),
+    }
+}
+
+/// The cloth's current state as a Surface mesh (pieces and seams from its pattern).
+fn surface_mesh(cloth: &Cloth) -> anyhow::Result<Mesh> {
+    let frame = cloth.surface();
+    let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
+    let mut mesh = Mesh::from_parts(
+        v3(&frame.positions),
+        Some(v3(&frame.normals)),
+        frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
+        frame.indices,
+        frame.piece_ids,
+    )?;
+    mesh.seams = cloth.pattern().seam_pairs().to_vec();
+    Ok(mesh)
+}
+
+/// docs/presets.md: where each preset is at frame 0 with the node's default parameters, and
+/// the UV rectangle of each pattern piece (which simulation never changes), so placements and
+/// cameras can be set up from the docs alone.
+pub fn presets_markdown() -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let default_of = |name: &str| match CLOTH_SIM.param(name).map(|(_, p)| &p.kind) {
+        Some(ParamKind::Int { default, .. }) => *default as f64,
+        Some(ParamKind::Float { default, .. }) => *default,
+        _ => 0.0,
+    };
+    let (triangles, seed, wind) =
+        (default_of("triangles") as usize, default_of("seed") as u64, default_of("wind_speed"));
+    let mut out = String::from(
+        "# ClothSim presets\n\nGenerated by `werkstatt nodes --presets` from the presets themselves; do not edit by hand \
+         (a test fails when this file is out of date). Bounds are at frame 0 with the node's default parameters \
+         (`warmup` 0, so the rest pose; the cloth moves from there, `bounds_min`/`bounds_max` give them per frame). \
+         UV rectangles never change; v points down. A placement outside every piece is dropped with a warning.\n",
+    );
+    for (i, name) in PresetKind::OPTIONS.iter().enumerate() {
+        let kind = PresetKind::from_index(i).expect("an index of OPTIONS");
+        let mesh = surface_mesh(&preset_of(kind, triangles, seed, wind as f32).build())?;
+        let (lo, hi) = mesh.bounds();
+        let v = |p: Vec3| format!("({:.2}, {:.2}, {:.2})", p.x, p.y, p.z);
+        let _ = write!(
+            out,
+            "\n## `{name}`\n\nBounds (metres): {} to {}, centre {}.\n\n| piece | u | v |\n|---:|---|---|\n",
+            v(lo),
+            v(hi),
+            v((lo + hi) * 0.5)
+        );
+        for (piece, a, b) in mesh.piece_uv_rects() {
+            let _ = writeln!(out, "| {piece} | {:.3} - {:.3} | {:.3} - {:.3} |", a.x, b.x, a.y, b.y);
+        }
+    }
+    Ok(out)
 }
 
 /// Drawable stand-ins for the colliders (a capsule as a cylinder with two spheres).

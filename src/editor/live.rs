@@ -254,16 +254,19 @@ pub struct Live {
     pub engine_error: Option<String>,
 }
 
+/// The play range the editor starts with; a turntable camera turns once over it.
+const DEFAULT_FRAME_RANGE: (i64, i64) = (0, 239);
+
 impl Live {
     pub fn new(base_dir: PathBuf, watch_files: bool) -> Self {
         Live {
             evaluator: None,
             resources: Resources::new(watch_files),
-            settings: FrameSettings { width: 480, height: 360, base_dir },
+            settings: FrameSettings { width: 480, height: 360, base_dir, frames: Some(DEFAULT_FRAME_RANGE) },
             frame: 0,
             fps: 30.0,
             playing: false,
-            frame_range: (0, 239),
+            frame_range: DEFAULT_FRAME_RANGE,
             play_clock: 0.0,
             camera: None,
             static_errors: BTreeMap::new(),

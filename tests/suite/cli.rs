@@ -23,6 +23,65 @@ fn docs_node_reference_is_up_to_date() {
 }
 
 #[test]
+fn nodes_kind_describes_one_node_in_full() {
+    let (code, out, err) = werkstatt(&["nodes", "GridPlacement"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("GridPlacement (Attachment)"), "{out}");
+    assert!(out.contains("surface  Surface (optional)"), "{out}");
+    assert!(out.contains("columns  int = 8 in [1, 100000]  Cells along u."), "{out}");
+    let (code, out, _) = werkstatt(&["nodes", "Draw"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("mesh      Mesh (required)"), "{out}");
+    let (code, _, err) = werkstatt(&["nodes", "Matrial"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("unknown node kind \"Matrial\"; did you mean \"Material\"?"), "{err}");
+    // The listing marks optional inputs.
+    let (_, out, _) = werkstatt(&["nodes"]);
+    assert!(out.contains("in (mesh: Mesh, material?: Material)"), "{out}");
+}
+
+#[test]
+fn nodes_json_lists_every_kind_with_its_parameters() {
+    let (code, out, err) = werkstatt(&["nodes", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let all: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(all.as_array().unwrap().len(), werkstatt::spec::all().len());
+    let material = all.as_array().unwrap().iter().find(|n| n["kind"] == "Material").unwrap();
+    let gloss = material["params"].as_array().unwrap().iter().find(|p| p["name"] == "glossiness").unwrap();
+    assert_eq!(
+        (gloss["type"].as_str(), gloss["min"].as_f64(), gloss["max"].as_f64()),
+        (Some("float"), Some(0.0), Some(1.0))
+    );
+    let (_, one, _) = werkstatt(&["nodes", "Material", "--json"]);
+    assert_eq!(&serde_json::from_str::<serde_json::Value>(&one).unwrap(), material);
+}
+
+#[test]
+fn nodes_markdown_prints_or_writes_the_reference() {
+    let (code, out, _) = werkstatt(&["nodes", "--markdown"]);
+    assert_eq!((code, out == werkstatt::docs::markdown()), (0, true));
+    let dir = temp("nodes-markdown");
+    let file = dir.join("nodes.md");
+    let (code, out, err) = werkstatt(&["nodes", "--markdown", "--out", file.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.is_empty());
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), werkstatt::docs::markdown());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn docs_presets_are_up_to_date() {
+    let expected = werkstatt::nodes::cloth::node::presets_markdown().unwrap();
+    let actual = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/presets.md")).unwrap_or_default();
+    assert!(
+        actual == expected,
+        "docs/presets.md is out of date: run `cargo run -- nodes --presets --out docs/presets.md`"
+    );
+    // The flag's one piece covers only part of the UV square: the number the issue asked for.
+    assert!(expected.contains("## `flag`"), "{expected}");
+}
+
+#[test]
 fn every_node_kind_is_documented_and_used_by_a_graph() {
     let graphs: String = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs"))
         .unwrap()
@@ -179,6 +238,100 @@ fn stats_are_kept_when_a_later_frame_fails() {
     assert_eq!(frames, [0, 1, 2]);
     let values: Vec<f64> = stats["values"]["w"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert_eq!(values, [0.0, 1.0 / 30.0]);
+    let error = stats["error"].as_str().expect("a failed run records its error");
+    assert!(error.contains("frame 2") && error.contains("outside the accepted range"), "{error}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+fn read_stats(out: &std::path::Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(out.join("stats.json")).unwrap()).unwrap()
+}
+
+/// stats.json alone says how the run was made: command line, overrides, frames, fps, version.
+#[test]
+fn stats_describe_the_run() {
+    let dir = temp("stats-describe");
+    let out = dir.join("out");
+    let args = [
+        "render",
+        "graphs/default.ron",
+        "--frames",
+        "1..2",
+        "--fps",
+        "24",
+        "--size",
+        "32x24",
+        "--set",
+        "camera.fov=40",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let (code, _, err) = werkstatt(&args);
+    assert_eq!(code, 0, "{err}");
+    let stats = read_stats(&out);
+    let command: Vec<&str> = stats["command"].as_array().unwrap().iter().map(|a| a.as_str().unwrap()).collect();
+    assert_eq!(command[1..], args);
+    assert_eq!(stats["sets"], serde_json::json!(["camera.fov=40"]));
+    assert_eq!(stats["frame_range"], serde_json::json!([1, 2]));
+    assert_eq!(stats["fps"], 24.0);
+    assert_eq!(stats["version"], env!("CARGO_PKG_VERSION"));
+    // Built from a checkout here; a build outside git leaves the field out.
+    if let Some(commit) = stats["git_commit"].as_str() {
+        assert!(commit.len() == 40 && commit.chars().all(|c| c.is_ascii_hexdigit()), "{commit}");
+    }
+    assert!(stats.get("error").is_none(), "{stats}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A run whose graph does not load still leaves a stats.json that says why.
+#[test]
+fn stats_record_a_run_that_fails_before_rendering() {
+    let dir = temp("stats-load-error");
+    let out = dir.join("out");
+    let (code, _, err) = werkstatt(&["render", "tests/data/bad/unknown_kind.ron", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    let stats = read_stats(&out);
+    assert!(stats["error"].as_str().unwrap().contains("unknown node kind \"OrbitCamra\""), "{stats}");
+    assert_eq!(stats["frames"], serde_json::json!([]));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A plane drawn and exported at one fixed frame.
+const EXPORT_GRAPH: &str = r#"(version: 1, nodes: {
+    "plane": (kind: "Primitive", params: {"shape": "plane", "segments_u": 2, "segments_v": 2}),
+    "draw": (kind: "Draw"),
+    "export": (kind: "ExportGeometry", params: {"frame": 1}),
+}, links: [("plane.mesh", "draw.mesh"), ("draw.scene", "export.scene")])"#;
+
+#[test]
+fn a_fixed_frame_export_is_written_counted_and_listed() {
+    let dir = temp("fixed-export");
+    let graph = dir.join("g.ron");
+    std::fs::write(&graph, EXPORT_GRAPH).unwrap();
+    let out = dir.join("out");
+    let (code, _, err) =
+        werkstatt(&["render", graph.to_str().unwrap(), "--frames", "0..2", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.join("export_0001.obj").exists());
+    assert!(!out.join("export_0000.obj").exists() && !out.join("export_0002.obj").exists());
+    let stats = read_stats(&out);
+    assert_eq!(stats["files"], serde_json::json!(["export_0001.obj"]));
+    let counts: Vec<&serde_json::Value> =
+        stats["frames"].as_array().unwrap().iter().map(|f| &f["nodes"]["export"]["counts"]).collect();
+    // 2 x 2 cells of two triangles, counted on the frame it exports.
+    assert_eq!(counts[1]["triangles"], 8, "{stats}");
+    assert!(counts[0].is_null() && counts[2].is_null(), "{stats}");
+    assert_eq!(stats["frames"][0]["nodes"]["draw"]["counts"]["triangles"], 8);
+    assert!(err.contains(": 1 file(s) and stats.json in"), "{err}");
+    assert!(stats["warnings"].as_array().unwrap().is_empty(), "{stats}");
+
+    // Outside the range it writes nothing, and says so.
+    let (code, _, err) =
+        werkstatt(&["render", graph.to_str().unwrap(), "--frames", "2..3", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let warning = "node \"export\" (ExportGeometry) writes only frame 1, outside the rendered frames 2..3";
+    assert!(err.contains(warning), "{err}");
+    assert!(read_stats(&out)["warnings"][0].as_str().unwrap().contains(warning));
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -224,4 +377,119 @@ fn every_shader_file_is_embedded() {
     let mut embedded: Vec<String> = werkstatt::shaders::names().map(str::to_string).collect();
     embedded.sort();
     assert_eq!(files, embedded, "shaders/ and the embedded list in src/shaders.rs differ");
+}
+
+/// Writes `text` as g.ron in a fresh folder named after the test.
+fn graph_file(name: &str, text: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = temp(name);
+    let graph = dir.join("g.ron");
+    std::fs::write(&graph, text).unwrap();
+    (dir, graph)
+}
+
+#[test]
+fn a_link_of_the_wrong_type_names_the_port_that_fits() {
+    let (dir, graph) = graph_file(
+        "link-type-help",
+        r#"(version: 1, nodes: {"mat": (kind: "Material"), "draw": (kind: "Draw")}, links: [("mat.material", "draw.mesh")])"#,
+    );
+    let (code, _, err) = werkstatt(&["check", graph.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("cannot link mat.material (Material) to draw.mesh (Mesh)"), "{err}");
+    assert!(err.contains("did you mean draw.material? (it takes a Material)"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+const MISSING_MESH: &str = r#"(version: 1, nodes: {
+    "m": (kind: "MeshFile", params: {"path": "garmnet.obj"}),
+    "draw": (kind: "Draw"),
+    "export": (kind: "ExportGeometry"),
+}, links: [("m.mesh", "draw.mesh"), ("draw.scene", "export.scene")])"#;
+
+#[test]
+fn a_missing_file_is_a_warning_in_check_and_named_at_render() {
+    let (dir, graph) = graph_file("missing-file", MISSING_MESH);
+    let (code, _, err) = werkstatt(&["check", graph.to_str().unwrap()]);
+    assert_eq!(code, 0, "files may appear later, so check only warns: {err}");
+    let missing = dir.join("garmnet.obj");
+    let warning = format!("warning: node \"m\" (MeshFile): parameter \"path\": no such file: {}", missing.display());
+    assert!(err.contains(&warning), "{err}");
+    let out = dir.join("out");
+    let (code, _, err) = werkstatt(&["render", graph.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains(&format!("no such file: {}", missing.display())), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn check_warns_about_a_live_link_in_batch() {
+    let (dir, graph) = graph_file("live-link-check", r#"(version: 1, nodes: {"sim": (kind: "LiveLink")}, links: [])"#);
+    let (code, _, err) = werkstatt(&["check", graph.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("node \"sim\" (LiveLink) waits for a simulator"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn set_typos_get_did_you_mean() {
+    for (set, needle) in [
+        ("camra.fov=40", "there is no node \"camra\"; did you mean \"camera\"?"),
+        ("camera.fow=40", "has no parameter \"fow\"; did you mean \"fov\"?"),
+    ] {
+        let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--set", set]);
+        assert_eq!(code, 1, "{set}");
+        assert!(err.contains(needle), "{set}: {err}");
+    }
+}
+
+#[test]
+fn dump_format_chooses_png_tone_mapped_or_exr() {
+    let dir = temp("dump-format");
+    let render = |extra: &[&str]| {
+        let out = dir.join(extra.join("-"));
+        let mut args = vec!["render", "graphs/default.ron", "--size", "32x24", "--dump", "gbuffer.depth"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 0, "{err}");
+        out
+    };
+    // Float textures default to EXR.
+    assert!(render(&[]).join("gbuffer.depth_0000.exr").exists());
+    let png = image::open(render(&["--dump-format", "png"]).join("gbuffer.depth_0000.png")).unwrap().to_rgba8();
+    // Depths of a few metres would all clip to white; tone mapped they stay below it.
+    let covered: Vec<u8> = png.pixels().map(|p| p[0]).filter(|&r| r > 0).collect();
+    assert!(!covered.is_empty() && covered.iter().all(|&r| r < 255), "{covered:?}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// --ssaa renders at N x the size and writes images at the asked size, box-filtered: a
+/// silhouette gets intermediate values that a 1-sample render never has.
+#[test]
+fn ssaa_writes_the_asked_size_with_smoothed_edges() {
+    let dir = temp("ssaa");
+    let total_variation = |ssaa: &str| {
+        let out = dir.join(ssaa);
+        let args = ["render", "graphs/default.ron", "--size", "40x30", "--ssaa", ssaa, "--out", out.to_str().unwrap()];
+        let (code, _, err) = werkstatt(&args);
+        assert_eq!(code, 0, "{err}");
+        let png = image::open(out.join("image_0000.png")).unwrap().to_rgba8();
+        assert_eq!((png.width(), png.height()), (40, 30));
+        assert_eq!(read_stats(&out)["ssaa"], ssaa.parse::<u64>().unwrap());
+        // Total variation: the sum of steps between horizontal neighbours; stair steps add to it.
+        let mut tv = 0u64;
+        for y in 0..png.height() {
+            for x in 1..png.width() {
+                let (a, b) = (png.get_pixel(x - 1, y).0, png.get_pixel(x, y).0);
+                tv += (0..3).map(|c| a[c].abs_diff(b[c]) as u64).sum::<u64>();
+            }
+        }
+        tv
+    };
+    let (plain, smooth) = (total_variation("1"), total_variation("3"));
+    assert!(smooth * 10 < plain * 9, "total variation {plain} without SSAA, {smooth} with");
+    let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--size", "4000x100", "--ssaa", "3"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("over the limit of 8192"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
 }

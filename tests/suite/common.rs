@@ -57,7 +57,10 @@ pub fn render_graph(
         out_dir: out.to_path_buf(),
         sets: sets.iter().map(|s| s.to_string()).collect(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        dump_format: None,
+        ssaa: 1,
         progress: false,
+        command: Vec::new(),
     };
     render(&opts, gpu())
 }
@@ -189,7 +192,7 @@ pub fn run_graph(graph: &werkstatt::graph::Graph, width: u32, height: u32) -> we
     use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
     let mut ev = Evaluator::new(graph, &[]).unwrap();
     let res = werkstatt::resources::Resources::new(false);
-    let settings = FrameSettings { width, height, base_dir: root() };
+    let settings = FrameSettings { width, height, base_dir: root(), frames: None };
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
     loop {
         let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);

@@ -197,7 +197,7 @@ fn evaluate(text: &str, targets: &[&str]) -> werkstatt::eval::Evaluator {
     let targets: Vec<String> = targets.iter().map(|t| t.to_string()).collect();
     let mut ev = werkstatt::eval::Evaluator::new(&graph(text), &targets).unwrap();
     let res = werkstatt::resources::Resources::new(false);
-    let settings = werkstatt::eval::FrameSettings { width: 8, height: 8, base_dir: common::root() };
+    let settings = werkstatt::eval::FrameSettings { width: 8, height: 8, base_dir: common::root(), frames: None };
     ev.evaluate(werkstatt::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings);
     ev
 }

@@ -502,3 +502,141 @@ fn a_failed_reload_recovers_when_the_file_is_fixed() {
     assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The camera's eye at `frame` of a turntable rendered over `range`.
+fn turntable_eye(range: (i64, i64), frame_no: i64) -> glam::Vec3 {
+    let g = graph(
+        r#"(version: 1, nodes: {"cam": (kind: "OrbitCamera", params: {"turntable": true, "yaw": 0.0, "pitch": 0.0, "distance": 2.0})}, links: [])"#,
+    );
+    let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
+    let settings = FrameSettings { frames: Some(range), ..FrameSettings::default() };
+    ev.evaluate(frame(frame_no), None, &Resources::new(false), &settings);
+    match ev.output("cam", "camera") {
+        Some(werkstatt::port::Value::Camera(c)) => c.eye,
+        _ => panic!("no camera output"),
+    }
+}
+
+#[test]
+fn a_turntable_turns_once_over_the_rendered_frames() {
+    let close = |a: glam::Vec3, b: glam::Vec3| a.distance(b) < 1e-4;
+    // Frames 10..13: four steps of 90 degrees, the last one short of the start.
+    assert!(close(turntable_eye((10, 13), 10), glam::Vec3::new(0.0, 0.0, 2.0)));
+    assert!(close(turntable_eye((10, 13), 11), glam::Vec3::new(2.0, 0.0, 0.0)));
+    assert!(close(turntable_eye((10, 13), 12), glam::Vec3::new(0.0, 0.0, -2.0)));
+    // A longer range turns slower: a quarter turn takes 25 of 100 frames.
+    assert!(close(turntable_eye((0, 99), 25), glam::Vec3::new(2.0, 0.0, 0.0)));
+}
+
+#[test]
+fn a_grid_over_the_whole_uv_square_reports_what_fell_off_the_flag() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 100, "warmup": 0.0}),
+            "grid": (kind: "GridPlacement", params: {"columns": 8, "rows": 5}),
+            "out": (kind: "Watch"),
+        }, links: [("cloth.surface", "grid.surface"), ("grid.count", "out.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
+    let count = match ev.output("grid", "count") {
+        Some(werkstatt::port::Value::Scalar(n)) => *n,
+        _ => panic!("no count output"),
+    };
+    let report = ev.report("grid").unwrap();
+    assert!(count > 0.0 && count < 40.0, "{count}");
+    assert_eq!(report.counts, [("placements", count as u64)]);
+    let warning = report.warnings.iter().find(|w| w.contains("fall off the pattern pieces")).expect("a warning");
+    assert!(warning.starts_with(&format!("{} of 40 placements", 40 - count as usize)), "{warning}");
+    assert!(warning.contains("the pieces cover piece 0: u "), "{warning}");
+}
+
+/// Two UV-mapped OBJ objects: "left" covers u 0-0.5 (all of v), "right" u 0.5-1, v 0.5-1 (v down).
+const TWO_PIECE_OBJ: &str = "o left\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n\
+o right\nv 2 0 0\nv 3 0 0\nv 3 1 0\nv 2 1 0\nvt 0.5 0\nvt 1 0\nvt 1 0.5\nvt 0.5 0.5\nf 5/5 6/6 7/7 8/8\n";
+
+/// Evaluates until the loads settle; returns the grid's report text (count and warnings) or the failure.
+fn grid_on_mesh_file(obj: &str, name: &str) -> Result<(f64, Vec<String>), String> {
+    let dir = std::env::temp_dir().join(format!("werkstatt-meshfile-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("garment.obj"), obj).unwrap();
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "m": (kind: "MeshFile", params: {"path": "garment.obj", "normalize": false}),
+            "grid": (kind: "GridPlacement", params: {"columns": 2, "rows": 2}),
+            "out": (kind: "Watch"),
+        }, links: [("m.surface", "grid.surface"), ("grid.count", "out.value")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let settings = FrameSettings { base_dir: dir.clone(), ..FrameSettings::default() };
+    ev.evaluate(frame(0), None, &res, &settings);
+    wait_idle(&res);
+    ev.evaluate(frame(0), None, &res, &settings);
+    let _ = std::fs::remove_dir_all(&dir);
+    if let NodeStatus::Failed(m) = ev.report("m").unwrap().status {
+        return Err(m.clone());
+    }
+    match ev.output("grid", "count") {
+        Some(werkstatt::port::Value::Scalar(n)) => Ok((*n, ev.report("grid").unwrap().warnings.to_vec())),
+        _ => panic!("no count output"),
+    }
+}
+
+#[test]
+fn a_uv_mapped_mesh_file_is_a_surface_with_a_piece_per_object() {
+    let (count, warnings) = grid_on_mesh_file(TWO_PIECE_OBJ, "pieces").unwrap();
+    // Cell centres (0.25, 0.25) and (0.25, 0.75) are on "left", (0.75, 0.75) on "right".
+    assert_eq!(count, 3.0);
+    assert_eq!(
+        warnings,
+        [
+            "1 of 4 placements fall off the pattern pieces and were dropped; the pieces cover piece 0: u 0.000-0.500, v 0.000-1.000; piece 1: u 0.500-1.000, v 0.500-1.000"
+        ]
+    );
+    let no_uvs = "o flat\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n";
+    let err = grid_on_mesh_file(no_uvs, "no-uvs").unwrap_err();
+    assert!(err.contains("garment.obj has no UVs, so it cannot be a surface"), "{err}");
+}
+
+#[test]
+fn an_orbit_camera_with_fit_frames_the_scene_bounds() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "box": (kind: "Primitive", params: {"shape": "box", "size": 2.0}),
+            "draw": (kind: "Draw", params: {"translate": [5.0, 1.0, 0.0]}),
+            "cam": (kind: "OrbitCamera", params: {"yaw": 0.0, "pitch": 0.0, "fov": 60.0, "target": [9.0, 9.0, 9.0]}),
+        }, links: [("box.mesh", "draw.mesh"), ("draw.scene", "cam.fit")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
+    ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
+    let Some(werkstatt::port::Value::Camera(c)) = ev.output("cam", "camera") else { panic!("no camera output") };
+    // A 2 m cube at (5, 1, 0): bounding sphere radius sqrt(3), seen at 60 degrees from 2 sqrt(3).
+    assert!(c.target.distance(glam::Vec3::new(5.0, 1.0, 0.0)) < 1e-4, "{:?}", c.target);
+    assert!((c.eye.distance(c.target) - 2.0 * 3f32.sqrt()).abs() < 1e-3, "{:?}", c.eye);
+}
+
+/// An export fixed at frame 0 does not warp again on later frames: its `mesh` stays the
+/// frame-0 export while the cloth moves on.
+#[test]
+fn a_fixed_frame_export_skips_its_work_on_other_frames() {
+    use werkstatt::port::Value;
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 100}),
+            "draw": (kind: "Draw"),
+            "export": (kind: "ExportGeometry", params: {"frame": 0}),
+        }, links: [("cloth.surface", "draw.mesh"), ("draw.scene", "export.scene")])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let (res, settings, gpu) = (Resources::new(false), FrameSettings::default(), crate::common::gpu());
+    let positions = |ev: &Evaluator, id: &str, port: &str| match ev.output(id, port) {
+        Some(Value::Mesh(m) | Value::Surface(m)) => m.positions.clone(),
+        _ => panic!("no {id}.{port}"),
+    };
+    ev.evaluate(frame(0), Some(gpu), &res, &settings);
+    let (export0, cloth0) = (positions(&ev, "export", "mesh"), positions(&ev, "cloth", "surface"));
+    ev.evaluate(frame(3), Some(gpu), &res, &settings);
+    assert!(positions(&ev, "cloth", "surface") != cloth0, "the flag should move in the wind");
+    assert!(positions(&ev, "export", "mesh") == export0, "the export ran again on frame 3");
+}

@@ -56,7 +56,10 @@ fn render_on(
         out_dir: out.to_path_buf(),
         sets: Vec::new(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
+        dump_format: None,
+        ssaa: 1,
         progress: false,
+        command: Vec::new(),
     };
     render(&opts, gpu).map(|_| ())
 }
@@ -131,7 +134,7 @@ fn render_livelink(gpu: &GpuContext) {
     graph.nodes.get_mut("simulator").unwrap().params.insert("address".into(), ParamValue::Str("127.0.0.1:0".into()));
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let res = Resources::new(false);
-    let settings = FrameSettings { width: 160, height: 120, base_dir: root().join("graphs") };
+    let settings = FrameSettings { width: 160, height: 120, base_dir: root().join("graphs"), frames: None };
     let deadline = Instant::now() + Duration::from_secs(30);
     let mut sender: Option<TcpStream> = None;
     let mut frame = 0;

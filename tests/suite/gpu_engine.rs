@@ -20,7 +20,7 @@ fn fresh_gpu() -> GpuContext {
 }
 
 fn settings(width: u32, height: u32) -> FrameSettings {
-    FrameSettings { width, height, base_dir: root().join("graphs") }
+    FrameSettings { width, height, base_dir: root().join("graphs"), frames: None }
 }
 
 /// Evaluates `frame` until nothing is pending.
@@ -80,7 +80,10 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         out_dir: out.clone(),
         sets: Vec::new(),
         dumps: Vec::new(),
+        dump_format: None,
+        ssaa: 1,
         progress: false,
+        command: Vec::new(),
     };
     render(&opts, &gpu).unwrap();
     let json: serde_json::Value =
@@ -119,7 +122,10 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             out_dir: out.to_path_buf(),
             sets: Vec::new(),
             dumps: Vec::new(),
+            dump_format: None,
+            ssaa: 1,
             progress: false,
+            command: Vec::new(),
         };
         render(&opts, &gpu).unwrap()
     };

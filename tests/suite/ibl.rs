@@ -325,7 +325,7 @@ fn ibl_nodes_report_bad_parameters_and_files_by_name() {
         edit(&mut graph);
         let mut ev = Evaluator::new(&graph, &[]).unwrap();
         let res = Resources::new(false);
-        let settings = FrameSettings { width: 16, height: 16, base_dir: root() };
+        let settings = FrameSettings { width: 16, height: 16, base_dir: root(), frames: None };
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             let s = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings);

@@ -160,8 +160,9 @@ fn every_primitive_is_a_valid_closed_or_open_mesh() {
     }
 }
 
-/// A binary glTF with one quad under a translated node.
-fn write_glb(path: &std::path::Path) {
+/// A binary glTF with one quad under a translated node, in `primitives` primitives (copies).
+fn write_glb(path: &std::path::Path, primitives: usize) {
+    let prims = vec![r#"{"attributes":{"POSITION":0,"TEXCOORD_0":1},"indices":2}"#; primitives].join(",");
     let positions: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
     let uvs: [[f32; 2]; 4] = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
     let indices: [u16; 6] = [0, 1, 2, 0, 2, 3];
@@ -175,7 +176,7 @@ fn write_glb(path: &std::path::Path) {
     let json = format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
         "nodes":[{{"mesh":0,"translation":[0,0,5]}}],
-        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":1}},"indices":2}}]}}],
+        "meshes":[{{"primitives":[{prims}]}}],
         "buffers":[{{"byteLength":{}}}],
         "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":48}},{{"buffer":0,"byteOffset":48,"byteLength":32}},{{"buffer":0,"byteOffset":80,"byteLength":12}}],
         "accessors":[{{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
@@ -206,9 +207,14 @@ fn gltf_and_obj_files_load_and_bad_ones_name_the_file() {
     let dir = std::env::temp_dir().join(format!("werkstatt-mesh-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let glb = dir.join("quad.glb");
-    write_glb(&glb);
+    write_glb(&glb, 1);
     let m = load_mesh_file(&glb).unwrap();
     assert_eq!(m.triangle_count(), 2);
+    assert!(m.piece_ids.is_empty(), "one primitive is one piece, no list");
+    // Each primitive is a pattern piece (MeshFile's surface output).
+    let two = dir.join("two.glb");
+    write_glb(&two, 2);
+    assert_eq!(load_mesh_file(&two).unwrap().piece_ids, [0, 0, 0, 0, 1, 1, 1, 1]);
     assert!(m.positions.iter().all(|p| (p.z - 5.0).abs() < 1e-6), "node translation applied");
     assert!((m.normals[0] - Vec3::Z).length() < 1e-6);
 

@@ -94,7 +94,7 @@ fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
     }
     let mut ev = Evaluator::new(&b.graph, std::slice::from_ref(&id)).map_err(|e| e.to_string())?;
     let resources = Resources::new(false);
-    let settings = FrameSettings { width: 32, height: 24, base_dir: PathBuf::from(".") };
+    let settings = FrameSettings { width: 32, height: 24, base_dir: PathBuf::from("."), frames: None };
     // Twice, so nodes with state see a second frame; loads are waited for in between.
     for frame in 0..2 {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);

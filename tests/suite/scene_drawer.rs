@@ -24,7 +24,8 @@ fn stickers_scene() -> (Arc<Vec<DrawItem>>, Camera) {
     let graph = Graph::load(&path).unwrap();
     let mut ev = Evaluator::new(&graph, &["gbuffer".to_string()]).unwrap();
     let resources = Resources::new(false);
-    let settings = FrameSettings { width: 32, height: 32, base_dir: path.parent().map(PathBuf::from).unwrap() };
+    let settings =
+        FrameSettings { width: 32, height: 32, base_dir: path.parent().map(PathBuf::from).unwrap(), frames: None };
     ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(common::gpu()), &resources, &settings);
     let Some(Value::Scene(scene)) = ev.input("gbuffer", "scene").cloned() else { panic!("no scene") };
     let Some(Value::Camera(camera)) = ev.input("gbuffer", "camera").cloned() else { panic!("no camera") };
