@@ -215,3 +215,24 @@ pub fn channel0(ev: &werkstatt::eval::Evaluator, node: &str, port: &str) -> Vec<
     let value = ev.output(node, port).and_then(werkstatt::port::Value::as_texture).expect("a texture");
     werkstatt::gpu::read_back(gpu(), value).unwrap().rgba.chunks_exact(4).map(|c| c[0]).collect()
 }
+
+/// Per pixel of the G-buffer of node "gbuffer", the world position: None where nothing was
+/// drawn, or within `margin_percent` of the image size from a border.
+pub fn world_positions(ev: &werkstatt::eval::Evaluator, margin_percent: u32) -> Vec<Option<glam::Vec3>> {
+    let g = match ev.output("gbuffer", "gbuffer") {
+        Some(werkstatt::port::Value::GBuffer(g)) => g.clone(),
+        _ => panic!("no G-buffer"),
+    };
+    let depth = werkstatt::gpu::read_back(gpu(), &g.depth).unwrap();
+    let channels = depth.rgba.len() / (depth.width * depth.height) as usize;
+    let (w, h) = (g.width(), g.height());
+    let (mx, my) = (w * margin_percent / 100, h * margin_percent / 100);
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let d = depth.rgba[i as usize * channels];
+            let border = x < mx || x >= w - mx || y < my || y >= h - my;
+            (d > 0.0 && !border).then(|| werkstatt::nodes::reference_occlusion::world_position(&g.view, x, y, d))
+        })
+        .collect()
+}

@@ -23,10 +23,9 @@ use werkstatt::gpu::{GpuImage, read_back};
 use werkstatt::graph::Graph;
 use werkstatt::ibl::gpu::Lights;
 use werkstatt::ibl::median_cut::RegionLight;
-use werkstatt::nodes::reference_occlusion::world_position;
 use werkstatt::nodes::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
 use werkstatt::port::Value;
-use werkstatt::scene::{DrawItem, GBuffer, Material};
+use werkstatt::scene::{DrawItem, Material};
 
 /// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
 fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> f32) {
@@ -106,23 +105,6 @@ fn rgba(ev: &Evaluator, node: &str, port: &str) -> Vec<f32> {
     read_back(gpu(), ev.output(node, port).and_then(Value::as_texture).expect("a texture")).unwrap().rgba
 }
 
-/// Per pixel, the world position (None where nothing was drawn).
-fn positions(ev: &Evaluator) -> Vec<Option<Vec3>> {
-    let g: Arc<GBuffer> = match ev.output("gbuffer", "gbuffer") {
-        Some(Value::GBuffer(g)) => g.clone(),
-        _ => panic!("no G-buffer"),
-    };
-    let depth = read_back(gpu(), &g.depth).unwrap();
-    let channels = depth.rgba.len() / (depth.width * depth.height) as usize;
-    let (w, h) = (g.width(), g.height());
-    (0..w * h)
-        .map(|i| {
-            let d = depth.rgba[i as usize * channels];
-            (d > 0.0).then(|| world_position(&g.view, i % w, i / w, d))
-        })
-        .collect()
-}
-
 /// Shadowed / unshadowed IBL per pixel (the visibility, with albedo 1 and g = 0).
 fn visibility(ev: &Evaluator) -> Vec<f32> {
     let (lit, plain) = (channel0(ev, "ibl", "image"), channel0(ev, "ibl_plain", "image"));
@@ -171,7 +153,7 @@ fn an_unoccluded_plane_has_visibility_one() {
         reference: None,
     };
     let ev = run_graph(&graph(&s), 96, 72);
-    let pos = positions(&ev);
+    let pos = world_positions(&ev, 0);
     let (lit, plain) = (channel0(&ev, "ibl", "image"), channel0(&ev, "ibl_plain", "image"));
     let mut worst = 0.0f32;
     for ((a, b), p) in lit.iter().zip(&plain).zip(&pos) {
@@ -208,7 +190,7 @@ fn a_planar_occluder_blocks_lights_from_above_under_its_middle_only() {
         reference: None,
     };
     let ev = run_graph(&graph(&s), 160, 120);
-    let pos = positions(&ev);
+    let pos = world_positions(&ev, 0);
     let vis = visibility(&ev);
     let on_floor = |p: Vec3| p.y.abs() < 1e-3;
     let (under, under_min, under_max, n_under) =
@@ -272,7 +254,7 @@ fn half_plane_penumbra(jitter: f32) -> (Vec<(f32, f32)>, f32, f32) {
     assert!(light.direction.angle_between(Vec3::Y) < 1e-3, "the light is not straight up: {}", light.direction);
     let sigma = light.sigma * atlas.texel_world;
     assert!(sigma > 0.05, "the blur is too narrow to measure a penumbra: sigma {sigma}");
-    let (pos, vis) = (positions(&ev), visibility(&ev));
+    let (pos, vis) = (world_positions(&ev, 0), visibility(&ev));
     let picked: Vec<(f32, f32)> = pos
         .iter()
         .zip(&vis)
@@ -520,7 +502,7 @@ fn spheres_errors(
     };
     let t = Instant::now();
     let ev = run_graph(&graph(&s), size.0, size.1);
-    let pos = positions(&ev);
+    let pos = world_positions(&ev, 0);
     let global = visibility(&ev);
     let local = channel0(&ev, "ssao", "occlusion");
     let reference = reference.unwrap_or_else(|| channel0(&ev, "reference", "occlusion"));

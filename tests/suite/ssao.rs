@@ -7,17 +7,13 @@
 //! their world position (reconstructed from the G-buffer's depth) and at least 15% of the
 //! image away from its borders.
 
-use std::sync::Arc;
-
 use glam::Vec3;
 
 use crate::common::*;
-use werkstatt::eval::Evaluator;
 use werkstatt::gpu::read_back;
 use werkstatt::graph::Graph;
-use werkstatt::nodes::reference_occlusion::{SceneBvh, world_position};
+use werkstatt::nodes::reference_occlusion::SceneBvh;
 use werkstatt::port::Value;
-use werkstatt::scene::GBuffer;
 
 /// A plane's (translate, rotate) for Draw.
 type Plane = ([f32; 3], [f32; 3]);
@@ -79,25 +75,6 @@ fn graph(
     Graph::load_str(&text, "ssao-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
-/// Per pixel, the world position (None where nothing was drawn or near the border).
-fn positions(ev: &Evaluator) -> Vec<Option<Vec3>> {
-    let g: Arc<GBuffer> = match ev.output("gbuffer", "gbuffer") {
-        Some(Value::GBuffer(g)) => g.clone(),
-        _ => panic!("no G-buffer"),
-    };
-    let depth = read_back(gpu(), &g.depth).unwrap();
-    let channels = depth.rgba.len() / (depth.width * depth.height) as usize;
-    let (w, h) = (g.width(), g.height());
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
-            let d = depth.rgba[i as usize * channels];
-            let border = x < w * 15 / 100 || x >= w * 85 / 100 || y < h * 15 / 100 || y >= h * 85 / 100;
-            (d > 0.0 && !border).then(|| world_position(&g.view, x, y, d))
-        })
-        .collect()
-}
-
 /// Mean, min and count of `values` over the pixels whose position passes `pick`.
 fn stats(values: &[f32], pos: &[Option<Vec3>], pick: impl Fn(Vec3) -> bool) -> (f32, f32, usize) {
     let picked: Vec<f32> = values.iter().zip(pos).filter(|(_, p)| p.is_some_and(&pick)).map(|(v, _)| *v).collect();
@@ -155,7 +132,7 @@ fn an_open_plane_is_unoccluded_in_both_modes() {
     for ssao in variants() {
         let g = graph(&[FLOOR], "", "", &[], r#""distance": 3.0, "pitch": 40.0, "yaw": 20.0"#, &ssao, None);
         let ev = run_graph(&g, SIZE.0, SIZE.1);
-        let pos = positions(&ev);
+        let pos = world_positions(&ev, 15);
         let (mean, min, n) = stats(&channel0(&ev, "ssao", "occlusion"), &pos, |_| true);
         eprintln!("plane {ssao}: mean {mean:.4}, min {min:.4} over {n} pixels");
         assert!(n > 5000);
@@ -171,7 +148,7 @@ fn edge_values(ssao: &str) -> (f32, f32, usize) {
     let ssao = &format!(r#"{ssao}, "radius": 0.6"#);
     let g = graph(&[FLOOR, WALL_X], "", "", &[], r#""distance": 3.0, "pitch": 35.0, "yaw": 90.0"#, ssao, None);
     let ev = run_graph(&g, FINE.0, FINE.1);
-    let pos = positions(&ev);
+    let pos = world_positions(&ev, 15);
     // Within 0.01 (1/30 of the radius) of the edge line, away from the planes' ends.
     let values = channel0(&ev, "ssao", "occlusion");
     profile(&format!("edge profile {ssao}"), &values, &pos, |p| if p.z.abs() < 0.8 { p.x.hypot(p.y) } else { 1.0 });
@@ -204,7 +181,7 @@ fn a_corner_gives_one_quarter_in_both_modes() {
         let ssao = format!(r#"{ssao}, "radius": 0.6"#);
         let g = graph(&[FLOOR, WALL_X, WALL_Z], "", "", &[], camera, &ssao, None);
         let ev = run_graph(&g, FINE.0, FINE.1);
-        let pos = positions(&ev);
+        let pos = world_positions(&ev, 15);
         let values = channel0(&ev, "ssao", "occlusion");
         profile(&format!("corner profile {ssao}"), &values, &pos, |p| p.length());
         let (mean, min, n) = stats(&values, &pos, |p| p.length() < 0.02);
@@ -224,7 +201,7 @@ fn a_convex_sphere_is_unoccluded_in_both_modes() {
         let link = r#"("ball.mesh", "ball_draw.mesh"),"#;
         let g = graph(&[], sphere, link, &["ball_draw"], r#""distance": 3.0, "pitch": 20.0"#, &ssao, None);
         let ev = run_graph(&g, SIZE.0, SIZE.1);
-        let pos = positions(&ev);
+        let pos = world_positions(&ev, 15);
         let values = channel0(&ev, "ssao", "occlusion");
         let (mean, min, n) = stats(&values, &pos, |_| true);
         eprintln!("sphere {ssao}: mean {mean:.4}, min {min:.4} over {n} pixels");
@@ -285,7 +262,7 @@ fn reference_occlusion_matches_the_form_factor_of_a_square_and_one_on_a_plane() 
     let camera = r#""distance": 3.0, "pitch": 8.0, "fov": 30.0"#;
     let g = graph(&[FLOOR], boxes, link, &["cube_draw"], camera, "", Some(reference));
     let ev = run_graph(&g, 160, 120);
-    let pos = positions(&ev);
+    let pos = world_positions(&ev, 15);
     let vis = channel0(&ev, "reference", "occlusion");
     let want = 1.0 - square_form_factor(0.5, 0.5);
     let (mean, _, n) = stats(&vis, &pos, |p| p.y.abs() < 1e-3 && p.x.hypot(p.z) < 0.05);
