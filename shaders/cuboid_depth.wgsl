@@ -4,18 +4,7 @@
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
 // #include "cuboid.wgsl"
-
-// As in depth.wgsl (src/draw.rs `TileUniform`).
-struct TileView {
-    to_tile: mat4x4<f32>,
-    rect: vec4<f32>,
-};
-
-struct Tiles {
-    tiles: array<TileView, 64>,
-};
-
-@group(0) @binding(0) var<uniform> views: Tiles;
+// #include "depth_tiles.wgsl"
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

@@ -6,19 +6,8 @@
 // #include "vertex_in.wgsl"
 // #include "warp.wgsl"
 // #include "instance_in.wgsl"
+// #include "depth_tiles.wgsl"
 
-struct TileView {
-    // The view's projection folded with the map of its clip space into the tile.
-    to_tile: mat4x4<f32>,
-    // The tile in texels: x0, y0, x1, y1.
-    rect: vec4<f32>,
-};
-
-struct Tiles {
-    tiles: array<TileView, 64>,
-};
-
-@group(0) @binding(0) var<uniform> views: Tiles;
 @group(3) @binding(0) var<uniform> attached_tile: vec4<u32>;
 
 struct VertexOut {

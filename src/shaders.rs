@@ -25,6 +25,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("attach_resolve.wgsl", include_str!("../shaders/attach_resolve.wgsl")),
     ("cube.wgsl", include_str!("../shaders/cube.wgsl")),
     ("pem_filter.wgsl", include_str!("../shaders/pem_filter.wgsl")),
+    ("depth_tiles.wgsl", include_str!("../shaders/depth_tiles.wgsl")),
     ("pem_phong.wgsl", include_str!("../shaders/pem_phong.wgsl")),
     ("cube_preview.wgsl", include_str!("../shaders/cube_preview.wgsl")),
     ("ibl_shading.wgsl", include_str!("../shaders/ibl_shading.wgsl")),
