@@ -106,6 +106,34 @@ enum Command {
     },
 }
 
+/// What every GPU bench takes: the frame size, the adapter, and where to write the rows.
+#[derive(clap::Args)]
+struct GpuBench {
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// Also write the rows as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
+}
+
+impl GpuBench {
+    /// The headless adapter and the parsed size.
+    fn open(&self) -> anyhow::Result<(GpuContext, (u32, u32))> {
+        let size = parse_size(&self.size)?;
+        Ok((GpuContext::headless(pick_backend(self.backend)?)?, size))
+    }
+
+    /// Writes `rows` to `--json` when given.
+    fn write_json(&self, rows: &impl serde::Serialize) -> anyhow::Result<()> {
+        if let Some(path) = &self.json {
+            crate::atomic::write_atomic(path, serde_json::to_string_pretty(rows)?.as_bytes())?;
+        }
+        Ok(())
+    }
+}
+
 #[derive(Subcommand)]
 enum BenchWhat {
     /// Evaluator overhead per idle frame (nothing changed) for a graph of cheap nodes.
@@ -133,13 +161,8 @@ enum BenchWhat {
         /// Timed frames per count (median reported).
         #[arg(long, default_value_t = 5)]
         frames: usize,
-        #[arg(long, default_value = "640x480")]
-        size: String,
-        /// Also write the rows as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long, value_enum)]
-        backend: Option<Backend>,
+        #[command(flatten)]
+        out: GpuBench,
     },
     /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
     /// ms per frame of the Ssao passes for each mode at full and half resolution.
@@ -150,13 +173,8 @@ enum BenchWhat {
         /// Timed frames per row (median reported).
         #[arg(long, default_value_t = 10)]
         frames: usize,
-        #[arg(long, default_value = "640x480")]
-        size: String,
-        /// Also write the rows as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long, value_enum)]
-        backend: Option<Backend>,
+        #[command(flatten)]
+        out: GpuBench,
     },
     /// Global occlusion (graphs/fig5_24_shadows.ron without its unshadowed pass): frame time
     /// (G-buffer, shadow atlas, shadowed IBL, SSAO, hybrid, tone mapping; a sphere moves every
@@ -172,13 +190,8 @@ enum BenchWhat {
         /// Timed frames per row (median reported).
         #[arg(long, default_value_t = 3)]
         frames: usize,
-        #[arg(long, default_value = "640x480")]
-        size: String,
-        /// Also write the rows as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long, value_enum)]
-        backend: Option<Backend>,
+        #[command(flatten)]
+        out: GpuBench,
     },
     /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
     /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
@@ -189,16 +202,11 @@ enum BenchWhat {
         /// Timed frames per measurement (median reported).
         #[arg(long, default_value_t = 3)]
         frames: usize,
-        #[arg(long, default_value = "640x480")]
-        size: String,
         /// Skip the CPU warp path.
         #[arg(long)]
         no_cpu: bool,
-        /// Also write the rows as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long, value_enum)]
-        backend: Option<Backend>,
+        #[command(flatten)]
+        out: GpuBench,
     },
     /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
     /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
@@ -213,13 +221,8 @@ enum BenchWhat {
         /// Timed frames per measurement (median reported).
         #[arg(long, default_value_t = 5)]
         frames: usize,
-        #[arg(long, default_value = "640x480")]
-        size: String,
-        /// Also write the rows as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long, value_enum)]
-        backend: Option<Backend>,
+        #[command(flatten)]
+        out: GpuBench,
     },
     /// The dissertation's Figs. 5.19/5.20 on the CPU: for each PEM filter kernel and Phong
     /// exponent, the volume-matched mip level and the lobe's shape error; also the default
@@ -424,9 +427,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Attachments { counts, frames, size, no_cpu, json, backend } } => {
-            let size = parse_size(&size)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+        Command::Bench { what: BenchWhat::Attachments { counts, frames, no_cpu, out } } => {
+            let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!("{:>18} {:>9} {:>12} {:>10} {:>9}", "path", "instances", "triangles", "ms/frame", "MTri/s");
             let rows = crate::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| {
@@ -435,14 +437,11 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
                 );
             })?;
-            if let Some(path) = json {
-                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Ibl { regions, frames, size, json, backend } } => {
-            let size = parse_size(&size)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+        Command::Bench { what: BenchWhat::Ibl { regions, frames, out } } => {
+            let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!(
                 "| regions | rebuild ms (cut + PEMs + frame) | ms/frame (G-buffer + IBL) | PEM MiB |\n|---:|---:|---:|---:|"
@@ -451,14 +450,11 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 let n = if r.regions == 0 { "full map".to_string() } else { r.regions.to_string() };
                 println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
             })?;
-            if let Some(path) = json {
-                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Ssao { samples, frames, size, json, backend } } => {
-            let size = parse_size(&size)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+        Command::Bench { what: BenchWhat::Ssao { samples, frames, out } } => {
+            let (gpu, size) = out.open()?;
             println!(
                 "adapter: {}, {}x{}, {samples} samples, median of {frames} frame(s)",
                 gpu.adapter_name(),
@@ -470,13 +466,11 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 let res = if r.half_resolution { "half" } else { "full" };
                 println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
             })?;
-            if let Some(path) = json {
-                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, size, json, backend } } => {
-            let size = parse_size(&size)?;
+        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, out } } => {
+            let (gpu, size) = out.open()?;
             let pair = |s: &str| -> anyhow::Result<(usize, usize)> {
                 let bad = || anyhow::anyhow!("expected COUNTxTRIANGLES such as 185x2000, not {s:?}");
                 let (a, b) = s.split_once('x').ok_or_else(bad)?;
@@ -489,7 +483,6 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let spheres = pair(&spheres)?;
             let helices = helices.iter().map(|h| pair(h)).collect::<anyhow::Result<Vec<_>>>()?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!(
                 "| scene | objects | triangles | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|"
@@ -505,14 +498,11 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     100.0 * r.ratio
                 );
             })?;
-            if let Some(path) = json {
-                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Shadows { lights, tiles, frames, size, json, backend } } => {
-            let size = parse_size(&size)?;
-            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+        Command::Bench { what: BenchWhat::Shadows { lights, tiles, frames, out } } => {
+            let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!(
                 "| lights | tile | atlas | atlas MiB | N x tile^2 x 4 B (Table 5.1) MiB | ms/frame |\n|---:|---:|---:|---:|---:|---:|"
@@ -524,9 +514,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     r.lights, r.tile, r.atlas_width, r.atlas_height, r.atlas_mib, r.table_mib
                 );
             })?;
-            if let Some(path) = json {
-                crate::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Cloth { triangles, warmup, frames } } => {
