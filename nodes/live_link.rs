@@ -31,14 +31,24 @@ pub static LIVE_LINK: NodeSpec = NodeSpec {
         PortSpec::output("surface", PortType::Surface, "The latest frame received; UVs are the pattern coordinates."),
         PortSpec::output("frame", PortType::Scalar, "The simulator's frame number of that frame."),
     ],
-    params: &[ParamSpec::new(
-        "address",
-        ParamKind::Text { default: "127.0.0.1:7878" },
-        "Where to listen, host:port. The default accepts only this machine (loopback); port 0 lets the system choose (the node's status shows the port). There is no authentication: listen on other interfaces only in a trusted network.",
-    )],
+    params: &[
+        ParamSpec::new(
+            "address",
+            ParamKind::Text { default: "127.0.0.1:7878" },
+            "Where to listen, host:port. The default accepts only this machine (loopback); port 0 lets the system choose (the node's status shows the port). There is no authentication: listen on other interfaces only in a trusted network.",
+        ),
+        ParamSpec::new(
+            "record",
+            ParamKind::Text { default: "" },
+            "A folder (relative to the graph's) to record the session into: every frame received is written as frame_NNNN.obj (the simulator's frame number; pattern pieces as OBJ objects, UVs kept), the sequence MeshSequence plays, so a streamed session becomes a batch render or CI case. Empty: no recording.",
+        ),
+    ],
     is_output: false,
     create: || Box::<LiveLinkNode>::default(),
 };
+
+/// What a batch render (or `check`) tells the user of a graph whose LiveLink has no sender.
+pub const RECORD_HELP: &str = "a batch render has no simulator to wait for: record a session instead (set the LiveLink's `record` parameter to a folder, e.g. in `werkstatt edit`, while the simulator streams: each frame is written as frame_NNNN.obj), then render with a MeshSequence whose `path` is that folder in place of the LiveLink";
 
 /// The first bytes of every message.
 pub const MAGIC: [u8; 4] = *b"WKLL";
@@ -211,6 +221,8 @@ struct Latest {
 
 struct Shared {
     address: String,
+    /// The folder frames are recorded into (the `record` parameter), if any.
+    record: Mutex<Option<PathBuf>>,
     latest: Mutex<Latest>,
     signal: ChangeSignal,
     stop: AtomicBool,
@@ -256,11 +268,13 @@ struct LiveLinkNode {
 impl Node for LiveLinkNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let address = cx.str("address").trim().to_string();
+        let record = (!cx.str("record").trim().is_empty()).then(|| cx.path("record"));
         if self.link.as_ref().is_none_or(|l| l.shared.address != address) {
             self.link = None;
             let addr = resolve(&address).map_err(NodeError::Failed)?;
             let shared = Arc::new(Shared {
                 address: address.clone(),
+                record: Mutex::new(record.clone()),
                 latest: Mutex::new(Latest::default()),
                 signal: ChangeSignal::new(),
                 stop: AtomicBool::new(false),
@@ -273,6 +287,7 @@ impl Node for LiveLinkNode {
             self.link = Some(Link { shared });
         }
         let shared = self.link.as_ref().expect("started above").shared.clone();
+        *shared.record.lock().unwrap_or_else(|e| e.into_inner()) = record;
         // Watch before reading: a frame that lands in between makes the next frame re-run.
         cx.watch(&shared.signal);
         let latest = shared.latest.lock().unwrap_or_else(|e| e.into_inner());
@@ -497,12 +512,26 @@ impl Connection {
         };
         // The framing is intact, so a bad frame is skipped and the connection kept.
         match Mesh::from_parts(positions, normals, t.uvs.clone(), t.indices.clone(), t.piece_ids.clone()) {
-            Ok(mesh) => shared.publish(|l| {
-                l.mesh = Some(Arc::new(mesh));
-                l.frame = h.frame;
-            }),
+            Ok(mesh) => {
+                let record = shared.record.lock().unwrap_or_else(|e| e.into_inner()).clone();
+                if let Some(dir) = record
+                    && let Err(e) = record_frame(&dir, h.frame, &mesh)
+                {
+                    shared.error(format!("cannot record frame {}: {e:#}", h.frame));
+                }
+                shared.publish(|l| {
+                    l.mesh = Some(Arc::new(mesh));
+                    l.frame = h.frame;
+                })
+            }
             Err(e) => shared.error(format!("skipped frame {} from {}: {e:#}", h.frame, self.peer)),
         }
         Ok(())
     }
+}
+
+/// Writes one received frame as `<dir>/frame_NNNN.obj` (atomically), for MeshSequence.
+fn record_frame(dir: &std::path::Path, frame: u64, mesh: &Mesh) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+    crate::geometry_io::write_obj(&dir.join(format!("frame_{frame:04}.obj")), mesh)
 }

@@ -1,4 +1,4 @@
-//! The command line: render, edit, check, fmt, nodes, info, bench.
+//! The command line: render, test, report, edit, check, fmt, nodes, info, bench.
 
 use std::io::IsTerminal as _;
 use std::path::PathBuf;
@@ -69,6 +69,45 @@ enum Command {
     Check {
         #[arg(required = true)]
         graphs: Vec<PathBuf>,
+        /// human: one line per problem with a hint; json: one JSON object per problem on
+        /// stdout (file, line, column, node, port, message, help), for CI annotations.
+        #[arg(long, value_parser = ["human", "json"], default_value = "human")]
+        message_format: String,
+    },
+    /// Render graphs and compare every output with stored references (image regression).
+    Test {
+        /// Graph files, folders of graphs, or one manifest (manifest.ron or *.manifest.ron).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The references of graphs given directly, one folder per case; a manifest.ron there
+        /// sets sizes and tolerances. A manifest's references sit beside it.
+        #[arg(long, default_value = "tests/references")]
+        references: PathBuf,
+        /// Output folder: a folder per case, results.json, junit.xml, report.html.
+        #[arg(long, default_value = "test-out")]
+        out: PathBuf,
+        /// Accept the current outputs as the references.
+        #[arg(long)]
+        bless: bool,
+        /// node.param=value overrides, or node.param=a,b,c to sweep (repeatable: every
+        /// combination is a case; vectors in brackets: [0,0,1],[1,0,0]).
+        #[arg(long = "set", value_name = "NODE.PARAM=A,B,...")]
+        sets: Vec<String>,
+        /// A RON list of sweep axes: ["node.param=a,b", ...].
+        #[arg(long)]
+        sweep: Option<PathBuf>,
+        /// Run shard I of N (0-based). Default: from SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT,
+        /// or JOB_COMPLETION_INDEX/WERKSTATT_SHARD_COUNT, else everything.
+        #[arg(long, value_name = "I/N")]
+        shard: Option<String>,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Work with the results of `werkstatt test`.
+    Report {
+        #[command(subcommand)]
+        what: ReportWhat,
     },
     /// Rewrite graphs in canonical form, or with --check list those that are not.
     Fmt {
@@ -103,6 +142,19 @@ enum Command {
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum ReportWhat {
+    /// Combine the output folders of the shards of one `werkstatt test` run into one.
+    Merge {
+        /// The shards' output folders.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Where the merged run goes (the same files an unsharded run writes).
+        #[arg(long)]
+        out: PathBuf,
     },
 }
 
@@ -251,6 +303,55 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// `werkstatt check`: validates each graph; with `json`, one JSON object per problem on
+/// stdout (file, line, column, node, port, message, help; warnings with "level": "warning").
+fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
+    let mut failed = 0;
+    let print_json = |file: &std::path::Path, line: usize, col: usize, level: &str, problem: serde_json::Value| {
+        let mut v = serde_json::json!({ "file": file.display().to_string(), "line": line, "column": col, "level": level });
+        if let (Some(o), serde_json::Value::Object(p)) = (v.as_object_mut(), problem) {
+            o.extend(p);
+        }
+        println!("{v}");
+    };
+    for path in graphs {
+        match Graph::load(path) {
+            Ok(g) => {
+                if !json {
+                    println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
+                }
+                let base = path.parent().unwrap_or(std::path::Path::new(""));
+                for w in g.warnings(base) {
+                    if json {
+                        let (line, col) = std::fs::read_to_string(path).map(|s| w.line_col(&s)).unwrap_or((1, 1));
+                        let problem = serde_json::json!({ "node": w.node, "port": null, "message": w.message, "help": w.help });
+                        print_json(path, line, col, "warning", problem);
+                    } else {
+                        eprintln!("{}: warning: {w}", path.display());
+                    }
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                if !json {
+                    eprintln!("{e}");
+                    continue;
+                }
+                for d in &e.diagnostics {
+                    let p = &d.problem;
+                    let problem = serde_json::json!({ "node": p.node, "port": p.port, "message": p.message, "help": p.help });
+                    print_json(&d.file, d.line, d.col, "error", problem);
+                }
+            }
+        }
+    }
+    if failed > 0 {
+        eprintln!("{failed} of {} graph(s) have errors", graphs.len());
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
+}
+
 fn pick_backend(flag: Option<Backend>) -> anyhow::Result<Backend> {
     match flag {
         Some(b) => Ok(b),
@@ -337,28 +438,33 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             crate::editor::run(graph, pick_backend(backend)?)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Check { graphs } => {
-            let mut failed = 0;
-            for path in &graphs {
-                match Graph::load(path) {
-                    Ok(g) => {
-                        println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
-                        let base = path.parent().unwrap_or(std::path::Path::new(""));
-                        for w in g.warnings(base) {
-                            eprintln!("{}: warning: {w}", path.display());
-                        }
-                    }
-                    Err(e) => {
-                        failed += 1;
-                        eprintln!("{e}");
-                    }
-                }
-            }
-            if failed > 0 {
-                eprintln!("{failed} of {} graph(s) have errors", graphs.len());
-                return Ok(ExitCode::FAILURE);
-            }
-            Ok(ExitCode::SUCCESS)
+        Command::Check { graphs, message_format } => Ok(check(&graphs, message_format == "json")),
+        Command::Test { inputs, references, out, bless, sets, sweep, shard, backend } => {
+            let shard = crate::regress::shard_from(shard.as_deref(), |k| std::env::var(k).ok())?;
+            let opts = crate::regress::TestOptions {
+                inputs,
+                references,
+                out_dir: out.clone(),
+                bless,
+                sets,
+                sweep_file: sweep,
+                shard,
+            };
+            // Plan first, so a bad manifest or --set fails before the GPU starts.
+            crate::regress::plan(&opts)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            let run = crate::regress::run(&opts, &gpu, |c| {
+                let first = c.message.as_deref().and_then(|m| m.lines().next()).unwrap_or("");
+                let slow = if c.slow { " (slower than its reference)" } else { "" };
+                eprintln!("{:?}: {} {:.0} ms{slow} {first}", c.status, c.name, c.render_ms);
+            })?;
+            eprintln!("{}\nreports: {}/junit.xml, {}/report.html", run.summary(), out.display(), out.display());
+            Ok(if run.regressed() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Report { what: ReportWhat::Merge { shards, out } } => {
+            let run = crate::regress::merge(&shards, &out)?;
+            eprintln!("{}\nreports: {}/junit.xml, {}/report.html", run.summary(), out.display(), out.display());
+            Ok(if run.regressed() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
         Command::Fmt { check, graphs } => {
             let mut bad = 0;

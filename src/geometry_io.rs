@@ -23,6 +23,8 @@ pub fn write_geometry(path: &Path, mesh: &Mesh, format: GeometryFormat) -> anyho
     }
 }
 
+/// Writes OBJ: positions, UVs (v up), normals and triangles; a Surface's pattern pieces as
+/// objects `piece_0`, `piece_1`, ... (the faces of each piece in their order).
 pub fn write_obj(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(Vec::new());
     writeln!(out, "# werkstatt export: {} vertices, {} triangles", mesh.positions.len(), mesh.triangle_count())?;
@@ -36,9 +38,24 @@ pub fn write_obj(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
     for n in &mesh.normals {
         writeln!(out, "vn {} {} {}", n.x, n.y, n.z)?;
     }
-    for t in mesh.indices.chunks_exact(3) {
+    let face = |out: &mut std::io::BufWriter<Vec<u8>>, t: &[u32]| {
         let [a, b, c] = [t[0] + 1, t[1] + 1, t[2] + 1];
-        writeln!(out, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
+        writeln!(out, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")
+    };
+    if mesh.piece_ids.is_empty() {
+        for t in mesh.indices.chunks_exact(3) {
+            face(&mut out, t)?;
+        }
+    } else {
+        // One OBJ object per pattern piece (MeshSequence reads each object as a piece), every
+        // id up to the largest written even when empty, so the ids read back the same.
+        let pieces = mesh.piece_ids.iter().copied().max().unwrap_or(0);
+        for piece in 0..=pieces {
+            writeln!(out, "o piece_{piece}")?;
+            for t in mesh.indices.chunks_exact(3).filter(|t| mesh.piece_ids[t[0] as usize] == piece) {
+                face(&mut out, t)?;
+            }
+        }
     }
     let bytes = out.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
     crate::atomic::write_atomic(path, &bytes).with_context(|| format!("cannot write {}", path.display()))

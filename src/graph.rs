@@ -170,6 +170,33 @@ impl fmt::Display for Diagnostic {
     }
 }
 
+/// Something `check` warns about without failing (see [`Graph::warnings`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Warning {
+    pub place: Place,
+    pub node: String,
+    pub kind: &'static str,
+    pub message: String,
+    pub help: Option<String>,
+}
+
+impl Warning {
+    /// Line and column of the warning's place in `source`, the graph's text.
+    pub fn line_col(&self, source: &str) -> (usize, usize) {
+        SourceMap::new(source).locate(&self.place)
+    }
+}
+
+impl fmt::Display for Warning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "node \"{}\" ({}): {}", self.node, self.kind, self.message)?;
+        if let Some(help) = &self.help {
+            write!(f, "; {help}")?;
+        }
+        Ok(())
+    }
+}
+
 /// All problems of one file.
 #[derive(Debug)]
 pub struct LoadError {
@@ -641,7 +668,7 @@ impl Graph {
     /// What `check` warns about but does not fail on: files a path parameter names that do
     /// not exist (yet: a simulator may write them later), and nodes that cannot finish a batch
     /// render. Paths are resolved against `base_dir`, the graph's folder, as rendering does.
-    pub fn warnings(&self, base_dir: &Path) -> Vec<String> {
+    pub fn warnings(&self, base_dir: &Path) -> Vec<Warning> {
         let mut out = Vec::new();
         for (id, node) in &self.nodes {
             let Some(spec) = spec::find(&node.kind) else { continue };
@@ -655,18 +682,23 @@ impl Graph {
                 let is_pattern = crate::resources::is_file_pattern(text);
                 let must_exist = if is_pattern { path.parent().unwrap_or(base_dir) } else { &path };
                 if !must_exist.exists() {
-                    out.push(format!(
-                        "node \"{id}\" ({}): parameter \"{}\": no such file: {}",
-                        spec.kind,
-                        p.name,
-                        must_exist.display()
-                    ));
+                    out.push(Warning {
+                        place: Place::Param(id.clone(), p.name.to_string()),
+                        node: id.clone(),
+                        kind: spec.kind,
+                        message: format!("parameter \"{}\": no such file: {}", p.name, must_exist.display()),
+                        help: None,
+                    });
                 }
             }
             if spec.kind == crate::nodes::live_link::LIVE_LINK.kind {
-                out.push(format!(
-                    "node \"{id}\" (LiveLink) waits for a simulator to connect: `werkstatt render` fails unless one sends frames; for batch renders record the frames as OBJ files and read them with MeshSequence"
-                ));
+                out.push(Warning {
+                    place: Place::Node(id.clone()),
+                    node: id.clone(),
+                    kind: spec.kind,
+                    message: "waits for a simulator to connect: `werkstatt render` fails unless one sends frames".into(),
+                    help: Some(crate::nodes::live_link::RECORD_HELP.into()),
+                });
             }
         }
         out

@@ -247,7 +247,7 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 break;
             }
             if resources.in_flight() == 0 && summary.ran == 0 {
-                bail!("frame {frame}: nodes are pending but nothing is loading");
+                bail!("frame {frame}: {}", nothing_will_arrive(&evaluator));
             }
             // A node waiting on an external source (a live link with no sender) never settles.
             if start.elapsed() > PENDING_LIMIT {
@@ -372,6 +372,18 @@ fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
         bail!("--dump {text}: the port is a {}, not a texture", port.ty);
     }
     Ok(r)
+}
+
+/// Why a batch render cannot settle: the pending nodes wait for something that no file load
+/// will bring (a `LiveLink` waits for a simulator to connect), with what to do instead.
+fn nothing_will_arrive(ev: &Evaluator) -> String {
+    let waiting = failures(ev);
+    let live = ev.reports().any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::live_link::LIVE_LINK.kind);
+    let mut msg = format!("nothing will arrive in a batch render: {}", waiting.join("; "));
+    if live {
+        msg.push_str(&format!("\n  help: {}", crate::nodes::live_link::RECORD_HELP));
+    }
+    msg
 }
 
 /// Messages for every failed node, naming node and kind.

@@ -426,7 +426,8 @@ fn check_warns_about_a_live_link_in_batch() {
     let (dir, graph) = graph_file("live-link-check", r#"(version: 1, nodes: {"sim": (kind: "LiveLink")}, links: [])"#);
     let (code, _, err) = werkstatt(&["check", graph.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("node \"sim\" (LiveLink) waits for a simulator"), "{err}");
+    assert!(err.contains("node \"sim\" (LiveLink): waits for a simulator"), "{err}");
+    assert!(err.contains("record"), "the warning says how to record a session: {err}");
     std::fs::remove_dir_all(dir).unwrap();
 }
 

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use werkstatt::compare::ImageTolerance;
 use werkstatt::gpu::{Backend, GpuContext, Pixels};
 use werkstatt::render::{RenderOptions, Stats, render};
 
@@ -108,28 +109,18 @@ pub fn encode(px: &Pixels, enc: Encoding) -> image::RgbaImage {
     image::RgbaImage::from_raw(px.width, px.height, bytes).unwrap()
 }
 
-/// The tolerance of a golden comparison.
-#[derive(Clone, Copy, Debug)]
-pub struct Tolerance {
-    /// Lowest accepted PSNR, in dB, over RGB and (separately) over alpha.
-    pub min_psnr: f64,
-    /// A pixel "differs" when a channel is off by more than this many levels.
-    pub level: u8,
-    /// Highest accepted share of differing pixels.
-    pub max_differing: f64,
-}
-
 /// The goldens were rendered by lavapipe (Mesa's Vulkan software rasterizer) of the Mesa that
 /// Debian ships. Another Mesa may round differently at triangle edges and in transcendental
 /// functions: a few levels on a few pixels, which this tolerance absorbs (up to 0.5% of the
 /// pixels off by more than 3 levels, 40 dB overall). A wrong shading model, a missing object
 /// or a wrong G-buffer channel moves far more. After a Mesa upgrade that exceeds it, look at
 /// the diff image before re-blessing.
-pub const STRICT: Tolerance = Tolerance { min_psnr: 40.0, level: 3, max_differing: 0.005 };
+pub const STRICT: ImageTolerance = ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0 };
 
-/// Compares `actual` with `tests/golden/NAME.png`. With `WERKSTATT_BLESS=1` the reference is
-/// (re)written instead. On failure a diff image (differences x8) is written beside the output.
-pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
+/// Compares `actual` with `tests/golden/NAME.png` (`werkstatt::compare`, as `werkstatt test`
+/// does). With `WERKSTATT_BLESS=1` the reference is (re)written instead. On failure a diff
+/// image (differences x8) is written beside the output.
+pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: ImageTolerance) {
     let golden = root().join("tests/golden").join(format!("{name}.png"));
     // Only an explicit 1 re-blesses: `WERKSTATT_BLESS=0` or an empty value compares.
     if std::env::var("WERKSTATT_BLESS").as_deref() == Ok("1") {
@@ -144,43 +135,14 @@ pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: Tolerance) {
     );
     let expected = read_png(&golden);
     assert_eq!(expected.dimensions(), actual.dimensions(), "{name}: size differs from the reference");
-    let (mut sq, mut sq_alpha, mut differing) = (0f64, 0f64, 0usize);
-    let mut diff = image::RgbaImage::new(actual.width(), actual.height());
-    for ((a, e), d) in actual.pixels().zip(expected.pixels()).zip(diff.pixels_mut()) {
-        let mut worst = 0u8;
-        for c in 0..4 {
-            let delta = a[c].abs_diff(e[c]);
-            if c < 3 {
-                sq += (delta as f64).powi(2);
-                d[c] = delta.saturating_mul(8);
-            } else {
-                sq_alpha += (delta as f64).powi(2);
-            }
-            worst = worst.max(delta);
-        }
-        // An alpha difference shows as a blue tint in the diff image.
-        d[2] = d[2].max(a[3].abs_diff(e[3]).saturating_mul(8));
-        d[3] = 255;
-        if worst > tol.level {
-            differing += 1;
-        }
-    }
-    let n = (actual.width() * actual.height()) as f64;
-    let psnr_of = |mse: f64| if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() };
-    let (psnr, psnr_alpha) = (psnr_of(sq / (n * 3.0)), psnr_of(sq_alpha / n));
-    let share = differing as f64 / n;
-    if psnr < tol.min_psnr || psnr_alpha < tol.min_psnr || share > tol.max_differing {
+    let diff = werkstatt::compare::compare_rgba8(&expected, actual, tol.threshold);
+    if let Some(why) = diff.verdict(&tol) {
         let dir = root().join("target/golden-diff");
         std::fs::create_dir_all(&dir).unwrap();
         actual.save(dir.join(format!("{name}.actual.png"))).unwrap();
-        diff.save(dir.join(format!("{name}.diff.png"))).unwrap();
+        diff.diff.save(dir.join(format!("{name}.diff.png"))).unwrap();
         panic!(
-            "{name}: PSNR {psnr:.1} dB, alpha {psnr_alpha:.1} dB (min {}), {:.2}% pixels differ by more than {} levels (max {:.2}%); \
-             see {}/{name}.diff.png; if the change is intended, re-bless with WERKSTATT_BLESS=1",
-            tol.min_psnr,
-            share * 100.0,
-            tol.level,
-            tol.max_differing * 100.0,
+            "{name}: {why}; see {}/{name}.diff.png; if the change is intended, re-bless with WERKSTATT_BLESS=1",
             dir.display()
         );
     }
