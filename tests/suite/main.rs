@@ -25,6 +25,7 @@ mod loaders;
 mod mesh;
 mod mesh_sequence;
 mod node_contracts;
+mod regression;
 mod render;
 mod roundtrip;
 mod scene_drawer;
