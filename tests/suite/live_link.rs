@@ -395,3 +395,126 @@ fn dropping_the_node_or_changing_its_address_stops_the_listener() {
     rig.tick();
     assert!(matches!(rig.status(), NodeStatus::Failed(m) if m.contains("not a host:port")), "{:?}", rig.status());
 }
+
+/// Two pattern pieces as separate 3 x 3 grids, vertices and triangles piece by piece: what a
+/// simulator streams and what a recording must keep.
+fn two_pieces() -> (Vec<u32>, Vec<Vec2>, Vec<u32>) {
+    let (mut indices, mut uvs, mut pieces) = (Vec::new(), Vec::new(), Vec::new());
+    for piece in 0..2u32 {
+        let base = uvs.len() as u32;
+        for j in 0..3 {
+            for i in 0..3 {
+                uvs.push(Vec2::new(0.05 + 0.5 * piece as f32 + 0.2 * i as f32, 0.1 + 0.4 * j as f32));
+                pieces.push(piece);
+            }
+        }
+        for j in 0..2 {
+            for i in 0..2 {
+                let a = base + j * 3 + i;
+                indices.extend_from_slice(&[a, a + 3, a + 1, a + 1, a + 3, a + 4]);
+            }
+        }
+    }
+    (indices, uvs, pieces)
+}
+
+/// A session streamed into a LiveLink with `record` set replays through MeshSequence: the
+/// same positions, UVs, triangles and pattern pieces.
+#[test]
+fn a_recorded_session_replays_through_mesh_sequence() {
+    let dir = crate::common::out_dir("livelink-record");
+    let record = dir.join("session");
+    let text = format!(
+        r#"(version: 1, nodes: {{"link": (kind: "LiveLink", params: {{"address": "127.0.0.1:0", "record": {:?}}})}}, links: [])"#,
+        record.display().to_string()
+    );
+    let g = Graph::load_str(&text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
+    let mut rig = Rig {
+        ev: Evaluator::new(&g, &["link".to_string()]).unwrap(),
+        res: Resources::new(false),
+        frame: 0,
+        addr: "127.0.0.1:0".parse().unwrap(),
+    };
+    rig.wait_until("the recording listener to bind", |r| match r.status() {
+        NodeStatus::Pending(p) => {
+            r.addr = p.display().to_string().rsplit("tcp://").next().unwrap().parse().unwrap();
+            r.addr.port() != 0
+        }
+        _ => false,
+    });
+    let (indices, uvs, pieces) = two_pieces();
+    let positions = |f: u64| -> Vec<Vec3> {
+        uvs.iter().map(|uv| Vec3::new(uv.x, 0.3 * f as f32 + (uv.x * 5.0 + f as f32).sin() * 0.1, uv.y)).collect()
+    };
+    let mut s = rig.connect();
+    s.write_all(&encode_topology(&indices, &uvs, Some(&pieces))).unwrap();
+    for f in 1..=3 {
+        s.write_all(&encode_frame(f, indices.len() as u32, &positions(f), None)).unwrap();
+    }
+    rig.wait_for_frame(3);
+    let live = rig.surface();
+    assert!(rig.warnings().is_empty(), "{:?}", rig.warnings());
+    let files: Vec<String> = {
+        let mut f: Vec<String> =
+            std::fs::read_dir(&record).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        f.sort();
+        f
+    };
+    assert_eq!(files, ["frame_0001.obj", "frame_0002.obj", "frame_0003.obj"]);
+
+    // Replay frame 2 (hold) and frame 3 through MeshSequence.
+    for (frame, start) in [(2u64, 2), (3, 3)] {
+        let text = format!(
+            r#"(version: 1, nodes: {{"seq": (kind: "MeshSequence", params: {{"path": {:?}, "mode": "hold", "start_frame": {start}}})}}, links: [])"#,
+            record.display().to_string()
+        );
+        let g = Graph::load_str(&text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
+        let mut ev = Evaluator::new(&g, &["seq".to_string()]).unwrap();
+        let res = Resources::new(false);
+        let deadline = Instant::now() + WAIT;
+        let replay = loop {
+            ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &FrameSettings::default());
+            if let Some(Value::Surface(m)) = ev.output("seq", "surface") {
+                break m.clone();
+            }
+            assert!(Instant::now() < deadline, "MeshSequence did not load: {:?}", ev.report("seq").unwrap().status);
+            crate::common::wait_idle(&res);
+        };
+        // The same triangles corner by corner (MeshSequence numbers vertices in order of first
+        // use, which need not be the sender's numbering).
+        let corners = |m: &Mesh| -> Vec<(Vec3, Vec2, u32)> {
+            m.indices.iter().map(|&i| (m.positions[i as usize], m.uvs[i as usize], m.piece_ids[i as usize])).collect()
+        };
+        let sent = Mesh::from_parts(positions(frame), None, uvs.clone(), indices.clone(), pieces.clone()).unwrap();
+        let (got, want) = (corners(&replay), corners(&sent));
+        assert_eq!(got.len(), want.len(), "frame {frame}: triangle count");
+        for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+            assert_eq!((a.0, a.2), (b.0, b.2), "frame {frame}, corner {k}: position and piece");
+            assert!((a.1 - b.1).abs().max_element() < 1e-6, "frame {frame}, corner {k}: UV {} against {}", a.1, b.1);
+        }
+        if frame == 3 {
+            assert_eq!(got.iter().map(|c| c.0).collect::<Vec<_>>(), corners(&live).iter().map(|c| c.0).collect::<Vec<_>>());
+        }
+    }
+}
+
+/// A batch render of a graph whose LiveLink has no sender stops at once and says which node
+/// waits where, and how to record a session instead.
+#[test]
+fn a_batch_render_without_a_sender_names_the_node_and_how_to_record() {
+    let out = crate::common::out_dir("livelink-no-sender");
+    let err = crate::common::render_graph(
+        &crate::common::root().join("graphs/livelink.ron"),
+        &out,
+        (0, 0),
+        (32, 24),
+        &["simulator.address=127.0.0.1:0"],
+        &[],
+    )
+    .unwrap_err();
+    let msg = format!("{err:#}");
+    assert!(msg.contains("node \"simulator\" (LiveLink) is still waiting for a simulator on tcp://127.0.0.1:"), "{msg}");
+    // Not the 120 s limit of a frame that waits for loads: nothing will ever arrive.
+    assert!(msg.contains("nothing will arrive in a batch render"), "{msg}");
+    assert!(msg.contains("record") && msg.contains("MeshSequence"), "{msg}");
+}
