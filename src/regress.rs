@@ -177,7 +177,7 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
             if m.graphs.is_empty() {
                 bail!("{}: the manifest lists no graphs (graphs: [\"../graphs\", ...])", one.display());
             }
-            let graphs = m.graphs.iter().map(|g| base.join(g)).collect::<Vec<_>>();
+            let graphs = m.graphs.iter().map(|g| clean(&base.join(g))).collect::<Vec<_>>();
             (m, base, graphs)
         }
         inputs => {
@@ -274,6 +274,22 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
     }
     cases.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(cases)
+}
+
+/// `a/b/../c` as `a/c` (without touching the file system), so reports name graphs plainly.
+fn clean(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 fn stem(path: &Path) -> String {

@@ -359,7 +359,7 @@ fn two_processes_render_the_same_bytes() {
 
 #[test]
 fn help_exists_for_every_command() {
-    for cmd in ["render", "check", "fmt", "nodes", "info", "bench"] {
+    for cmd in ["render", "test", "report", "check", "fmt", "nodes", "info", "bench"] {
         let (code, out, _) = werkstatt(&[cmd, "--help"]);
         assert_eq!(code, 0, "{cmd}");
         assert!(out.contains("Usage"), "{cmd}");
@@ -397,6 +397,65 @@ fn a_link_of_the_wrong_type_names_the_port_that_fits() {
     assert_eq!(code, 1);
     assert!(err.contains("cannot link mat.material (Material) to draw.mesh (Mesh)"), "{err}");
     assert!(err.contains("did you mean draw.material? (it takes a Material)"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// `check --message-format json`: one object per problem, with the position, node, port and
+/// help that CI annotations need; warnings too, marked as such.
+#[test]
+fn check_prints_one_json_object_per_problem() {
+    let (dir, graph) = graph_file(
+        "check-json",
+        "(version: 1, nodes: {\n    \"mat\": (kind: \"Material\"),\n    \"draw\": (kind: \"Draw\"),\n    \"sim\": (kind: \"LiveLink\"),\n}, links: [\n    (\"mat.material\", \"draw.mesh\"),\n])",
+    );
+    let (code, out, _) = werkstatt(&["check", "--message-format", "json", graph.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    let problems: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let link = problems.iter().find(|p| p["port"] == "mesh").unwrap_or_else(|| panic!("{out}"));
+    assert_eq!(link["file"], graph.display().to_string());
+    assert_eq!((link["line"].as_u64(), link["column"].as_u64()), (Some(6), Some(5)), "{link}");
+    assert_eq!((&link["node"], &link["level"]), (&serde_json::json!("draw"), &serde_json::json!("error")));
+    assert!(link["message"].as_str().unwrap().contains("cannot link mat.material"), "{link}");
+    assert!(link["help"].as_str().unwrap().contains("draw.material"), "{link}");
+
+    // A valid graph's warnings: the LiveLink, at its line.
+    std::fs::write(&graph, "(version: 1, nodes: {\n    \"sim\": (kind: \"LiveLink\"),\n}, links: [])").unwrap();
+    let (code, out, _) = werkstatt(&["check", "--message-format", "json", graph.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}");
+    let w: serde_json::Value = serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!((&w["level"], &w["node"], &w["line"]), (&serde_json::json!("warning"), &serde_json::json!("sim"), &serde_json::json!(2)));
+    assert!(w["help"].as_str().unwrap().contains("record"), "{w}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// The command line of `werkstatt test`: exit code 1 on a regression (here a missing
+/// reference), 0 after --bless; `report merge` of one shard.
+#[test]
+fn test_command_exits_non_zero_on_a_regression() {
+    let dir = temp("test-command");
+    let (refs, out) = (dir.join("refs"), dir.join("out"));
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = ["test", "graphs/scalars.ron", "--references", refs.to_str().unwrap(), "--out", out.to_str().unwrap()]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = |a: Vec<String>| werkstatt(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let (code, _, err) = run(args(&[]));
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("no reference for case \"scalars\""), "{err}");
+    assert_eq!(run(args(&["--bless"])).0, 0);
+    let (code, _, err) = run(args(&["--shard", "0/1"]));
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run(args(&["--shard", "1/1"]));
+    assert_eq!(code, 1);
+    assert!(err.contains("shard 1 of 1 does not exist"), "{err}");
+    let merged = dir.join("merged");
+    let (code, _, err) = werkstatt(&["report", "merge", out.to_str().unwrap(), "--out", merged.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(merged.join("junit.xml").is_file() && merged.join("scalars/stats.json").is_file());
     std::fs::remove_dir_all(dir).unwrap();
 }
 
