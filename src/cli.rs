@@ -308,7 +308,8 @@ pub fn main() -> ExitCode {
 fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
     let mut failed = 0;
     let print_json = |file: &std::path::Path, line: usize, col: usize, level: &str, problem: serde_json::Value| {
-        let mut v = serde_json::json!({ "file": file.display().to_string(), "line": line, "column": col, "level": level });
+        let mut v =
+            serde_json::json!({ "file": file.display().to_string(), "line": line, "column": col, "level": level });
         if let (Some(o), serde_json::Value::Object(p)) = (v.as_object_mut(), problem) {
             o.extend(p);
         }
@@ -324,7 +325,8 @@ fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
                 for w in g.warnings(base) {
                     if json {
                         let (line, col) = std::fs::read_to_string(path).map(|s| w.line_col(&s)).unwrap_or((1, 1));
-                        let problem = serde_json::json!({ "node": w.node, "port": null, "message": w.message, "help": w.help });
+                        let problem =
+                            serde_json::json!({ "node": w.node, "port": null, "message": w.message, "help": w.help });
                         print_json(path, line, col, "warning", problem);
                     } else {
                         eprintln!("{}: warning: {w}", path.display());
@@ -339,7 +341,8 @@ fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
                 }
                 for d in &e.diagnostics {
                     let p = &d.problem;
-                    let problem = serde_json::json!({ "node": p.node, "port": p.port, "message": p.message, "help": p.help });
+                    let problem =
+                        serde_json::json!({ "node": p.node, "port": p.port, "message": p.message, "help": p.help });
                     print_json(&d.file, d.line, d.col, "error", problem);
                 }
             }

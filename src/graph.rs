@@ -696,7 +696,8 @@ impl Graph {
                     place: Place::Node(id.clone()),
                     node: id.clone(),
                     kind: spec.kind,
-                    message: "waits for a simulator to connect: `werkstatt render` fails unless one sends frames".into(),
+                    message: "waits for a simulator to connect: `werkstatt render` fails unless one sends frames"
+                        .into(),
                     help: Some(crate::nodes::live_link::RECORD_HELP.into()),
                 });
             }

@@ -107,9 +107,8 @@ impl Default for Manifest {
 impl Manifest {
     pub fn load(path: &Path) -> anyhow::Result<Manifest> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        ron::from_str(&text).map_err(|e| {
-            anyhow::anyhow!("{}:{}:{}: {}", path.display(), e.span.start.line, e.span.start.col, e.code)
-        })
+        ron::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}:{}:{}: {}", path.display(), e.span.start.line, e.span.start.col, e.code))
     }
 }
 
@@ -168,8 +167,7 @@ pub struct Case {
 
 /// The full, sorted list of cases of a run (before sharding).
 pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
-    let is_manifest =
-        |p: &Path| p.is_file() && p.file_name().is_some_and(|n| n.to_string_lossy().ends_with(MANIFEST));
+    let is_manifest = |p: &Path| p.is_file() && p.file_name().is_some_and(|n| n.to_string_lossy().ends_with(MANIFEST));
     let (manifest, base, graphs) = match opts.inputs.as_slice() {
         [one] if is_manifest(one) => {
             let m = Manifest::load(one)?;
@@ -198,7 +196,9 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
             let mut inside: Vec<PathBuf> = std::fs::read_dir(g)
                 .with_context(|| format!("cannot read the folder {}", g.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|e| e == "ron") && !p.to_string_lossy().ends_with(".autosave.ron"))
+                .filter(|p| {
+                    p.extension().is_some_and(|e| e == "ron") && !p.to_string_lossy().ends_with(".autosave.ron")
+                })
                 .collect();
             inside.sort();
             files.extend(inside);
@@ -249,7 +249,8 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
         let mut fixed = config.sets.clone();
         fixed.extend(fixed_cli.iter().cloned());
         for variant in product(&axes) {
-            let name = if variant.is_empty() { stem.clone() } else { sanitize(&format!("{stem}@{}", variant.join("+"))) };
+            let name =
+                if variant.is_empty() { stem.clone() } else { sanitize(&format!("{stem}@{}", variant.join("+"))) };
             if let Some(other) = cases.iter().find(|c| c.name == name) {
                 bail!(
                     "two cases are named \"{name}\": {} and {}; graphs tested together need distinct file names",
@@ -327,7 +328,8 @@ pub fn parse_axis(text: &str) -> anyhow::Result<(String, Vec<String>)> {
         current.push(c);
     }
     out.push(current.trim().to_string());
-    let out: Vec<String> = out.into_iter().map(|v| v.trim_start_matches('[').trim_end_matches(']').to_string()).collect();
+    let out: Vec<String> =
+        out.into_iter().map(|v| v.trim_start_matches('[').trim_end_matches(']').to_string()).collect();
     if depth != 0 || out.iter().any(String::is_empty) {
         bail!("--set \"{text}\": a value is empty or a bracket is not closed");
     }
@@ -600,14 +602,18 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
         let name = format!("watch:{key}");
         let (cur, refv) = (stats.values.get(key), reference.values.get(key));
         let tol = case.outputs.get(&name).unwrap_or(&case.tolerance).value;
-        result.outputs.push(match compare::compare_values(
-            refv.map_or(&[][..], Vec::as_slice),
-            cur.map_or(&[][..], Vec::as_slice),
-            tol,
-        ) {
-            Ok(()) => OutputResult { name, passed: true, detail: format!("{:?}", cur.unwrap_or(&Vec::new())), images: None },
-            Err(why) => fail(&name, why),
-        });
+        result.outputs.push(
+            match compare::compare_values(refv.map_or(&[][..], Vec::as_slice), cur.map_or(&[][..], Vec::as_slice), tol)
+            {
+                Ok(()) => OutputResult {
+                    name,
+                    passed: true,
+                    detail: format!("{:?}", cur.unwrap_or(&Vec::new())),
+                    images: None,
+                },
+                Err(why) => fail(&name, why),
+            },
+        );
     }
     let failures: Vec<String> =
         result.outputs.iter().filter(|o| !o.passed).map(|o| format!("{}: {}", o.name, o.detail)).collect();
@@ -625,7 +631,13 @@ fn fail(name: &str, detail: String) -> OutputResult {
 
 /// Compares one output file with its reference; a failing image gets its reference, current
 /// and diff views (PNG) written beside the output for the report.
-fn compare_file(name: &str, reference_dir: &Path, out: &Path, case: &str, tol: &Tolerances) -> anyhow::Result<OutputResult> {
+fn compare_file(
+    name: &str,
+    reference_dir: &Path,
+    out: &Path,
+    case: &str,
+    tol: &Tolerances,
+) -> anyhow::Result<OutputResult> {
     let (ref_path, cur_path) = (reference_dir.join(name), out.join(name));
     let ext = Path::new(name).extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
     let open = |p: &Path| image::open(p).with_context(|| format!("cannot read the image {}", p.display()));
@@ -709,15 +721,21 @@ fn bless(case: &Case, out: &Path, stats: &render::Stats, render_ms: f64) -> anyh
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     for f in &stats.files {
         let bytes = std::fs::read(out.join(f)).with_context(|| format!("cannot read {}", out.join(f).display()))?;
-        crate::atomic::write_atomic(&dir.join(f), &bytes).with_context(|| format!("cannot write {}", dir.join(f).display()))?;
+        crate::atomic::write_atomic(&dir.join(f), &bytes)
+            .with_context(|| format!("cannot write {}", dir.join(f).display()))?;
     }
     for entry in std::fs::read_dir(dir)? {
         let name = entry?.file_name().to_string_lossy().into_owned();
         if name != REFERENCE && !stats.files.contains(&name) {
-            std::fs::remove_file(dir.join(&name)).with_context(|| format!("cannot remove {}", dir.join(&name).display()))?;
+            std::fs::remove_file(dir.join(&name))
+                .with_context(|| format!("cannot remove {}", dir.join(&name).display()))?;
         }
     }
-    let reference = Reference { files: stats.files.clone(), values: stats.values.clone(), render_ms: (render_ms * 10.0).round() / 10.0 };
+    let reference = Reference {
+        files: stats.files.clone(),
+        values: stats.values.clone(),
+        render_ms: (render_ms * 10.0).round() / 10.0,
+    };
     let text = ron::ser::to_string_pretty(&reference, ron::ser::PrettyConfig::default())? + "\n";
     crate::atomic::write_atomic(&dir.join(REFERENCE), text.as_bytes())
         .with_context(|| format!("cannot write {}", dir.join(REFERENCE).display()))
@@ -731,9 +749,11 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> anyhow::Result<TestRun> {
     let mut cases: BTreeMap<String, (CaseResult, PathBuf)> = BTreeMap::new();
     for dir in shards {
         let path = dir.join(RESULTS);
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("cannot read {}: is {} the output folder of a `werkstatt test` run?", path.display(), dir.display()))?;
-        let run: TestRun = serde_json::from_str(&text).with_context(|| format!("{}: not a results file", path.display()))?;
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!("cannot read {}: is {} the output folder of a `werkstatt test` run?", path.display(), dir.display())
+        })?;
+        let run: TestRun =
+            serde_json::from_str(&text).with_context(|| format!("{}: not a results file", path.display()))?;
         match &plan {
             Some(p) if *p != run.plan => bail!("{}: a run of other cases than {}", path.display(), shards[0].display()),
             _ => plan = Some(run.plan.clone()),

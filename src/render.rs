@@ -378,7 +378,9 @@ fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
 /// will bring (a `LiveLink` waits for a simulator to connect), with what to do instead.
 fn nothing_will_arrive(ev: &Evaluator) -> String {
     let waiting = failures(ev);
-    let live = ev.reports().any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::live_link::LIVE_LINK.kind);
+    let live = ev
+        .reports()
+        .any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::live_link::LIVE_LINK.kind);
     let mut msg = format!("nothing will arrive in a batch render: {}", waiting.join("; "));
     if live {
         msg.push_str(&format!("\n  help: {}", crate::nodes::live_link::RECORD_HELP));

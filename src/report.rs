@@ -122,7 +122,9 @@ pub fn html(run: &TestRun, dir: &Path) -> String {
          </style></head><body>\n<h1>werkstatt test</h1>\n",
     );
     let _ = writeln!(h, "<p>{}</p>", escape(&run.summary()));
-    h.push_str("<table><tr><th>case</th><th>status</th><th>render ms</th><th>reference ms</th><th>compare ms</th></tr>\n");
+    h.push_str(
+        "<table><tr><th>case</th><th>status</th><th>render ms</th><th>reference ms</th><th>compare ms</th></tr>\n",
+    );
     for c in &run.cases {
         let status = status_name(&c.status);
         let reference = c.reference_ms.map_or_else(String::new, |r| format!("{r:.1}"));
@@ -158,8 +160,20 @@ fn anchor(name: &str) -> String {
 }
 
 fn section(h: &mut String, c: &CaseResult, dir: &Path) {
-    let _ = writeln!(h, "<h2 id=\"{}\">{} <span class=\"{}\">{}</span></h2>", anchor(&c.name), escape(&c.name), status_name(&c.status), status_name(&c.status));
-    let _ = writeln!(h, "<p>graph {}{}</p>", escape(&c.graph), if c.variant.is_empty() { String::new() } else { format!(", variant {}", escape(&c.variant.join(" "))) });
+    let _ = writeln!(
+        h,
+        "<h2 id=\"{}\">{} <span class=\"{}\">{}</span></h2>",
+        anchor(&c.name),
+        escape(&c.name),
+        status_name(&c.status),
+        status_name(&c.status)
+    );
+    let _ = writeln!(
+        h,
+        "<p>graph {}{}</p>",
+        escape(&c.graph),
+        if c.variant.is_empty() { String::new() } else { format!(", variant {}", escape(&c.variant.join(" "))) }
+    );
     if let Some(r) = c.reference_ms.filter(|_| c.slow) {
         let _ = writeln!(h, "<p class=\"slow\">render {:.1} ms against {r:.1} ms at the last bless</p>", c.render_ms);
     }

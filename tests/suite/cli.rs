@@ -423,7 +423,10 @@ fn check_prints_one_json_object_per_problem() {
     let (code, out, _) = werkstatt(&["check", "--message-format", "json", graph.to_str().unwrap()]);
     assert_eq!(code, 0, "{out}");
     let w: serde_json::Value = serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
-    assert_eq!((&w["level"], &w["node"], &w["line"]), (&serde_json::json!("warning"), &serde_json::json!("sim"), &serde_json::json!(2)));
+    assert_eq!(
+        (&w["level"], &w["node"], &w["line"]),
+        (&serde_json::json!("warning"), &serde_json::json!("sim"), &serde_json::json!(2))
+    );
     assert!(w["help"].as_str().unwrap().contains("record"), "{w}");
     std::fs::remove_dir_all(dir).unwrap();
 }
@@ -435,10 +438,11 @@ fn test_command_exits_non_zero_on_a_regression() {
     let dir = temp("test-command");
     let (refs, out) = (dir.join("refs"), dir.join("out"));
     let args = |extra: &[&str]| -> Vec<String> {
-        let mut a: Vec<String> = ["test", "graphs/scalars.ron", "--references", refs.to_str().unwrap(), "--out", out.to_str().unwrap()]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
+        let mut a: Vec<String> =
+            ["test", "graphs/scalars.ron", "--references", refs.to_str().unwrap(), "--out", out.to_str().unwrap()]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
         a.extend(extra.iter().map(|s| s.to_string()));
         a
     };

@@ -455,8 +455,10 @@ fn a_recorded_session_replays_through_mesh_sequence() {
     let live = rig.surface();
     assert!(rig.warnings().is_empty(), "{:?}", rig.warnings());
     let files: Vec<String> = {
-        let mut f: Vec<String> =
-            std::fs::read_dir(&record).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        let mut f: Vec<String> = std::fs::read_dir(&record)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
         f.sort();
         f
     };
@@ -493,7 +495,10 @@ fn a_recorded_session_replays_through_mesh_sequence() {
             assert!((a.1 - b.1).abs().max_element() < 1e-6, "frame {frame}, corner {k}: UV {} against {}", a.1, b.1);
         }
         if frame == 3 {
-            assert_eq!(got.iter().map(|c| c.0).collect::<Vec<_>>(), corners(&live).iter().map(|c| c.0).collect::<Vec<_>>());
+            assert_eq!(
+                got.iter().map(|c| c.0).collect::<Vec<_>>(),
+                corners(&live).iter().map(|c| c.0).collect::<Vec<_>>()
+            );
         }
     }
 }
@@ -513,7 +518,10 @@ fn a_batch_render_without_a_sender_names_the_node_and_how_to_record() {
     )
     .unwrap_err();
     let msg = format!("{err:#}");
-    assert!(msg.contains("node \"simulator\" (LiveLink) is still waiting for a simulator on tcp://127.0.0.1:"), "{msg}");
+    assert!(
+        msg.contains("node \"simulator\" (LiveLink) is still waiting for a simulator on tcp://127.0.0.1:"),
+        "{msg}"
+    );
     // Not the 120 s limit of a frame that waits for loads: nothing will ever arrive.
     assert!(msg.contains("nothing will arrive in a batch render"), "{msg}");
     assert!(msg.contains("record") && msg.contains("MeshSequence"), "{msg}");

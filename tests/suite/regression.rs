@@ -108,7 +108,10 @@ fn a_missing_reference_is_a_clear_error() {
     assert_eq!(case.status, Status::Error);
     let msg = case.message.clone().unwrap();
     let expected = dir.join("references/scalars/reference.ron");
-    assert!(msg.contains("no reference for case \"scalars\"") && msg.contains(&expected.display().to_string()), "{msg}");
+    assert!(
+        msg.contains("no reference for case \"scalars\"") && msg.contains(&expected.display().to_string()),
+        "{msg}"
+    );
     assert!(msg.contains("--bless"), "{msg}");
     let junit = std::fs::read_to_string(opts.out_dir.join("junit.xml")).unwrap();
     assert!(junit.contains("errors=\"1\"") && junit.contains("<error message=\"no reference"), "{junit}");
@@ -120,7 +123,16 @@ fn without_timings(path: &Path) -> String {
     let mut out = String::new();
     for line in text.lines() {
         let mut l = line.to_string();
-        for key in ["time=\"", "\"render_ms\": ", "\"compare_ms\": ", "\"reference_ms\": ", "time: ", "<td>", "render ", "compare "] {
+        for key in [
+            "time=\"",
+            "\"render_ms\": ",
+            "\"compare_ms\": ",
+            "\"reference_ms\": ",
+            "time: ",
+            "<td>",
+            "render ",
+            "compare ",
+        ] {
             let mut from = 0;
             while let Some(i) = l[from..].find(key).map(|i| i + from + key.len()) {
                 let end = l[i..].find(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(l.len(), |e| i + e);
