@@ -107,9 +107,14 @@ impl Default for Manifest {
 impl Manifest {
     pub fn load(path: &Path) -> anyhow::Result<Manifest> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        ron::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}:{}:{}: {}", path.display(), e.span.start.line, e.span.start.col, e.code))
+        parse_ron(&text, path)
     }
+}
+
+/// Parses RON text read from `path`; an error names the file, line and column.
+fn parse_ron<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> anyhow::Result<T> {
+    ron::from_str(text)
+        .map_err(|e| anyhow::anyhow!("{}:{}:{}: {}", path.display(), e.span.start.line, e.span.start.col, e.code))
 }
 
 /// What `werkstatt test` was asked to do.
@@ -216,15 +221,8 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
     }
     if let Some(path) = &opts.sweep_file {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let list: Vec<String> = ron::from_str(&text).map_err(|e| {
-            anyhow::anyhow!(
-                "{}:{}:{}: {} (a sweep file is a list of \"node.param=a,b,c\")",
-                path.display(),
-                e.span.start.line,
-                e.span.start.col,
-                e.code
-            )
-        })?;
+        let list: Vec<String> =
+            parse_ron(&text, path).context("a sweep file is a RON list of \"node.param=a,b,c\" strings")?;
         for s in &list {
             axes_cli.push(parse_axis(s).with_context(|| format!("in {}", path.display()))?);
         }
@@ -569,9 +567,7 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
     }
     let reference_file = case.reference_dir.join(REFERENCE);
     let reference: Reference = match std::fs::read_to_string(&reference_file) {
-        Ok(text) => ron::from_str(&text).map_err(|e| {
-            anyhow::anyhow!("{}:{}:{}: {}", reference_file.display(), e.span.start.line, e.span.start.col, e.code)
-        })?,
+        Ok(text) => parse_ron(&text, &reference_file)?,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             result.status = Status::Error;
             result.message = Some(format!(

@@ -28,10 +28,16 @@ struct Rig {
 
 impl Rig {
     fn start() -> Rig {
-        let text = r#"(version: 1, nodes: {
+        Rig::with_graph(
+            r#"(version: 1, nodes: {
             "link": (kind: "LiveLink", params: {"address": "127.0.0.1:0"}),
             "watch": (kind: "Watch"),
-        }, links: [("link.frame", "watch.value")])"#;
+        }, links: [("link.frame", "watch.value")])"#,
+        )
+    }
+
+    /// A rig on a graph whose LiveLink "link" listens on 127.0.0.1:0.
+    fn with_graph(text: &str) -> Rig {
         let g = Graph::load_str(text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
         let mut rig = Rig {
             ev: Evaluator::new(&g, &["link".to_string()]).unwrap(),
@@ -428,20 +434,7 @@ fn a_recorded_session_replays_through_mesh_sequence() {
         r#"(version: 1, nodes: {{"link": (kind: "LiveLink", params: {{"address": "127.0.0.1:0", "record": {:?}}})}}, links: [])"#,
         record.display().to_string()
     );
-    let g = Graph::load_str(&text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
-    let mut rig = Rig {
-        ev: Evaluator::new(&g, &["link".to_string()]).unwrap(),
-        res: Resources::new(false),
-        frame: 0,
-        addr: "127.0.0.1:0".parse().unwrap(),
-    };
-    rig.wait_until("the recording listener to bind", |r| match r.status() {
-        NodeStatus::Pending(p) => {
-            r.addr = p.display().to_string().rsplit("tcp://").next().unwrap().parse().unwrap();
-            r.addr.port() != 0
-        }
-        _ => false,
-    });
+    let mut rig = Rig::with_graph(&text);
     let (indices, uvs, pieces) = two_pieces();
     let positions = |f: u64| -> Vec<Vec3> {
         uvs.iter().map(|uv| Vec3::new(uv.x, 0.3 * f as f32 + (uv.x * 5.0 + f as f32).sin() * 0.1, uv.y)).collect()
