@@ -254,3 +254,17 @@ fn shards_merge_to_the_unsharded_run_and_sweeps_name_their_variants() {
         }
     }
 }
+
+/// The manifest shown in docs/ci.md is one that `werkstatt test` reads.
+#[test]
+fn the_manifest_in_the_docs_parses() {
+    let doc = std::fs::read_to_string(root().join("docs/ci.md")).unwrap();
+    let start = doc.find("```ron\n").expect("a ron block in docs/ci.md") + 7;
+    let text = &doc[start..start + doc[start..].find("```").unwrap()];
+    let path = out_dir("regression-doc-manifest").join("manifest.ron");
+    std::fs::write(&path, text).unwrap();
+    let m = regress::Manifest::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(m.size, (48, 36));
+    assert_eq!(m.cases["spot"].outputs["hdr_0000.exr"].exr.threshold, 0.05);
+    assert_eq!(m.cases["default"].size, Some((64, 48)));
+}
