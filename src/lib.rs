@@ -29,7 +29,6 @@ pub mod param;
 pub mod port;
 pub mod regress;
 pub mod render;
-pub mod report;
 pub mod resources;
 pub mod rng;
 pub mod scene;

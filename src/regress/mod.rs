@@ -1,7 +1,7 @@
 //! `werkstatt test`: renders saved graphs and compares every output (images, EXR, exported
 //! geometry, `Watch` values) with stored references, under tolerances from a small RON
 //! manifest beside the references; sweeps of parameter values, shards for cluster schedulers,
-//! and the reports (results.json, JUnit XML, HTML; see [`crate::report`]).
+//! and the reports (results.json, JUnit XML, HTML; see [`report`]).
 //!
 //! The unit of work is a *case*: one graph with one set of parameter values (a sweep's
 //! variant). Cases are named (`tablecloth`, `default@median_cut.count=4`), sorted by name, and
@@ -21,6 +21,8 @@ use serde::{Deserialize, Serialize};
 use crate::compare::{self, ImageTolerance};
 use crate::gpu::GpuContext;
 use crate::render::{self, RenderOptions};
+
+pub mod report;
 
 /// The file name of a manifest; a folder of references may hold one.
 pub const MANIFEST: &str = "manifest.ron";
@@ -500,7 +502,7 @@ pub fn run(opts: &TestOptions, gpu: &GpuContext, mut progress: impl FnMut(&CaseR
         results.push(r);
     }
     let run = TestRun { plan: cases.iter().map(|c| c.name.clone()).collect(), shard: opts.shard, cases: results };
-    crate::report::write_all(&opts.out_dir, &run)?;
+    report::write_all(&opts.out_dir, &run)?;
     Ok(run)
 }
 
@@ -779,7 +781,7 @@ pub fn merge(shards: &[PathBuf], out: &Path) -> anyhow::Result<TestRun> {
         merged.push(case);
     }
     let run = TestRun { plan, shard: (0, 1), cases: merged };
-    crate::report::write_all(out, &run)?;
+    report::write_all(out, &run)?;
     Ok(run)
 }
 

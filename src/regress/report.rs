@@ -7,7 +7,7 @@ use std::path::Path;
 
 use anyhow::Context as _;
 
-use crate::regress::{CaseResult, RESULTS, Status, TestRun};
+use super::{CaseResult, RESULTS, Status, TestRun};
 
 /// Writes `results.json`, `junit.xml` and `report.html` into `dir` (atomically each).
 pub fn write_all(dir: &Path, run: &TestRun) -> anyhow::Result<()> {
