@@ -100,6 +100,10 @@ enum Command {
         /// or JOB_COMPLETION_INDEX/WERKSTATT_SHARD_COUNT, else everything.
         #[arg(long, value_name = "I/N")]
         shard: Option<String>,
+        /// Fail cases slower than their reference time by more than the manifest's `slowdown`
+        /// factor (without it they are only flagged).
+        #[arg(long)]
+        fail_on_slowdown: bool,
         /// GPU backend (or WERKSTATT_BACKEND).
         #[arg(long, value_enum)]
         backend: Option<Backend>,
@@ -442,7 +446,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Check { graphs, message_format } => Ok(check(&graphs, message_format == "json")),
-        Command::Test { inputs, references, out, bless, sets, sweep, shard, backend } => {
+        Command::Test { inputs, references, out, bless, sets, sweep, shard, fail_on_slowdown, backend } => {
             let shard = crate::regress::shard_from(shard.as_deref(), |k| std::env::var(k).ok())?;
             let opts = crate::regress::TestOptions {
                 inputs,
@@ -452,6 +456,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 sets,
                 sweep_file: sweep,
                 shard,
+                fail_on_slowdown,
             };
             // Plan first, so a bad manifest or --set fails before the GPU starts.
             crate::regress::plan(&opts)?;

@@ -137,6 +137,9 @@ pub struct TestOptions {
     pub sweep_file: Option<PathBuf>,
     /// This run's shard (index, count).
     pub shard: (usize, usize),
+    /// Fail a case that is slower than its reference by more than its `slowdown` tolerance
+    /// (by default such a case is only flagged).
+    pub fail_on_slowdown: bool,
 }
 
 impl TestOptions {
@@ -149,6 +152,7 @@ impl TestOptions {
             sets: Vec::new(),
             sweep_file: None,
             shard: (0, 1),
+            fail_on_slowdown: false,
         }
     }
 }
@@ -584,6 +588,15 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
     };
     result.reference_ms = Some(reference.render_ms);
     result.slow = result.render_ms > reference.render_ms * case.tolerance.slowdown;
+    if result.slow && opts.fail_on_slowdown {
+        result.outputs.push(fail(
+            "time",
+            format!(
+                "{:.1} ms, more than {} x the reference's {:.1} ms (--fail-on-slowdown)",
+                result.render_ms, case.tolerance.slowdown, reference.render_ms
+            ),
+        ));
+    }
     let current: BTreeSet<&String> = stats.files.iter().collect();
     let expected: BTreeSet<&String> = reference.files.iter().collect();
     for name in current.union(&expected) {

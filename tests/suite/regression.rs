@@ -268,3 +268,18 @@ fn the_manifest_in_the_docs_parses() {
     assert_eq!(m.cases["spot"].outputs["hdr_0000.exr"].exr.threshold, 0.05);
     assert_eq!(m.cases["default"].size, Some((64, 48)));
 }
+
+/// A slowdown is flagged, not failed, unless asked for. (A `slowdown` tolerance of 0 makes
+/// every render "slower than its reference", so nothing here depends on the machine's speed.)
+#[test]
+fn a_slowdown_is_flagged_and_fails_only_when_asked() {
+    let (_dir, mut opts) = blessed("regression-slow", &["scalars.ron"], &[]);
+    std::fs::write(opts.references.join("manifest.ron"), "(size: (32, 24), tolerance: (slowdown: 0.0))").unwrap();
+    let r = run(&opts);
+    assert!(r.cases[0].slow && !r.regressed(), "{}", failures(&r));
+    assert!(std::fs::read_to_string(opts.out_dir.join("report.html")).unwrap().contains("class=\"slow\""));
+    opts.fail_on_slowdown = true;
+    let r = run(&opts);
+    assert_eq!(r.cases[0].status, Status::Failed);
+    assert!(r.cases[0].message.as_deref().unwrap().contains("--fail-on-slowdown"), "{}", failures(&r));
+}
