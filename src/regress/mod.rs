@@ -4,10 +4,9 @@
 //! and the reports (results.json, JUnit XML, HTML; see [`report`]).
 //!
 //! The unit of work is a *case*: one graph with one set of parameter values (a sweep's
-//! variant). Cases are named (`tablecloth`, `default@median_cut.count=4`), sorted by name, and
-//! shard `I/N` runs the cases whose position in that order is I modulo N. A graph's frames stay
-//! in one case: they share state (a cloth simulation runs through them), so splitting them
-//! would re-simulate. Each case renders into `<out>/<case>/`, and its references live in
+//! variant) over its frames, or over a part of them with `frames_per_case`. Cases are named
+//! (`tablecloth`, `default@median_cut.count=4`, `tablecloth@frames=0-11`), sorted by name, and
+//! shard `I/N` runs the cases whose position in that order is I modulo N. Each case renders into `<out>/<case>/`, and its references live in
 //! `<references>/<case>/`: the files it wrote and `reference.ron` (the file list, the `Watch`
 //! values and the render time at the last `--bless`).
 
@@ -70,6 +69,8 @@ pub struct CaseConfig {
     pub size: Option<(u32, u32)>,
     /// Inclusive frame range.
     pub frames: Option<(i64, i64)>,
+    /// Split the frames into cases of this many frames each (see [`Manifest::frames_per_case`]).
+    pub frames_per_case: Option<u32>,
     /// Replaces the manifest's tolerances for this graph (fields not written: built-in defaults).
     pub tolerance: Option<Tolerances>,
     /// Tolerances of single outputs, by file name (`image_0000.png`).
@@ -87,6 +88,12 @@ pub struct Manifest {
     pub graphs: Vec<String>,
     pub size: (u32, u32),
     pub frames: (i64, i64),
+    /// Split each graph's frames into cases of this many frames (`tablecloth@frames=0-11`,
+    /// ...), so that shards share out long animations too. Each such case renders its frames
+    /// on its own: nodes that depend on earlier frames replay them (ClothSim simulates from
+    /// the start), so the outputs are those of one run over all frames, at more cost.
+    /// 0: one case for all frames.
+    pub frames_per_case: u32,
     pub fps: f64,
     pub tolerance: Tolerances,
     /// Per graph, by file stem.
@@ -99,6 +106,7 @@ impl Default for Manifest {
             graphs: Vec::new(),
             size: (160, 120),
             frames: (0, 0),
+            frames_per_case: 0,
             fps: 30.0,
             tolerance: Tolerances::default(),
             cases: BTreeMap::new(),
@@ -252,29 +260,42 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
         axes.extend(axes_cli.iter().cloned());
         let mut fixed = config.sets.clone();
         fixed.extend(fixed_cli.iter().cloned());
+        let (first, last) = config.frames.unwrap_or(manifest.frames);
+        let per_case = config.frames_per_case.unwrap_or(manifest.frames_per_case) as i64;
+        let chunks: Vec<(i64, i64)> = if per_case > 0 && last - first + 1 > per_case {
+            (first..=last).step_by(per_case as usize).map(|a| (a, (a + per_case - 1).min(last))).collect()
+        } else {
+            vec![(first, last)]
+        };
         for variant in product(&axes) {
-            let name =
-                if variant.is_empty() { stem.clone() } else { sanitize(&format!("{stem}@{}", variant.join("+"))) };
-            if let Some(other) = cases.iter().find(|c| c.name == name) {
-                bail!(
-                    "two cases are named \"{name}\": {} and {}; graphs tested together need distinct file names",
-                    other.graph.display(),
-                    file.display()
-                );
+            for &(a, b) in &chunks {
+                let mut suffix = variant.clone();
+                if chunks.len() > 1 {
+                    suffix.push(format!("frames={a}-{b}"));
+                }
+                let name =
+                    if suffix.is_empty() { stem.clone() } else { sanitize(&format!("{stem}@{}", suffix.join("+"))) };
+                if let Some(other) = cases.iter().find(|c| c.name == name) {
+                    bail!(
+                        "two cases are named \"{name}\": {} and {}; graphs tested together need distinct file names",
+                        other.graph.display(),
+                        file.display()
+                    );
+                }
+                cases.push(Case {
+                    reference_dir: base.join(&name),
+                    name,
+                    graph: file.clone(),
+                    sets: fixed.iter().cloned().chain(variant.iter().cloned()).collect(),
+                    variant: variant.clone(),
+                    size: config.size.unwrap_or(manifest.size),
+                    frames: (a, b),
+                    fps: manifest.fps,
+                    tolerance: config.tolerance.clone().unwrap_or_else(|| manifest.tolerance.clone()),
+                    outputs: config.outputs.clone(),
+                    expect_error: config.expect_error.clone(),
+                });
             }
-            cases.push(Case {
-                reference_dir: base.join(&name),
-                name,
-                graph: file.clone(),
-                sets: fixed.iter().cloned().chain(variant.iter().cloned()).collect(),
-                variant,
-                size: config.size.unwrap_or(manifest.size),
-                frames: config.frames.unwrap_or(manifest.frames),
-                fps: manifest.fps,
-                tolerance: config.tolerance.clone().unwrap_or_else(|| manifest.tolerance.clone()),
-                outputs: config.outputs.clone(),
-                expect_error: config.expect_error.clone(),
-            });
         }
     }
     cases.sort_by(|a, b| a.name.cmp(&b.name));

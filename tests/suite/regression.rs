@@ -283,3 +283,48 @@ fn a_slowdown_is_flagged_and_fails_only_when_asked() {
     assert_eq!(r.cases[0].status, Status::Failed);
     assert!(r.cases[0].message.as_deref().unwrap().contains("--fail-on-slowdown"), "{}", failures(&r));
 }
+
+/// `frames_per_case` splits a graph's frames into cases (so shards share out animations):
+/// named by their frames, each rendering what one run over all frames renders (ClothSim
+/// replays the frames before a case's first).
+#[test]
+fn frames_split_into_cases_render_what_one_run_renders() {
+    let dir = out_dir("regression-frames");
+    let mut opts = TestOptions::new(vec![root().join("graphs/tablecloth.ron")], dir.join("split"));
+    opts.references = dir.join("references");
+    std::fs::create_dir_all(&opts.references).unwrap();
+    std::fs::write(
+        opts.references.join("manifest.ron"),
+        "(size: (32, 24), frames: (0, 3), frames_per_case: 2, tolerance: (slowdown: 1e9))",
+    )
+    .unwrap();
+    let names: Vec<String> = regress::plan(&opts).unwrap().into_iter().map(|c| c.name).collect();
+    assert_eq!(names, ["tablecloth@frames=0-1", "tablecloth@frames=2-3"]);
+    opts.bless = true;
+    run(&opts);
+    opts.bless = false;
+    let split = run(&opts);
+    assert!(!split.regressed(), "{}", failures(&split));
+    let whole = dir.join("whole");
+    let out = render_graph(&root().join("graphs/tablecloth.ron"), &whole, (0, 3), (32, 24), &[], &[]).unwrap();
+    assert_eq!(out.files.len(), 4);
+    for (case, images) in [
+        ("tablecloth@frames=0-1", ["image_0000.png", "image_0001.png"]),
+        ("tablecloth@frames=2-3", ["image_0002.png", "image_0003.png"]),
+    ] {
+        let mut written: Vec<String> = std::fs::read_dir(opts.out_dir.join(case))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".png"))
+            .collect();
+        written.sort();
+        assert_eq!(written, images, "{case} renders its frames only");
+    }
+    for (case, frame) in [("tablecloth@frames=0-1", 1), ("tablecloth@frames=2-3", 2), ("tablecloth@frames=2-3", 3)] {
+        let file = format!("image_{frame:04}.png");
+        assert!(
+            std::fs::read(opts.out_dir.join(case).join(&file)).unwrap() == std::fs::read(whole.join(&file)).unwrap(),
+            "{case}: {file} differs from a run over frames 0..3"
+        );
+    }
+}
