@@ -14,11 +14,10 @@
 //!
 //! CPU math is in f64 so the composed transforms lose nothing before they reach the GPU's f32.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3, Mat4, Vec3};
 
-use crate::gpu::GpuContext;
 use crate::mesh::Mesh;
 
 /// The unit-cube position of corner `i` (eq. 3.1's order).
@@ -174,7 +173,6 @@ pub struct CuboidGrid {
     pub corners: Vec<DVec3>,
     /// How normals are transformed when drawn.
     pub normals: NormalMethod,
-    gpu: OnceLock<wgpu::Buffer>,
 }
 
 impl Clone for CuboidGrid {
@@ -228,7 +226,7 @@ impl CuboidGrid {
         if let Some(i) = corners.iter().position(|c| !c.is_finite()) {
             return Err(format!("corner {i} of the cuboid grid is not finite"));
         }
-        Ok(CuboidGrid { box_min, box_max, cells, corners, normals, gpu: OnceLock::new() })
+        Ok(CuboidGrid { box_min, box_max, cells, corners, normals })
     }
 
     /// A grid whose corner at unit-cube position `u` is `f(u)`.
@@ -347,24 +345,24 @@ impl CuboidGrid {
         .expect("a resampled grid keeps a valid box")
     }
 
-    /// Corner positions as a read-only storage buffer of `vec4<f32>` in corner order: the
-    /// dissertation's 3D texture of positions, but read as plain memory (shaders/cuboid.wgsl
-    /// does the trilinear step, eq. 3.4, itself; texel fetches in the vertex stage cost
-    /// lavapipe far more than buffer loads, and 32-bit floats are not filterable everywhere).
-    pub fn gpu(&self, gpu: &GpuContext) -> &wgpu::Buffer {
-        self.gpu.get_or_init(|| {
-            let texels: Vec<[f32; 4]> = self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()).collect();
-            gpu.create_buffer_init("cuboid grid", bytemuck::cast_slice(&texels), wgpu::BufferUsages::STORAGE)
-        })
+    /// Appends the corner positions as `vec4<f32>` in corner order to `texels`, the one
+    /// storage buffer of all grids a draw uses: the dissertation's 3D texture of positions,
+    /// read as plain memory (shaders/cuboid.wgsl does the trilinear step, eq. 3.4, itself;
+    /// texel fetches in the vertex stage cost lavapipe far more than buffer loads, and one
+    /// buffer for all grids saves a buffer and a bind group per object and frame).
+    pub fn append_corners(&self, texels: &mut Vec<[f32; 4]>) {
+        texels.extend(self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()));
     }
 
-    /// The uniform block of shaders/cuboid.wgsl: box origin (w: normal method), 1/box size,
+    /// The grid's header in the object uniform (shaders/object.wgsl `grid_*`): box origin
+    /// (w: normal method), 1/box size (w: index of the first corner in the shared buffer),
     /// cells per axis.
-    pub fn uniform(&self) -> [[f32; 4]; 3] {
+    pub fn header(&self, first_corner: u32) -> [[f32; 4]; 3] {
         let inv = (1.0 / (self.box_max - self.box_min)).as_vec3();
+        // f32 holds every index below 2^24 exactly; the drawer checks the total.
         [
             self.box_min.as_vec3().extend(self.normals.shader_flag()).to_array(),
-            inv.extend(0.0).to_array(),
+            inv.extend(first_corner as f32).to_array(),
             [self.cells[0] as f32, self.cells[1] as f32, self.cells[2] as f32, 0.0],
         ]
     }

@@ -287,7 +287,17 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
             attached: None,
             cuboid,
         };
-        let on_gpu = [item(plate.clone(), model, Some(grid.clone()))];
+        // Drawn after another non-linear grid (of the other normal method) that puts its copy
+        // beyond the far plane: both grids share one corner buffer, so the plate's grid must
+        // be read from its own first corner with its own header.
+        let other = if method == NormalMethod::Direct { NormalMethod::TangentSpace } else { NormalMethod::Direct };
+        let beyond_far = Arc::new(
+            CuboidGrid::from_fn(lo, hi, [2, 2, 2], other, |u| {
+                bend(lo, hi, 40.0)(lo + u * (hi - lo)) - 100.0 * DVec3::Z
+            })
+            .unwrap(),
+        );
+        let on_gpu = [item(plate.clone(), model, Some(beyond_far)), item(plate.clone(), model, Some(grid.clone()))];
         let on_cpu = [item(cpu, Mat4::IDENTITY, None)];
         let mut drawer = SceneDrawer::default();
         let a = drawer.gbuffer(gpu, &on_gpu, camera, view).unwrap();
