@@ -333,3 +333,45 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
         assert!(diff <= 4, "{method:?}: shadow-tile depth differs in {diff} texels (worst {worst_tile})");
     }
 }
+
+/// Fig. 4.5: a tube along x through a 2x1 bend grid, its seam at x = 0. Across the seam only
+/// the Jacobian's x column jumps (the y and z columns are derivatives within the shared face).
+/// The direct method, J n, uses only those columns for the tube's normals (n_x = 0), so it is
+/// continuous there; the tangent-space method, cof(J) n, involves the x column and shows the
+/// seam, but stays orthogonal to the deformed surface, which J n does not. Both by exactly
+/// the angles the cells' chords give.
+#[test]
+fn at_a_cell_seam_direct_normals_are_continuous_and_tangent_space_normals_are_orthogonal() {
+    let (lo, hi) = (DVec3::new(-1.0, -0.5, -0.5), DVec3::new(1.0, 0.5, 0.5));
+    let grid =
+        |method| CuboidGrid::from_fn(lo, hi, [2, 1, 1], method, |u| bend(lo, hi, 120.0)(lo + u * (hi - lo))).unwrap();
+    let (direct, tangent) = (grid(NormalMethod::Direct), grid(NormalMethod::TangentSpace));
+    let angle = |a: DVec3, b: DVec3| a.normalize().dot(b.normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+    let (mut direct_jump, mut tangent_jump, mut tangent_skew, mut direct_skew) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for k in 0..16 {
+        let phi = k as f64 * std::f64::consts::TAU / 16.0;
+        let n = DVec3::new(0.0, phi.cos(), phi.sin());
+        let p = 0.3 * n;
+        let (left, right) = (p - 1e-9 * DVec3::X, p + 1e-9 * DVec3::X);
+        direct_jump = direct_jump.max(angle(direct.normal(left, n), direct.normal(right, n)));
+        tangent_jump = tangent_jump.max(angle(tangent.normal(left, n), tangent.normal(right, n)));
+        // The tube's tangents at p: along x and around it.
+        for t in [DVec3::X, DVec3::new(0.0, -phi.sin(), phi.cos())] {
+            for side in [left, right] {
+                let image = direct.jacobian(side) * t;
+                tangent_skew = tangent_skew.max((90.0 - angle(tangent.normal(side, n), image)).abs());
+                direct_skew = direct_skew.max((90.0 - angle(direct.normal(side, n), image)).abs());
+            }
+        }
+    }
+    eprintln!(
+        "seam: direct jumps {direct_jump:.2e} deg, tangent space {tangent_jump:.2} deg; off-orthogonal: tangent space {tangent_skew:.2e} deg, direct {direct_skew:.2} deg"
+    );
+    assert!(direct_jump < 1e-5, "direct normals jump by {direct_jump} degrees at the seam");
+    // Each cell's x edges are chords of its 60 degrees of the 120 degree arc: the surface turns
+    // by the angle between neighbouring chords at the seam, and J n (the face's direction at
+    // the seam) leans half of it from either chord's normal.
+    assert!((tangent_jump - 60.0).abs() < 1e-6, "tangent-space normals jump {tangent_jump} degrees, not 60");
+    assert!(tangent_skew < 1e-6, "tangent-space normals leave the surface's normal by {tangent_skew} degrees");
+    assert!((direct_skew - 30.0).abs() < 1e-6, "direct normals lean {direct_skew} degrees, not 30");
+}
