@@ -523,6 +523,12 @@ impl Anchor {
     /// triangle of `mesh` that contains `uv` in texture space (stable under deformation,
     /// since a deforming mesh keeps its UVs).
     pub fn at_uv(mesh: &Mesh, uv: glam::DVec2, du: f64) -> Result<Anchor, String> {
+        Anchor::at_uv_towards(mesh, uv, glam::DVec2::new(du, 0.0))
+    }
+
+    /// Like [`Anchor::at_uv`] with the tangent point at `uv + step` (a row of anchors points
+    /// its tangents along the row).
+    pub fn at_uv_towards(mesh: &Mesh, uv: glam::DVec2, step: glam::DVec2) -> Result<Anchor, String> {
         if mesh.uvs.len() != mesh.positions.len() {
             return Err("the anchor mesh has no texture coordinates".into());
         }
@@ -531,7 +537,7 @@ impl Anchor {
             let [a, b, c] = std::array::from_fn(|k| mesh.uvs[mesh.indices[3 * t + k] as usize].as_dvec2());
             if let Some(w) = barycentric_2d(a, b, c, uv) {
                 // The tangent point may leave the triangle: barycentrics extrapolate linearly.
-                let tangent_point = barycentric_2d_unclamped(a, b, c, uv + glam::DVec2::new(du, 0.0))
+                let tangent_point = barycentric_2d_unclamped(a, b, c, uv + step)
                     .ok_or_else(|| format!("triangle {t} is degenerate in UV space"))?;
                 return Ok(Anchor { triangle: t, point: w, tangent_point });
             }
@@ -598,6 +604,32 @@ pub fn anchor_grid(
         }
     }
     CuboidGrid::new(box_min, box_max, cells, corners, normals)
+}
+
+/// A row of anchors (a 1D array) driving a grid of `(n-1) x 1 x 1` cells, for objects along
+/// a line on the body (a belt, a zip): corner `(i, j, k)` lies at anchor `i`'s frame
+/// coordinates `(0, (j - 1/2) width, k height)`, so the row runs through the middle of the
+/// grid's bottom face, across its bitangent.
+pub fn anchor_row(
+    frames: &[Frame],
+    width: f64,
+    height: f64,
+    box_min: DVec3,
+    box_max: DVec3,
+    normals: NormalMethod,
+) -> Result<CuboidGrid, String> {
+    if frames.len() < 2 {
+        return Err(format!("a row of anchors needs at least 2 of them, not {}", frames.len()));
+    }
+    let mut corners = Vec::with_capacity(frames.len() * 4);
+    for k in 0..2 {
+        for j in 0..2 {
+            for f in frames {
+                corners.push(f.point(DVec3::new(0.0, (j as f64 - 0.5) * width, height * k as f64)));
+            }
+        }
+    }
+    CuboidGrid::new(box_min, box_max, [frames.len() - 1, 1, 1], corners, normals)
 }
 
 #[cfg(test)]

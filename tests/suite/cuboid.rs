@@ -9,7 +9,8 @@ use std::sync::Arc;
 use glam::{DMat4, DQuat, DVec2, DVec3, Mat4, Vec3};
 use proptest::prelude::*;
 use werkstatt::cuboid::{
-    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, bend, compose, unit_corner,
+    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, anchor_row, bend, compose,
+    unit_corner,
 };
 use werkstatt::draw::SceneDrawer;
 use werkstatt::gpu::read_back;
@@ -186,6 +187,50 @@ fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
         worst = worst.max(after.eval(p.as_dvec3()).distance(expected) / size);
     }
     assert!(worst < 1e-5, "relative error {worst}");
+}
+
+/// A row of anchors across a flat plane (y = 0, normal +y) gives the affine grid it should:
+/// content x runs along the row from its first anchor to its last, y across it over `width`
+/// (along the bitangent n x t = -z), z up the normal over `height`. On a sphere the row's grid
+/// bends, and it moves rigidly with the sphere.
+#[test]
+fn a_row_of_anchors_drives_a_one_dimensional_grid() {
+    use werkstatt::nodes::cuboid_grid::anchor_row_frames;
+    let plane = werkstatt::nodes::geometry::plane(2.0, 8, 8).unwrap();
+    let (a, b) = (DVec2::new(0.2, 0.5), DVec2::new(0.8, 0.5));
+    let frames = anchor_row_frames(&plane, a, b, 4).unwrap();
+    for f in &frames {
+        assert!(f.normal.distance(DVec3::Y) < 1e-9 && f.tangent.distance(DVec3::X) < 1e-9, "{f:?}");
+    }
+    let (width, height) = (0.4, 0.3);
+    let grid = anchor_row(&frames, width, height, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap();
+    assert_eq!(grid.cells, [3, 1, 1]);
+    let expected = |p: DVec3| DVec3::new(0.6 * p.x, height * (p.z + 1.0) / 2.0, -width / 2.0 * p.y);
+    let cube = werkstatt::nodes::geometry::cube(2.0).unwrap();
+    let worst =
+        cube.positions.iter().map(|p| grid.eval(p.as_dvec3()).distance(expected(p.as_dvec3()))).fold(0.0, f64::max);
+    assert!(worst < 1e-6, "the row's grid is off its analytic map by {worst}");
+    assert!(grid.as_affine(LINEAR_TOLERANCE).is_some(), "a row on a plane is affine: the fast path applies");
+
+    let body = werkstatt::nodes::geometry::sphere(1.0, 24, 16).unwrap();
+    let (r, t) = (DQuat::from_scaled_axis(DVec3::new(0.3, -1.1, 0.5)), DVec3::new(0.7, -2.0, 1.3));
+    let row_on = |mesh: &Mesh| {
+        let anchors: Vec<Anchor> = (0..5)
+            .map(|i| {
+                Anchor::at_uv_towards(&body, DVec2::new(0.2 + 0.1 * i as f64, 0.45), DVec2::new(0.02, 0.0)).unwrap()
+            })
+            .collect();
+        let frames: Vec<_> = anchors.iter().map(|an| an.frame(mesh).unwrap()).collect();
+        anchor_row(&frames, width, height, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap()
+    };
+    let (before, after) = (row_on(&body), row_on(&rotate_mesh(&body, r, t)));
+    assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the row follows the sphere's curvature");
+    let worst = cube
+        .positions
+        .iter()
+        .map(|p| after.eval(p.as_dvec3()).distance(r * before.eval(p.as_dvec3()) + t))
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "a rigid motion of the body moves the row's object by {worst} more than rigidly");
 }
 
 fn graph(text: &str) -> Graph {
