@@ -483,6 +483,38 @@ impl Transform {
     pub fn is_linear(&self) -> bool {
         matches!(self, Transform::Affine(_))
     }
+
+    /// `mesh` with every vertex moved through the transform on the CPU: positions mapped,
+    /// tangents by the Jacobian, normals by the grid's method (an affine map's by its
+    /// cofactor, the inverse transpose up to scale). UVs, pieces and indices are kept, so the
+    /// result is still a Surface that a matrix texture, attachments and anchors can use.
+    pub fn deform_mesh(&self, mesh: &Mesh) -> Mesh {
+        let mut out = mesh.clone();
+        let jacobian = |p: DVec3| match self {
+            Transform::Affine(a) => DMat3::from_mat4(*a),
+            Transform::Grid(g) => g.jacobian(p),
+        };
+        for (i, p) in mesh.positions.iter().enumerate() {
+            let p = p.as_dvec3();
+            let j = jacobian(p);
+            out.positions[i] = self.eval(p).as_vec3();
+            if let Some(n) = mesh.normals.get(i) {
+                out.normals[i] = match self {
+                    Transform::Affine(_) => NormalMethod::TangentSpace.transform(j, n.as_dvec3()),
+                    Transform::Grid(g) => g.normals.transform(j, n.as_dvec3()),
+                }
+                .as_vec3();
+            }
+            for (tangents, t) in
+                [(&mut out.tangents_u, mesh.tangents_u.get(i)), (&mut out.tangents_v, mesh.tangents_v.get(i))]
+            {
+                if let Some(t) = t {
+                    tangents[i] = (j * t.as_dvec3()).normalize_or_zero().as_vec3();
+                }
+            }
+        }
+        out
+    }
 }
 
 /// Where a draw item's vertex `p` lands: `grid(model p)`, or `model p` without a grid.
