@@ -115,6 +115,30 @@ impl Node for CuboidNode {
     }
 }
 
+pub static DEFORM_SURFACE: NodeSpec = NodeSpec {
+    kind: "DeformSurface",
+    category: Category::Geometry,
+    doc: "Moves a surface's vertices through a cuboid transform or grid on the CPU (positions, tangents by the Jacobian, normals by the grid's method), keeping UVs and pieces: a body bent by a grid can carry a matrix texture, attachments and anchors, which Deform's draw-time transform cannot.",
+    inputs: &[
+        PortSpec::required("surface", PortType::Surface, "The surface."),
+        PortSpec::required("transform", PortType::CuboidTransform, "What to apply to it."),
+    ],
+    outputs: &[PortSpec::output("surface", PortType::Surface, "The deformed surface.")],
+    params: &[],
+    is_output: false,
+    create: || Box::new(DeformSurfaceNode),
+};
+
+struct DeformSurfaceNode;
+impl Node for DeformSurfaceNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let surface: Arc<crate::mesh::Mesh> = cx.input("surface")?;
+        let transform: Arc<Transform> = cx.input("transform")?;
+        cx.set("surface", Arc::new(transform.deform_mesh(&surface)));
+        Ok(())
+    }
+}
+
 pub static DEFORM: NodeSpec = NodeSpec {
     kind: "Deform",
     category: Category::Scene,

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::{DVec2, DVec3};
 
 use super::cuboid::{BOX_MAX, BOX_MIN, NORMALS, Normals, content_box};
-use crate::cuboid::{Anchor, CuboidGrid, Transform, anchor_grid, bend, torus, twist};
+use crate::cuboid::{Anchor, CuboidGrid, Transform, anchor_grid, anchor_row, bend, torus, twist};
 use crate::mesh::Mesh;
 use crate::node::prelude::*;
 
@@ -17,24 +17,25 @@ crate::choice!(
         Twist = "twist",
         Torus = "torus",
         Anchors = "anchors",
+        AnchorRow = "anchor_row",
     }
 );
 
 pub static CUBOID_GRID: NodeSpec = NodeSpec {
     kind: "CuboidGrid",
     category: Category::Scene,
-    doc: "A uniform grid of trilinear cuboids over the content box: sampled from a bend, a twist or a torus wrap, or driven by an array of anchors (barycentric on the mesh's triangles, found by UV) that follow a deforming mesh.",
+    doc: "A uniform grid of trilinear cuboids over the content box: sampled from a bend, a twist or a torus wrap, or driven by a 2D array or a row of anchors (barycentric on the mesh's triangles, found by UV) that follow a deforming mesh.",
     inputs: &[PortSpec::optional(
         "mesh",
         PortType::Mesh,
-        "The deforming body the anchors sit on (source = anchors); it needs UVs.",
+        "The deforming body the anchors sit on (source = anchors or anchor_row); it needs UVs.",
     )],
     outputs: &[PortSpec::output("transform", PortType::CuboidTransform, "The grid, or its affine map when linear.")],
     params: &[
         ParamSpec::new(
             "source",
             ParamKind::Choice { default: "bend", options: Source::OPTIONS },
-            "What the corners sample: bend, twist, torus, or anchors on the mesh.",
+            "What the corners sample: bend, twist, torus, a 2D array of anchors on the mesh, or a row of them.",
         ),
         ParamSpec::new("cells_x", ParamKind::Int { default: 4, min: 1, max: 256 }, "Cells along x."),
         ParamSpec::new("cells_y", ParamKind::Int { default: 1, min: 1, max: 256 }, "Cells along y."),
@@ -63,7 +64,12 @@ pub static CUBOID_GRID: NodeSpec = NodeSpec {
         ParamSpec::new(
             "uv_max",
             ParamKind::Vec3 { default: [0.75, 0.75, 0.0] },
-            "Anchors: UV of the last anchor; the cells_x+1 by cells_y+1 anchors span uv_min..uv_max.",
+            "Anchors: UV of the last anchor; the cells_x+1 by cells_y+1 anchors span uv_min..uv_max (a row: cells_x+1 anchors on the line between them).",
+        ),
+        ParamSpec::new(
+            "width",
+            ParamKind::Float { default: 0.2, min: 1e-6, max: 1e4 },
+            "Anchor row: the grid's width across the row, centred on it.",
         ),
         ParamSpec::new(
             "height",
@@ -102,6 +108,14 @@ impl Node for CuboidGridNode {
                 let frames = anchor_frames(&mesh, a, b, cols, rows)?;
                 anchor_grid(&frames, cols, rows, cx.f64("height"), lo, hi, normals)
             }
+            Source::AnchorRow => {
+                let mesh: Arc<Mesh> = cx
+                    .optional("mesh")
+                    .ok_or_else(|| NodeError::msg("source = \"anchor_row\" needs a mesh on input \"mesh\""))?;
+                let (a, b) = (cx.vec3("uv_min").as_dvec3().truncate(), cx.vec3("uv_max").as_dvec3().truncate());
+                let frames = anchor_row_frames(&mesh, a, b, cells[0] + 1)?;
+                anchor_row(&frames, cx.f64("width"), cx.f64("height"), lo, hi, normals)
+            }
         }
         .map_err(NodeError::msg)?;
         cx.set("transform", Arc::new(Transform::from_grid(grid)));
@@ -117,6 +131,26 @@ fn sampled(
     f: impl Fn(DVec3) -> DVec3,
 ) -> Result<CuboidGrid, String> {
     CuboidGrid::from_fn(lo, hi, cells, normals, |u| f(lo + u * (hi - lo)))
+}
+
+/// The frames of `count` anchors on the line from UV `a` to `b`, tangents along the line.
+pub fn anchor_row_frames(
+    mesh: &Mesh,
+    a: DVec2,
+    b: DVec2,
+    count: usize,
+) -> Result<Vec<crate::cuboid::Frame>, NodeError> {
+    if a.distance(b) < 1e-9 {
+        return Err(NodeError::msg("an anchor row needs uv_min and uv_max apart: they give its direction"));
+    }
+    let step = (b - a) / count as f64 * 0.25;
+    (0..count)
+        .map(|i| {
+            let uv = a + (b - a) * (i as f64 / (count - 1) as f64);
+            let anchor = Anchor::at_uv_towards(mesh, uv, step).map_err(NodeError::msg)?;
+            anchor.frame(mesh).map_err(NodeError::msg)
+        })
+        .collect()
 }
 
 /// The frames of a `cols` x `rows` array of anchors spanning UVs `a..b` (u fastest), each

@@ -46,6 +46,7 @@ pub static ALL: &[&NodeSpec] = &[
     &cuboid::CUBOID,
     &cuboid_grid::CUBOID_GRID,
     &cuboid::DEFORM,
+    &cuboid::DEFORM_SURFACE,
     &camera::ORBIT_CAMERA,
     &matrix_texture::MATRIX_TEXTURE,
     &placements::SCATTER,

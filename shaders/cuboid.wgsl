@@ -1,19 +1,11 @@
 // The trilinear (cuboid grid) transform of a draw item (src/cuboid.rs, dissertation eq. 3.4):
-// group 2 holds the grid's box, its cells and its corner positions (x fastest, then y, then z)
-// in a storage buffer: the dissertation's 3D texture of positions, read as memory since eq.
-// 3.4 needs the cell's 8 corners anyway (and texel fetches are slow in lavapipe's vertex stage).
+// the grid's box and cells are in the object uniform (object.wgsl `grid_*`), its corner
+// positions (x fastest, then y, then z) in one storage buffer shared by every grid of the
+// draw, from the grid's first corner on: the dissertation's 3D texture of positions, read as
+// memory since eq. 3.4 needs the cell's 8 corners anyway (and texel fetches are slow in
+// lavapipe's vertex stage).
 
-struct CuboidGrid {
-    // xyz: the content box's minimum; w: normal method (0 tangent space, 1 direct).
-    box_min: vec4<f32>,
-    // xyz: 1 / the box's size.
-    inv_size: vec4<f32>,
-    // xyz: cells per axis.
-    cells: vec4<f32>,
-};
-
-@group(2) @binding(0) var<uniform> cuboid: CuboidGrid;
-@group(2) @binding(1) var<storage, read> cuboid_corners: array<vec4<f32>>;
+@group(2) @binding(0) var<storage, read> cuboid_corners: array<vec4<f32>>;
 
 struct Deformed {
     position: vec3<f32>,
@@ -22,16 +14,16 @@ struct Deformed {
 };
 
 fn cuboid_corner(c: vec3<i32>) -> vec3<f32> {
-    let nx = i32(cuboid.cells.x) + 1;
-    let ny = i32(cuboid.cells.y) + 1;
-    return cuboid_corners[c.x + nx * (c.y + ny * c.z)].xyz;
+    let nx = i32(object.grid_cells.x) + 1;
+    let ny = i32(object.grid_cells.y) + 1;
+    return cuboid_corners[i32(object.grid_inv_size.w) + c.x + nx * (c.y + ny * c.z)].xyz;
 }
 
 // Maps `p` (after the model matrix) through the grid: into the box's unit cube, into its
 // cell (the nearest one outside the box), then eq. 3.4 with the cell's coefficient matrix.
 fn cuboid_deform(p: vec3<f32>) -> Deformed {
-    let n = cuboid.cells.xyz;
-    let t = (p - cuboid.box_min.xyz) * cuboid.inv_size.xyz * n;
+    let n = object.grid_cells.xyz;
+    let t = (p - object.grid_min.xyz) * object.grid_inv_size.xyz * n;
     let cell = clamp(floor(t), vec3<f32>(0.0), n - 1.0);
     let l = t - cell;
     let i = vec3<i32>(cell);
@@ -62,7 +54,7 @@ fn cuboid_deform(p: vec3<f32>) -> Deformed {
     let dx = c_x + c_xy * y + c_xz * z + c_xyz * y * z;
     let dy = c_y + c_xy * x + c_yz * z + c_xyz * x * z;
     let dz = c_z + c_xz * x + c_yz * y + c_xyz * x * y;
-    let s = n * cuboid.inv_size.xyz;
+    let s = n * object.grid_inv_size.xyz;
     out.jacobian = mat3x3<f32>(dx * s.x, dy * s.y, dz * s.z);
     return out;
 }
@@ -72,5 +64,5 @@ fn cuboid_deform(p: vec3<f32>) -> Deformed {
 // branch: lavapipe recompiles a shader for every value of a uniform that steers control flow.
 fn cuboid_normal(j: mat3x3<f32>, n: vec3<f32>) -> vec3<f32> {
     let cof = mat3x3<f32>(cross(j[1], j[2]), cross(j[2], j[0]), cross(j[0], j[1]));
-    return mix(cof * n, j * n, cuboid.box_min.w);
+    return mix(cof * n, j * n, object.grid_min.w);
 }

@@ -11,6 +11,13 @@ struct Object {
     params: vec4<f32>,
     // x: glossiness where the gloss map is 0.
     extra: vec4<f32>,
+    // A non-linear cuboid grid (shaders/cuboid.wgsl; zero otherwise). xyz: the content box's
+    // minimum, w: normal method (0 tangent space, 1 direct).
+    grid_min: vec4<f32>,
+    // xyz: 1 / the box's size, w: index of the grid's first corner in the shared buffer.
+    grid_inv_size: vec4<f32>,
+    // xyz: cells per axis.
+    grid_cells: vec4<f32>,
 };
 
 @group(1) @binding(0) var<uniform> object: Object;

@@ -14,11 +14,10 @@
 //!
 //! CPU math is in f64 so the composed transforms lose nothing before they reach the GPU's f32.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3, Mat4, Vec3};
 
-use crate::gpu::GpuContext;
 use crate::mesh::Mesh;
 
 /// The unit-cube position of corner `i` (eq. 3.1's order).
@@ -174,7 +173,6 @@ pub struct CuboidGrid {
     pub corners: Vec<DVec3>,
     /// How normals are transformed when drawn.
     pub normals: NormalMethod,
-    gpu: OnceLock<wgpu::Buffer>,
 }
 
 impl Clone for CuboidGrid {
@@ -228,7 +226,7 @@ impl CuboidGrid {
         if let Some(i) = corners.iter().position(|c| !c.is_finite()) {
             return Err(format!("corner {i} of the cuboid grid is not finite"));
         }
-        Ok(CuboidGrid { box_min, box_max, cells, corners, normals, gpu: OnceLock::new() })
+        Ok(CuboidGrid { box_min, box_max, cells, corners, normals })
     }
 
     /// A grid whose corner at unit-cube position `u` is `f(u)`.
@@ -347,24 +345,24 @@ impl CuboidGrid {
         .expect("a resampled grid keeps a valid box")
     }
 
-    /// Corner positions as a read-only storage buffer of `vec4<f32>` in corner order: the
-    /// dissertation's 3D texture of positions, but read as plain memory (shaders/cuboid.wgsl
-    /// does the trilinear step, eq. 3.4, itself; texel fetches in the vertex stage cost
-    /// lavapipe far more than buffer loads, and 32-bit floats are not filterable everywhere).
-    pub fn gpu(&self, gpu: &GpuContext) -> &wgpu::Buffer {
-        self.gpu.get_or_init(|| {
-            let texels: Vec<[f32; 4]> = self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()).collect();
-            gpu.create_buffer_init("cuboid grid", bytemuck::cast_slice(&texels), wgpu::BufferUsages::STORAGE)
-        })
+    /// Appends the corner positions as `vec4<f32>` in corner order to `texels`, the one
+    /// storage buffer of all grids a draw uses: the dissertation's 3D texture of positions,
+    /// read as plain memory (shaders/cuboid.wgsl does the trilinear step, eq. 3.4, itself;
+    /// texel fetches in the vertex stage cost lavapipe far more than buffer loads, and one
+    /// buffer for all grids saves a buffer and a bind group per object and frame).
+    pub fn append_corners(&self, texels: &mut Vec<[f32; 4]>) {
+        texels.extend(self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()));
     }
 
-    /// The uniform block of shaders/cuboid.wgsl: box origin (w: normal method), 1/box size,
+    /// The grid's header in the object uniform (shaders/object.wgsl `grid_*`): box origin
+    /// (w: normal method), 1/box size (w: index of the first corner in the shared buffer),
     /// cells per axis.
-    pub fn uniform(&self) -> [[f32; 4]; 3] {
+    pub fn header(&self, first_corner: u32) -> [[f32; 4]; 3] {
         let inv = (1.0 / (self.box_max - self.box_min)).as_vec3();
+        // f32 holds every index below 2^24 exactly; the drawer checks the total.
         [
             self.box_min.as_vec3().extend(self.normals.shader_flag()).to_array(),
-            inv.extend(0.0).to_array(),
+            inv.extend(first_corner as f32).to_array(),
             [self.cells[0] as f32, self.cells[1] as f32, self.cells[2] as f32, 0.0],
         ]
     }
@@ -485,6 +483,38 @@ impl Transform {
     pub fn is_linear(&self) -> bool {
         matches!(self, Transform::Affine(_))
     }
+
+    /// `mesh` with every vertex moved through the transform on the CPU: positions mapped,
+    /// tangents by the Jacobian, normals by the grid's method (an affine map's by its
+    /// cofactor, the inverse transpose up to scale). UVs, pieces and indices are kept, so the
+    /// result is still a Surface that a matrix texture, attachments and anchors can use.
+    pub fn deform_mesh(&self, mesh: &Mesh) -> Mesh {
+        let mut out = mesh.clone();
+        let jacobian = |p: DVec3| match self {
+            Transform::Affine(a) => DMat3::from_mat4(*a),
+            Transform::Grid(g) => g.jacobian(p),
+        };
+        for (i, p) in mesh.positions.iter().enumerate() {
+            let p = p.as_dvec3();
+            let j = jacobian(p);
+            out.positions[i] = self.eval(p).as_vec3();
+            if let Some(n) = mesh.normals.get(i) {
+                out.normals[i] = match self {
+                    Transform::Affine(_) => NormalMethod::TangentSpace.transform(j, n.as_dvec3()),
+                    Transform::Grid(g) => g.normals.transform(j, n.as_dvec3()),
+                }
+                .as_vec3();
+            }
+            for (tangents, t) in
+                [(&mut out.tangents_u, mesh.tangents_u.get(i)), (&mut out.tangents_v, mesh.tangents_v.get(i))]
+            {
+                if let Some(t) = t {
+                    tangents[i] = (j * t.as_dvec3()).normalize_or_zero().as_vec3();
+                }
+            }
+        }
+        out
+    }
 }
 
 /// Where a draw item's vertex `p` lands: `grid(model p)`, or `model p` without a grid.
@@ -525,6 +555,12 @@ impl Anchor {
     /// triangle of `mesh` that contains `uv` in texture space (stable under deformation,
     /// since a deforming mesh keeps its UVs).
     pub fn at_uv(mesh: &Mesh, uv: glam::DVec2, du: f64) -> Result<Anchor, String> {
+        Anchor::at_uv_towards(mesh, uv, glam::DVec2::new(du, 0.0))
+    }
+
+    /// Like [`Anchor::at_uv`] with the tangent point at `uv + step` (a row of anchors points
+    /// its tangents along the row).
+    pub fn at_uv_towards(mesh: &Mesh, uv: glam::DVec2, step: glam::DVec2) -> Result<Anchor, String> {
         if mesh.uvs.len() != mesh.positions.len() {
             return Err("the anchor mesh has no texture coordinates".into());
         }
@@ -533,7 +569,7 @@ impl Anchor {
             let [a, b, c] = std::array::from_fn(|k| mesh.uvs[mesh.indices[3 * t + k] as usize].as_dvec2());
             if let Some(w) = barycentric_2d(a, b, c, uv) {
                 // The tangent point may leave the triangle: barycentrics extrapolate linearly.
-                let tangent_point = barycentric_2d_unclamped(a, b, c, uv + glam::DVec2::new(du, 0.0))
+                let tangent_point = barycentric_2d_unclamped(a, b, c, uv + step)
                     .ok_or_else(|| format!("triangle {t} is degenerate in UV space"))?;
                 return Ok(Anchor { triangle: t, point: w, tangent_point });
             }
@@ -600,6 +636,32 @@ pub fn anchor_grid(
         }
     }
     CuboidGrid::new(box_min, box_max, cells, corners, normals)
+}
+
+/// A row of anchors (a 1D array) driving a grid of `(n-1) x 1 x 1` cells, for objects along
+/// a line on the body (a belt, a zip): corner `(i, j, k)` lies at anchor `i`'s frame
+/// coordinates `(0, (j - 1/2) width, k height)`, so the row runs through the middle of the
+/// grid's bottom face, across its bitangent.
+pub fn anchor_row(
+    frames: &[Frame],
+    width: f64,
+    height: f64,
+    box_min: DVec3,
+    box_max: DVec3,
+    normals: NormalMethod,
+) -> Result<CuboidGrid, String> {
+    if frames.len() < 2 {
+        return Err(format!("a row of anchors needs at least 2 of them, not {}", frames.len()));
+    }
+    let mut corners = Vec::with_capacity(frames.len() * 4);
+    for k in 0..2 {
+        for j in 0..2 {
+            for f in frames {
+                corners.push(f.point(DVec3::new(0.0, (j as f64 - 0.5) * width, height * k as f64)));
+            }
+        }
+    }
+    CuboidGrid::new(box_min, box_max, [frames.len() - 1, 1, 1], corners, normals)
 }
 
 #[cfg(test)]

@@ -10,9 +10,11 @@
 
 use glam::{Mat4, Vec4};
 
-use crate::cuboid::{CuboidGrid, LINEAR_TOLERANCE, fast_path};
-use crate::gpu::pass::{Bindings, texture_entry, uniform_entry};
-use crate::gpu::{Bind, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc};
+use crate::cuboid::{LINEAR_TOLERANCE, fast_path};
+use crate::gpu::pass::{Bindings, storage_entry_for, texture_entry, uniform_entry};
+use crate::gpu::{
+    Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
+};
 use crate::mesh::Vertex;
 use crate::scene::{DrawItem, GBuffer, Image8, View};
 use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
@@ -43,6 +45,8 @@ struct ObjectUniform {
     base_color: [f32; 4],
     params: [f32; 4],
     extra: [f32; 4],
+    /// A non-linear cuboid grid's header ([`CuboidGrid::header`]), zero without one.
+    grid: [[f32; 4]; 3],
 }
 
 /// shaders/depth.wgsl `TileView`: a tile's view-projection folded with the map from clip
@@ -117,8 +121,8 @@ impl InstanceResolver {
 }
 
 /// `model` is the item's own matrix, or the composed one where the linear fast path folded
-/// an affine cuboid grid into it.
-fn object_uniform(item: &DrawItem, model: Mat4) -> ObjectUniform {
+/// an affine cuboid grid into it; `grid` the header of a remaining non-linear grid.
+fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUniform {
     let m = &item.material;
     ObjectUniform {
         model: model.to_cols_array_2d(),
@@ -131,21 +135,20 @@ fn object_uniform(item: &DrawItem, model: Mat4) -> ObjectUniform {
             f32::from(u8::from(m.gloss_map.is_some())),
         ],
         extra: [m.gloss_min, 0.0, 0.0, 0.0],
+        grid,
     }
 }
 
 /// An item's bind groups for one draw: its object group, for attachments the warp group
-/// and the instance buffer, for non-linear cuboid transforms the grid's group.
+/// and the instance buffer, for non-linear cuboid transforms the group of all grids' corners.
 struct Prepared {
     object: wgpu::BindGroup,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
     cuboid: Option<wgpu::BindGroup>,
 }
 
-/// The group-2 binds of shaders/cuboid.wgsl for `grid`.
-fn cuboid_binds<'a>(gpu: &GpuContext, grid: &'a CuboidGrid, uniform: &'a [[f32; 4]; 3]) -> [Bind<'a>; 2] {
-    [Bind::Uniform(bytemuck::cast_slice(uniform)), Bind::Storage(grid.gpu(gpu))]
-}
+/// Corner indices in the shared buffer are carried as f32 in the object uniform.
+const MAX_GRID_CORNERS: usize = 1 << 24;
 
 /// Whether any item still needs the trilinear vertex stage after the linear fast path.
 fn any_nonlinear(items: &[DrawItem]) -> bool {
@@ -161,7 +164,9 @@ pub struct SceneDrawer {
     tile_index: Bindings,
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
-    cuboids: Vec<Bindings>,
+    /// The corners of every non-linear grid a draw uses, in one storage buffer per draw.
+    grid_corners: BufferRing,
+    grid_group: Bindings,
     white: Image8,
     resolver: InstanceResolver,
 }
@@ -174,7 +179,8 @@ impl Default for SceneDrawer {
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
             objects: Vec::new(),
             warps: Vec::new(),
-            cuboids: Vec::new(),
+            grid_corners: BufferRing::new("cuboid grid corners", wgpu::BufferUsages::STORAGE),
+            grid_group: Bindings::new(wgpu::ShaderStages::VERTEX),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
         }
@@ -192,11 +198,9 @@ impl SceneDrawer {
         Bindings::new(OBJECT_VISIBILITY).layout(gpu, &shape)
     }
 
-    /// The layout of group 2 for cuboid items (a grid's uniform and corner texture).
+    /// The layout of group 2 for cuboid items (the storage buffer of all grids' corners).
     fn cuboid_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
-        let identity = CuboidGrid::identity(glam::DVec3::ZERO, glam::DVec3::ONE, [1, 1, 1]).expect("unit box");
-        let uniform = identity.uniform();
-        Bindings::new(wgpu::ShaderStages::VERTEX).layout(gpu, &cuboid_binds(gpu, &identity, &uniform))
+        gpu.bind_group_layout(&[storage_entry_for(0, wgpu::ShaderStages::VERTEX, true)])
     }
 
     /// Bind groups for every item (resolving point attachments' frames on first use).
@@ -211,14 +215,38 @@ impl SceneDrawer {
         while self.objects.len() < items.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
-            self.cuboids.push(Bindings::new(wgpu::ShaderStages::VERTEX));
         }
+        // The linear fast path, tested once per composed transform right before drawing; the
+        // corners of the grids that stay non-linear go into one buffer, each item's header
+        // (with its first corner) into its object uniform.
+        let mut corners: Vec<[f32; 4]> = Vec::new();
+        let transforms: Vec<(Mat4, [[f32; 4]; 3], bool)> = items
+            .iter()
+            .map(|item| match fast_path(item.model, item.cuboid.clone()) {
+                (model, Some(grid)) => {
+                    let header = grid.header(corners.len() as u32);
+                    grid.append_corners(&mut corners);
+                    (model, header, true)
+                }
+                (model, None) => (model, [[0.0; 4]; 3], false),
+            })
+            .collect();
+        anyhow::ensure!(
+            corners.len() <= MAX_GRID_CORNERS,
+            "the scene's cuboid grids have {} corners; one draw holds at most {MAX_GRID_CORNERS}",
+            corners.len()
+        );
+        let grids = match cuboid_layout {
+            Some(layout) if !corners.is_empty() => {
+                let buffer = self.grid_corners.write(gpu, bytemuck::cast_slice(&corners)).clone();
+                Some(self.grid_group.bind_group(gpu, layout, &[Bind::Storage(&buffer)]))
+            }
+            _ => None,
+        };
         let mut prepared = Vec::with_capacity(items.len());
-        for (i, item) in items.iter().enumerate() {
+        for (i, (item, &(model, header, trilinear))) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
-            // The linear fast path, tested once per composed transform right before drawing.
-            let (model, grid) = fast_path(item.model, item.cuboid.clone());
-            let uniform = object_uniform(item, model);
+            let uniform = object_uniform(item, model, header);
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
             let binds = [
@@ -237,13 +265,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let cuboid = match (&grid, cuboid_layout) {
-                (Some(g), Some(layout)) => {
-                    let u = g.uniform();
-                    Some(self.cuboids[i].bind_group(gpu, layout, &cuboid_binds(gpu, g, &u)))
-                }
-                _ => None,
-            };
+            let cuboid = grids.clone().filter(|_| trilinear);
             prepared.push(Prepared { object, warp, cuboid });
         }
         Ok(prepared)

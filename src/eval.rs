@@ -578,3 +578,50 @@ impl Evaluator {
         self.state[s].outputs[o].as_ref()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A node whose code is wrong: every built-in kind is expected never to panic, so the
+    /// registry has none of these; the test swaps it in for one node of a graph.
+    struct Panicking;
+
+    impl Node for Panicking {
+        fn eval(&mut self, _: &mut EvalCx<'_>) -> Result<(), NodeError> {
+            panic!("index 7 out of range")
+        }
+    }
+
+    #[test]
+    fn a_node_that_panics_fails_with_the_message_and_blocks_its_consumers_only() {
+        let text = r#"(version: 1, nodes: {
+            "x": (kind: "Number", params: {"value": 2.0}),
+            "broken": (kind: "Math", params: {"op": "add"}),
+            "out": (kind: "Watch"),
+            "ok": (kind: "Math", params: {"op": "multiply", "b": 3.0}),
+            "out_ok": (kind: "Watch"),
+        }, links: [("x.value", "broken.a"), ("broken.result", "out.value"),
+                   ("x.value", "ok.a"), ("ok.result", "out_ok.value")])"#;
+        let graph = Graph::load_str(text, "test.ron".as_ref()).unwrap();
+        let mut ev = Evaluator::new(&graph, &[]).unwrap();
+        let broken = ev.ids.iter().position(|id| id == "broken").unwrap();
+        ev.state[broken].instance = Box::new(Panicking);
+        let resources = Resources::new(false);
+        let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &resources, &FrameSettings::default());
+        assert_eq!(summary.failed, 1, "only the panicking node fails");
+        let status = &ev.report("broken").unwrap().status;
+        assert!(
+            matches!(status, NodeStatus::Failed(m) if m.contains("panic") && m.contains("Math") && m.contains("index 7 out of range")),
+            "the panic becomes the node's error, naming its kind and message: {status:?}"
+        );
+        assert!(matches!(&ev.report("out").unwrap().status, NodeStatus::Blocked(m) if m.contains("\"broken\"")));
+        assert!(
+            matches!(ev.output("out_ok", "value"), Some(Value::Scalar(v)) if *v == 6.0),
+            "other branches still run"
+        );
+        // A panicked node is a failed one: not retried while nothing changes.
+        ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &resources, &FrameSettings::default());
+        assert_eq!(ev.report("broken").unwrap().runs, 1);
+    }
+}

@@ -226,7 +226,9 @@ impl Resources {
         let weak = Arc::downgrade(&self.inner);
         let handler = move |event: notify::Result<notify::Event>| {
             let (Ok(event), Some(inner)) = (event, weak.upgrade()) else { return };
-            if !(event.kind.is_modify() || event.kind.is_create()) {
+            // A removed file reloads too, so its node says the file is gone instead of showing
+            // the last contents; editors that delete before writing reload again on create.
+            if !(event.kind.is_modify() || event.kind.is_create() || event.kind.is_remove()) {
                 return;
             }
             let me = Resources { inner };

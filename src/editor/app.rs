@@ -149,6 +149,11 @@ impl EditorApp {
         self.gpu.as_deref()
     }
 
+    /// The viewport's picture as egui samples it (gamma-encoded Rgba8Unorm).
+    pub fn viewport_display(&self) -> Option<&crate::gpu::GpuImage> {
+        self.viewport.display()
+    }
+
     /// Opens a graph file (unsaved changes must have been dealt with).
     pub fn open(&mut self, path: &Path) {
         match EditorState::open(path) {

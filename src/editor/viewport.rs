@@ -71,6 +71,11 @@ impl Viewport {
         Viewport { converter: None, display: None, texture_id: None, last_source: None, message: None }
     }
 
+    /// The texture egui shows: the viewed port converted for display (None before the first).
+    pub fn display(&self) -> Option<&GpuImage> {
+        self.display.as_ref()
+    }
+
     /// Converts the viewed texture for display (when it changed) and registers it with egui.
     fn update_texture(
         &mut self,

@@ -9,7 +9,8 @@ use std::sync::Arc;
 use glam::{DMat4, DQuat, DVec2, DVec3, Mat4, Vec3};
 use proptest::prelude::*;
 use werkstatt::cuboid::{
-    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, bend, compose, unit_corner,
+    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, anchor_row, bend, compose,
+    unit_corner,
 };
 use werkstatt::draw::SceneDrawer;
 use werkstatt::gpu::read_back;
@@ -188,6 +189,50 @@ fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
     assert!(worst < 1e-5, "relative error {worst}");
 }
 
+/// A row of anchors across a flat plane (y = 0, normal +y) gives the affine grid it should:
+/// content x runs along the row from its first anchor to its last, y across it over `width`
+/// (along the bitangent n x t = -z), z up the normal over `height`. On a sphere the row's grid
+/// bends, and it moves rigidly with the sphere.
+#[test]
+fn a_row_of_anchors_drives_a_one_dimensional_grid() {
+    use werkstatt::nodes::cuboid_grid::anchor_row_frames;
+    let plane = werkstatt::nodes::geometry::plane(2.0, 8, 8).unwrap();
+    let (a, b) = (DVec2::new(0.2, 0.5), DVec2::new(0.8, 0.5));
+    let frames = anchor_row_frames(&plane, a, b, 4).unwrap();
+    for f in &frames {
+        assert!(f.normal.distance(DVec3::Y) < 1e-9 && f.tangent.distance(DVec3::X) < 1e-9, "{f:?}");
+    }
+    let (width, height) = (0.4, 0.3);
+    let grid = anchor_row(&frames, width, height, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap();
+    assert_eq!(grid.cells, [3, 1, 1]);
+    let expected = |p: DVec3| DVec3::new(0.6 * p.x, height * (p.z + 1.0) / 2.0, -width / 2.0 * p.y);
+    let cube = werkstatt::nodes::geometry::cube(2.0).unwrap();
+    let worst =
+        cube.positions.iter().map(|p| grid.eval(p.as_dvec3()).distance(expected(p.as_dvec3()))).fold(0.0, f64::max);
+    assert!(worst < 1e-6, "the row's grid is off its analytic map by {worst}");
+    assert!(grid.as_affine(LINEAR_TOLERANCE).is_some(), "a row on a plane is affine: the fast path applies");
+
+    let body = werkstatt::nodes::geometry::sphere(1.0, 24, 16).unwrap();
+    let (r, t) = (DQuat::from_scaled_axis(DVec3::new(0.3, -1.1, 0.5)), DVec3::new(0.7, -2.0, 1.3));
+    let row_on = |mesh: &Mesh| {
+        let anchors: Vec<Anchor> = (0..5)
+            .map(|i| {
+                Anchor::at_uv_towards(&body, DVec2::new(0.2 + 0.1 * i as f64, 0.45), DVec2::new(0.02, 0.0)).unwrap()
+            })
+            .collect();
+        let frames: Vec<_> = anchors.iter().map(|an| an.frame(mesh).unwrap()).collect();
+        anchor_row(&frames, width, height, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap()
+    };
+    let (before, after) = (row_on(&body), row_on(&rotate_mesh(&body, r, t)));
+    assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the row follows the sphere's curvature");
+    let worst = cube
+        .positions
+        .iter()
+        .map(|p| after.eval(p.as_dvec3()).distance(r * before.eval(p.as_dvec3()) + t))
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "a rigid motion of the body moves the row's object by {worst} more than rigidly");
+}
+
 fn graph(text: &str) -> Graph {
     Graph::load_str(text, &common::root().join("graphs/test.ron")).unwrap()
 }
@@ -287,7 +332,17 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
             attached: None,
             cuboid,
         };
-        let on_gpu = [item(plate.clone(), model, Some(grid.clone()))];
+        // Drawn after another non-linear grid (of the other normal method) that puts its copy
+        // beyond the far plane: both grids share one corner buffer, so the plate's grid must
+        // be read from its own first corner with its own header.
+        let other = if method == NormalMethod::Direct { NormalMethod::TangentSpace } else { NormalMethod::Direct };
+        let beyond_far = Arc::new(
+            CuboidGrid::from_fn(lo, hi, [2, 2, 2], other, |u| {
+                bend(lo, hi, 40.0)(lo + u * (hi - lo)) - 100.0 * DVec3::Z
+            })
+            .unwrap(),
+        );
+        let on_gpu = [item(plate.clone(), model, Some(beyond_far)), item(plate.clone(), model, Some(grid.clone()))];
         let on_cpu = [item(cpu, Mat4::IDENTITY, None)];
         let mut drawer = SceneDrawer::default();
         let a = drawer.gbuffer(gpu, &on_gpu, camera, view).unwrap();
@@ -322,4 +377,99 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
         let diff = ta.iter().zip(&tb).filter(|(x, y)| (*x - *y).abs() > 1e-4).count();
         assert!(diff <= 4, "{method:?}: shadow-tile depth differs in {diff} texels (worst {worst_tile})");
     }
+}
+
+/// Fig. 4.5: a tube along x through a 2x1 bend grid, its seam at x = 0. Across the seam only
+/// the Jacobian's x column jumps (the y and z columns are derivatives within the shared face).
+/// The direct method, J n, uses only those columns for the tube's normals (n_x = 0), so it is
+/// continuous there; the tangent-space method, cof(J) n, involves the x column and shows the
+/// seam, but stays orthogonal to the deformed surface, which J n does not. Both by exactly
+/// the angles the cells' chords give.
+#[test]
+fn at_a_cell_seam_direct_normals_are_continuous_and_tangent_space_normals_are_orthogonal() {
+    let (lo, hi) = (DVec3::new(-1.0, -0.5, -0.5), DVec3::new(1.0, 0.5, 0.5));
+    let grid =
+        |method| CuboidGrid::from_fn(lo, hi, [2, 1, 1], method, |u| bend(lo, hi, 120.0)(lo + u * (hi - lo))).unwrap();
+    let (direct, tangent) = (grid(NormalMethod::Direct), grid(NormalMethod::TangentSpace));
+    let angle = |a: DVec3, b: DVec3| a.normalize().dot(b.normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+    let (mut direct_jump, mut tangent_jump, mut tangent_skew, mut direct_skew) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for k in 0..16 {
+        let phi = k as f64 * std::f64::consts::TAU / 16.0;
+        let n = DVec3::new(0.0, phi.cos(), phi.sin());
+        let p = 0.3 * n;
+        let (left, right) = (p - 1e-9 * DVec3::X, p + 1e-9 * DVec3::X);
+        direct_jump = direct_jump.max(angle(direct.normal(left, n), direct.normal(right, n)));
+        tangent_jump = tangent_jump.max(angle(tangent.normal(left, n), tangent.normal(right, n)));
+        // The tube's tangents at p: along x and around it.
+        for t in [DVec3::X, DVec3::new(0.0, -phi.sin(), phi.cos())] {
+            for side in [left, right] {
+                let image = direct.jacobian(side) * t;
+                tangent_skew = tangent_skew.max((90.0 - angle(tangent.normal(side, n), image)).abs());
+                direct_skew = direct_skew.max((90.0 - angle(direct.normal(side, n), image)).abs());
+            }
+        }
+    }
+    eprintln!(
+        "seam: direct jumps {direct_jump:.2e} deg, tangent space {tangent_jump:.2} deg; off-orthogonal: tangent space {tangent_skew:.2e} deg, direct {direct_skew:.2} deg"
+    );
+    assert!(direct_jump < 1e-5, "direct normals jump by {direct_jump} degrees at the seam");
+    // Each cell's x edges are chords of its 60 degrees of the 120 degree arc: the surface turns
+    // by the angle between neighbouring chords at the seam, and J n (the face's direction at
+    // the seam) leans half of it from either chord's normal.
+    assert!((tangent_jump - 60.0).abs() < 1e-6, "tangent-space normals jump {tangent_jump} degrees, not 60");
+    assert!(tangent_skew < 1e-6, "tangent-space normals leave the surface's normal by {tangent_skew} degrees");
+    assert!((direct_skew - 30.0).abs() < 1e-6, "direct normals lean {direct_skew} degrees, not 30");
+}
+
+/// DeformSurface moves a Surface on the CPU to where Deform's draw-time transform puts the
+/// same mesh (two code paths, one map); the tangent-space normals stay orthogonal to the bent
+/// surface (face normals of the fine result agree with its vertex normals); UVs and pieces are
+/// kept, so the result feeds a matrix texture, whose frames then follow the bend.
+#[test]
+fn deform_surface_bends_a_surface_that_a_matrix_texture_and_anchors_can_use() {
+    let text = r#"(version: 1, nodes: {
+        "body": (kind: "Primitive", pos: (0.0, 0.0), params: {"shape": "cylinder", "radius": 0.3, "height": 1.6, "segments_u": 48, "segments_v": 48}),
+        "bend": (kind: "CuboidGrid", pos: (0.0, 0.0), params: {"source": "bend", "amount": 40.0, "cells_x": 8, "cells_y": 2,
+            "box_min": [-0.8, -0.8, -0.4], "box_max": [0.8, 0.8, 0.4]}),
+        "bent": (kind: "DeformSurface", pos: (0.0, 0.0), params: {}),
+        "draw": (kind: "Draw", pos: (0.0, 0.0), params: {}),
+        "deform": (kind: "Deform", pos: (0.0, 0.0), params: {}),
+        "matrix": (kind: "MatrixTexture", pos: (0.0, 0.0), params: {}),
+    }, links: [("body.mesh", "bent.surface"), ("bend.transform", "bent.transform"), ("body.mesh", "draw.mesh"),
+               ("draw.scene", "deform.scene"), ("bend.transform", "deform.transform"), ("bent.surface", "matrix.surface")])"#;
+    let ev = evaluate(text, &["bent", "deform"]);
+    let (Some(Value::Surface(bent)), Some(Value::Surface(body)), Some(Value::Scene(scene))) = (
+        ev.output("bent", "surface").cloned(),
+        ev.output("body", "mesh").cloned(),
+        ev.output("deform", "scene").cloned(),
+    ) else {
+        panic!("no outputs: {:?}", ev.report("bent").map(|r| r.status.clone()))
+    };
+    let item = &scene[0];
+    let grid = item.cuboid.as_deref().expect("an 80 degree bend is not linear");
+    let worst = body
+        .positions
+        .iter()
+        .zip(&bent.positions)
+        .map(|(p, q)| werkstatt::cuboid::place_point(item.model, Some(grid), *p).distance(q.as_dvec3()))
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "DeformSurface and Deform disagree by {worst}");
+    assert_eq!((&bent.uvs, &bent.indices, &bent.piece_ids), (&body.uvs, &body.indices, &body.piece_ids));
+    let mut worst_angle = 0.0f32;
+    for t in bent.indices.chunks(3) {
+        let [a, b, c] = [0, 1, 2].map(|k| t[k] as usize);
+        let face = (bent.positions[b] - bent.positions[a]).cross(bent.positions[c] - bent.positions[a]).normalize();
+        let vertex = (bent.normals[a] + bent.normals[b] + bent.normals[c]).normalize();
+        worst_angle = worst_angle.max(face.dot(vertex).clamp(-1.0, 1.0).acos().to_degrees());
+    }
+    eprintln!("DeformSurface: vertex normals within {worst_angle:.2} degrees of the bent faces");
+    // Faceting alone: the straight cylinder's are within 1.3 degrees, the bent one's 2.0;
+    // untransformed normals would be 14 degrees off.
+    assert!(worst_angle < 3.0, "vertex normals leave the bent faces by {worst_angle} degrees");
+    let moved = body.positions.iter().zip(&bent.positions).map(|(p, q)| p.distance(*q)).fold(0.0, f32::max);
+    assert!(moved > 0.05, "the cylinder is bent (its vertices moved at most {moved})");
+    assert!(
+        matches!(ev.report("matrix").map(|r| r.status.clone()), Some(werkstatt::eval::NodeStatus::NotRun)),
+        "the matrix texture only needs a GPU; the link type-checks"
+    );
 }

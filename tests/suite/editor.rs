@@ -342,6 +342,7 @@ fn the_viewport_shows_the_rendered_graph_and_orbits() {
     assert!(h.query_by_label("showing image.image").is_some());
     let image = h.render().expect("the harness renders with wgpu");
     assert!(viewport_colours(&image) > 20, "the viewport shows a picture");
+    assert_viewport_shows(&h, "image.image");
 
     // Orbit: drag on the picture.
     let runs = h.state().live.runs("camera");
@@ -377,6 +378,7 @@ fn the_viewport_shows_the_rendered_graph_and_orbits() {
     assert!(h.query_by_label("showing gbuffer.gbuffer").is_some());
     let image = h.render().unwrap();
     assert!(viewport_colours(&image) > 8, "the G-buffer colour is shown");
+    assert_viewport_shows(&h, "gbuffer.gbuffer");
     h.get_by_role_and_label(Role::Button, "back to preview").click();
     settle(&mut h);
     assert_eq!(h.state().state.inspected, None);
@@ -420,6 +422,29 @@ fn screenshot() {
     if let Some(out) = std::env::var_os("WERKSTATT_EDITOR_SCREENSHOT") {
         image.save(&out).unwrap();
     }
+}
+
+/// The viewport's display texture is the viewed port's picture, sRGB-encoded as the batch
+/// renderer's PNGs are: every pixel within one level of the CPU encoding of its read-back.
+fn assert_viewport_shows(h: &Harness<'_, EditorApp>, port: &str) {
+    let app = h.state();
+    let gpu = app.gpu().expect("a GPU");
+    let source = app.live.output(&p(port)).and_then(|v| v.as_texture()).expect("the port holds a texture");
+    let display = app.viewport_display().expect("the viewport converted a picture");
+    assert_eq!((display.width, display.height), (source.width, source.height));
+    let shown = werkstatt::gpu::read_back(gpu, display).unwrap();
+    let linear = werkstatt::gpu::read_back(gpu, source).unwrap();
+    let encoded = source.format.is_srgb() || source.format == wgpu::TextureFormat::Rgba8Unorm;
+    let mut worst = 0.0f32;
+    for (i, (s, l)) in shown.rgba.chunks(4).zip(linear.rgba.chunks(4)).enumerate() {
+        for c in 0..3 {
+            let want = if encoded { l[c] } else { werkstatt::color::linear_to_srgb(l[c].clamp(0.0, 1.0)) };
+            let diff = (s[c] - want).abs() * 255.0;
+            assert!(diff <= 1.0, "{port}: pixel {i} channel {c} shows {} for {}", s[c] * 255.0, want * 255.0);
+            worst = worst.max(diff);
+        }
+    }
+    eprintln!("viewport vs sRGB read-back of {port}: worst {worst:.2} levels");
 }
 
 /// How many distinct colours the top of the side panel (the viewport) holds.

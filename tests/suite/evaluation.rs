@@ -477,29 +477,75 @@ fn a_failed_reload_recovers_when_the_file_is_fixed() {
     let g = mesh_graph(&path);
     let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
     let res = Resources::new(true);
-    let s = FrameSettings::default();
-    let until = |ev: &mut Evaluator, what: &str, done: &dyn Fn(&Evaluator) -> bool| {
-        let deadline = Instant::now() + WAIT;
-        loop {
-            ev.evaluate(frame(0), None, &res, &s);
-            if done(ev) {
-                return;
-            }
-            assert!(Instant::now() < deadline, "{what}: status {:?}", ev.report("mesh").unwrap().status);
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
-    until(&mut ev, "the first load", &|ev| triangles(ev) == 1);
+    until(&mut ev, &res, "the first load", &|ev| triangles(ev) == 1);
     save_by_rename(&path, "v 0 0 0\nf 1 2 7\n");
     let name = path.display().to_string();
     until(
         &mut ev,
+        &res,
         "the broken file's error",
         &|ev| matches!(ev.report("mesh").unwrap().status, NodeStatus::Failed(m) if m.contains(&name)),
     );
     save_by_rename(&path, QUAD_OBJ);
-    until(&mut ev, "the fixed file", &|ev| triangles(ev) == 2);
+    until(&mut ev, &res, "the fixed file", &|ev| triangles(ev) == 2);
     assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Evaluates frame 0 until `done`, failing with `what` and the mesh node's status after `WAIT`.
+fn until(ev: &mut Evaluator, res: &Resources, what: &str, done: &dyn Fn(&Evaluator) -> bool) {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        ev.evaluate(frame(0), None, res, &FrameSettings::default());
+        if done(ev) {
+            return;
+        }
+        assert!(Instant::now() < deadline, "{what}: status {:?}", ev.report("mesh").unwrap().status);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A watched file deleted: the node fails saying the file is gone (not a parser's wording);
+/// written again, it recovers.
+#[test]
+fn a_deleted_file_is_an_error_until_it_is_back() {
+    let dir = temp_dir("deleted");
+    let path = dir.join("shape.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let mut ev = Evaluator::new(&mesh_graph(&path), &["mesh".to_string()]).unwrap();
+    let res = Resources::new(true);
+    until(&mut ev, &res, "the first load", &|ev| triangles(ev) == 1);
+    std::fs::remove_file(&path).unwrap();
+    until(
+        &mut ev,
+        &res,
+        "the deleted file's error",
+        &|ev| matches!(ev.report("mesh").unwrap().status, NodeStatus::Failed(m) if m.contains("no such file") && m.contains("shape.obj")),
+    );
+    save_by_rename(&path, QUAD_OBJ);
+    until(&mut ev, &res, "the file written again", &|ev| triangles(ev) == 2);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Two saves in quick succession (closer than any debounce): the node ends with the second.
+#[test]
+fn two_quick_edits_end_with_the_second() {
+    let dir = temp_dir("quick-edits");
+    let path = dir.join("shape.obj");
+    std::fs::write(&path, TRIANGLE_OBJ).unwrap();
+    let mut ev = Evaluator::new(&mesh_graph(&path), &["mesh".to_string()]).unwrap();
+    let res = Resources::new(true);
+    until(&mut ev, &res, "the first load", &|ev| triangles(ev) == 1);
+    let three = format!("{QUAD_OBJ}f 1 3 4\n");
+    save_by_rename(&path, QUAD_OBJ);
+    save_by_rename(&path, &three);
+    until(&mut ev, &res, "the second edit", &|ev| triangles(ev) == 3);
+    // Nothing older lands afterwards: the value stays while later events drain.
+    for _ in 0..10 {
+        std::thread::sleep(Duration::from_millis(20));
+        ev.evaluate(frame(0), None, &res, &FrameSettings::default());
+        assert_eq!(triangles(&ev), 3, "an older load replaced the second edit");
+    }
     std::fs::remove_dir_all(dir).unwrap();
 }
 
