@@ -52,6 +52,9 @@ enum Command {
         /// or exr (values as they are). Default: png for 8-bit textures, exr for float ones.
         #[arg(long, value_parser = ["png", "exr"])]
         dump_format: Option<String>,
+        /// Seconds one frame may wait for loads and external sources before the render fails.
+        #[arg(long, default_value_t = crate::render::PENDING_LIMIT.as_secs_f64())]
+        pending_timeout: f64,
         /// GPU backend (or WERKSTATT_BACKEND).
         #[arg(long, value_enum)]
         backend: Option<Backend>,
@@ -393,7 +396,7 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, backend } => {
+        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, pending_timeout, backend } => {
             use crate::param::Choice as _;
             let dump_format = dump_format.map(|name| {
                 let i = crate::image_io::ImageFormat::OPTIONS.iter().position(|o| *o == name).expect("clap checked it");
@@ -411,6 +414,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             if !(fps > 0.0 && fps.is_finite()) {
                 anyhow::bail!("--fps must be a positive number");
             }
+            let pending_timeout = std::time::Duration::try_from_secs_f64(pending_timeout)
+                .map_err(|_| anyhow::anyhow!("--pending-timeout must be a number of seconds, not {pending_timeout}"))?;
             let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
             let opts = crate::render::RenderOptions {
                 graph_path: graph,
@@ -425,6 +430,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 ssaa,
                 progress,
                 command: std::env::args().collect(),
+                pending_timeout,
             };
             // Validate before touching the GPU, so a bad graph fails fast and clearly.
             let prepared = crate::render::load_with_overrides(&opts.graph_path, &opts.sets)

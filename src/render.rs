@@ -38,6 +38,8 @@ pub struct RenderOptions {
     pub progress: bool,
     /// The command line that asked for the run, recorded in `stats.json` (empty from code).
     pub command: Vec<String>,
+    /// How long one frame may wait for pending nodes (loads, external sources) before it fails.
+    pub pending_timeout: std::time::Duration,
 }
 
 #[derive(Serialize, Debug)]
@@ -132,8 +134,8 @@ pub fn record_failure(opts: &RenderOptions, error: &anyhow::Error) {
     }
 }
 
-/// How long batch rendering waits for one frame's pending nodes before failing.
-const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+/// How long batch rendering waits for one frame's pending nodes before failing, by default.
+pub const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
 
 /// Loads the graph and applies `--set` overrides, re-validating afterwards.
 pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
@@ -250,15 +252,15 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 bail!("frame {frame}: {}", nothing_will_arrive(&evaluator));
             }
             // A node waiting on an external source (a live link with no sender) never settles.
-            if start.elapsed() > PENDING_LIMIT {
+            if start.elapsed() > opts.pending_timeout {
                 bail!(
-                    "frame {frame}: still pending after {} s: {}",
-                    PENDING_LIMIT.as_secs(),
+                    "frame {frame}: still pending after {:.1} s (--pending-timeout): {}",
+                    opts.pending_timeout.as_secs_f64(),
                     failures(&evaluator).join("; ")
                 );
             }
             // Bounded too: a loader that never returns fails the frame above instead of hanging.
-            resources.wait_idle_timeout(PENDING_LIMIT.saturating_sub(start.elapsed()));
+            resources.wait_idle_timeout(opts.pending_timeout.saturating_sub(start.elapsed()));
             if resources.in_flight() == 0 {
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }

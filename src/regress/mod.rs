@@ -549,6 +549,7 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
         dump_format: None,
         progress: false,
         command: Vec::new(),
+        pending_timeout: crate::render::PENDING_LIMIT,
     };
     let rendered = render::render(&ropts, gpu);
     let mut result = CaseResult {

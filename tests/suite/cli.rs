@@ -557,3 +557,42 @@ fn ssaa_writes_the_asked_size_with_smoothed_edges() {
     assert!(err.contains("over the limit of 8192"), "{err}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A load that never finishes (a FIFO nobody writes, as a hung network mount would behave)
+/// fails the frame after --pending-timeout with a message naming the node and the file,
+/// instead of hanging the CI job.
+#[cfg(unix)]
+#[test]
+fn a_load_that_never_finishes_fails_after_the_pending_timeout() {
+    let dir = temp("pending-timeout");
+    let fifo = dir.join("hung.obj");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+    assert!(made.success());
+    let graph = dir.join("g.ron");
+    std::fs::write(
+        &graph,
+        r#"(version: 1, nodes: {
+            "mesh": (kind: "MeshFile", params: {"path": "hung.obj"}),
+            "draw": (kind: "Draw"),
+            "export": (kind: "ExportGeometry"),
+        }, links: [("mesh.mesh", "draw.mesh"), ("draw.scene", "export.scene")])"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let started = std::time::Instant::now();
+    let (code, _, err) =
+        werkstatt(&["render", graph.to_str().unwrap(), "--pending-timeout", "0.5", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("frame 0: still pending after 0.5 s (--pending-timeout)")
+            && err.contains("node \"mesh\" (MeshFile) is still waiting for")
+            && err.contains("hung.obj"),
+        "{err}"
+    );
+    // Not a timed assertion on speed: only that the 120 s default did not apply.
+    assert!(started.elapsed() < std::time::Duration::from_secs(100), "the timeout was not applied");
+    let (code, _, err) = werkstatt(&["render", graph.to_str().unwrap(), "--pending-timeout=-1"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--pending-timeout must be a number of seconds"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

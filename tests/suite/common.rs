@@ -62,6 +62,7 @@ pub fn render_graph(
         ssaa: 1,
         progress: false,
         command: Vec::new(),
+        pending_timeout: werkstatt::render::PENDING_LIMIT,
     };
     render(&opts, gpu())
 }

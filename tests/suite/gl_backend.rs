@@ -60,6 +60,7 @@ fn render_on(
         ssaa: 1,
         progress: false,
         command: Vec::new(),
+        pending_timeout: werkstatt::render::PENDING_LIMIT,
     };
     render(&opts, gpu).map(|_| ())
 }

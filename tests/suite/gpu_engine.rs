@@ -86,6 +86,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         ssaa: 1,
         progress: false,
         command: Vec::new(),
+        pending_timeout: werkstatt::render::PENDING_LIMIT,
     };
     render(&opts, &gpu).unwrap();
     let json: serde_json::Value =
@@ -128,6 +129,7 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             ssaa: 1,
             progress: false,
             command: Vec::new(),
+            pending_timeout: werkstatt::render::PENDING_LIMIT,
         };
         render(&opts, &gpu).unwrap()
     };
