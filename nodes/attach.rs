@@ -155,7 +155,11 @@ pub static AREA_ATTACHMENT: NodeSpec = NodeSpec {
             "Offset along the normal after scaling (M_tan), e.g. to keep a flat sticker off the cloth.",
         ),
         ParamSpec::new("center", ParamKind::Vec3 { default: [0.5, 0.5, 0.0] }, "Decal centre in UV (x = u, y = v)."),
-        ParamSpec::new("size", ParamKind::Float { default: 0.2, min: 1e-5, max: 10.0 }, "Decal size in UV units."),
+        ParamSpec::new(
+            "size",
+            ParamKind::Float { default: 0.2, min: 1e-5, max: 10.0 },
+            "Decal size in UV units: its longer side (the mesh keeps its aspect ratio, eq. 6).",
+        ),
         ParamSpec::new(
             "angle",
             ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
@@ -186,9 +190,15 @@ impl Node for AreaAttachmentNode {
         }
         let m_tan = Mat4::from_translation(Vec3::new(0.0, cx.f32("lift"), 0.0))
             * Mat4::from_scale(Vec3::new(1.0, cx.f32("height"), 1.0));
-        // M_tex maps the mesh's xz bounds onto a UV square of side `size` at `origin`.
+        // M_tex maps the mesh's xz bounds onto a UV square of side `size` at `origin`: a tile
+        // stretched to fill its square cell; a decal scaled uniformly (eq. 6), its longer side
+        // `size`, so a 2:1 logo stays 2:1.
+        let decal = cx.choice::<AreaMode>("mode") == AreaMode::Decal;
+        let fit = if decal { Vec2::splat(extent.max_element()) } else { extent };
         let tile = |origin: Vec2, size: f32, angle_deg: f32| {
-            let to_unit = Affine2::from_scale(Vec2::ONE / extent) * Affine2::from_translation(-Vec2::new(lo.x, lo.z));
+            let to_unit = Affine2::from_translation(Vec2::splat(0.5) - extent / fit * 0.5)
+                * Affine2::from_scale(Vec2::ONE / fit)
+                * Affine2::from_translation(-Vec2::new(lo.x, lo.z));
             let centred = Affine2::from_translation(Vec2::splat(-0.5)) * to_unit;
             let placed = Affine2::from_translation(origin)
                 * Affine2::from_angle(angle_deg.to_radians())
@@ -196,7 +206,7 @@ impl Node for AreaAttachmentNode {
                 * centred;
             InstanceData::identity().with_tex(placed).with_tan(m_tan)
         };
-        let instances = if cx.choice::<AreaMode>("mode") == AreaMode::Decal {
+        let instances = if decal {
             let spin = cx.f32("spin");
             let angle = cx.f32("angle") + if spin != 0.0 { spin * cx.time().seconds() as f32 } else { 0.0 };
             vec![tile(cx.vec3("center").truncate(), cx.f32("size"), angle)]

@@ -9,7 +9,7 @@ use glam::Vec2;
 
 use crate::mesh::Mesh;
 use crate::node::prelude::*;
-use crate::warp::{ArcTable, Curves, Placement, bezier, bezier_tangent};
+use crate::warp::{ArcTable, Curves, Placement, bezier, curve_direction};
 
 const REGION: [ParamSpec; 4] = [
     ParamSpec::new("u_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest u."),
@@ -293,7 +293,9 @@ impl Node for CurvePlacementNode {
             for i in 0..=n {
                 let (seg, t) = table.at(i as f32 * spacing);
                 let p = bezier(&path[seg], t);
-                let d = bezier_tangent(&path[seg], t);
+                // The tangent's direction, or its limit where a control point equals an end
+                // point (common in SVG paths), where the tangent itself vanishes.
+                let d = curve_direction(&path[seg], t);
                 // Angle about the normal from +u towards +v, as point attachments read it.
                 let angle = d.y.atan2(d.x).to_degrees() + cx.f32("angle");
                 out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
