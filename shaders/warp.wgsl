@@ -185,22 +185,27 @@ fn lookup_frame(uv: vec2<f32>) -> SurfaceFrame {
     if ok[2] && ok[3] { du = du + f.y * (ps[3] - ps[2]); wu = wu + f.y; }
     if ok[0] && ok[2] { dv = dv + (1.0 - f.x) * (ps[2] - ps[0]); wv = wv + 1.0 - f.x; }
     if ok[1] && ok[3] { dv = dv + f.x * (ps[3] - ps[1]); wv = wv + f.x; }
-    let d = uv_derivatives(du, wu, dv, wv, vec2<f32>(dims), frame.tu, frame.tv);
+    let d = uv_derivatives(du, wu, dv, wv, vec2<f32>(dims), frame);
     frame.dpdu = d[0];
     frame.dpdv = d[1];
     return frame;
 }
 
-// dp/du, dp/dv in world per UV unit from texel differences `du`, `dv` with their weight
-// sums; an axis without a covered pair takes the other axis's scale along its unit tangent,
-// and with neither the unit tangents stand in (scale unknown).
-fn uv_derivatives(du: vec3<f32>, wu: f32, dv: vec3<f32>, wv: f32, dims: vec2<f32>, tu: vec3<f32>, tv: vec3<f32>) -> array<vec3<f32>, 2> {
-    var a = tu;
-    var b = tv;
+// dp/du and dp/dv in world per UV unit from texel differences `du`, `dv` with their weight
+// sums, projected onto the tangent plane of the interpolated normal (a difference between
+// texels is a chord of the surface, up to half a texel's turn off the plane at the lookup
+// point; the smooth surface's derivative lies in it). An axis without a covered pair takes
+// the other axis's scale along its unit tangent; with neither the unit tangents stand in
+// (scale unknown).
+fn uv_derivatives(du: vec3<f32>, wu: f32, dv: vec3<f32>, wv: f32, dims: vec2<f32>, f: SurfaceFrame) -> array<vec3<f32>, 2> {
+    var a = f.tu;
+    var b = f.tv;
     if wu > 1e-6 { a = du * (dims.x / wu); }
     if wv > 1e-6 { b = dv * (dims.y / wv); }
-    if wu <= 1e-6 && wv > 1e-6 { a = tu * length(b); }
-    if wv <= 1e-6 && wu > 1e-6 { b = tv * length(a); }
+    a = a - f.n * dot(f.n, a);
+    b = b - f.n * dot(f.n, b);
+    if wu <= 1e-6 && wv > 1e-6 { a = f.tu * length(b); }
+    if wv <= 1e-6 && wu > 1e-6 { b = f.tv * length(a); }
     return array<vec3<f32>, 2>(a, b);
 }
 

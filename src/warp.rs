@@ -142,9 +142,9 @@ impl MatrixTexels {
         pair(2, 3, f.y, &mut du, &mut wu);
         pair(0, 2, 1.0 - f.x, &mut dv, &mut wv);
         pair(1, 3, f.x, &mut dv, &mut wv);
-        let r = self.resolution as f32;
-        let [dpdu, dpdv] = uv_derivatives(du, wu, dv, wv, Vec2::splat(r), tu, tv);
-        Some(SurfaceFrame { frame: TexelFrame { tu, n, tv, p: sp / weight }, dpdu, dpdv })
+        let frame = TexelFrame { tu, n, tv, p: sp / weight };
+        let [dpdu, dpdv] = uv_derivatives(du, wu, dv, wv, Vec2::splat(self.resolution as f32), &frame);
+        Some(SurfaceFrame { frame, dpdu, dpdv })
     }
 }
 
@@ -169,14 +169,15 @@ fn bilinear_weight(f: Vec2, ox: i32, oy: i32) -> f32 {
 }
 
 /// The CPU twin of `uv_derivatives` in shaders/warp.wgsl.
-fn uv_derivatives(du: Vec3, wu: f32, dv: Vec3, wv: f32, dims: Vec2, tu: Vec3, tv: Vec3) -> [Vec3; 2] {
-    let mut a = if wu > 1e-6 { du * (dims.x / wu) } else { tu };
-    let mut b = if wv > 1e-6 { dv * (dims.y / wv) } else { tv };
+fn uv_derivatives(du: Vec3, wu: f32, dv: Vec3, wv: f32, dims: Vec2, f: &TexelFrame) -> [Vec3; 2] {
+    let a = if wu > 1e-6 { du * (dims.x / wu) } else { f.tu };
+    let b = if wv > 1e-6 { dv * (dims.y / wv) } else { f.tv };
+    let (mut a, mut b) = (a - f.n * f.n.dot(a), b - f.n * f.n.dot(b));
     if wu <= 1e-6 && wv > 1e-6 {
-        a = tu * b.length();
+        a = f.tu * b.length();
     }
     if wv <= 1e-6 && wu > 1e-6 {
-        b = tv * a.length();
+        b = f.tv * a.length();
     }
     [a, b]
 }
