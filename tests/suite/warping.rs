@@ -775,3 +775,4 @@ fn a_moved_surface_carries_its_attachments() {
         assert!((wv.position - expected).length() < 1e-4, "{:?} vs {expected:?}", wv.position);
     }
 }
+
