@@ -776,3 +776,33 @@ fn a_moved_surface_carries_its_attachments() {
     }
 }
 
+/// A placement file's rows in piece-local coordinates land at the same spot of each piece's
+/// UV rectangle; read as atlas coordinates, the rows whose piece column disagrees are warned.
+#[test]
+fn placement_files_honour_the_piece_column() {
+    let layout = |coordinates: &str| {
+        let g = graph(&format!(
+            r#"(version: 1, nodes: {{
+                "m": (kind: "MeshFile", params: {{"path": "tests/data/mirrored_piece.obj", "normalize": false}}),
+                "pf": (kind: "PlacementFile", params: {{"path": "tests/data/piece_layout.csv", "coordinates": "{coordinates}"}}),
+                "out": (kind: "Watch"),
+            }}, links: [("m.surface", "pf.surface"), ("pf.count", "out.value")])"#
+        ));
+        let ev = common::run_graph(&g, 8, 8);
+        let warnings = ev.report("pf").unwrap().warnings.to_vec();
+        match ev.output("pf", "placements") {
+            Some(werkstatt::port::Value::Instances(p)) => ((**p).clone(), warnings),
+            _ => panic!("no placements"),
+        }
+    };
+    // Piece 0 covers u 0-0.5, v 0-1; piece 1 (mirrored) u 0.5-1, v 0-0.5 (OBJ v is flipped on load).
+    let (p, warnings) = layout("piece");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let got: Vec<(u32, f32, f32)> = p.iter().map(|p| (p.piece, p.u, p.v)).collect();
+    assert_eq!(got, [(0, 0.25, 0.5), (1, 0.75, 0.25)]);
+    // As atlas UVs (0.5, 0.5) lies on the pieces' shared corner region: the piece column of at
+    // least one row disagrees with the piece found there, and the node says so.
+    let (p, warnings) = layout("atlas");
+    assert_eq!(p.len(), 2);
+    assert!(warnings.iter().any(|w| w.contains("1 rows name a piece other than")), "{warnings:?}");
+}
