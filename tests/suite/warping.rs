@@ -806,3 +806,19 @@ fn placement_files_honour_the_piece_column() {
     assert_eq!(p.len(), 2);
     assert!(warnings.iter().any(|w| w.contains("1 rows name a piece other than")), "{warnings:?}");
 }
+
+/// The sampling-theorem minimum (2 texels across the shortest UV edge) is a warning on the
+/// node, not only a log line.
+#[test]
+fn the_sampling_minimum_is_warned_on_the_node() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+            "p": (kind: "Primitive", params: {"shape": "plane", "segments_u": 64, "segments_v": 4}),
+            "mt": (kind: "MatrixTexture", params: {"resolution": 32}),
+            "out": (kind: "Watch"),
+        }, links: [("p.mesh", "mt.surface"), ("mt.min_resolution", "out.value")])"#,
+    );
+    let ev = common::run_graph(&g, 8, 8);
+    let warnings = ev.report("mt").unwrap().warnings.to_vec();
+    assert!(warnings.iter().any(|w| w.contains("resolution 32 is below the sampling minimum 128")), "{warnings:?}");
+}
