@@ -342,7 +342,10 @@ fn lookups_past_a_seam_blend_into_the_partner_piece() {
         );
         // Positions continue across the seam: x = (u - 0.05) / 0.4 - 1.
         let x = (u - 0.05) / 0.4 - 1.0;
-        assert!((frame.p.x - x).abs() < 0.25 / res as f32 * 2.5, "u = {u}: x {} vs {x}", frame.p.x);
+        // The partner point is read bilinearly: exact on this flat garment (its nearest texel
+        // was up to 0.7 texel = 0.014 off). One texel is 1 / (0.4 res) world units.
+        let texel = 1.0 / (0.4 * res as f32);
+        assert!((frame.p.x - x).abs() < 0.02 * texel, "u = {u}: x {} vs {x}", frame.p.x);
         // The GPU agrees with the CPU reference.
         let g = &gpu[k * nv];
         let c = werkstatt::warp::warp_vertex_cpu(&texels, &s, &places[k], detail.positions[0], detail.normals[0]);
