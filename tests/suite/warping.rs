@@ -422,7 +422,8 @@ fn area_tiles_on_a_cylinder_and_a_sphere_lie_at_the_lifted_radius() {
             .with_tex(glam::Affine2::from_scale_angle_translation(Vec2::splat(0.1), 0.4, Vec2::new(u, v)))
             .with_tan(glam::Mat4::from_translation(Vec3::new(0.0, lift, 0.0)))
     };
-    let distance: [(Mesh, fn(Vec3) -> f32); 2] = [
+    type Distance = fn(Vec3) -> f32;
+    let distance: [(Mesh, Distance); 2] = [
         (geometry::cylinder(r, 1.0, 256, 4).unwrap(), |p| Vec2::new(p.x, p.z).length()),
         (geometry::sphere(r, 256, 128).unwrap(), |p| p.length()),
     ];
