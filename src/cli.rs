@@ -208,6 +208,19 @@ enum BenchWhat {
         #[command(flatten)]
         out: GpuBench,
     },
+    /// The paper's Table 1: the Fig. 1 graphs scaled to the paper's triangle counts (25M fur,
+    /// 10M embroidery, 6M buttons and seams, 48M knit, 650k stickers), triangles and ms per
+    /// frame (matrix texture + G-buffer) beside the paper's GTX 580 times.
+    Table1 {
+        /// Timed frames per figure (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Fraction of the paper's triangle counts (1 = the paper's; smaller for a quick look).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        #[command(flatten)]
+        out: GpuBench,
+    },
     /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
     /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
     /// object and helices of small objects, and their ratio.
@@ -435,6 +448,29 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!(
                     "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
                     r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Table1 { frames, scale, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|"
+            );
+            let rows = crate::bench::table1(&gpu, frames, size, scale, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+                    r.figure,
+                    r.types,
+                    r.paper_triangles,
+                    r.paper_ms,
+                    r.triangles,
+                    r.matrix_ms,
+                    r.gbuffer_ms,
+                    r.ms_per_frame,
+                    r.settings.join(" ")
                 );
             })?;
             out.write_json(&rows)?;
