@@ -1113,3 +1113,106 @@ pub fn table1(
     }
     Ok(rows)
 }
+
+/// One row of `werkstatt bench export`.
+#[derive(Debug, serde::Serialize)]
+pub struct ExportRow {
+    pub buttons: usize,
+    pub triangles: usize,
+    /// Producing the warped geometry in memory: GPU warp and read-back into the output layout.
+    pub warp_ms: f64,
+    /// Assembling the mesh from it (outliers dropped): produce_ms - warp_ms.
+    pub assemble_ms: f64,
+    pub produce_ms: f64,
+    /// The threaded CPU twin producing the same geometry (warp + assemble).
+    pub cpu_produce_ms: f64,
+    /// Writing binary PLY to `out`.
+    pub write_ms: f64,
+    pub megabytes: f64,
+}
+
+/// The export path of Fig. 10's data: `counts` point-attached 928-triangle buttons on a grid
+/// over the tablecloth sequence (tests/data/sequence), produced as one mesh (GPU and CPU twin)
+/// and written as binary PLY into `out`, each timed apart (median of `frames`). The graph's
+/// ExportGeometry (at a frame never reached) only pulls the scene.
+pub fn export(
+    gpu: &crate::gpu::GpuContext,
+    counts: &[usize],
+    frames: usize,
+    out: &std::path::Path,
+    mut report: impl FnMut(&ExportRow),
+) -> anyhow::Result<Vec<ExportRow>> {
+    use crate::nodes::export::{GpuWarper, assemble, warped_layout_cpu};
+    use crate::port::Value;
+
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let resources = Resources::new(false);
+    let settings = FrameSettings { width: 64, height: 64, base_dir: dir, frames: None };
+    std::fs::create_dir_all(out)?;
+    let mut rows = Vec::new();
+    for &count in counts {
+        let side = (count as f64).sqrt().round().max(1.0) as usize;
+        let cols = count.div_ceil(side);
+        let text = format!(
+            r#"(version: 1, nodes: {{
+                "cloth": (kind: "MeshSequence", params: {{"path": "sequence"}}),
+                "matrix": (kind: "MatrixTexture", params: {{"resolution": 512}}),
+                "grid": (kind: "GridPlacement", params: {{"columns": {cols}, "rows": {side}}}),
+                "button": (kind: "Primitive", params: {{"shape": "disc", "radius": 0.5, "height": 0.2, "segments_u": 232}}),
+                "buttons": (kind: "PointAttachment", params: {{"scale": {scale}}}),
+                "out": (kind: "ExportGeometry", params: {{"frame": 1000000}}),
+            }}, links: [("cloth.surface", "matrix.surface"), ("cloth.surface", "grid.surface"),
+                ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"),
+                ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene")])"#,
+            scale = 0.8 / cols as f32,
+        );
+        let graph = Graph::load_str(&text, "export.ron".as_ref()).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+        settle_frame(&mut ev, gpu, &resources, &settings, 0, "the export scene")?;
+        let Some(Value::Scene(items)) = ev.output("buttons", "scene") else {
+            anyhow::bail!("the export scene has no attachments");
+        };
+        let item = &items[0];
+        let draw = item.attached.as_ref().expect("an attachment");
+        let mut warper = GpuWarper::default();
+        let warp_ms = median_ms(frames, &mut || warper.warp_layout(gpu, &item.mesh, draw).map(drop))?;
+        let mut mesh = None;
+        let produce_ms = median_ms(frames, &mut || {
+            mesh = Some(assemble(&item.mesh, warper.warp_layout(gpu, &item.mesh, draw)?)?);
+            Ok(())
+        })?;
+        let texels = crate::nodes::matrix_texture::read_matrix(gpu, &draw.matrix)?;
+        let instances: Vec<crate::warp::InstanceData> = draw.instances.to_vec();
+        let mut cpu_mesh = None;
+        let cpu_produce_ms = median_ms(frames, &mut || {
+            let l = warped_layout_cpu(&texels, &draw.settings, &item.mesh, &instances);
+            cpu_mesh = Some(assemble(&item.mesh, l)?);
+            Ok(())
+        })?;
+        let mesh = mesh.expect("assembled above");
+        let cpu_mesh = cpu_mesh.expect("assembled above");
+        anyhow::ensure!(
+            mesh.indices == cpu_mesh.indices,
+            "the GPU and the CPU twin keep different triangles ({} and {})",
+            mesh.triangle_count(),
+            cpu_mesh.triangle_count()
+        );
+        let path = out.join(format!("export_{count}.ply"));
+        let write_ms = median_ms(frames, &mut || crate::geometry_io::write_ply(&path, &mesh))?;
+        let megabytes = std::fs::metadata(&path).map(|m| m.len() as f64 / 1e6).unwrap_or(0.0);
+        let _ = std::fs::remove_file(&path);
+        let row = ExportRow {
+            buttons: draw.instances.len(),
+            triangles: mesh.triangle_count(),
+            warp_ms,
+            assemble_ms: produce_ms - warp_ms,
+            produce_ms,
+            cpu_produce_ms,
+            write_ms,
+            megabytes,
+        };
+        report(&row);
+        rows.push(row);
+    }
+    Ok(rows)
+}

@@ -221,6 +221,22 @@ enum BenchWhat {
         #[command(flatten)]
         out: GpuBench,
     },
+    /// The export path of Fig. 10's data: N point-attached 928-triangle buttons on the
+    /// tablecloth sequence; producing the warped geometry in memory (GPU, and the threaded CPU
+    /// twin) apart from writing it as binary PLY.
+    Export {
+        /// Button counts, comma-separated.
+        #[arg(long, default_value = "1000,10000,65000", value_delimiter = ',')]
+        counts: Vec<usize>,
+        /// Timed runs per measurement (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Folder the PLY files are written to (and removed from); a RAM disk measures the copy.
+        #[arg(long, default_value = "out")]
+        dir: PathBuf,
+        #[command(flatten)]
+        out: GpuBench,
+    },
     /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
     /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
     /// object and helices of small objects, and their ratio.
@@ -448,6 +464,28 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!(
                     "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
                     r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Export { counts, frames, dir, out } } => {
+            let (gpu, _) = out.open()?;
+            println!("adapter: {}, median of {frames} run(s), PLY into {}", gpu.adapter_name(), dir.display());
+            println!(
+                "| buttons | triangles | GPU warp + read-back ms | assemble ms | GPU produce ms | CPU twin produce ms | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::export(&gpu, &counts, frames, &dir, |r| {
+                println!(
+                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                    r.buttons,
+                    r.triangles,
+                    r.warp_ms,
+                    r.assemble_ms,
+                    r.produce_ms,
+                    r.cpu_produce_ms,
+                    r.write_ms,
+                    r.megabytes
                 );
             })?;
             out.write_json(&rows)?;
