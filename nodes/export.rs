@@ -142,7 +142,7 @@ fn has_area(positions: &[Vec3], t: [u32; 3]) -> bool {
 pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
     let nv = mesh.positions.len();
     let n = warped.positions.len();
-    anyhow::ensure!(nv > 0 && n % nv == 0, "{n} warped vertices are not whole instances of {nv}");
+    anyhow::ensure!(nv > 0 && n.is_multiple_of(nv), "{n} warped vertices are not whole instances of {nv}");
     let mut indices = Vec::with_capacity(mesh.indices.len() * (n / nv));
     for (k, valid) in warped.valid.chunks(nv).enumerate() {
         let base = (k * nv) as u32;
