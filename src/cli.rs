@@ -218,6 +218,9 @@ enum BenchWhat {
         /// Fraction of the paper's triangle counts (1 = the paper's; smaller for a quick look).
         #[arg(long, default_value_t = 1.0)]
         scale: f64,
+        /// Only these figures (graph name prefixes, e.g. fig1c), comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
         #[command(flatten)]
         out: GpuBench,
     },
@@ -491,13 +494,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Table1 { frames, scale, out } } => {
+        Command::Bench { what: BenchWhat::Table1 { frames, scale, only, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!(
                 "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|"
             );
-            let rows = crate::bench::table1(&gpu, frames, size, scale, |r| {
+            let rows = crate::bench::table1(&gpu, frames, size, scale, &only, |r| {
                 println!(
                     "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
                     r.figure,
