@@ -1032,6 +1032,9 @@ pub fn table1(
                 break;
             }
             for &(node, param, exponent) in fig.knobs {
+                // Within the parameter's range: a knob at its limit leaves the rest to the others.
+                let kind = graph.nodes.get(node).map(|n| n.kind.clone()).unwrap_or_default();
+                let range = crate::spec::find(&kind).and_then(|s| s.param(param)).map(|(_, p)| p.kind);
                 let p = graph
                     .nodes
                     .get_mut(node)
@@ -1040,10 +1043,16 @@ pub fn table1(
                     .get_mut(param)
                     .ok_or_else(|| anyhow::anyhow!("{what}: {node} does not set {param}"))?;
                 let f = (target / have).powf(1.0 / exponent);
-                *p = match p {
-                    ParamValue::Int(v) => ParamValue::Int(((*v as f64) * f).round().max(1.0) as i64),
-                    ParamValue::Float(v) => ParamValue::Float(*v * f),
-                    other => anyhow::bail!("{what}: {node}.{param} is {other:?}, not a number"),
+                *p = match (&*p, range) {
+                    (ParamValue::Int(v), Some(crate::param::ParamKind::Int { min, max, .. })) => {
+                        ParamValue::Int((((*v as f64) * f).round() as i64).clamp(min, max))
+                    }
+                    (ParamValue::Float(v), Some(crate::param::ParamKind::Float { min, max, .. })) => {
+                        ParamValue::Float((*v * f).clamp(min, max))
+                    }
+                    (ParamValue::Int(v), _) => ParamValue::Int(((*v as f64) * f).round().max(1.0) as i64),
+                    (ParamValue::Float(v), _) => ParamValue::Float(*v * f),
+                    (other, _) => anyhow::bail!("{what}: {node}.{param} is {other:?}, not a number"),
                 };
             }
             ev.update(&graph, &[]).map_err(anyhow::Error::msg)?;
