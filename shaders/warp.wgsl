@@ -137,33 +137,20 @@ fn lookup_frame(uv: vec2<f32>) -> SurfaceFrame {
     let st = uv * vec2<f32>(dims) - 0.5;
     let base = vec2<i32>(floor(st));
     let f = st - floor(st);
-    var su = vec3<f32>(0.0);
-    var sn = vec3<f32>(0.0);
-    var sv = vec3<f32>(0.0);
-    var sp = vec3<f32>(0.0);
-    var weight = 0.0;
-    var ps: array<vec3<f32>, 4>;
-    var ok: array<bool, 4>;
-    for (var k = 0; k < 4; k = k + 1) {
-        let o = vec2<i32>(k & 1, k >> 1);
-        let q = base + o;
-        ok[k] = false;
-        if q.x < 0 || q.y < 0 || q.x >= dims.x || q.y >= dims.y {
-            continue;
-        }
-        let t = texel_or_partner(q, dims);
-        if !t.valid {
-            continue;
-        }
-        ok[k] = true;
-        ps[k] = t.p;
-        let w = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
-        su = su + w * t.tu;
-        sn = sn + w * t.n;
-        sv = sv + w * t.tv;
-        sp = sp + w * t.p;
-        weight = weight + w;
-    }
+    // The four footprint texels, unrolled (no private array: llvmpipe spills those).
+    let t00 = footprint_texel(base, dims);
+    let t10 = footprint_texel(base + vec2<i32>(1, 0), dims);
+    let t01 = footprint_texel(base + vec2<i32>(0, 1), dims);
+    let t11 = footprint_texel(base + vec2<i32>(1, 1), dims);
+    let w00 = select(0.0, (1.0 - f.x) * (1.0 - f.y), t00.valid);
+    let w10 = select(0.0, f.x * (1.0 - f.y), t10.valid);
+    let w01 = select(0.0, (1.0 - f.x) * f.y, t01.valid);
+    let w11 = select(0.0, f.x * f.y, t11.valid);
+    let weight = w00 + w10 + w01 + w11;
+    let su = w00 * t00.tu + w10 * t10.tu + w01 * t01.tu + w11 * t11.tu;
+    let sn = w00 * t00.n + w10 * t10.n + w01 * t01.n + w11 * t11.n;
+    let sv = w00 * t00.tv + w10 * t10.tv + w01 * t01.tv + w11 * t11.tv;
+    let sp = w00 * t00.p + w10 * t10.p + w01 * t01.p + w11 * t11.p;
     var frame: SurfaceFrame;
     frame.valid = weight >= max(warp.params.z, 1e-6);
     let inv = 1.0 / max(weight, 1e-6);
@@ -177,18 +164,24 @@ fn lookup_frame(uv: vec2<f32>) -> SurfaceFrame {
     frame.p = sp * inv;
     // The derivative of the bilinear position field: differences along each axis between
     // covered texel pairs, weighted as the interpolation weights them.
-    var du = vec3<f32>(0.0);
-    var dv = vec3<f32>(0.0);
-    var wu = 0.0;
-    var wv = 0.0;
-    if ok[0] && ok[1] { du = du + (1.0 - f.y) * (ps[1] - ps[0]); wu = wu + 1.0 - f.y; }
-    if ok[2] && ok[3] { du = du + f.y * (ps[3] - ps[2]); wu = wu + f.y; }
-    if ok[0] && ok[2] { dv = dv + (1.0 - f.x) * (ps[2] - ps[0]); wv = wv + 1.0 - f.x; }
-    if ok[1] && ok[3] { dv = dv + f.x * (ps[3] - ps[1]); wv = wv + f.x; }
-    let d = uv_derivatives(du, wu, dv, wv, vec2<f32>(dims), frame);
+    let wu0 = select(0.0, 1.0 - f.y, t00.valid && t10.valid);
+    let wu1 = select(0.0, f.y, t01.valid && t11.valid);
+    let wv0 = select(0.0, 1.0 - f.x, t00.valid && t01.valid);
+    let wv1 = select(0.0, f.x, t10.valid && t11.valid);
+    let du = wu0 * (t10.p - t00.p) + wu1 * (t11.p - t01.p);
+    let dv = wv0 * (t01.p - t00.p) + wv1 * (t11.p - t10.p);
+    let d = uv_derivatives(du, wu0 + wu1, dv, wv0 + wv1, vec2<f32>(dims), frame);
     frame.dpdu = d[0];
     frame.dpdv = d[1];
     return frame;
+}
+
+// A footprint texel (its own frame or its seam partner's), invalid outside the texture.
+fn footprint_texel(q: vec2<i32>, dims: vec2<i32>) -> Texel {
+    if q.x < 0 || q.y < 0 || q.x >= dims.x || q.y >= dims.y {
+        return Texel(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), false);
+    }
+    return texel_or_partner(q, dims);
 }
 
 // dp/du and dp/dv in world per UV unit from texel differences `du`, `dv` with their weight
