@@ -79,6 +79,23 @@ pub fn point_instance(p: &Placement, scale: f32, normal_scale: f32, lift: f32, e
     ))
 }
 
+/// M_tex of an area attachment: maps the detail mesh's xz bounds (`lo`, `hi`) onto a UV
+/// square of side `size` centred at `origin`, turned by `angle_deg` (positive from +u towards
+/// +v). `uniform` (decals): scaled uniformly (eq. 6), the longer side `size`, so a 2:1 logo
+/// stays 2:1; else (tiles) stretched to fill the square cell.
+pub fn area_tex(lo: Vec3, hi: Vec3, uniform: bool, origin: Vec2, size: f32, angle_deg: f32) -> Affine2 {
+    let extent = Vec2::new(hi.x - lo.x, hi.z - lo.z);
+    let fit = if uniform { Vec2::splat(extent.max_element()) } else { extent };
+    let to_unit = Affine2::from_translation(Vec2::splat(0.5) - extent / fit * 0.5)
+        * Affine2::from_scale(Vec2::ONE / fit)
+        * Affine2::from_translation(-Vec2::new(lo.x, lo.z));
+    Affine2::from_translation(origin)
+        * Affine2::from_angle(angle_deg.to_radians())
+        * Affine2::from_scale(Vec2::splat(size))
+        * Affine2::from_translation(Vec2::splat(-0.5))
+        * to_unit
+}
+
 pub static POINT_ATTACHMENT: NodeSpec = NodeSpec {
     kind: "PointAttachment",
     category: Category::Attachment,
@@ -155,7 +172,11 @@ pub static AREA_ATTACHMENT: NodeSpec = NodeSpec {
             "Offset along the normal after scaling (M_tan), e.g. to keep a flat sticker off the cloth.",
         ),
         ParamSpec::new("center", ParamKind::Vec3 { default: [0.5, 0.5, 0.0] }, "Decal centre in UV (x = u, y = v)."),
-        ParamSpec::new("size", ParamKind::Float { default: 0.2, min: 1e-5, max: 10.0 }, "Decal size in UV units."),
+        ParamSpec::new(
+            "size",
+            ParamKind::Float { default: 0.2, min: 1e-5, max: 10.0 },
+            "Decal size in UV units: its longer side (the mesh keeps its aspect ratio, eq. 6).",
+        ),
         ParamSpec::new(
             "angle",
             ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
@@ -186,17 +207,11 @@ impl Node for AreaAttachmentNode {
         }
         let m_tan = Mat4::from_translation(Vec3::new(0.0, cx.f32("lift"), 0.0))
             * Mat4::from_scale(Vec3::new(1.0, cx.f32("height"), 1.0));
-        // M_tex maps the mesh's xz bounds onto a UV square of side `size` at `origin`.
+        let decal = cx.choice::<AreaMode>("mode") == AreaMode::Decal;
         let tile = |origin: Vec2, size: f32, angle_deg: f32| {
-            let to_unit = Affine2::from_scale(Vec2::ONE / extent) * Affine2::from_translation(-Vec2::new(lo.x, lo.z));
-            let centred = Affine2::from_translation(Vec2::splat(-0.5)) * to_unit;
-            let placed = Affine2::from_translation(origin)
-                * Affine2::from_angle(angle_deg.to_radians())
-                * Affine2::from_scale(Vec2::splat(size))
-                * centred;
-            InstanceData::identity().with_tex(placed).with_tan(m_tan)
+            InstanceData::identity().with_tex(area_tex(lo, hi, decal, origin, size, angle_deg)).with_tan(m_tan)
         };
-        let instances = if cx.choice::<AreaMode>("mode") == AreaMode::Decal {
+        let instances = if decal {
             let spin = cx.f32("spin");
             let angle = cx.f32("angle") + if spin != 0.0 { spin * cx.time().seconds() as f32 } else { 0.0 };
             vec![tile(cx.vec3("center").truncate(), cx.f32("size"), angle)]

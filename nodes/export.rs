@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use crate::geometry_io::GeometryFormat;
-use crate::gpu::readback::read_buffer_range;
+use crate::gpu::readback::read_buffer_with;
 use crate::gpu::{Bind, BufferRing, ComputePass, GpuContext, read_buffer};
 use crate::mesh::{GpuMesh, Mesh};
 use crate::node::prelude::*;
@@ -90,11 +90,86 @@ impl Default for GpuWarper {
     }
 }
 
+/// Warped vertices in the exported layout: instance-major positions and normals (zero for
+/// outliers) and whether each vertex is valid.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WarpedLayout {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub valid: Vec<bool>,
+}
+
+impl WarpedLayout {
+    fn with_len(n: usize) -> Self {
+        WarpedLayout { positions: vec![Vec3::ZERO; n], normals: vec![Vec3::ZERO; n], valid: vec![false; n] }
+    }
+
+    /// As per-vertex structs (tests compare them with the CPU reference).
+    pub fn vertices(&self) -> Vec<WarpedVertex> {
+        (0..self.positions.len())
+            .map(|i| WarpedVertex { position: self.positions[i], normal: self.normals[i], valid: self.valid[i] })
+            .collect()
+    }
+}
+
+/// The threaded CPU twin of `GpuWarper::warp_layout` (`warp_all_cpu` into the same layout),
+/// which `werkstatt bench export` compares with the GPU path.
+pub fn warped_layout_cpu(
+    texels: &crate::warp::MatrixTexels,
+    settings: &crate::warp::WarpSettings,
+    mesh: &Mesh,
+    instances: &[InstanceData],
+) -> WarpedLayout {
+    let warped = crate::warp::warp_all_cpu(texels, settings, mesh, instances);
+    let mut out = WarpedLayout::with_len(warped.len());
+    for (i, w) in warped.iter().enumerate() {
+        if w.valid {
+            (out.positions[i], out.normals[i], out.valid[i]) = (w.position, w.normal, true);
+        }
+    }
+    out
+}
+
+/// Whether triangle `t` has an area (a collapsed one is left out of exports, as `Mesh::build` does).
+fn has_area(positions: &[Vec3], t: [u32; 3]) -> bool {
+    let [a, b, c] = t.map(|i| positions[i as usize]);
+    (b - a).cross(c - a).length() > f32::MIN_POSITIVE
+}
+
+/// The mesh of warped instances of `mesh`: vertices as warped, each instance's UVs, and its
+/// triangles except those touching an outlier vertex. No tangents (an exported mesh is drawn
+/// or written, not parametrized again).
+pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
+    let nv = mesh.positions.len();
+    let n = warped.positions.len();
+    anyhow::ensure!(nv > 0 && n.is_multiple_of(nv), "{n} warped vertices are not whole instances of {nv}");
+    let mut indices = Vec::with_capacity(mesh.indices.len() * (n / nv));
+    for (k, valid) in warped.valid.chunks(nv).enumerate() {
+        let base = (k * nv) as u32;
+        for t in mesh.indices.chunks_exact(3) {
+            let global = [t[0] + base, t[1] + base, t[2] + base];
+            if t.iter().all(|&i| valid[i as usize]) && has_area(&warped.positions, global) {
+                indices.extend_from_slice(&global);
+            }
+        }
+    }
+    let mut uvs = Vec::with_capacity(n);
+    for _ in 0..n / nv {
+        uvs.extend_from_slice(&mesh.uvs);
+    }
+    Ok(Mesh::from_raw(warped.positions, warped.normals, uvs, Vec::new(), Vec::new(), indices))
+}
+
 impl GpuWarper {
     /// Warps every instance of `mesh`; the result is instance-major.
     pub fn warp(&mut self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<Vec<WarpedVertex>> {
+        Ok(self.warp_layout(gpu, mesh, draw)?.vertices())
+    }
+
+    /// Warps every instance of `mesh` straight into the exported layout (instance-major).
+    pub fn warp_layout(&mut self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<WarpedLayout> {
         let nv = mesh.positions.len();
-        let per_instance = (nv * 32) as u64;
+        let per_instance = (nv * 28) as u64;
         let max_binding = gpu.limits.max_storage_buffer_binding_size.min(gpu.limits.max_buffer_size);
         let chunk = ((max_binding / per_instance.max(1)) as usize).clamp(1, 1 << 20);
         // The same instance data as rendering: point frames resolved once per instance.
@@ -110,9 +185,10 @@ impl GpuWarper {
             draw.instances.to_vec()
         };
         let uniform = draw.settings.uniform(resolved);
-        let mut out = Vec::with_capacity(nv * instances.len());
-        for insts in instances.chunks(chunk) {
-            out.extend(self.warp_chunk(gpu, mesh, insts, &warp_binds(&draw.matrix, &uniform))?);
+        let mut out = WarpedLayout::with_len(nv * instances.len());
+        for (c, insts) in instances.chunks(chunk).enumerate() {
+            let start = c * chunk * nv;
+            self.warp_chunk(gpu, mesh, insts, &warp_binds(&draw.matrix, &uniform), &mut out, start)?;
         }
         Ok(out)
     }
@@ -123,11 +199,13 @@ impl GpuWarper {
         mesh: &Mesh,
         insts: &[InstanceData],
         warp: &[Bind<'_>],
-    ) -> anyhow::Result<Vec<WarpedVertex>> {
+        out: &mut WarpedLayout,
+        start: usize,
+    ) -> anyhow::Result<()> {
         let gm: &GpuMesh = mesh.gpu(gpu);
         let nv = mesh.positions.len();
         let total = nv * insts.len();
-        let size = (total * 32) as u64;
+        let size = (total * 28) as u64;
         if self.output.as_ref().is_none_or(|b| b.size() < size) {
             let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
             self.output = Some(gpu.create_buffer("export output", size.next_power_of_two(), usage));
@@ -142,52 +220,65 @@ impl GpuWarper {
             Bind::Uniform(bytemuck::cast_slice(&counts)),
         ];
         self.pass.dispatch(gpu, &[&io, &[], warp], ComputePass::groups_for(total, 64))?;
-        let floats: Vec<f32> = read_buffer_range(gpu, output, size)?;
-        Ok(floats
-            .chunks_exact(8)
-            .map(|v| WarpedVertex {
-                position: Vec3::new(v[0], v[1], v[2]),
-                normal: Vec3::new(v[4], v[5], v[6]),
-                valid: v[3] > 0.5,
-            })
-            .collect())
+        let range = start..start + total;
+        read_buffer_with(gpu, output, size, |bytes| {
+            let (p, rest) = bytes.split_at(total * 12);
+            let (n, v) = rest.split_at(total * 12);
+            bytemuck::cast_slice_mut::<Vec3, u8>(&mut out.positions[range.clone()]).copy_from_slice(p);
+            bytemuck::cast_slice_mut::<Vec3, u8>(&mut out.normals[range.clone()]).copy_from_slice(n);
+            for (slot, f) in out.valid[range].iter_mut().zip(v.chunks_exact(4)) {
+                *slot = f32::from_le_bytes([f[0], f[1], f[2], f[3]]) > 0.5;
+            }
+        })
     }
 }
 
 /// One mesh of everything the scene draws: plain items transformed by their model matrix,
-/// attached items warped per instance; triangles touching an outlier vertex are left out.
+/// attached items warped per instance on the GPU straight into the exported layout (on
+/// lavapipe too: `werkstatt bench export` measured it faster than the threaded CPU twin on
+/// this machine); triangles touching an outlier vertex are left out. A scene of one attachment is its mesh as assembled.
 pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> anyhow::Result<Mesh> {
-    let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut parts = Vec::with_capacity(items.len());
     for item in items {
         let m = &item.mesh;
         match &item.attached {
             None => {
-                let base = positions.len() as u32;
                 let nm = item.model.inverse().transpose();
-                positions.extend(m.positions.iter().map(|p| item.model.transform_point3(*p)));
-                normals.extend(m.normals.iter().map(|n| nm.transform_vector3(*n).normalize_or_zero()));
-                uvs.extend_from_slice(&m.uvs);
-                indices.extend(m.indices.iter().map(|i| i + base));
+                let positions: Vec<Vec3> = m.positions.iter().map(|p| item.model.transform_point3(*p)).collect();
+                let indices = m
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| [t[0], t[1], t[2]])
+                    .filter(|&t| has_area(&positions, t))
+                    .flatten()
+                    .collect();
+                parts.push(Mesh::from_raw(
+                    positions,
+                    m.normals.iter().map(|n| nm.transform_vector3(*n).normalize_or_zero()).collect(),
+                    m.uvs.clone(),
+                    Vec::new(),
+                    Vec::new(),
+                    indices,
+                ));
             }
             Some(a) => {
-                let warped = warper.warp(gpu, m, a)?;
-                let nv = m.positions.len();
-                for inst in warped.chunks(nv) {
-                    let base = positions.len() as u32;
-                    positions.extend(inst.iter().map(|w| w.position));
-                    normals.extend(inst.iter().map(|w| w.normal));
-                    uvs.extend_from_slice(&m.uvs);
-                    for t in m.indices.chunks_exact(3) {
-                        if t.iter().all(|&i| inst[i as usize].valid) {
-                            indices.extend(t.iter().map(|i| i + base));
-                        }
-                    }
-                }
+                parts.push(assemble(m, warper.warp_layout(gpu, m, a)?)?);
             }
         }
     }
-    if indices.is_empty() {
+    if parts.iter().all(|p| p.indices.is_empty()) {
         anyhow::bail!("nothing to export: the scene has no visible triangles");
     }
-    Mesh::build(positions, Some(uvs), Some(normals), indices)
+    if parts.len() == 1 {
+        return Ok(parts.pop().expect("one part"));
+    }
+    let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for p in parts {
+        let base = positions.len() as u32;
+        positions.extend_from_slice(&p.positions);
+        normals.extend_from_slice(&p.normals);
+        uvs.extend_from_slice(&p.uvs);
+        indices.extend(p.indices.iter().map(|i| i + base));
+    }
+    Ok(Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices))
 }

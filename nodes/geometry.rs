@@ -246,33 +246,49 @@ pub static TRANSFORM_MESH: NodeSpec = NodeSpec {
     doc: "Scales, rotates (XYZ, degrees) and translates a mesh's vertices, e.g. to stand a detail mesh up or put its base at y = 0 before attaching it.",
     inputs: &[PortSpec::required("mesh", PortType::Mesh, "The mesh.")],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The transformed mesh.")],
-    params: &[
-        ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation (applied last)."),
-        ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees."),
-        ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis (applied first)."),
-    ],
+    params: &[TRANSLATE, ROTATE, SCALE],
     is_output: false,
     create: || Box::new(TransformMeshNode),
 };
+
+/// The transform parameters of `TransformMesh`, `Draw` and `MatrixTexture` (read by `model_matrix`).
+pub const TRANSLATE: ParamSpec =
+    ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation (applied last).");
+pub const ROTATE: ParamSpec =
+    ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees.");
+pub const SCALE: ParamSpec =
+    ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis (applied first).");
+
+/// The model matrix of the `translate`, `rotate`, `scale` parameters: scale, then rotate XYZ
+/// in degrees, then translate; an error where a scale component is 0.
+pub fn model_matrix(cx: &EvalCx<'_>) -> Result<glam::Mat4, NodeError> {
+    let r = cx.vec3("rotate");
+    let rotation = glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
+    let m = glam::Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
+    if m.determinant().abs() < 1e-12 {
+        return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
+    }
+    Ok(m)
+}
+
+/// `mesh` with positions moved by `m`, normals by its inverse transpose and tangents by its
+/// linear part.
+pub fn transform_mesh(mesh: &Mesh, m: glam::Mat4) -> Mesh {
+    let normal_matrix = glam::Mat3::from_mat4(m).inverse().transpose();
+    let linear = glam::Mat3::from_mat4(m);
+    let mut out = mesh.clone();
+    out.positions.iter_mut().for_each(|p| *p = m.transform_point3(*p));
+    out.normals.iter_mut().for_each(|n| *n = (normal_matrix * *n).normalize_or_zero());
+    out.tangents_u.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
+    out.tangents_v.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
+    out
+}
 
 struct TransformMeshNode;
 impl Node for TransformMeshNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let mesh: Arc<Mesh> = cx.input("mesh")?;
-        let r = cx.vec3("rotate");
-        let rotation =
-            glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
-        let m = glam::Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
-        if m.determinant().abs() < 1e-12 {
-            return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
-        }
-        let normal_matrix = glam::Mat3::from_mat4(m).inverse().transpose();
-        let linear = glam::Mat3::from_mat4(m);
-        let mut out = (*mesh).clone();
-        out.positions.iter_mut().for_each(|p| *p = m.transform_point3(*p));
-        out.normals.iter_mut().for_each(|n| *n = (normal_matrix * *n).normalize_or_zero());
-        out.tangents_u.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
-        out.tangents_v.iter_mut().for_each(|t| *t = (linear * *t).normalize_or_zero());
+        let out = transform_mesh(&mesh, model_matrix(cx)?);
         cx.set("mesh", Arc::new(out));
         Ok(())
     }

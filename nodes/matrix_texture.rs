@@ -36,8 +36,20 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
         ParamSpec::new(
             "filter_radius",
             ParamKind::Int { default: 0, min: 0, max: 8 },
-            "Low-pass filter of the orientation field in texels (0 = off), against self-intersections of tall details.",
+            "Low-pass filter of the orientation field in texels (0 = off), within each pattern piece, against self-intersections of tall details.",
         ),
+        ParamSpec::new(
+            "flip_left_handed",
+            ParamKind::Bool { default: false },
+            "Flip t_v on pattern pieces whose UVs are mirrored ((t_u x n) . t_v < 0), so attachments there are not mirrored.",
+        ),
+        ParamSpec::new(
+            "translate",
+            ParamKind::Vec3 { default: [0.0, 0.0, 0.0] },
+            "The surface's model transform, as on the Draw that shows it (applied last).",
+        ),
+        crate::nodes::geometry::ROTATE,
+        crate::nodes::geometry::SCALE,
     ],
     is_output: false,
     create: || Box::new(MatrixTextureNode::default()),
@@ -50,6 +62,8 @@ pub struct MatrixTextureNode {
     bit_copy: Option<wgpu::Buffer>,
     /// The seam map depends only on UVs, seams and resolution, not on positions: kept across frames.
     seam_map: Option<(u64, GpuImage)>,
+    /// The piece map (piece_map.wgsl) for the filter, by the same key.
+    piece_map: Option<(u64, GpuImage)>,
 }
 
 /// Gutter width of the seam map, in texels.
@@ -137,6 +151,10 @@ impl MatrixTextureNode {
         };
         m = as_floats(m);
         if filter_radius > 0 {
+            if self.piece_map.as_ref().is_none_or(|(k, _)| *k != key) {
+                self.piece_map = Some((key, render_piece_map(gpu, mesh, resolution)?));
+            }
+            let pieces = self.piece_map.as_ref().expect("set above").1.share();
             let pass =
                 self.filter.get_or_insert_with(|| FullscreenPass::new("matrix_filter.wgsl").with_fragment_entry(entry));
             for dir in [[1.0f32, 0.0], [0.0, 1.0]] {
@@ -151,7 +169,7 @@ impl MatrixTextureNode {
                 pass.run_mrt(
                     gpu,
                     bytemuck::cast_slice(&params),
-                    &[&m.col_u, &m.col_n, &m.col_v],
+                    &[&m.col_u, &m.col_n, &m.col_v, &pieces],
                     &[&out.col_u, &out.col_n, &out.col_v],
                 )?;
                 m = as_floats(out);
@@ -187,6 +205,46 @@ impl Node for MatrixTextureNode {
         }
         if mesh.uvs.iter().any(|uv| uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0) {
             cx.warn("some UVs lie outside [0,1]^2; those parts of the surface are not in the matrix texture");
+        }
+        // The surface in world space: moved by its model transform, as the Draw that shows it.
+        let model = crate::nodes::geometry::model_matrix(cx)?;
+        let mut mesh: Arc<Mesh> = if model == glam::Mat4::IDENTITY {
+            mesh
+        } else {
+            Arc::new(crate::nodes::geometry::transform_mesh(&mesh, model))
+        };
+        let hands = handedness(&mesh, resolution);
+        let flip = cx.bool("flip_left_handed");
+        let left: Vec<&PieceHandedness> = hands.iter().filter(|h| h.left_texels >= 0.5).collect();
+        if !left.is_empty() {
+            let list: Vec<String> = left
+                .iter()
+                .map(|h| format!("piece {}: {:.0} of {:.0}", h.piece, h.left_texels, h.left_texels + h.right_texels))
+                .collect();
+            let total: f64 = left.iter().map(|h| h.left_texels).sum();
+            let what = format!(
+                "about {total:.0} texels have left-handed (mirrored) UVs, (t_u x n) . t_v < 0 ({})",
+                list.join(", ")
+            );
+            cx.warn(if flip {
+                format!("{what}; t_v is flipped on the pieces where they are the majority")
+            } else {
+                format!("{what}: attachments there are mirrored; set flip_left_handed to flip t_v on those pieces")
+            });
+        }
+        let flipped: Vec<u32> = if flip {
+            hands.iter().filter(|h| h.left_texels > h.right_texels).map(|h| h.piece).collect()
+        } else {
+            vec![]
+        };
+        if !flipped.is_empty() {
+            let mut m = (*mesh).clone();
+            for (i, t) in m.tangents_v.iter_mut().enumerate() {
+                if flipped.contains(&m.piece_ids.get(i).copied().unwrap_or(0)) {
+                    *t = -*t;
+                }
+            }
+            mesh = Arc::new(m);
         }
         let format = match cx.choice::<Precision>("precision") {
             Precision::F16 => gpu.formats().matrix_f16,
@@ -224,4 +282,86 @@ fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {
         (crate::warp::seam_map(mesh, resolution, SEAM_GUTTER_TEXELS), resolution)
     };
     GpuImage::upload(gpu, "seam map", size, size, wgpu::TextureFormat::Rgba32Float, 16, bytemuck::cast_slice(&data))
+}
+
+/// Texels of one pattern piece by the handedness of its frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PieceHandedness {
+    pub piece: u32,
+    /// Texels (UV area x resolution^2) where (t_u x n) . t_v < 0: a mirrored parametrization.
+    pub left_texels: f64,
+    pub right_texels: f64,
+}
+
+/// Each piece's texels by handedness at `resolution`, from its triangles: the sign of
+/// (t_u x n) . t_v of the vertex frames at the centroid (Gram-Schmidt in matrix_texture.wgsl
+/// keeps that sign), weighted by the triangle's UV area.
+pub fn handedness(mesh: &Mesh, resolution: u32) -> Vec<PieceHandedness> {
+    let mut out: Vec<PieceHandedness> = Vec::new();
+    let texels = (resolution as f64).powi(2);
+    for t in mesh.indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| i as usize);
+        let sum = |v: &[glam::Vec3]| v[a] + v[b] + v[c];
+        let (tu, n, tv) = (sum(&mesh.tangents_u), sum(&mesh.normals), sum(&mesh.tangents_v));
+        let (e1, e2) = (mesh.uvs[b] - mesh.uvs[a], mesh.uvs[c] - mesh.uvs[a]);
+        let area = 0.5 * (e1.x * e2.y - e1.y * e2.x).abs() as f64 * texels;
+        let piece = mesh.piece_ids.get(a).copied().unwrap_or(0);
+        let i = match out.iter().position(|h| h.piece == piece) {
+            Some(i) => i,
+            None => {
+                out.push(PieceHandedness { piece, left_texels: 0.0, right_texels: 0.0 });
+                out.len() - 1
+            }
+        };
+        if tu.cross(n).dot(tv) < 0.0 {
+            out[i].left_texels += area;
+        } else {
+            out[i].right_texels += area;
+        }
+    }
+    out.sort_by_key(|h| h.piece);
+    out
+}
+
+/// The piece map of `mesh` (piece_map.wgsl); a 1x1 placeholder for a mesh of one piece.
+fn render_piece_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> anyhow::Result<GpuImage> {
+    let format = gpu.formats().matrix_f16;
+    let first = mesh.piece_ids.first().copied().unwrap_or(0);
+    if mesh.piece_ids.iter().all(|&p| p == first) {
+        let one = [0.0f32; 4];
+        return Ok(GpuImage::upload(
+            gpu,
+            "piece map",
+            1,
+            1,
+            wgpu::TextureFormat::Rgba32Float,
+            16,
+            bytemuck::cast_slice(&one),
+        ));
+    }
+    let vertices: Vec<[f32; 3]> =
+        mesh.uvs.iter().zip(&mesh.piece_ids).map(|(uv, &p)| [uv.x, uv.y, p as f32 + 1.0]).collect();
+    let buffer = gpu.upload_pooled("piece map vertices", bytemuck::cast_slice(&vertices), wgpu::BufferUsages::VERTEX);
+    let gpu_mesh = mesh.gpu(gpu);
+    let target = GpuImage::target(gpu, "piece map", resolution, resolution, format);
+    let attributes = wgpu::vertex_attr_array![0 => Float32x3];
+    let layout =
+        wgpu::VertexBufferLayout { array_stride: 12, step_mode: wgpu::VertexStepMode::Vertex, attributes: &attributes };
+    let formats = [format];
+    let pipeline = gpu.render_pipeline(&RenderPipelineDesc::new("piece_map.wgsl", &[], &[Some(layout)], &formats))?;
+    gpu.record(|enc| {
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("piece map"),
+            color_attachments: &[target.clear_attachment()],
+            depth_stencil_attachment: None,
+            timestamp_writes: gpu.pass_timestamps(),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_vertex_buffer(0, buffer.slice(..));
+        pass.set_index_buffer(gpu_mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
+    });
+    Ok(target)
 }

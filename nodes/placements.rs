@@ -9,7 +9,7 @@ use glam::Vec2;
 
 use crate::mesh::Mesh;
 use crate::node::prelude::*;
-use crate::warp::{ArcTable, Curves, Placement, bezier, bezier_tangent};
+use crate::warp::{ArcTable, Curves, Placement, bezier, curve_direction};
 
 const REGION: [ParamSpec; 4] = [
     ParamSpec::new("u_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest u."),
@@ -293,7 +293,9 @@ impl Node for CurvePlacementNode {
             for i in 0..=n {
                 let (seg, t) = table.at(i as f32 * spacing);
                 let p = bezier(&path[seg], t);
-                let d = bezier_tangent(&path[seg], t);
+                // The tangent's direction, or its limit where a control point equals an end
+                // point (common in SVG paths), where the tangent itself vanishes.
+                let d = curve_direction(&path[seg], t);
                 // Angle about the normal from +u towards +v, as point attachments read it.
                 let angle = d.y.atan2(d.x).to_degrees() + cx.f32("angle");
                 out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
@@ -307,13 +309,31 @@ impl Node for CurvePlacementNode {
 pub static PLACEMENT_FILE: NodeSpec = NodeSpec {
     kind: "PlacementFile",
     category: Category::Attachment,
-    doc: "Loads a designer's layout: CSV with a header `piece,u,v,angle,scale` (angle in degrees), or RON: a list of (piece, u, v, angle, scale).",
-    inputs: &[],
+    doc: "Loads a designer's layout: CSV with a header `piece,u,v,angle,scale` (angle in degrees), or RON: a list of (piece, u, v, angle, scale). `coordinates: atlas`: u, v are packed-pattern UVs and, with a surface, the piece column is checked; `piece`: u, v run 0-1 across that piece's UV rectangle (needs the surface).",
+    inputs: &[PortSpec::optional(
+        "surface",
+        PortType::Surface,
+        "The surface whose pattern pieces the rows name: maps piece-local coordinates, checks atlas ones.",
+    )],
     outputs: &[PLACEMENTS, COUNT],
-    params: &[ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["csv", "ron"] }, "The layout file.")],
+    params: &[
+        ParamSpec::new("path", ParamKind::Path { default: "", extensions: &["csv", "ron"] }, "The layout file."),
+        ParamSpec::new(
+            "coordinates",
+            ParamKind::Choice { default: "atlas", options: Coordinates::OPTIONS },
+            "What u, v mean: packed-pattern (atlas) UVs, or 0-1 across the row's piece (its UV bounding rectangle).",
+        ),
+    ],
     is_output: false,
     create: || Box::new(PlacementFileNode),
 };
+
+crate::choice!(
+    enum Coordinates {
+        Atlas = "atlas",
+        Piece = "piece",
+    }
+);
 
 struct PlacementFileNode;
 impl Node for PlacementFileNode {
@@ -323,9 +343,67 @@ impl Node for PlacementFileNode {
         }
         let path = cx.path("path");
         let placements = cx.load(&path, load_placements)?;
-        finish(cx, (*placements).clone(), 0, None);
+        let surface = surface_input(cx);
+        let piece_local = cx.choice::<Coordinates>("coordinates") == Coordinates::Piece;
+        let Some(mesh) = surface.as_deref() else {
+            if piece_local {
+                return Err(NodeError::msg(
+                    "coordinates: piece needs the surface input, whose pieces' UV rectangles the rows are relative to",
+                ));
+            }
+            finish(cx, (*placements).clone(), 0, None);
+            return Ok(());
+        };
+        let (out, dropped, mismatched) = place_on_pieces(&placements, mesh, piece_local).map_err(NodeError::msg)?;
+        if mismatched > 0 {
+            cx.warn(format!(
+                "{mismatched} rows name a piece other than the one under their (u, v); with piece-local coordinates set coordinates: piece"
+            ));
+        }
+        finish(cx, out, dropped, Some(mesh));
         Ok(())
     }
+}
+
+/// A layout's rows on `mesh`'s pieces: with `piece_local`, (u, v) maps from 0-1 across the
+/// row's piece UV rectangle into the atlas; rows whose point no piece covers are dropped,
+/// and rows whose piece column names another piece than the one under the point are
+/// counted. Returns (placements, dropped, mismatched); an error names a row's unknown piece.
+pub fn place_on_pieces(
+    rows: &[Placement],
+    mesh: &Mesh,
+    piece_local: bool,
+) -> Result<(Vec<Placement>, usize, usize), String> {
+    let rects = mesh.piece_uv_rects();
+    let coverage = UvCoverage::new(mesh);
+    let (mut out, mut dropped, mut mismatched) = (Vec::with_capacity(rows.len()), 0, 0);
+    for (i, row) in rows.iter().enumerate() {
+        let mut p = *row;
+        if piece_local {
+            let Some((_, lo, hi)) = rects.iter().find(|r| r.0 == row.piece) else {
+                let known: Vec<String> = rects.iter().map(|r| r.0.to_string()).collect();
+                return Err(format!(
+                    "row {} names piece {}, but the surface has pieces {}",
+                    i + 1,
+                    row.piece,
+                    known.join(", ")
+                ));
+            };
+            let uv = *lo + (*hi - *lo) * Vec2::new(row.u, row.v);
+            (p.u, p.v) = (uv.x, uv.y);
+        }
+        match coverage.piece_at(Vec2::new(p.u, p.v)) {
+            None => dropped += 1,
+            Some(piece) => {
+                if piece != row.piece {
+                    mismatched += 1;
+                }
+                p.piece = piece;
+                out.push(p);
+            }
+        }
+    }
+    Ok((out, dropped, mismatched))
 }
 
 /// Parses a placement file; errors name the file and line.

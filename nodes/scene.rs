@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use glam::{EulerRot, Mat4, Quat, Vec3};
+use glam::Vec3;
 
 use crate::mesh::Mesh;
 use crate::node::prelude::*;
@@ -149,9 +149,9 @@ pub static DRAW: NodeSpec = NodeSpec {
     ],
     outputs: &[PortSpec::output("scene", PortType::Scene, "One draw item.")],
     params: &[
-        ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation."),
-        ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees."),
-        ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis."),
+        crate::nodes::geometry::TRANSLATE,
+        crate::nodes::geometry::ROTATE,
+        crate::nodes::geometry::SCALE,
         ParamSpec::new(
             "detail",
             ParamKind::Bool { default: false },
@@ -167,12 +167,7 @@ impl Node for DrawNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let mesh: Arc<Mesh> = cx.input("mesh")?;
         let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
-        let r = cx.vec3("rotate");
-        let rotation = Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
-        let model = Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
-        if model.determinant().abs() < 1e-12 {
-            return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
-        }
+        let model = crate::nodes::geometry::model_matrix(cx)?;
         cx.count("triangles", mesh.triangle_count());
         let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None, cuboid: None };
         cx.set("scene", Arc::new(vec![item]));

@@ -1,13 +1,14 @@
 // The warp of attach.wgsl as a compute pass: writes the world-space vertices of every
-// instance, for export and for tests, through exactly the rendering code path.
+// instance, for export and for tests, through exactly the rendering code path, straight into
+// the exported layout: all positions (3 floats each), then all normals, then a valid flag per
+// vertex (outliers' positions and normals are zero), so the CPU copies each region once.
 
 // #include "warp.wgsl"
 
 // Vertex buffer read as floats: position(3) normal(3) tangent_u(3) uv(2) tangent_v(3).
 @group(0) @binding(0) var<storage, read> vertices: array<f32>;
 @group(0) @binding(1) var<storage, read> instances: array<Instance>;
-// Per output vertex: position xyz + valid flag, normal xyz + 0.
-@group(0) @binding(2) var<storage, read_write> out_vertices: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(3) var<uniform> counts: vec4<u32>;
 
 @compute @workgroup_size(64)
@@ -23,6 +24,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = vec3<f32>(vertices[v], vertices[v + 1u], vertices[v + 2u]);
     let n = vec3<f32>(vertices[v + 3u], vertices[v + 4u], vertices[v + 5u]);
     let w = warp_vertex(p, n, inst);
-    out_vertices[2u * k] = vec4<f32>(w.position, select(0.0, 1.0, w.valid));
-    out_vertices[2u * k + 1u] = vec4<f32>(w.normal, 0.0);
+    let keep = select(0.0, 1.0, w.valid);
+    for (var c = 0u; c < 3u; c = c + 1u) {
+        out_vertices[3u * k + c] = w.position[c] * keep;
+        out_vertices[3u * (total + k) + c] = w.normal[c] * keep;
+    }
+    out_vertices[6u * total + k] = keep;
 }

@@ -1,7 +1,7 @@
 // Low-pass filter of the matrix texture's orientation field (paper section 6, "Flexibility"):
-// a separable box filter over the covered texels within the radius (at most 8 texels, less
-// than the atlas gutter between pieces at common resolutions), positions left as they are,
-// frames re-orthonormalized. It smooths sudden orientation changes that make
+// a separable box filter over the covered texels of the same pattern piece within the radius
+// (piece_map.wgsl; neighbouring pieces across the atlas gutter are never mixed), positions
+// left as they are, frames re-orthonormalized. It smooths sudden orientation changes that make
 // tall attached geometry intersect itself.
 
 // #include "fullscreen.wgsl"
@@ -16,6 +16,15 @@ struct Params {
 @group(0) @binding(1) var col_u: texture_2d<f32>;
 @group(0) @binding(2) var col_n: texture_2d<f32>;
 @group(0) @binding(3) var col_v: texture_2d<f32>;
+// Piece id + 1 per texel (piece_map.wgsl); a 1x1 placeholder for a surface of one piece.
+@group(0) @binding(4) var pieces: texture_2d<f32>;
+
+fn piece_of(q: vec2<i32>) -> f32 {
+    if textureDimensions(pieces).x == 1u {
+        return 1.0;
+    }
+    return textureLoad(pieces, q, 0).x;
+}
 
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> MatrixOut {
@@ -43,10 +52,11 @@ fn filtered(frag: vec4<f32>) -> MatrixOut {
     var su = vec3<f32>(0.0);
     var sn = vec3<f32>(0.0);
     var sv = vec3<f32>(0.0);
+    let piece = piece_of(px);
     for (var k = -radius; k <= radius; k = k + 1) {
         let q = clamp(px + dir * k, vec2<i32>(0), dims - 1);
         let n = textureLoad(col_n, q, 0).xyz;
-        if dot(n, n) < 0.25 {
+        if dot(n, n) < 0.25 || piece_of(q) != piece {
             continue;
         }
         su = su + textureLoad(col_u, q, 0).xyz;

@@ -60,6 +60,19 @@ pub fn idle_overhead(nodes: usize, frames: usize) -> anyhow::Result<IdleOverhead
     Ok(IdleOverhead { median_us: samples[batches / 2], first_frame_us, batches, frames_per_batch: per })
 }
 
+/// One untimed run of `work` (pipelines, uploads), then the median of `frames` timed ones, ms.
+fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
+    work()?;
+    let mut samples = Vec::new();
+    for _ in 0..frames.max(1) {
+        let t = Instant::now();
+        work()?;
+        samples.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    samples.sort_by(f64::total_cmp);
+    Ok(samples[samples.len() / 2])
+}
+
 /// One row of `werkstatt bench attachments`.
 #[derive(Debug, serde::Serialize)]
 pub struct AttachRow {
@@ -108,18 +121,7 @@ pub fn attachments(
     };
     let material = Arc::new(Material::default());
     let mut drawer = SceneDrawer::default();
-    // One untimed frame (pipelines, uploads), then the median of `frames` timed ones.
-    let median_ms = |work: &mut dyn FnMut() -> anyhow::Result<()>| -> anyhow::Result<f64> {
-        work()?;
-        let mut samples = Vec::new();
-        for _ in 0..frames.max(1) {
-            let t = Instant::now();
-            work()?;
-            samples.push(t.elapsed().as_secs_f64() * 1e3);
-        }
-        samples.sort_by(f64::total_cmp);
-        Ok(samples[samples.len() / 2])
-    };
+    let median_ms = |work: &mut dyn FnMut() -> anyhow::Result<()>| median_ms(frames, work);
     let mut rows = Vec::new();
     let mut push = |path: &'static str, instances: usize, triangles: usize, ms: f64| {
         let row = AttachRow { path, instances, triangles, ms_per_frame: ms, mtri_per_s: triangles as f64 / ms / 1e3 };
@@ -913,6 +915,315 @@ pub fn cuboids(
         let triangles = count * mesh.indices.len() / 3;
         let (l, t) = (fps(&|i| make(true, i))?, fps(&|i| make(false, i))?);
         push(CuboidRow { scene: "helix", objects: count, triangles, fps_linear: l, fps_trilinear: t, ratio: t / l });
+    }
+    Ok(rows)
+}
+
+/// One figure of the paper's Table 1 (Fig. 1 a-e at the paper's triangle counts).
+pub struct Table1Figure {
+    pub graph: &'static str,
+    pub types: &'static str,
+    pub paper_triangles: usize,
+    pub paper_ms: &'static str,
+    /// The parameters scaled to reach the count: (node, parameter, exponent). Each is scaled
+    /// by (target / reached)^(1 / exponent): a count 1, a spacing -1, a tile size -2; knobs of
+    /// separate parts (buttons and seams) each with their own exponent, two knobs of one
+    /// product (a grid's segments along u and v) 2 each.
+    pub knobs: &'static [(&'static str, &'static str, f64)],
+}
+
+/// Table 1 of the paper: the Fig. 1 graphs and how each reaches the paper's triangle count.
+pub const TABLE1: [Table1Figure; 5] = [
+    Table1Figure {
+        graph: "fig1a_fur",
+        types: "points",
+        paper_triangles: 25_000_000,
+        paper_ms: "~37",
+        knobs: &[("scatter", "count", 1.0)],
+    },
+    Table1Figure {
+        graph: "fig1b_embroidery",
+        types: "curves",
+        paper_triangles: 10_000_000,
+        paper_ms: "~20",
+        knobs: &[("stitches", "spacing", -1.0)],
+    },
+    Table1Figure {
+        graph: "fig1c_buttons_seam",
+        types: "curves and points",
+        paper_triangles: 6_000_000,
+        paper_ms: "~13",
+        knobs: &[("seam", "spacing", -1.0), ("button_row", "spacing", -1.0)],
+    },
+    Table1Figure {
+        graph: "fig1d_knitwear",
+        types: "area",
+        paper_triangles: 48_000_000,
+        paper_ms: "~56",
+        knobs: &[("knit", "tile_size", -2.0)],
+    },
+    Table1Figure {
+        graph: "fig1e_stickers",
+        types: "area",
+        paper_triangles: 650_000,
+        paper_ms: "< 6",
+        knobs: &[("tile", "segments_u", 2.0), ("tile", "segments_v", 2.0)],
+    },
+];
+
+/// One row of `werkstatt bench table1`.
+#[derive(Debug, serde::Serialize)]
+pub struct Table1Row {
+    pub figure: &'static str,
+    pub types: &'static str,
+    pub paper_triangles: usize,
+    pub paper_ms: &'static str,
+    /// Attached triangles reached (the attachment nodes' counts).
+    pub triangles: u64,
+    /// The parameters as set: "node.param=value".
+    pub settings: Vec<String>,
+    /// Median per frame: the matrix texture pass.
+    pub matrix_ms: f64,
+    /// Median per frame: the G-buffer pass over the whole scene (attachments warped in it).
+    pub gbuffer_ms: f64,
+    pub ms_per_frame: f64,
+}
+
+/// The attached triangles of an evaluated graph: the sum of its attachment nodes' counts.
+fn attached_triangles(ev: &Evaluator, graph: &Graph) -> u64 {
+    graph
+        .nodes
+        .iter()
+        .filter(|(_, n)| n.kind.ends_with("Attachment"))
+        .filter_map(|(id, _)| ev.report(id))
+        .flat_map(|r| r.counts.iter().filter(|c| c.0 == "triangles").map(|c| c.1))
+        .sum()
+}
+
+/// The paper's Table 1: each Fig. 1 graph (those named in `only`, or all) with its knobs scaled (up to six evaluations) until
+/// its attachments have the paper's triangle count (within 5%, or `scale` times it), then the
+/// median over `frames` of the matrix texture pass and the G-buffer pass of its scene.
+pub fn table1(
+    gpu: &crate::gpu::GpuContext,
+    frames: usize,
+    size: (u32, u32),
+    scale: f64,
+    only: &[String],
+    mut report: impl FnMut(&Table1Row),
+) -> anyhow::Result<Vec<Table1Row>> {
+    use crate::draw::{SceneDrawer, render_gbuffer};
+    use crate::nodes::matrix_texture::MatrixTextureNode;
+    use crate::port::Value;
+
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
+    let resources = Resources::new(false);
+    let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir.clone(), frames: None };
+    let mut rows = Vec::new();
+    for fig in TABLE1.iter().filter(|f| only.is_empty() || only.iter().any(|o| f.graph.starts_with(o.as_str()))) {
+        let what = format!("{}.ron", fig.graph);
+        let mut graph = Graph::load(&dir.join(&what)).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+        settle_frame(&mut ev, gpu, &resources, &settings, 0, &what)?;
+        let target = fig.paper_triangles as f64 * scale;
+        for _ in 0..6 {
+            let have = attached_triangles(&ev, &graph) as f64;
+            anyhow::ensure!(have > 0.0, "{what}: no attached triangles");
+            if (have / target - 1.0).abs() < 0.05 {
+                break;
+            }
+            for &(node, param, exponent) in fig.knobs {
+                // Within the parameter's range: a knob at its limit leaves the rest to the others.
+                let kind = graph.nodes.get(node).map(|n| n.kind.clone()).unwrap_or_default();
+                let range = crate::spec::find(&kind).and_then(|s| s.param(param)).map(|(_, p)| p.kind);
+                let p = graph
+                    .nodes
+                    .get_mut(node)
+                    .ok_or_else(|| anyhow::anyhow!("{what} has no node {node}"))?
+                    .params
+                    .get_mut(param)
+                    .ok_or_else(|| anyhow::anyhow!("{what}: {node} does not set {param}"))?;
+                let f = (target / have).powf(1.0 / exponent);
+                *p = match (&*p, range) {
+                    (ParamValue::Int(v), Some(crate::param::ParamKind::Int { min, max, .. })) => {
+                        ParamValue::Int((((*v as f64) * f).round() as i64).clamp(min, max))
+                    }
+                    (ParamValue::Float(v), Some(crate::param::ParamKind::Float { min, max, .. })) => {
+                        ParamValue::Float((*v * f).clamp(min, max))
+                    }
+                    (ParamValue::Int(v), _) => ParamValue::Int(((*v as f64) * f).round().max(1.0) as i64),
+                    (ParamValue::Float(v), _) => ParamValue::Float(*v * f),
+                    (other, _) => anyhow::bail!("{what}: {node}.{param} is {other:?}, not a number"),
+                };
+            }
+            ev.update(&graph, &[]).map_err(anyhow::Error::msg)?;
+            settle_frame(&mut ev, gpu, &resources, &settings, 0, &what)?;
+        }
+        let triangles = attached_triangles(&ev, &graph);
+        let knob_settings = fig
+            .knobs
+            .iter()
+            .map(|&(node, param, _)| match &graph.nodes[node].params[param] {
+                ParamValue::Int(v) => format!("{node}.{param}={v}"),
+                ParamValue::Float(v) => format!("{node}.{param}={v:.5}"),
+                other => format!("{node}.{param}={other:?}"),
+            })
+            .collect();
+        // The scene the G-buffer pass draws, its camera and the surface of the matrix texture.
+        let link_into = |to: &str, port: &str| {
+            graph.links.iter().find(|l| l.to.node == to && l.to.port == port).map(|l| l.from.clone())
+        };
+        let scene = link_into("gbuffer", "scene")
+            .and_then(|f| match ev.output(&f.node, &f.port) {
+                Some(Value::Scene(s)) => Some(s.clone()),
+                _ => None,
+            })
+            .ok_or_else(|| anyhow::anyhow!("{what}: no scene into gbuffer"))?;
+        let camera = link_into("gbuffer", "camera")
+            .and_then(|f| match ev.output(&f.node, &f.port) {
+                Some(Value::Camera(c)) => Some(*c),
+                _ => None,
+            })
+            .ok_or_else(|| anyhow::anyhow!("{what}: no camera into gbuffer"))?;
+        let surface = link_into("matrix", "surface")
+            .and_then(|f| match ev.output(&f.node, &f.port) {
+                Some(Value::Surface(s)) => Some(s.clone()),
+                _ => None,
+            })
+            .ok_or_else(|| anyhow::anyhow!("{what}: no surface into matrix"))?;
+        let resolution = match graph.nodes["matrix"].params.get("resolution") {
+            Some(ParamValue::Int(r)) => *r as u32,
+            _ => 512,
+        };
+        let mut matrix_node = MatrixTextureNode::default();
+        let mut drawer = SceneDrawer::default();
+        let matrix_ms = median_ms(frames, &mut || {
+            matrix_node.render(gpu, &surface, resolution, wgpu::TextureFormat::Rgba32Float, 0)?;
+            gpu.submit_checked()?;
+            gpu.wait_idle();
+            Ok(())
+        })?;
+        let gbuffer_ms = median_ms(frames, &mut || {
+            render_gbuffer(gpu, &mut drawer, &scene, camera, size.0, size.1)?;
+            gpu.submit_checked()?;
+            gpu.wait_idle();
+            Ok(())
+        })?;
+        let row = Table1Row {
+            figure: fig.graph,
+            types: fig.types,
+            paper_triangles: fig.paper_triangles,
+            paper_ms: fig.paper_ms,
+            triangles,
+            settings: knob_settings,
+            matrix_ms,
+            gbuffer_ms,
+            ms_per_frame: matrix_ms + gbuffer_ms,
+        };
+        report(&row);
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// One row of `werkstatt bench export`.
+#[derive(Debug, serde::Serialize)]
+pub struct ExportRow {
+    pub buttons: usize,
+    pub triangles: usize,
+    /// Producing the warped geometry in memory: GPU warp and read-back into the output layout.
+    pub warp_ms: f64,
+    /// Assembling the mesh from it (outliers dropped): produce_ms - warp_ms.
+    pub assemble_ms: f64,
+    pub produce_ms: f64,
+    /// The threaded CPU twin producing the same geometry (warp + assemble).
+    pub cpu_produce_ms: f64,
+    /// Writing binary PLY to `out`.
+    pub write_ms: f64,
+    pub megabytes: f64,
+}
+
+/// The export path of Fig. 10's data: `counts` point-attached 928-triangle buttons on a grid
+/// over the tablecloth sequence (tests/data/sequence), produced as one mesh (GPU and CPU twin)
+/// and written as binary PLY into `out`, each timed apart (median of `frames`). The graph's
+/// ExportGeometry (at a frame never reached) only pulls the scene.
+pub fn export(
+    gpu: &crate::gpu::GpuContext,
+    counts: &[usize],
+    frames: usize,
+    out: &std::path::Path,
+    mut report: impl FnMut(&ExportRow),
+) -> anyhow::Result<Vec<ExportRow>> {
+    use crate::nodes::export::{GpuWarper, assemble, warped_layout_cpu};
+    use crate::port::Value;
+
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let resources = Resources::new(false);
+    let settings = FrameSettings { width: 64, height: 64, base_dir: dir, frames: None };
+    std::fs::create_dir_all(out)?;
+    let mut rows = Vec::new();
+    for &count in counts {
+        let side = (count as f64).sqrt().round().max(1.0) as usize;
+        let cols = count.div_ceil(side);
+        let text = format!(
+            r#"(version: 1, nodes: {{
+                "cloth": (kind: "MeshSequence", params: {{"path": "sequence"}}),
+                "matrix": (kind: "MatrixTexture", params: {{"resolution": 512}}),
+                "grid": (kind: "GridPlacement", params: {{"columns": {cols}, "rows": {side}}}),
+                "button": (kind: "Primitive", params: {{"shape": "disc", "radius": 0.5, "height": 0.2, "segments_u": 232}}),
+                "buttons": (kind: "PointAttachment", params: {{"scale": {scale}}}),
+                "out": (kind: "ExportGeometry", params: {{"frame": 1000000}}),
+            }}, links: [("cloth.surface", "matrix.surface"), ("cloth.surface", "grid.surface"),
+                ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"),
+                ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene")])"#,
+            scale = 0.8 / cols as f32,
+        );
+        let graph = Graph::load_str(&text, "export.ron".as_ref()).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+        settle_frame(&mut ev, gpu, &resources, &settings, 0, "the export scene")?;
+        let Some(Value::Scene(items)) = ev.output("buttons", "scene") else {
+            anyhow::bail!("the export scene has no attachments");
+        };
+        let item = &items[0];
+        let draw = item.attached.as_ref().expect("an attachment");
+        let mut warper = GpuWarper::default();
+        let warp_ms = median_ms(frames, &mut || warper.warp_layout(gpu, &item.mesh, draw).map(drop))?;
+        let mut mesh = None;
+        let produce_ms = median_ms(frames, &mut || {
+            mesh = Some(assemble(&item.mesh, warper.warp_layout(gpu, &item.mesh, draw)?)?);
+            Ok(())
+        })?;
+        let texels = crate::nodes::matrix_texture::read_matrix(gpu, &draw.matrix)?;
+        let instances: Vec<crate::warp::InstanceData> = draw.instances.to_vec();
+        let mut cpu_mesh = None;
+        let cpu_produce_ms = median_ms(frames, &mut || {
+            let l = warped_layout_cpu(&texels, &draw.settings, &item.mesh, &instances);
+            cpu_mesh = Some(assemble(&item.mesh, l)?);
+            Ok(())
+        })?;
+        let mesh = mesh.expect("assembled above");
+        let cpu_mesh = cpu_mesh.expect("assembled above");
+        anyhow::ensure!(
+            mesh.indices == cpu_mesh.indices,
+            "the GPU and the CPU twin keep different triangles ({} and {})",
+            mesh.triangle_count(),
+            cpu_mesh.triangle_count()
+        );
+        let path = out.join(format!("export_{count}.ply"));
+        let write_ms = median_ms(frames, &mut || crate::geometry_io::write_ply(&path, &mesh))?;
+        let megabytes = std::fs::metadata(&path).map(|m| m.len() as f64 / 1e6).unwrap_or(0.0);
+        let _ = std::fs::remove_file(&path);
+        let row = ExportRow {
+            buttons: draw.instances.len(),
+            triangles: mesh.triangle_count(),
+            warp_ms,
+            assemble_ms: produce_ms - warp_ms,
+            produce_ms,
+            cpu_produce_ms,
+            write_ms,
+            megabytes,
+        };
+        report(&row);
+        rows.push(row);
     }
     Ok(rows)
 }

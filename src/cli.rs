@@ -267,6 +267,38 @@ enum BenchWhat {
         #[command(flatten)]
         out: GpuBench,
     },
+    /// The paper's Table 1: the Fig. 1 graphs scaled to the paper's triangle counts (25M fur,
+    /// 10M embroidery, 6M buttons and seams, 48M knit, 650k stickers), triangles and ms per
+    /// frame (matrix texture + G-buffer) beside the paper's GTX 580 times.
+    Table1 {
+        /// Timed frames per figure (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Fraction of the paper's triangle counts (1 = the paper's; smaller for a quick look).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Only these figures (graph name prefixes, e.g. fig1c), comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The export path of Fig. 10's data: N point-attached 928-triangle buttons on the
+    /// tablecloth sequence; producing the warped geometry in memory (GPU, and the threaded CPU
+    /// twin) apart from writing it as binary PLY.
+    Export {
+        /// Button counts, comma-separated.
+        #[arg(long, default_value = "1000,10000,65000", value_delimiter = ',')]
+        counts: Vec<usize>,
+        /// Timed runs per measurement (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Folder the PLY files are written to (and removed from); a RAM disk measures the copy.
+        #[arg(long, default_value = "out")]
+        dir: PathBuf,
+        #[command(flatten)]
+        out: GpuBench,
+    },
     /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
     /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
     /// object and helices of small objects, and their ratio.
@@ -555,6 +587,51 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!(
                     "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
                     r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Export { counts, frames, dir, out } } => {
+            let (gpu, _) = out.open()?;
+            println!("adapter: {}, median of {frames} run(s), PLY into {}", gpu.adapter_name(), dir.display());
+            println!(
+                "| buttons | triangles | GPU warp + read-back ms | assemble ms | GPU produce ms | CPU twin produce ms | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::export(&gpu, &counts, frames, &dir, |r| {
+                println!(
+                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                    r.buttons,
+                    r.triangles,
+                    r.warp_ms,
+                    r.assemble_ms,
+                    r.produce_ms,
+                    r.cpu_produce_ms,
+                    r.write_ms,
+                    r.megabytes
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Table1 { frames, scale, only, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|"
+            );
+            let rows = crate::bench::table1(&gpu, frames, size, scale, &only, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+                    r.figure,
+                    r.types,
+                    r.paper_triangles,
+                    r.paper_ms,
+                    r.triangles,
+                    r.matrix_ms,
+                    r.gbuffer_ms,
+                    r.ms_per_frame,
+                    r.settings.join(" ")
                 );
             })?;
             out.write_json(&rows)?;

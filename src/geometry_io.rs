@@ -62,28 +62,59 @@ pub fn write_obj(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
 }
 
 pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
-    let mut out = Vec::new();
-    write!(
-        out,
+    let header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment werkstatt export\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float s\nproperty float t\nelement face {}\nproperty list uchar uint vertex_indices\nend_header\n",
         mesh.positions.len(),
         mesh.triangle_count()
-    )?;
+    );
+    // One pass per element into a buffer of the exact size: 32 bytes a vertex, 13 a face.
+    let mut out = Vec::with_capacity(header.len() + mesh.positions.len() * 32 + mesh.triangle_count() * 13);
+    out.extend_from_slice(header.as_bytes());
     for i in 0..mesh.positions.len() {
-        for f in mesh.positions[i]
-            .to_array()
-            .into_iter()
-            .chain(mesh.normals[i].to_array())
-            .chain([mesh.uvs[i].x, 1.0 - mesh.uvs[i].y])
-        {
-            out.extend_from_slice(&f.to_le_bytes());
-        }
+        let (p, n, uv) = (mesh.positions[i], mesh.normals[i], mesh.uvs[i]);
+        let record = [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, 1.0 - uv.y].map(f32::to_le_bytes);
+        out.extend_from_slice(record.as_flattened());
     }
     for t in mesh.indices.chunks_exact(3) {
-        out.push(3);
-        for i in t {
-            out.extend_from_slice(&i.to_le_bytes());
+        let mut face = [3u8; 13];
+        for (k, i) in t.iter().enumerate() {
+            face[1 + 4 * k..5 + 4 * k].copy_from_slice(&i.to_le_bytes());
         }
+        out.extend_from_slice(&face);
     }
     crate::atomic::write_atomic(path, &out).with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3};
+
+    /// Binary PLY: the header's counts, 32 bytes per vertex (position, normal, s, t = 1 - v),
+    /// 13 per face (count 3, three indices), little-endian.
+    #[test]
+    fn ply_records_are_little_endian_and_complete() {
+        let mesh = crate::mesh::Mesh::from_raw(
+            vec![Vec3::new(1.0, 2.0, 3.0), Vec3::X, Vec3::Y],
+            vec![Vec3::Z; 3],
+            vec![Vec2::new(0.25, 0.75), Vec2::ZERO, Vec2::ONE],
+            Vec::new(),
+            Vec::new(),
+            vec![0, 1, 2],
+        );
+        let path = std::env::temp_dir().join(format!("werkstatt-ply-{}.ply", std::process::id()));
+        super::write_ply(&path, &mesh).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let end = b"end_header\n";
+        let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let header = std::str::from_utf8(&bytes[..body]).unwrap();
+        assert!(header.contains("element vertex 3\n") && header.contains("element face 1\n"), "{header}");
+        assert_eq!(bytes.len() - body, 3 * 32 + 13);
+        let f = |k: usize| f32::from_le_bytes(bytes[body + 4 * k..body + 4 * k + 4].try_into().unwrap());
+        assert_eq!((0..8).map(f).collect::<Vec<_>>(), [1.0, 2.0, 3.0, 0.0, 0.0, 1.0, 0.25, 0.25]);
+        let face = &bytes[body + 96..];
+        assert_eq!(face[0], 3);
+        let index = |k: usize| u32::from_le_bytes(face[1 + 4 * k..5 + 4 * k].try_into().unwrap());
+        assert_eq!([index(0), index(1), index(2)], [0, 1, 2]);
+    }
 }

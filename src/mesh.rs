@@ -271,9 +271,10 @@ impl Mesh {
                 .map(|i| Vertex {
                     position: self.positions[i].to_array(),
                     normal: self.normals[i].to_array(),
-                    tangent_u: self.tangents_u[i].to_array(),
+                    // A mesh without tangents (an exported one) uploads zero tangents.
+                    tangent_u: self.tangents_u.get(i).map_or([0.0; 3], |t| t.to_array()),
                     uv: self.uvs[i].to_array(),
-                    tangent_v: self.tangents_v[i].to_array(),
+                    tangent_v: self.tangents_v.get(i).map_or([0.0; 3], |t| t.to_array()),
                 })
                 .collect();
             // Pooled: a simulated mesh is a new mesh of the same size every frame.

@@ -18,6 +18,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("matrix_out.wgsl", include_str!("../shaders/matrix_out.wgsl")),
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
+    ("piece_map.wgsl", include_str!("../shaders/piece_map.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
     ("instance_in.wgsl", include_str!("../shaders/instance_in.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),

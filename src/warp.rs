@@ -45,42 +45,74 @@ impl MatrixTexels {
         self.at(x, y).n.length_squared() < 0.25
     }
 
+    fn covered(&self, x: i32, y: i32) -> Option<TexelFrame> {
+        let res = self.resolution as i32;
+        if x < 0 || y < 0 || x >= res || y >= res {
+            return None;
+        }
+        let t = self.at(x as u32, y as u32);
+        (t.n.length_squared() >= 0.25).then_some(t)
+    }
+
     /// The frame a footprint texel contributes: its own if a piece covers it, else, for a gutter
-    /// texel beside a seam, the partner piece's frame turned into this piece's UV directions.
+    /// texel beside a seam, the partner piece's frame (bilinear over its covered texels) turned
+    /// into this piece's UV directions. The CPU twin of `texel_or_partner` in shaders/warp.wgsl.
     fn texel_or_partner(&self, x: i32, y: i32) -> Option<TexelFrame> {
         let res = self.resolution as i32;
-        let t = self.at(x as u32, y as u32);
-        if t.n.length_squared() >= 0.25 {
+        if let Some(t) = self.covered(x, y) {
             return Some(t);
         }
         let &[pu, pv, angle, sigma] = self.seams.get((y * res + x) as usize)?;
         if sigma == 0.0 {
             return None;
         }
-        let (qx, qy) = (((pu * res as f32) as i32).clamp(0, res - 1), ((pv * res as f32) as i32).clamp(0, res - 1));
-        let b = self.at(qx as u32, qy as u32);
-        if b.n.length_squared() < 0.25 {
-            return None;
-        }
+        let b = self.partner_bilinear(Vec2::new(pu, pv))?;
         let m = seam_rotation(angle, sigma);
         Some(TexelFrame { tu: b.tu * m[0][0] + b.tv * m[0][1], n: b.n, tv: b.tu * m[1][0] + b.tv * m[1][1], p: b.p })
     }
 
-    /// The CPU twin of `lookup_frame` in shaders/warp.wgsl.
-    pub fn lookup(&self, uv: Vec2, min_weight: f32) -> Option<TexelFrame> {
-        let res = self.resolution as i32;
-        let st = uv * self.resolution as f32 - Vec2::splat(0.5);
-        let base = st.floor();
-        let f = st - base;
-        let (mut su, mut sn, mut sv, mut sp, mut weight) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0);
+    /// The CPU twin of `partner_bilinear` in shaders/warp.wgsl.
+    fn partner_bilinear(&self, uv: Vec2) -> Option<TexelFrame> {
+        let (base, f) = footprint(uv, self.resolution);
+        let (mut acc, mut weight) = (TexelFrame { tu: Vec3::ZERO, n: Vec3::ZERO, tv: Vec3::ZERO, p: Vec3::ZERO }, 0.0);
         for k in 0..4 {
             let (ox, oy) = (k & 1, k >> 1);
-            let (qx, qy) = (base.x as i32 + ox, base.y as i32 + oy);
+            let Some(t) = self.covered(base.0 + ox, base.1 + oy) else { continue };
+            let w = bilinear_weight(f, ox, oy);
+            acc.tu += w * t.tu;
+            acc.n += w * t.n;
+            acc.tv += w * t.tv;
+            acc.p += w * t.p;
+            weight += w;
+        }
+        (weight > 0.0).then(|| TexelFrame {
+            tu: acc.tu / weight,
+            n: acc.n / weight,
+            tv: acc.tv / weight,
+            p: acc.p / weight,
+        })
+    }
+
+    /// The CPU twin of `lookup_frame` in shaders/warp.wgsl.
+    pub fn lookup(&self, uv: Vec2, min_weight: f32) -> Option<TexelFrame> {
+        self.lookup_surface(uv, min_weight).map(|s| s.frame)
+    }
+
+    /// `lookup` with the derivatives dp/du, dp/dv of the interpolated position field.
+    pub fn lookup_surface(&self, uv: Vec2, min_weight: f32) -> Option<SurfaceFrame> {
+        let res = self.resolution as i32;
+        let (base, f) = footprint(uv, self.resolution);
+        let (mut su, mut sn, mut sv, mut sp, mut weight) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0);
+        let mut ps = [None; 4];
+        for (k, slot) in ps.iter_mut().enumerate() {
+            let (ox, oy) = ((k & 1) as i32, (k >> 1) as i32);
+            let (qx, qy) = (base.0 + ox, base.1 + oy);
             if qx < 0 || qy < 0 || qx >= res || qy >= res {
                 continue;
             }
             let Some(t) = self.texel_or_partner(qx, qy) else { continue };
-            let w = if ox == 1 { f.x } else { 1.0 - f.x } * if oy == 1 { f.y } else { 1.0 - f.y };
+            *slot = Some(t.p);
+            let w = bilinear_weight(f, ox, oy);
             su += w * t.tu;
             sn += w * t.n;
             sv += w * t.tv;
@@ -99,8 +131,55 @@ impl MatrixTexels {
         let n = n.normalize();
         let tu = (u - n * n.dot(u)).normalize();
         let tv = (v - n * n.dot(v) - tu * tu.dot(v)).normalize();
-        Some(TexelFrame { tu, n, tv, p: sp / weight })
+        let (mut du, mut dv, mut wu, mut wv) = (Vec3::ZERO, Vec3::ZERO, 0.0, 0.0);
+        let pair = |a: usize, b: usize, w: f32, d: &mut Vec3, ws: &mut f32| {
+            if let (Some(pa), Some(pb)) = (ps[a], ps[b]) {
+                *d += w * (pb - pa);
+                *ws += w;
+            }
+        };
+        pair(0, 1, 1.0 - f.y, &mut du, &mut wu);
+        pair(2, 3, f.y, &mut du, &mut wu);
+        pair(0, 2, 1.0 - f.x, &mut dv, &mut wv);
+        pair(1, 3, f.x, &mut dv, &mut wv);
+        let frame = TexelFrame { tu, n, tv, p: sp / weight };
+        let [dpdu, dpdv] = uv_derivatives(du, wu, dv, wv, Vec2::splat(self.resolution as f32), &frame);
+        Some(SurfaceFrame { frame, dpdu, dpdv })
     }
+}
+
+/// A looked-up surface frame with the derivatives of the interpolated position field: world
+/// units per UV unit, the local UV-to-world scale and shear of area and curve attachments.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceFrame {
+    pub frame: TexelFrame,
+    pub dpdu: Vec3,
+    pub dpdv: Vec3,
+}
+
+/// The texel at the footprint's top-left and the fractional position in it (bilinear lookup).
+fn footprint(uv: Vec2, resolution: u32) -> ((i32, i32), Vec2) {
+    let st = uv * resolution as f32 - Vec2::splat(0.5);
+    let base = st.floor();
+    ((base.x as i32, base.y as i32), st - base)
+}
+
+fn bilinear_weight(f: Vec2, ox: i32, oy: i32) -> f32 {
+    (if ox == 1 { f.x } else { 1.0 - f.x }) * if oy == 1 { f.y } else { 1.0 - f.y }
+}
+
+/// The CPU twin of `uv_derivatives` in shaders/warp.wgsl.
+fn uv_derivatives(du: Vec3, wu: f32, dv: Vec3, wv: f32, dims: Vec2, f: &TexelFrame) -> [Vec3; 2] {
+    let a = if wu > 1e-6 { du * (dims.x / wu) } else { f.tu };
+    let b = if wv > 1e-6 { dv * (dims.y / wv) } else { f.tv };
+    let (mut a, mut b) = (a - f.n * f.n.dot(a), b - f.n * f.n.dot(b));
+    if wu <= 1e-6 && wv > 1e-6 {
+        a = f.tu * b.length();
+    }
+    if wv <= 1e-6 && wu > 1e-6 {
+        b = f.tv * a.length();
+    }
+    [a, b]
 }
 
 /// The 2x2 map from this piece's UV directions to the partner's, as rows of coefficients:
@@ -440,7 +519,9 @@ pub fn warp_vertex_cpu(
 ) -> WarpedVertex {
     let mut uv_in = Vec2::ZERO;
     let mut f_map = p.extend(1.0);
-    let mut n_local = normal;
+    let mut t = 0.0;
+    let mut nc = Vec2::X;
+    let c = inst.curve();
     match s.mode {
         WarpMode::Point | WarpMode::Unattached => {}
         WarpMode::Area => {
@@ -448,47 +529,73 @@ pub fn warp_vertex_cpu(
             f_map = Vec4::new(0.0, p.y, 0.0, 1.0);
         }
         WarpMode::Curve | WarpMode::CurveAligned => {
-            let c = inst.curve();
             let r = inst.range;
             let sz = (p.z - r[2]) / (r[3] - r[2]).max(1e-12);
-            let t = r[0] + (r[1] - r[0]) * sz;
+            t = r[0] + (r[1] - r[0]) * sz;
             uv_in = bezier(&c, t);
             f_map = Vec4::new(p.x, p.y, 0.0, 1.0);
             if s.mode == WarpMode::CurveAligned {
                 let d = curve_direction(&c, t);
-                let nc = Vec2::new(d.y, -d.x);
+                nc = Vec2::new(d.y, -d.x);
                 f_map = Vec4::new(nc.x * p.x, p.y, nc.y * p.x, 1.0);
-                n_local = normal.x * Vec3::new(nc.x, 0.0, nc.y)
-                    + Vec3::new(0.0, normal.y, 0.0)
-                    + normal.z * Vec3::new(d.x, 0.0, d.y);
             }
         }
     }
     let h = uv_in.extend(1.0);
     let uv = Vec2::new(Vec3::from_slice(&inst.m_tex0).dot(h), Vec3::from_slice(&inst.m_tex1).dot(h));
     let found = if s.mode == WarpMode::Unattached {
-        Some(TexelFrame { tu: Vec3::X, n: Vec3::Y, tv: Vec3::Z, p: Vec3::new(uv.x, 0.0, uv.y) })
+        let frame = TexelFrame { tu: Vec3::X, n: Vec3::Y, tv: Vec3::Z, p: Vec3::new(uv.x, 0.0, uv.y) };
+        Some(SurfaceFrame { frame, dpdu: Vec3::X, dpdv: Vec3::Z })
     } else {
-        texels.lookup(uv, s.min_weight)
+        texels.lookup_surface(uv, s.min_weight)
     };
-    let Some(f) = found else {
+    let Some(sf) = found else {
         return WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false };
     };
+    let f = sf.frame;
     let m_tan = Mat4::from_cols_array_2d(&inst.m_tan);
-    let q = m_tan * f_map;
-    let mut position = f.tu * q.x + f.n * q.y + f.tv * q.z + f.p;
-    let nt = normal_matrix(Mat3::from_mat4(m_tan)) * n_local;
-    let normal = (f.tu * nt.x + f.n * nt.y + f.tv * nt.z).normalize();
-    if s.gravity > 0.0 {
-        let foot = f.p + f.tu * q.x + f.tv * q.z;
-        let bent = position - Vec3::new(0.0, s.gravity * q.y * q.y, 0.0);
-        let len = (position - foot).length();
-        let dir = bent - foot;
-        if dir.length_squared() > 1e-20 {
-            position = foot + len * dir.normalize();
+    let mut q = (m_tan * f_map).truncate();
+    let to_frame = |w: Vec3| Vec3::new(f.tu.dot(w), f.n.dot(w), f.tv.dot(w));
+    let uv_to_frame = |d: Vec2| {
+        let e = Vec2::new(inst.m_tex0[0] * d.x + inst.m_tex0[1] * d.y, inst.m_tex1[0] * d.x + inst.m_tex1[1] * d.y);
+        to_frame(sf.dpdu * e.x + sf.dpdv * e.y)
+    };
+    let col = |i: usize| Vec4::from_array(inst.m_tan[i]).truncate();
+    let mut jac = Mat3::from_cols(col(0), col(1), col(2));
+    match s.mode {
+        WarpMode::Area => jac = Mat3::from_cols(uv_to_frame(Vec2::X), col(1), uv_to_frame(Vec2::Y)),
+        WarpMode::Curve | WarpMode::CurveAligned => {
+            let r = inst.range;
+            let speed = bezier_tangent(&c, t).length().max(1e-6) * (r[1] - r[0]) / (r[3] - r[2]).max(1e-12);
+            let along = uv_to_frame(curve_direction(&c, t) * speed);
+            jac = Mat3::from_cols(col(0) * nc.x + col(2) * nc.y, col(1), along);
         }
+        WarpMode::Point | WarpMode::Unattached => {}
     }
+    if s.gravity > 0.0 {
+        let (bent, db) = fur_bend(&f, q, s.gravity);
+        q = bent;
+        jac = Mat3::from_cols(Vec3::X, db, Vec3::Z) * jac;
+    }
+    let position = f.tu * q.x + f.n * q.y + f.tv * q.z + f.p;
+    let nt = normal_matrix(jac) * normal;
+    let normal = (f.tu * nt.x + f.n * nt.y + f.tv * nt.z).normalize();
     WarpedVertex { position, normal, valid: true }
+}
+
+/// The CPU twin of `fur_bend` in shaders/warp.wgsl (eqs. 11-12 in frame coordinates): the
+/// bent point and its derivative by the height.
+pub fn fur_bend(f: &TexelFrame, q: Vec3, c: f32) -> (Vec3, Vec3) {
+    let up = Vec3::new(f.tu.y, f.n.y, f.tv.y);
+    let b = q.y;
+    let w = Vec3::Y - c * b * up;
+    let lw = w.length();
+    if lw < 1e-10 {
+        return (q, Vec3::Y);
+    }
+    let u = w / lw;
+    let bent = Vec3::new(q.x, 0.0, q.z) + b * u;
+    (bent, u - b * c * (up - u * u.dot(up)) / lw)
 }
 
 /// The CPU twin of `normal_matrix` in shaders/warp.wgsl: cofactors with the determinant's sign.
@@ -498,9 +605,11 @@ pub fn normal_matrix(m: Mat3) -> Mat3 {
     Mat3::from_cols(c0, c1, c2) * sign
 }
 
-/// The CPU twin of `curve_direction` in shaders/warp.wgsl.
+/// The CPU twin of `curve_direction` in shaders/warp.wgsl: the tangent's direction, or at a
+/// degenerate end its limit (c2 - c0 at t = 0, c3 - c1 at t = 1).
 pub fn curve_direction(c: &[Vec2; 4], t: f32) -> Vec2 {
-    [bezier_tangent(c, t), c[2] - c[0], c[3] - c[0]]
+    let end = if t < 0.5 { c[2] - c[0] } else { c[3] - c[1] };
+    [bezier_tangent(c, t), end, c[3] - c[0]]
         .into_iter()
         .find(|d| d.length_squared() >= 1e-16)
         .map_or(Vec2::Y, Vec2::normalize)

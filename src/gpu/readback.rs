@@ -31,6 +31,25 @@ fn give_back(gpu: &GpuContext, buffer: wgpu::Buffer) {
 
 /// Submits the queued work, maps the first `size` bytes of `buffer` (MAP_READ) and copies them out.
 pub(crate) fn map_read(gpu: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> anyhow::Result<Vec<u8>> {
+    map_with(gpu, buffer, size, <[u8]>::to_vec)
+}
+
+/// The first `size` bytes of `src` (COPY_SRC), after the queued work, handed to `f` while
+/// mapped: `f` copies them where they belong, the only copy on the CPU.
+pub fn read_buffer_with<R>(
+    gpu: &GpuContext,
+    src: &wgpu::Buffer,
+    size: u64,
+    f: impl FnOnce(&[u8]) -> R,
+) -> anyhow::Result<R> {
+    let buffer = staging(gpu, size);
+    gpu.record(|enc| enc.copy_buffer_to_buffer(src, 0, &buffer, 0, size));
+    let r = map_with(gpu, &buffer, size, f);
+    give_back(gpu, buffer);
+    r
+}
+
+fn map_with<R>(gpu: &GpuContext, buffer: &wgpu::Buffer, size: u64, f: impl FnOnce(&[u8]) -> R) -> anyhow::Result<R> {
     gpu.flush();
     let slice = buffer.slice(..size);
     let (tx, rx) = std::sync::mpsc::channel();
@@ -39,7 +58,7 @@ pub(crate) fn map_read(gpu: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> an
     });
     let _ = gpu.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: None });
     rx.recv().context("read-back was cancelled")?.context("cannot map the read-back buffer")?;
-    let data = slice.get_mapped_range().map_err(|e| anyhow!("cannot read the mapped buffer: {e}"))?.to_vec();
+    let data = f(&slice.get_mapped_range().map_err(|e| anyhow!("cannot read the mapped buffer: {e}"))?);
     buffer.unmap();
     Ok(data)
 }
