@@ -32,6 +32,7 @@ pub mod rng;
 pub mod scene;
 pub mod shaders;
 pub mod signal;
+pub mod tessellation;
 pub mod spec;
 pub mod warp;
 
