@@ -57,6 +57,7 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
         detail: true,
         attached: Some(Arc::new(attached)),
         cuboid: None,
+        tessellated: None,
     };
     cx.set("scene", Arc::new(vec![item]));
 }

@@ -192,6 +192,7 @@ pub fn attachments(
                 detail: true,
                 attached: Some(Arc::new(draw)),
                 cuboid: None,
+                tessellated: None,
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -226,6 +227,7 @@ pub fn attachments(
                     detail: true,
                     attached: None,
                     cuboid: None,
+                    tessellated: None,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -591,6 +593,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
         detail: false,
         attached: None,
         cuboid: None,
+        tessellated: None,
     };
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
@@ -833,6 +836,7 @@ pub fn cuboids(
                 detail: false,
                 attached: None,
                 cuboid: None,
+                tessellated: None,
             }
         })
         .collect();
@@ -870,6 +874,7 @@ pub fn cuboids(
             detail: false,
             attached: None,
             cuboid: None,
+            tessellated: None,
         };
         let turns = 6.0;
         let helix = |s: f64, phase: f64| {

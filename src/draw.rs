@@ -481,8 +481,23 @@ fn draw_items(
     per_draw: &[wgpu::BindGroup],
 ) {
     for (item, p) in items.iter().zip(prepared) {
-        let mesh = item.mesh.gpu(gpu);
         pass.set_bind_group(1, &p.object, &[]);
+        if let Some(t) = &item.tessellated {
+            // Written by the compute pass this frame: counts never come back to the CPU.
+            pass.set_vertex_buffer(0, t.vertices.slice(..));
+            pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
+            match (&p.cuboid, pipelines.trilinear) {
+                (Some(group), Some(pipeline)) => {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(2, group, &[]);
+                }
+                _ => pass.set_pipeline(pipelines.plain),
+            }
+            let instances = plain_instances.min(crate::tessellation::MAX_INDIRECT_INSTANCES);
+            pass.draw_indexed_indirect(&t.indirect, crate::tessellation::TessMesh::indirect_offset(instances));
+            continue;
+        }
+        let mesh = item.mesh.gpu(gpu);
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
         if let (Some(group), Some(pipeline)) = (&p.cuboid, pipelines.trilinear) {

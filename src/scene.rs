@@ -146,6 +146,9 @@ pub struct DrawItem {
     /// A non-linear (cuboid grid) transform applied after `model`: the vertex lands at
     /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
     pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
+    /// A GPU-resident tessellation of `mesh` (the `Tessellate` node): drawn instead of `mesh`
+    /// from its own buffers with an indirect draw.
+    pub tessellated: Option<Arc<crate::tessellation::TessMesh>>,
 }
 
 /// The deferred renderer's multiple render targets.

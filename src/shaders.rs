@@ -19,6 +19,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
+    ("tessellate.wgsl", include_str!("../shaders/tessellate.wgsl")),
     ("instance_in.wgsl", include_str!("../shaders/instance_in.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),

@@ -615,12 +615,14 @@ pub struct Settings {
     pub pn: bool,
 }
 
-/// The edge levels of triangle `ids` (edge e from corner e to e + 1) from vertex levels.
+/// The edge levels of triangle `ids` (edge e from corner e to e + 1) from vertex levels
+/// (rounded up to powers of two in dyadic mode).
 pub fn triangle_edge_levels(levels: &[f32], ids: [u32; 3], s: &Settings) -> [u32; 3] {
     if s.mode == Mode::Uniform {
         return [s.max_level.max(1); 3];
     }
-    std::array::from_fn(|e| edge_level(levels[ids[e] as usize], levels[ids[(e + 1) % 3] as usize], s.max_level))
+    let n = std::array::from_fn(|e| edge_level(levels[ids[e] as usize], levels[ids[(e + 1) % 3] as usize], s.max_level));
+    if s.mode == Mode::Dyadic { n.map(dyadic) } else { n }
 }
 
 /// The CPU reference of the whole compute pass: every triangle of `mesh` refined with the
@@ -638,6 +640,202 @@ pub fn tessellate(mesh: &crate::mesh::Mesh, levels: &[f32], s: &Settings) -> (Ve
         indices.extend(patch.triangles.iter().flatten().map(|i| first + i));
     }
     (vertices, indices)
+}
+
+/// How vertex levels are chosen on the GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    /// [`vertex_level`]: logarithmic distance falloff and silhouette.
+    Distance,
+    /// Each vertex: its longest incident edge on screen over the maximum edge length (Fig. 5.15).
+    EdgeLength,
+}
+
+/// What the level metrics look at: the camera and the viewport.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewLod {
+    pub view_proj: glam::Mat4,
+    pub eye: Vec3,
+    pub width: f32,
+    pub height: f32,
+    pub lod: Lod,
+    pub metric: Metric,
+    /// The edge-length metric's target, in pixels.
+    pub max_edge_px: f32,
+}
+
+/// shaders/tessellate.wgsl `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    view_proj: [[f32; 4]; 4],
+    eye: [f32; 4],
+    lod: [f32; 4],
+    screen: [f32; 4],
+    mode: u32,
+    max_level: u32,
+    pn: u32,
+    metric: u32,
+    tri_count: u32,
+    vertex_count: u32,
+    pad: [u32; 2],
+}
+
+/// The most instances an indirect draw of a [`TessMesh`] can ask for (one per shadow tile).
+pub const MAX_INDIRECT_INSTANCES: u32 = crate::draw::MAX_TILES as u32;
+const INDIRECT_STRIDE: u64 = 20;
+
+/// A tessellated mesh that lives on the GPU only: vertex and index buffers written by the
+/// compute pass and indirect draw arguments (entry k draws k + 1 instances).
+pub struct TessMesh {
+    pub vertices: crate::gpu::PooledBuffer,
+    pub indices: crate::gpu::PooledBuffer,
+    pub indirect: crate::gpu::PooledBuffer,
+    /// The vertex levels used (f32), for inspection.
+    pub levels: crate::gpu::PooledBuffer,
+    /// Per input triangle its first output vertex and index (after the scan).
+    pub offsets: crate::gpu::PooledBuffer,
+    pub vertex_capacity: u64,
+    pub index_capacity: u64,
+}
+
+impl std::fmt::Debug for TessMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TessMesh(capacity {} vertices, {} indices)", self.vertex_capacity, self.index_capacity)
+    }
+}
+
+impl TessMesh {
+    /// The byte offset of the indirect arguments that draw `instances` instances.
+    pub fn indirect_offset(instances: u32) -> u64 {
+        u64::from(instances.clamp(1, MAX_INDIRECT_INSTANCES) - 1) * INDIRECT_STRIDE
+    }
+}
+
+/// The most vertices and triangles one triangle can produce at `max_level` in `mode`: the
+/// uniform grid of that level bounds the pattern (tested in `counts_are_bounded_by_the_uniform_grid`).
+pub fn patch_capacity(mode: Mode, max_level: u32) -> (u32, u32) {
+    let m = if mode == Mode::Dyadic { dyadic(max_level) } else { max_level.max(1) };
+    ((m + 1) * (m + 2) / 2, m * m)
+}
+
+/// The compute passes of shaders/tessellate.wgsl, kept between frames.
+pub struct GpuTessellator {
+    vertex_levels: crate::gpu::ComputePass,
+    edge_lengths: crate::gpu::ComputePass,
+    count: crate::gpu::ComputePass,
+    scan: crate::gpu::ComputePass,
+    generate: crate::gpu::ComputePass,
+}
+
+impl Default for GpuTessellator {
+    fn default() -> Self {
+        use crate::gpu::ComputePass;
+        GpuTessellator {
+            vertex_levels: ComputePass::new("tessellate.wgsl", "vertex_levels"),
+            edge_lengths: ComputePass::new("tessellate.wgsl", "edge_lengths"),
+            count: ComputePass::new("tessellate.wgsl", "count"),
+            scan: ComputePass::new("tessellate.wgsl", "scan"),
+            generate: ComputePass::new("tessellate.wgsl", "generate"),
+        }
+    }
+}
+
+impl GpuTessellator {
+    /// Records the tessellation of `mesh` into the current frame: vertex levels from `view`
+    /// (or `levels`, one per vertex, where given), then counts, offsets and the patches.
+    /// Nothing is read back; draw the result with its indirect arguments.
+    pub fn run(
+        &mut self,
+        gpu: &crate::gpu::GpuContext,
+        mesh: &crate::mesh::Mesh,
+        levels: Option<&[f32]>,
+        view: &ViewLod,
+        s: &Settings,
+    ) -> anyhow::Result<TessMesh> {
+        use crate::gpu::{Bind, ComputePass};
+        use wgpu::BufferUsages as U;
+        let tris = mesh.triangle_count();
+        let verts = mesh.positions.len();
+        anyhow::ensure!(tris > 0, "the mesh has no triangles to tessellate");
+        anyhow::ensure!((1..=64).contains(&s.max_level), "max_level must be 1 to 64, not {}", s.max_level);
+        let (pv, pt) = patch_capacity(s.mode, s.max_level);
+        let vertex_capacity = tris as u64 * u64::from(pv);
+        let index_capacity = tris as u64 * u64::from(pt) * 3;
+        let vertex_bytes = vertex_capacity * std::mem::size_of::<Vertex>() as u64;
+        let limits = gpu.device.limits();
+        let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if vertex_bytes.max(index_capacity * 4) > limit {
+            anyhow::bail!(
+                "{tris} triangles at max_level {} ({}) may need {} MB of vertices, more than this GPU's {} MB \
+                 per buffer: lower max_level or tessellate a coarser mesh",
+                s.max_level,
+                s.mode.name(),
+                vertex_bytes >> 20,
+                limit >> 20
+            );
+        }
+        let metric = match (levels, view.metric) {
+            (Some(_), _) => 2,
+            (None, Metric::Distance) => 0,
+            (None, Metric::EdgeLength) => 1,
+        };
+        let params = Params {
+            view_proj: view.view_proj.to_cols_array_2d(),
+            eye: view.eye.extend(1.0).to_array(),
+            lod: [view.lod.near, view.lod.far, view.lod.max_level.max(1.0), view.lod.silhouette],
+            screen: [view.width, view.height, view.max_edge_px, 0.0],
+            mode: s.mode.index(),
+            max_level: s.max_level,
+            pn: u32::from(s.pn),
+            metric,
+            tri_count: tris as u32,
+            vertex_count: verts as u32,
+            pad: [0; 2],
+        };
+        let source = mesh.gpu(gpu);
+        let level_buffer = match levels {
+            Some(l) => {
+                anyhow::ensure!(l.len() == verts, "{} vertex levels for {verts} vertices", l.len());
+                anyhow::ensure!(
+                    l.iter().all(|x| x.is_finite() && *x >= 1.0),
+                    "vertex levels must be finite and at least 1"
+                );
+                gpu.upload_pooled("tessellation levels", bytemuck::cast_slice(l), U::STORAGE | U::COPY_SRC)
+            }
+            None => gpu.scratch_pooled("tessellation levels", verts as u64 * 4, U::STORAGE | U::COPY_SRC),
+        };
+        let offsets = gpu.scratch_pooled("tessellation offsets", tris as u64 * 8, U::STORAGE | U::COPY_SRC);
+        let vertices = gpu.scratch_pooled("tessellated vertices", vertex_bytes, U::STORAGE | U::VERTEX | U::COPY_SRC);
+        let indices = gpu.scratch_pooled("tessellated indices", index_capacity * 4, U::STORAGE | U::INDEX | U::COPY_SRC);
+        let indirect = gpu.scratch_pooled(
+            "tessellation indirect",
+            u64::from(MAX_INDIRECT_INSTANCES) * INDIRECT_STRIDE,
+            U::STORAGE | U::INDIRECT | U::COPY_SRC,
+        );
+        let binds = [
+            Bind::Uniform(bytemuck::bytes_of(&params)),
+            Bind::Storage(&source.vertices),
+            Bind::Storage(&source.indices),
+            Bind::StorageRw(&level_buffer),
+            Bind::StorageRw(&offsets),
+            Bind::StorageRw(&vertices),
+            Bind::StorageRw(&indices),
+            Bind::StorageRw(&indirect),
+        ];
+        let per_vertex = ComputePass::groups_for(verts, 64);
+        let per_triangle = ComputePass::groups_for(tris, 64);
+        if metric != 2 {
+            self.vertex_levels.dispatch(gpu, &[&binds], per_vertex)?;
+        }
+        if metric == 1 {
+            self.edge_lengths.dispatch(gpu, &[&binds], per_triangle)?;
+        }
+        self.count.dispatch(gpu, &[&binds], per_triangle)?;
+        self.scan.dispatch(gpu, &[&binds], [1, 1, 1])?;
+        self.generate.dispatch(gpu, &[&binds], per_triangle)?;
+        Ok(TessMesh { vertices, indices, indirect, levels: level_buffer, offsets, vertex_capacity, index_capacity })
+    }
 }
 
 #[cfg(test)]
@@ -727,9 +925,13 @@ mod tests {
         }
         let boundary = count.values().filter(|&&c| c == 1).count() as u32;
         assert!(count.values().all(|&c| c <= 2), "{n:?}");
+        let (v, t) = counts(n, false);
+        let cap = patch_capacity(Mode::Pattern, n.into_iter().max().unwrap());
+        assert!(v <= cap.0 && t <= cap.1, "{n:?}: {v} vertices, {t} triangles over the capacity {cap:?}");
         assert_eq!(boundary, n.iter().sum::<u32>(), "{n:?}");
     }
 
+    /// Also checks the counts are bounded by the uniform grid (`patch_capacity`).
     #[test]
     fn the_pattern_tiles_the_triangle_for_all_small_levels() {
         for a in 1..=9 {

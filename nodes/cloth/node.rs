@@ -180,6 +180,7 @@ fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
         detail: false,
         attached: None,
         cuboid: None,
+        tessellated: None,
     };
     let mut items = Vec::new();
     for c in colliders {

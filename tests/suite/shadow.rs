@@ -322,6 +322,7 @@ fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
             detail: false,
             attached: None,
             cuboid: None,
+            tessellated: None,
         })
         .collect()
 }
