@@ -174,7 +174,15 @@ impl Node for DrawNode {
             return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
         }
         cx.count("triangles", mesh.triangle_count());
-        let item = DrawItem { mesh, material, model, detail: cx.bool("detail"), attached: None, cuboid: None, tessellated: None };
+        let item = DrawItem {
+            mesh,
+            material,
+            model,
+            detail: cx.bool("detail"),
+            attached: None,
+            cuboid: None,
+            tessellated: None,
+        };
         cx.set("scene", Arc::new(vec![item]));
         Ok(())
     }

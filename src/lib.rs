@@ -32,8 +32,8 @@ pub mod rng;
 pub mod scene;
 pub mod shaders;
 pub mod signal;
-pub mod tessellation;
 pub mod spec;
+pub mod tessellation;
 pub mod warp;
 
 #[path = "../nodes/mod.rs"]

@@ -22,36 +22,31 @@ use glam::{Vec2, Vec3};
 
 use crate::mesh::Vertex;
 
-/// The refinement modes of Fig. 5.11.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    /// Every triangle at one level (the PN-triangle scheme's uniform refinement).
-    Uniform,
-    /// Dyadic semi-uniform adaptive refinement with edge snapping [DRS09].
-    Dyadic,
-    /// The dissertation's pattern (uniform triangle + trapezoid strip), no warping.
-    Pattern,
-    /// The pattern with barycentric warping toward the higher-level vertices.
-    PatternWarp,
-}
+crate::choice!(
+    /// The refinement modes of Fig. 5.11.
+    pub enum Mode {
+        /// Every triangle at one level (the PN-triangle scheme's uniform refinement).
+        Uniform = "uniform",
+        /// Dyadic semi-uniform adaptive refinement with edge snapping [DRS09].
+        Dyadic = "dyadic",
+        /// The dissertation's pattern (uniform triangle + trapezoid strip), no warping.
+        Pattern = "pattern",
+        /// The pattern with barycentric warping toward the higher-level vertices.
+        PatternWarp = "pattern_warp",
+    }
+);
+
+crate::choice!(
+    /// How vertex levels are chosen on the GPU.
+    pub enum Metric {
+        /// [`vertex_level`]: logarithmic distance falloff and silhouette.
+        Distance = "distance",
+        /// Each vertex: its longest incident edge on screen over the maximum edge length (Fig. 5.15).
+        EdgeLength = "edge_length",
+    }
+);
 
 impl Mode {
-    pub const NAMES: [&'static str; 4] = ["uniform", "dyadic", "pattern", "pattern_warp"];
-
-    pub fn from_name(name: &str) -> Option<Mode> {
-        Some(match name {
-            "uniform" => Mode::Uniform,
-            "dyadic" => Mode::Dyadic,
-            "pattern" => Mode::Pattern,
-            "pattern_warp" => Mode::PatternWarp,
-            _ => return None,
-        })
-    }
-
-    pub fn name(self) -> &'static str {
-        Mode::NAMES[self.index() as usize]
-    }
-
     /// The mode's number in shaders/tessellate.wgsl.
     pub fn index(self) -> u32 {
         match self {
@@ -226,11 +221,7 @@ fn top_point(f: &Frame, m: u32, row: u32, c: u32, bl: [f32; 3], br: [f32; 3], up
     } else {
         let (fm, fr, fc) = (m as f32, row as f32, c as f32);
         let (wl, wr, wc) = ((fm - fr - fc) / fm, fc / fm, fr / fm);
-        f.interior([
-            wl * bl[0] + wr * br[0],
-            wl * bl[1] + wr * br[1],
-            wl * bl[2] + wr * br[2] + wc,
-        ])
+        f.interior([wl * bl[0] + wr * br[0], wl * bl[1] + wr * br[1], wl * bl[2] + wr * br[2] + wc])
     }
 }
 
@@ -621,7 +612,8 @@ pub fn triangle_edge_levels(levels: &[f32], ids: [u32; 3], s: &Settings) -> [u32
     if s.mode == Mode::Uniform {
         return [s.max_level.max(1); 3];
     }
-    let n = std::array::from_fn(|e| edge_level(levels[ids[e] as usize], levels[ids[(e + 1) % 3] as usize], s.max_level));
+    let n =
+        std::array::from_fn(|e| edge_level(levels[ids[e] as usize], levels[ids[(e + 1) % 3] as usize], s.max_level));
     if s.mode == Mode::Dyadic { n.map(dyadic) } else { n }
 }
 
@@ -642,15 +634,6 @@ pub fn tessellate(mesh: &crate::mesh::Mesh, levels: &[f32], s: &Settings) -> (Ve
     (vertices, indices)
 }
 
-/// How vertex levels are chosen on the GPU.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Metric {
-    /// [`vertex_level`]: logarithmic distance falloff and silhouette.
-    Distance,
-    /// Each vertex: its longest incident edge on screen over the maximum edge length (Fig. 5.15).
-    EdgeLength,
-}
-
 /// What the level metrics look at: the camera and the viewport.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewLod {
@@ -662,6 +645,63 @@ pub struct ViewLod {
     pub metric: Metric,
     /// The edge-length metric's target, in pixels.
     pub max_edge_px: f32,
+}
+
+/// The vertex levels the compute shader's first passes choose (`vertex_levels`,
+/// `edge_lengths`), on the CPU: for the wireframe output and tests.
+pub fn cpu_vertex_levels(mesh: &crate::mesh::Mesh, view: &ViewLod) -> Vec<f32> {
+    match view.metric {
+        Metric::Distance => (0..mesh.positions.len())
+            .map(|i| {
+                vertex_level(mesh.positions[i], mesh.normals.get(i).copied().unwrap_or(Vec3::ZERO), view.eye, &view.lod)
+            })
+            .collect(),
+        Metric::EdgeLength => {
+            let screen = |p: Vec3| {
+                let c = view.view_proj * p.extend(1.0);
+                Vec2::new(c.x, c.y) / c.w.max(1e-4) * 0.5 * Vec2::new(view.width, view.height)
+            };
+            let mut levels = vec![1.0f32; mesh.positions.len()];
+            for t in mesh.indices.chunks_exact(3) {
+                for e in 0..3 {
+                    let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
+                    let len = screen(mesh.positions[a]).distance(screen(mesh.positions[b]));
+                    let l = (len / view.max_edge_px.max(1e-3)).clamp(1.0, view.lod.max_level);
+                    levels[a] = levels[a].max(l);
+                    levels[b] = levels[b].max(l);
+                }
+            }
+            levels
+        }
+    }
+}
+
+/// Every edge of a triangle list as a thin ribbon of `width`, lifted by half its width along
+/// the vertex normals so that it lies on top of the surface (wireframe figures).
+pub fn wireframe(vertices: &[Vertex], indices: &[u32], width: f32) -> anyhow::Result<crate::mesh::Mesh> {
+    let mut seen = std::collections::HashSet::new();
+    let (mut p, mut n, mut idx) = (Vec::new(), Vec::new(), Vec::new());
+    for t in indices.chunks_exact(3) {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            if !seen.insert((a.min(b), a.max(b))) {
+                continue;
+            }
+            let (va, vb) = (&vertices[a as usize], &vertices[b as usize]);
+            let (pa, pb) = (Vec3::from(va.position), Vec3::from(vb.position));
+            let normal = (Vec3::from(va.normal) + Vec3::from(vb.normal)).normalize_or(Vec3::Y);
+            let side = (pb - pa).cross(normal).normalize_or_zero() * (0.5 * width);
+            let lift = normal * (0.5 * width);
+            let first = p.len() as u32;
+            p.extend([pa - side + lift, pa + side + lift, pb + side + lift, pb - side + lift]);
+            n.extend([normal; 4]);
+            idx.extend([first, first + 1, first + 2, first, first + 2, first + 3]);
+        }
+    }
+    anyhow::ensure!(!p.is_empty(), "nothing to draw a wireframe of");
+    let mut mesh = crate::mesh::Mesh::build(p, None, Some(n), idx)?;
+    mesh.repairs.clear();
+    Ok(mesh)
 }
 
 /// shaders/tessellate.wgsl `Params`.
@@ -770,7 +810,7 @@ impl GpuTessellator {
                 "{tris} triangles at max_level {} ({}) may need {} MB of vertices, more than this GPU's {} MB \
                  per buffer: lower max_level or tessellate a coarser mesh",
                 s.max_level,
-                s.mode.name(),
+                crate::param::Choice::name(s.mode),
                 vertex_bytes >> 20,
                 limit >> 20
             );
@@ -807,7 +847,8 @@ impl GpuTessellator {
         };
         let offsets = gpu.scratch_pooled("tessellation offsets", tris as u64 * 8, U::STORAGE | U::COPY_SRC);
         let vertices = gpu.scratch_pooled("tessellated vertices", vertex_bytes, U::STORAGE | U::VERTEX | U::COPY_SRC);
-        let indices = gpu.scratch_pooled("tessellated indices", index_capacity * 4, U::STORAGE | U::INDEX | U::COPY_SRC);
+        let indices =
+            gpu.scratch_pooled("tessellated indices", index_capacity * 4, U::STORAGE | U::INDEX | U::COPY_SRC);
         let indirect = gpu.scratch_pooled(
             "tessellation indirect",
             u64::from(MAX_INDIRECT_INSTANCES) * INDIRECT_STRIDE,
