@@ -652,6 +652,118 @@ pub fn ssao(
     Ok(rows)
 }
 
+/// One row of `werkstatt bench tessellation`.
+#[derive(Debug, serde::Serialize)]
+pub struct TessellationRow {
+    /// "equal": every vertex at `level`; "random": vertex levels uniform in [1, level].
+    pub levels: &'static str,
+    pub mode: &'static str,
+    pub level: u32,
+    /// Triangles generated (counted by the CPU reference's `counts`).
+    pub triangles: u64,
+    /// Median time of the compute passes alone (recorded, submitted, waited for).
+    pub compute_ms: f64,
+    pub mtri_per_s: f64,
+    /// Median time of tessellation + G-buffer draw of the result at the bench size.
+    pub frame_ms: f64,
+}
+
+/// Fig. 5.11 on this machine: a 1024-triangle sphere tessellated in every mode at each level.
+pub fn tessellation(
+    gpu: &crate::gpu::GpuContext,
+    levels: &[u32],
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&TessellationRow),
+) -> anyhow::Result<Vec<TessellationRow>> {
+    use crate::draw::{SceneDrawer, render_gbuffer};
+    use crate::param::Choice;
+    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod, counts, triangle_edge_levels};
+    use glam::Vec3;
+
+    let mesh = std::sync::Arc::new(crate::nodes::geometry::sphere(1.0, 32, 16)?);
+    let camera = crate::scene::Camera {
+        eye: Vec3::new(0.0, 0.5, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        near: 0.05,
+        far: 100.0,
+    };
+    let view = crate::scene::View::new(&camera, size.0, size.1);
+    let mut tess = GpuTessellator::default();
+    let mut drawer = SceneDrawer::default();
+    let mut rows = Vec::new();
+    for (kind, random) in [("equal", false), ("random", true)] {
+        for &level in levels {
+            let level = level.clamp(1, 64);
+            let mut rng = crate::rng::SplitMix64::new(5);
+            let vertex_levels: Vec<f32> = (0..mesh.positions.len())
+                .map(|_| if random { 1.0 + (level as f32 - 1.0) * rng.next_f32() } else { level as f32 })
+                .collect();
+            for mode in [Mode::Uniform, Mode::Dyadic, Mode::Pattern, Mode::PatternWarp] {
+                let s = Settings { mode, max_level: level, pn: true };
+                let triangles: u64 = mesh
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| {
+                        let n = triangle_edge_levels(&vertex_levels, [t[0], t[1], t[2]], &s);
+                        u64::from(counts(n, mode == Mode::Dyadic).1)
+                    })
+                    .sum();
+                let lod = ViewLod {
+                    view_proj: view.view_proj,
+                    eye: camera.eye,
+                    width: size.0 as f32,
+                    height: size.1 as f32,
+                    lod: Lod { near: 1.0, far: 10.0, max_level: level as f32, silhouette: 0.0 },
+                    metric: Metric::Distance,
+                    max_edge_px: 16.0,
+                };
+                let mut once = |draw: bool| -> anyhow::Result<f64> {
+                    let t = Instant::now();
+                    let out = tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &s)?;
+                    let item = crate::scene::DrawItem {
+                        mesh: mesh.clone(),
+                        material: Default::default(),
+                        model: glam::Mat4::IDENTITY,
+                        detail: false,
+                        attached: None,
+                        cuboid: None,
+                        tessellated: Some(std::sync::Arc::new(out)),
+                    };
+                    let g =
+                        draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;
+                    gpu.submit_checked()?;
+                    gpu.wait_idle();
+                    drop(g);
+                    Ok(t.elapsed().as_secs_f64() * 1e3)
+                };
+                let median = |once: &mut dyn FnMut(bool) -> anyhow::Result<f64>, draw: bool| -> anyhow::Result<f64> {
+                    once(draw)?;
+                    let mut v = (0..frames.max(1)).map(|_| once(draw)).collect::<anyhow::Result<Vec<f64>>>()?;
+                    v.sort_by(f64::total_cmp);
+                    Ok(v[v.len() / 2])
+                };
+                let compute_ms = median(&mut once, false)?;
+                let frame_ms = median(&mut once, true)?;
+                let row = TessellationRow {
+                    levels: kind,
+                    mode: mode.name(),
+                    level,
+                    triangles,
+                    compute_ms,
+                    mtri_per_s: triangles as f64 / compute_ms / 1e3,
+                    frame_ms,
+                };
+                report(&row);
+                rows.push(row);
+            }
+        }
+    }
+    Ok(rows)
+}
+
 /// One row of `werkstatt bench shadows`.
 #[derive(Debug, serde::Serialize)]
 pub struct ShadowRow {
