@@ -208,3 +208,58 @@ fn too_large_a_tessellation_is_refused_with_advice() {
     let err = GpuTessellator::default().run(gpu(), &mesh, None, &view(), &s).unwrap_err().to_string();
     assert!(err.contains("max_level"), "{err}");
 }
+
+/// A flat tessellation draws, through its indirect arguments, the same depth as the coarse
+/// mesh: in the G-buffer and in two shadow tiles (the second entry of the arguments).
+#[test]
+fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles() {
+    use std::sync::Arc;
+    use werkstatt::draw::{SceneDrawer, Tile};
+    use werkstatt::gpu::read_back;
+    use werkstatt::scene::{Camera, DrawItem, View};
+
+    let g = gpu();
+    let mesh = Arc::new(icosahedron(1.0).unwrap());
+    let camera = Camera {
+        eye: Vec3::new(0.3, 0.8, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        near: 0.1,
+        far: 10.0,
+    };
+    let levels = random_levels(mesh.positions.len(), 5, 6.0);
+    let tess =
+        GpuTessellator::default().run(g, &mesh, Some(&levels), &view(), &settings(Mode::PatternWarp, false)).unwrap();
+    let coarse = DrawItem {
+        mesh: mesh.clone(),
+        material: Default::default(),
+        model: glam::Mat4::IDENTITY,
+        detail: false,
+        attached: None,
+        cuboid: None,
+        tessellated: None,
+    };
+    let fine = DrawItem { tessellated: Some(Arc::new(tess)), ..coarse.clone() };
+    let (w, h) = (48u32, 40u32);
+    let v = View::new(&camera, w, h);
+    let tiles =
+        [Tile { view_proj: v.view_proj, rect: [0, 0, w, h] }, Tile { view_proj: v.view_proj, rect: [w, 0, w, h] }];
+    let mut drawer = SceneDrawer::default();
+    let depth = |item: &DrawItem, drawer: &mut SceneDrawer| {
+        let gb = drawer.gbuffer(g, std::slice::from_ref(item), camera, v).unwrap();
+        let tiles = drawer.depth_tiles(g, std::slice::from_ref(item), &tiles, 2 * w, h).unwrap();
+        g.submit_checked().unwrap();
+        (read_back(g, &gb.depth_buffer).unwrap().rgba, read_back(g, &tiles).unwrap().rgba)
+    };
+    let (coarse_gb, coarse_tiles) = depth(&coarse, &mut drawer);
+    let (fine_gb, fine_tiles) = depth(&fine, &mut drawer);
+    let covered = coarse_gb.iter().step_by(4).filter(|&&d| d < 1.0).count();
+    assert!(covered > (w * h / 5) as usize, "only {covered} texels covered");
+    for (k, (a, b)) in coarse_gb.iter().zip(&fine_gb).enumerate().step_by(4) {
+        assert!((a - b).abs() < 1e-4, "G-buffer texel {}: coarse {a}, tessellated {b}", k / 4);
+    }
+    for (k, (a, b)) in coarse_tiles.iter().zip(&fine_tiles).enumerate().step_by(4) {
+        assert!((a - b).abs() < 1e-4, "shadow tile texel {}: coarse {a}, tessellated {b}", k / 4);
+    }
+}
