@@ -85,11 +85,11 @@ fn weld(vertices: &[Vertex], eps: f32) -> Vec<usize> {
         'search: for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(list) = cells.get(&[cell[0] + dx, cell[1] + dy, cell[2] + dz]) {
-                        if let Some(&r) = list.iter().find(|&&r| reps[r].distance(p) <= eps) {
-                            found = Some(r);
-                            break 'search;
-                        }
+                    if let Some(list) = cells.get(&[cell[0] + dx, cell[1] + dy, cell[2] + dz])
+                        && let Some(&r) = list.iter().find(|&&r| reps[r].distance(p) <= eps)
+                    {
+                        found = Some(r);
+                        break 'search;
                     }
                 }
             }
