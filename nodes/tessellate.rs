@@ -25,7 +25,7 @@ pub static TESSELLATE: NodeSpec = NodeSpec {
         PortSpec::output(
             "wireframe",
             PortType::Mesh,
-            "The refined mesh's edges as thin ribbons, from the CPU reference (for figures; computed only when linked).",
+            "The refined mesh's edges as thin ribbons, from the CPU reference (for figures; empty unless linked).",
         ),
     ],
     params: &[
@@ -133,6 +133,9 @@ impl Node for TessellateNode {
             let (vertices, indices) = crate::tessellation::tessellate(&mesh, &levels, &settings);
             let wire = crate::tessellation::wireframe(&vertices, &indices, cx.f32("wire_width"))?;
             cx.set("wireframe", Arc::new(wire));
+        } else {
+            // Nothing reads it: an empty mesh rather than a CPU tessellation per frame.
+            cx.set("wireframe", Arc::new(Mesh::default()));
         }
         Ok(())
     }

@@ -21,6 +21,7 @@ use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
 
 /// The most tiles one depth draw fills (the size of the views array in shaders/depth.wgsl).
 pub const MAX_TILES: usize = 64;
+const _: () = assert!(crate::tessellation::MAX_INDIRECT_INSTANCES as usize == MAX_TILES);
 
 /// One tile of a depth target: the view drawn into it and where it lies in the texture.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -721,8 +721,9 @@ struct Params {
     pad: [u32; 2],
 }
 
-/// The most instances an indirect draw of a [`TessMesh`] can ask for (one per shadow tile).
-pub const MAX_INDIRECT_INSTANCES: u32 = crate::draw::MAX_TILES as u32;
+/// The most instances an indirect draw of a [`TessMesh`] can ask for: one per shadow tile
+/// (`draw::MAX_TILES`, asserted equal there; `MAX_TILES` in shaders/tessellate.wgsl).
+pub const MAX_INDIRECT_INSTANCES: u32 = 64;
 const INDIRECT_STRIDE: u64 = 20;
 
 /// A tessellated mesh that lives on the GPU only: vertex and index buffers written by the
