@@ -182,6 +182,7 @@ impl Node for DrawNode {
             attached: None,
             cuboid: None,
             tessellated: None,
+            pn_pixels: false,
         };
         cx.set("scene", Arc::new(vec![item]));
         Ok(())

@@ -66,6 +66,11 @@ pub static TESSELLATE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("pn", ParamKind::Bool { default: true }, "Smooth with PN triangles [VPBM01] (else flat)."),
         ParamSpec::new(
+            "per_pixel",
+            ParamKind::Bool { default: false },
+            "Per-pixel PN depth (sections 4.1.3/5.1.3): no refinement; the G-buffer evaluates each triangle's PN patch per fragment, so SSAO sees smooth depth on coarse cloth. Shadow tiles draw the coarse mesh.",
+        ),
+        ParamSpec::new(
             "fixed_levels",
             ParamKind::Vec3 { default: [0.0, 0.0, 0.0] },
             "If any is positive: vertex i gets level fixed_levels[i mod 3] instead of the metric (figures of one triangle, Figs. 3.7-3.11).",
@@ -107,6 +112,23 @@ impl Node for TessellateNode {
             metric: cx.choice("metric"),
             max_edge_px: cx.f32("max_edge_px"),
         };
+        let material_for = material.clone();
+        if cx.bool("per_pixel") {
+            let item = DrawItem {
+                mesh: mesh.clone(),
+                material: material_for,
+                model: Mat4::IDENTITY,
+                detail: false,
+                attached: None,
+                cuboid: None,
+                tessellated: None,
+                pn_pixels: true,
+            };
+            cx.count("patches", mesh.triangle_count());
+            cx.set("scene", Arc::new(vec![item]));
+            cx.set("wireframe", Arc::new(Mesh::default()));
+            return Ok(());
+        }
         let fixed = cx.vec3("fixed_levels");
         let fixed_levels: Option<Vec<f32>> = (fixed.max_element() > 0.0).then(|| {
             let f = fixed.max(Vec3::ONE).to_array();
@@ -123,6 +145,7 @@ impl Node for TessellateNode {
             attached: None,
             cuboid: None,
             tessellated: Some(Arc::new(tess)),
+            pn_pixels: false,
         };
         cx.set("scene", Arc::new(vec![item]));
         if cx.output_linked("wireframe") {

@@ -28,6 +28,8 @@ struct Params {
     _pad1: u32,
 }
 
+// #include "pn.wgsl"
+
 const FLOATS: u32 = 14u;
 const MAX_TILES: u32 = 64u;
 
@@ -315,28 +317,6 @@ fn warp_edge(t: f32, la: f32, lb: f32) -> f32 {
     return t * t + 2.0 * wb * t * (1.0 - t);
 }
 
-fn pn_edge(pi: vec3<f32>, ni: vec3<f32>, pj: vec3<f32>) -> vec3<f32> {
-    return (2.0 * pi + pj - dot(pj - pi, ni) * ni) / 3.0;
-}
-
-fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
-    let l = length(v);
-    if l > 0.0 {
-        return v / l;
-    }
-    return vec3<f32>(0.0);
-}
-
-fn pn_normal(pi: vec3<f32>, ni: vec3<f32>, pj: vec3<f32>, nj: vec3<f32>) -> vec3<f32> {
-    let d = pj - pi;
-    let dd = dot(d, d);
-    var v = 0.0;
-    if dd > 0.0 {
-        v = 2.0 * dot(d, ni + nj) / dd;
-    }
-    return normalize_or_zero(ni + nj - v * d);
-}
-
 fn write_vertex(p: vec3<f32>, n: vec3<f32>, tu: vec3<f32>, uv: vec2<f32>, tv: vec3<f32>) {
     let o = next_vertex * FLOATS;
     out_vertices[o] = p.x;
@@ -381,19 +361,8 @@ fn interior_vertex(w: vec3<f32>) {
     var p = c0.p * u + c1.p * v + c2.p * x;
     var n = c0.n * u + c1.n * v + c2.n * x;
     if params.pn != 0u {
-        let b210 = pn_edge(c0.p, c0.n, c1.p);
-        let b120 = pn_edge(c1.p, c1.n, c0.p);
-        let b021 = pn_edge(c1.p, c1.n, c2.p);
-        let b012 = pn_edge(c2.p, c2.n, c1.p);
-        let b102 = pn_edge(c2.p, c2.n, c0.p);
-        let b201 = pn_edge(c0.p, c0.n, c2.p);
-        let e = (b210 + b120 + b021 + b012 + b102 + b201) / 6.0;
-        let b111 = e + (e - (c0.p + c1.p + c2.p) / 3.0) / 2.0;
-        p = c0.p * (u * u * u) + c1.p * (v * v * v) + c2.p * (x * x * x) + b210 * (3.0 * u * u * v)
-            + b120 * (3.0 * u * v * v) + b021 * (3.0 * v * v * x) + b012 * (3.0 * v * x * x)
-            + b102 * (3.0 * u * x * x) + b201 * (3.0 * u * u * x) + b111 * (6.0 * u * v * x);
-        n = c0.n * (u * u) + c1.n * (v * v) + c2.n * (x * x) + pn_normal(c0.p, c0.n, c1.p, c1.n) * (u * v)
-            + pn_normal(c1.p, c1.n, c2.p, c2.n) * (v * x) + pn_normal(c2.p, c2.n, c0.p, c0.n) * (u * x);
+        p = pn_position(c0.p, c1.p, c2.p, c0.n, c1.n, c2.n, w);
+        n = pn_normal_at(c0.p, c1.p, c2.p, c0.n, c1.n, c2.n, w);
     }
     write_vertex(p, normalize_or_zero(n), normalize_or_zero(c0.tu * u + c1.tu * v + c2.tu * x),
                  c0.uv * u + c1.uv * v + c2.uv * x, normalize_or_zero(c0.tv * u + c1.tv * v + c2.tv * x));

@@ -193,6 +193,7 @@ pub fn attachments(
                 attached: Some(Arc::new(draw)),
                 cuboid: None,
                 tessellated: None,
+                pn_pixels: false,
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -228,6 +229,7 @@ pub fn attachments(
                     attached: None,
                     cuboid: None,
                     tessellated: None,
+                    pn_pixels: false,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -594,6 +596,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
         attached: None,
         cuboid: None,
         tessellated: None,
+        pn_pixels: false,
     };
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
@@ -731,6 +734,7 @@ pub fn tessellation(
                         attached: None,
                         cuboid: None,
                         tessellated: Some(std::sync::Arc::new(out)),
+                        pn_pixels: false,
                     };
                     let g =
                         draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;
@@ -949,6 +953,7 @@ pub fn cuboids(
                 attached: None,
                 cuboid: None,
                 tessellated: None,
+                pn_pixels: false,
             }
         })
         .collect();
@@ -987,6 +992,7 @@ pub fn cuboids(
             attached: None,
             cuboid: None,
             tessellated: None,
+            pn_pixels: false,
         };
         let turns = 6.0;
         let helix = |s: f64, phase: f64| {

@@ -149,6 +149,9 @@ pub struct DrawItem {
     /// A GPU-resident tessellation of `mesh` (the `Tessellate` node): drawn instead of `mesh`
     /// from its own buffers with an indirect draw.
     pub tessellated: Option<Arc<crate::tessellation::TessMesh>>,
+    /// Per-pixel PN depth (dissertation 4.1.3): the G-buffer evaluates the PN patch of each
+    /// triangle per fragment (shaders/gbuffer_pn.wgsl); other targets draw the mesh as it is.
+    pub pn_pixels: bool,
 }
 
 /// The deferred renderer's multiple render targets.

@@ -20,6 +20,8 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("matrix_filter.wgsl", include_str!("../shaders/matrix_filter.wgsl")),
     ("warp.wgsl", include_str!("../shaders/warp.wgsl")),
     ("tessellate.wgsl", include_str!("../shaders/tessellate.wgsl")),
+    ("pn.wgsl", include_str!("../shaders/pn.wgsl")),
+    ("gbuffer_pn.wgsl", include_str!("../shaders/gbuffer_pn.wgsl")),
     ("instance_in.wgsl", include_str!("../shaders/instance_in.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),

@@ -181,6 +181,7 @@ fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
         attached: None,
         cuboid: None,
         tessellated: None,
+        pn_pixels: false,
     };
     let mut items = Vec::new();
     for c in colliders {

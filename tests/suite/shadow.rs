@@ -323,6 +323,7 @@ fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
             attached: None,
             cuboid: None,
             tessellated: None,
+            pn_pixels: false,
         })
         .collect()
 }
