@@ -684,7 +684,7 @@ pub fn tessellation(
     use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod, counts, triangle_edge_levels};
     use glam::Vec3;
 
-    let mesh = std::sync::Arc::new(crate::nodes::geometry::sphere(1.0, 32, 16)?);
+    let mesh = tessellation_bench_mesh(1)?.0;
     let camera = crate::scene::Camera {
         eye: Vec3::new(0.0, 0.5, 3.0),
         target: Vec3::ZERO,
@@ -700,10 +700,8 @@ pub fn tessellation(
     for (kind, random) in [("equal", false), ("random", true)] {
         for &level in levels {
             let level = level.clamp(1, 64);
-            let mut rng = crate::rng::SplitMix64::new(5);
-            let vertex_levels: Vec<f32> = (0..mesh.positions.len())
-                .map(|_| if random { 1.0 + (level as f32 - 1.0) * rng.next_f32() } else { level as f32 })
-                .collect();
+            let vertex_levels =
+                if random { tessellation_bench_mesh(level)?.1 } else { vec![level as f32; mesh.positions.len()] };
             for mode in [Mode::Uniform, Mode::Dyadic, Mode::Pattern, Mode::PatternWarp] {
                 let s = Settings { mode, max_level: level, pn: true };
                 let triangles: u64 = mesh
@@ -764,6 +762,91 @@ pub fn tessellation(
                 rows.push(row);
             }
         }
+    }
+    Ok(rows)
+}
+
+/// Warping's cost in `werkstatt bench tessellation`: compute time of the pattern without and
+/// with warping, measured in interleaved pairs (alternating which runs first) so that load
+/// changes on a shared machine hit both alike.
+#[derive(Debug, serde::Serialize)]
+pub struct WarpCostRow {
+    pub level: u32,
+    pub pairs: usize,
+    /// Medians over the pairs (ms).
+    pub pattern_ms: f64,
+    pub pattern_warp_ms: f64,
+    /// The median over pairs of pattern_warp / pattern, minus 1 (0.05 = 5% slower).
+    pub cost: f64,
+}
+
+/// The 1024-triangle sphere of the tessellation bench and its random vertex levels in [1, level].
+fn tessellation_bench_mesh(level: u32) -> anyhow::Result<(std::sync::Arc<crate::mesh::Mesh>, Vec<f32>)> {
+    let mesh = std::sync::Arc::new(crate::nodes::geometry::sphere(1.0, 32, 16)?);
+    let mut rng = crate::rng::SplitMix64::new(5);
+    let levels = (0..mesh.positions.len()).map(|_| 1.0 + (level as f32 - 1.0) * rng.next_f32()).collect();
+    Ok((mesh, levels))
+}
+
+/// Warping's cost (Fig. 5.11's red against green line) at each level, random vertex levels.
+pub fn tessellation_warp_cost(
+    gpu: &crate::gpu::GpuContext,
+    levels: &[u32],
+    pairs: usize,
+    mut report: impl FnMut(&WarpCostRow),
+) -> anyhow::Result<Vec<WarpCostRow>> {
+    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod};
+    let mut tess = GpuTessellator::default();
+    let mut rows = Vec::new();
+    for &level in levels {
+        let level = level.clamp(1, 64);
+        let (mesh, vertex_levels) = tessellation_bench_mesh(level)?;
+        let lod = ViewLod {
+            view_proj: glam::Mat4::IDENTITY,
+            eye: glam::Vec3::ZERO,
+            width: 1.0,
+            height: 1.0,
+            lod: Lod { near: 1.0, far: 10.0, max_level: level as f32, silhouette: 0.0 },
+            metric: Metric::Distance,
+            max_edge_px: 16.0,
+        };
+        let mut once = |mode: Mode| -> anyhow::Result<f64> {
+            let t = Instant::now();
+            let out =
+                tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &Settings { mode, max_level: level, pn: true })?;
+            gpu.submit_checked()?;
+            gpu.wait_idle();
+            drop(out);
+            Ok(t.elapsed().as_secs_f64() * 1e3)
+        };
+        once(Mode::Pattern)?;
+        once(Mode::PatternWarp)?;
+        let (mut plain, mut warp, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..pairs.max(1) {
+            let (p, w) = if k % 2 == 0 {
+                let p = once(Mode::Pattern)?;
+                (p, once(Mode::PatternWarp)?)
+            } else {
+                let w = once(Mode::PatternWarp)?;
+                (once(Mode::Pattern)?, w)
+            };
+            plain.push(p);
+            warp.push(w);
+            ratio.push(w / p);
+        }
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let row = WarpCostRow {
+            level,
+            pairs: plain.len(),
+            pattern_ms: median(plain),
+            pattern_warp_ms: median(warp),
+            cost: median(ratio) - 1.0,
+        };
+        report(&row);
+        rows.push(row);
     }
     Ok(rows)
 }

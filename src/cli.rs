@@ -479,7 +479,14 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     r.levels, r.mode, r.level, r.triangles, r.compute_ms, r.mtri_per_s, r.frame_ms
                 );
             })?;
-            out.write_json(&rows)?;
+            let pairs = 4 * frames.max(1);
+            println!(
+                "\nwarping's cost, random levels, median of {pairs} interleaved pairs:\n| level | pattern ms | pattern_warp ms | cost |\n|---:|---:|---:|---:|"
+            );
+            let costs = crate::bench::tessellation_warp_cost(&gpu, &levels, pairs, |r| {
+                println!("| {} | {:.2} | {:.2} | {:+.1}% |", r.level, r.pattern_ms, r.pattern_warp_ms, 100.0 * r.cost);
+            })?;
+            out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Ssao { samples, frames, out } } => {
