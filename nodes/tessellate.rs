@@ -27,6 +27,11 @@ pub static TESSELLATE: NodeSpec = NodeSpec {
             PortType::Mesh,
             "The refined mesh's edges as thin ribbons, from the CPU reference (for figures; empty unless linked).",
         ),
+        PortSpec::output(
+            "mesh",
+            PortType::Mesh,
+            "The refined mesh from the CPU reference, welded (for attachments' detail meshes, refined once and then warped like any mesh; empty unless linked).",
+        ),
     ],
     params: &[
         ParamSpec::new(
@@ -127,6 +132,7 @@ impl Node for TessellateNode {
             cx.count("patches", mesh.triangle_count());
             cx.set("scene", Arc::new(vec![item]));
             cx.set("wireframe", Arc::new(Mesh::default()));
+            cx.set("mesh", Arc::new(Mesh::default()));
             return Ok(());
         }
         let fixed = cx.vec3("fixed_levels");
@@ -148,17 +154,25 @@ impl Node for TessellateNode {
             pn_pixels: false,
         };
         cx.set("scene", Arc::new(vec![item]));
-        if cx.output_linked("wireframe") {
+        let (wire, refined) = (cx.output_linked("wireframe"), cx.output_linked("mesh"));
+        let cpu = (wire || refined).then(|| {
             let levels = match &fixed_levels {
                 Some(l) => l.clone(),
                 None => crate::tessellation::cpu_vertex_levels(&mesh, &lod),
             };
-            let (vertices, indices) = crate::tessellation::tessellate(&mesh, &levels, &settings);
-            let wire = crate::tessellation::wireframe(&vertices, &indices, cx.f32("wire_width"))?;
-            cx.set("wireframe", Arc::new(wire));
-        } else {
-            // Nothing reads it: an empty mesh rather than a CPU tessellation per frame.
-            cx.set("wireframe", Arc::new(Mesh::default()));
+            crate::tessellation::tessellate(&mesh, &levels, &settings)
+        });
+        // Outputs nobody reads stay empty rather than cost a CPU tessellation per run.
+        let empty = || Arc::new(Mesh::default());
+        match (&cpu, wire) {
+            (Some((v, i)), true) => {
+                cx.set("wireframe", Arc::new(crate::tessellation::wireframe(v, i, cx.f32("wire_width"))?))
+            }
+            _ => cx.set("wireframe", empty()),
+        }
+        match (&cpu, refined) {
+            (Some((v, i)), true) => cx.set("mesh", Arc::new(crate::tessellation::welded_mesh(v, i)?)),
+            _ => cx.set("mesh", empty()),
         }
         Ok(())
     }

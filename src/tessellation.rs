@@ -676,6 +676,25 @@ pub fn cpu_vertex_levels(mesh: &crate::mesh::Mesh, view: &ViewLod) -> Vec<f32> {
     }
 }
 
+/// A triangle list as a mesh, vertices with bit-identical attributes merged (the tessellation's
+/// shared edge vertices are bit-identical, so neighbouring patches join up).
+pub fn welded_mesh(vertices: &[Vertex], indices: &[u32]) -> anyhow::Result<crate::mesh::Mesh> {
+    let mut first: std::collections::HashMap<[u32; 14], u32> = std::collections::HashMap::new();
+    let (mut p, mut n, mut uv, mut remap) = (Vec::new(), Vec::new(), Vec::new(), Vec::with_capacity(vertices.len()));
+    for v in vertices {
+        let key: [u32; 14] = bytemuck::cast(*v);
+        let id = *first.entry(key).or_insert_with(|| {
+            p.push(Vec3::from(v.position));
+            n.push(Vec3::from(v.normal));
+            uv.push(Vec2::from(v.uv));
+            p.len() as u32 - 1
+        });
+        remap.push(id);
+    }
+    let idx = indices.iter().map(|&i| remap[i as usize]).collect();
+    crate::mesh::Mesh::build(p, Some(uv), Some(n), idx)
+}
+
 /// Every edge of a triangle list as a thin ribbon of `width`, lifted by half its width along
 /// the vertex normals so that it lies on top of the surface (wireframe figures).
 pub fn wireframe(vertices: &[Vertex], indices: &[u32], width: f32) -> anyhow::Result<crate::mesh::Mesh> {
@@ -1041,6 +1060,28 @@ mod tests {
         };
         let (a, b, c) = (mean_b0(2.0), mean_b0(4.0), mean_b0(8.0));
         assert!(a < b && b < c, "{a} {b} {c}");
+    }
+
+    /// Two triangles sharing an edge, refined uniformly to level n and welded: (n + 1)^2
+    /// vertices, so the shared edge's vertices are the same from both sides.
+    #[test]
+    fn a_welded_uniform_quad_has_n_plus_1_squared_vertices() {
+        let quad = crate::mesh::Mesh::build(
+            vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z],
+            None,
+            Some(vec![Vec3::Y; 4]),
+            vec![0, 3, 1, 1, 3, 2],
+        )
+        .unwrap();
+        for mode in [Mode::Uniform, Mode::PatternWarp] {
+            for n in [1, 2, 5, 8] {
+                let s = Settings { mode, max_level: n, pn: true };
+                let (v, i) = tessellate(&quad, &[n as f32; 4], &s);
+                let m = welded_mesh(&v, &i).unwrap();
+                assert_eq!(m.positions.len() as u32, (n + 1) * (n + 1), "{mode:?} level {n}");
+                assert_eq!(m.triangle_count() as u32, 2 * n * n);
+            }
+        }
     }
 
     #[test]
