@@ -117,18 +117,9 @@ impl Node for TessellateNode {
             metric: cx.choice("metric"),
             max_edge_px: cx.f32("max_edge_px"),
         };
-        let material_for = material.clone();
+        let plain = DrawItem::plain(mesh.clone(), material, Mat4::IDENTITY);
         if cx.bool("per_pixel") {
-            let item = DrawItem {
-                mesh: mesh.clone(),
-                material: material_for,
-                model: Mat4::IDENTITY,
-                detail: false,
-                attached: None,
-                cuboid: None,
-                tessellated: None,
-                pn_pixels: true,
-            };
+            let item = DrawItem { pn_pixels: true, ..plain };
             cx.count("patches", mesh.triangle_count());
             cx.set("scene", Arc::new(vec![item]));
             cx.set("wireframe", Arc::new(Mesh::default()));
@@ -143,16 +134,7 @@ impl Node for TessellateNode {
         let tess = self.gpu.run(gpu, &mesh, fixed_levels.as_deref(), &lod, &settings)?;
         cx.count("patches", mesh.triangle_count());
         cx.count("max_triangles", (tess.index_capacity / 3) as usize);
-        let item = DrawItem {
-            mesh: mesh.clone(),
-            material,
-            model: Mat4::IDENTITY,
-            detail: false,
-            attached: None,
-            cuboid: None,
-            tessellated: Some(Arc::new(tess)),
-            pn_pixels: false,
-        };
+        let item = DrawItem { tessellated: Some(Arc::new(tess)), ..plain };
         cx.set("scene", Arc::new(vec![item]));
         let (wire, refined) = (cx.output_linked("wireframe"), cx.output_linked("mesh"));
         let cpu = (wire || refined).then(|| {

@@ -725,14 +725,8 @@ pub fn tessellation(
                     let t = Instant::now();
                     let out = tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &s)?;
                     let item = crate::scene::DrawItem {
-                        mesh: mesh.clone(),
-                        material: Default::default(),
-                        model: glam::Mat4::IDENTITY,
-                        detail: false,
-                        attached: None,
-                        cuboid: None,
                         tessellated: Some(std::sync::Arc::new(out)),
-                        pn_pixels: false,
+                        ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
                     };
                     let g =
                         draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;

@@ -154,6 +154,22 @@ pub struct DrawItem {
     pub pn_pixels: bool,
 }
 
+impl DrawItem {
+    /// A coarse (non-detail) item drawn as it is: no attachment, cuboid, tessellation or PN.
+    pub fn plain(mesh: Arc<Mesh>, material: Arc<Material>, model: Mat4) -> DrawItem {
+        DrawItem {
+            mesh,
+            material,
+            model,
+            detail: false,
+            attached: None,
+            cuboid: None,
+            tessellated: None,
+            pn_pixels: false,
+        }
+    }
+}
+
 /// The deferred renderer's multiple render targets.
 pub struct GBuffer {
     /// Linear base colour (rgb) and glossiness (a), Rgba16Float.

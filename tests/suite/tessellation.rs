@@ -248,16 +248,7 @@ fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles
     let levels = random_levels(mesh.positions.len(), 5, 6.0);
     let tess =
         GpuTessellator::default().run(g, &mesh, Some(&levels), &view(), &settings(Mode::PatternWarp, false)).unwrap();
-    let coarse = DrawItem {
-        mesh: mesh.clone(),
-        material: Default::default(),
-        model: glam::Mat4::IDENTITY,
-        detail: false,
-        attached: None,
-        cuboid: None,
-        tessellated: None,
-        pn_pixels: false,
-    };
+    let coarse = DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY);
     let fine = DrawItem { tessellated: Some(Arc::new(tess)), ..coarse.clone() };
     let (w, h) = (48u32, 40u32);
     let v = View::new(&camera, w, h);
@@ -310,16 +301,7 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
         g.submit_checked().unwrap();
         read_back(g, &gb.depth).unwrap().rgba.iter().step_by(4).copied().collect::<Vec<f32>>()
     };
-    let item = |mesh: Arc<Mesh>| DrawItem {
-        mesh,
-        material: Default::default(),
-        model: glam::Mat4::IDENTITY,
-        detail: false,
-        attached: None,
-        cuboid: None,
-        tessellated: None,
-        pn_pixels: false,
-    };
+    let item = |mesh: Arc<Mesh>| DrawItem::plain(mesh, Default::default(), glam::Mat4::IDENTITY);
     let flat_plane = Arc::new(plane(2.0, 3, 2).unwrap());
     let a = depth(item(flat_plane.clone()));
     let b = depth(DrawItem { pn_pixels: true, ..item(flat_plane) });
