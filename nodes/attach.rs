@@ -57,6 +57,8 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
         detail: true,
         attached: Some(Arc::new(attached)),
         cuboid: None,
+        tessellated: None,
+        pn_pixels: false,
     };
     cx.set("scene", Arc::new(vec![item]));
 }

@@ -18,7 +18,7 @@ pub static PRIMITIVE: NodeSpec = NodeSpec {
         ParamSpec::new(
             "shape",
             ParamKind::Choice { default: "sphere", options: Shape::OPTIONS },
-            "plane: size x size in XZ; cylinder: radius, height along Y (open); sphere: radius; torus: radius, minor_radius; disc: a button of radius and height; box: size cube.",
+            "plane: size x size in XZ; triangle: equilateral of edge size in XZ; icosahedron: radius (Fig. 5.13); cylinder: radius, height along Y (open); sphere: radius; torus: radius, minor_radius; disc: a button of radius and height; box: size cube.",
         ),
         ParamSpec::new("size", ParamKind::Float { default: 1.0, min: 1e-4, max: 1e4 }, "Edge length of plane and box."),
         ParamSpec::new(
@@ -55,6 +55,8 @@ crate::choice!(
         Torus = "torus",
         Disc = "disc",
         Box = "box",
+        Icosahedron = "icosahedron",
+        Triangle = "triangle",
     }
 );
 
@@ -69,6 +71,8 @@ impl Node for PrimitiveNode {
             Shape::Disc => disc(cx.f32("radius"), cx.f32("height"), su.max(3)),
             Shape::Box => cube(cx.f32("size")),
             Shape::Sphere => sphere(cx.f32("radius"), su.max(3), sv.max(2)),
+            Shape::Icosahedron => icosahedron(cx.f32("radius")),
+            Shape::Triangle => triangle(cx.f32("size")),
         }?;
         cx.set("mesh", Arc::new(mesh));
         Ok(())
@@ -95,6 +99,53 @@ fn grid(su: u32, sv: u32, f: impl Fn(f32, f32) -> (Vec3, Vec3)) -> anyhow::Resul
         }
     }
     Mesh::build(p, Some(uv), Some(n), idx)
+}
+
+/// The regular icosahedron of circumradius `r` (12 vertices, 20 faces), normals pointing out,
+/// UVs by longitude and latitude.
+pub fn icosahedron(r: f32) -> anyhow::Result<Mesh> {
+    let g = (1.0 + 5f32.sqrt()) / 2.0;
+    let raw = [
+        [-1.0, g, 0.0],
+        [1.0, g, 0.0],
+        [-1.0, -g, 0.0],
+        [1.0, -g, 0.0],
+        [0.0, -1.0, g],
+        [0.0, 1.0, g],
+        [0.0, -1.0, -g],
+        [0.0, 1.0, -g],
+        [g, 0.0, -1.0],
+        [g, 0.0, 1.0],
+        [-g, 0.0, -1.0],
+        [-g, 0.0, 1.0],
+    ];
+    let n: Vec<Vec3> = raw.iter().map(|p| Vec3::from_array(*p).normalize()).collect();
+    let p: Vec<Vec3> = n.iter().map(|n| *n * r).collect();
+    let uv = n.iter().map(|n| Vec2::new(0.5 + n.x.atan2(n.z) / TAU, n.y.clamp(-1.0, 1.0).acos() / PI)).collect();
+    let mut idx: Vec<u32> = vec![
+        0, 11, 5, 0, 5, 1, 0, 1, 7, 0, 7, 10, 0, 10, 11, 1, 5, 9, 5, 11, 4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3, 9, 4, 3,
+        4, 2, 3, 2, 6, 3, 6, 8, 3, 8, 9, 4, 9, 5, 2, 4, 11, 6, 2, 10, 8, 6, 7, 9, 8, 1,
+    ];
+    // Wind every face like the other primitives: (b - a) x (c - a) along the outward normal.
+    for t in idx.chunks_exact_mut(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| p[i as usize]);
+        if (b - a).cross(c - a).dot(a + b + c) < 0.0 {
+            t.swap(1, 2);
+        }
+    }
+    Mesh::build(p, Some(uv), Some(n), idx)
+}
+
+/// One equilateral triangle of edge `size` in the XZ plane, normal +Y (Figs. 3.7-3.11).
+pub fn triangle(size: f32) -> anyhow::Result<Mesh> {
+    let h = size * 3f32.sqrt() / 2.0;
+    let p = vec![
+        Vec3::new(-size / 2.0, 0.0, -h / 3.0),
+        Vec3::new(0.0, 0.0, 2.0 * h / 3.0),
+        Vec3::new(size / 2.0, 0.0, -h / 3.0),
+    ];
+    let uv = vec![Vec2::new(0.0, 0.0), Vec2::new(0.5, 1.0), Vec2::new(1.0, 0.0)];
+    Mesh::build(p, Some(uv), Some(vec![Vec3::Y; 3]), vec![0, 1, 2])
 }
 
 /// In the XZ plane, normal +Y; u along +X, v along +Z.

@@ -25,6 +25,7 @@ pub mod reference_occlusion;
 pub mod scene;
 pub mod shadow_atlas;
 pub mod ssao;
+pub mod tessellate;
 pub mod tonemap;
 
 use crate::node::prelude::*;
@@ -37,6 +38,7 @@ pub static ALL: &[&NodeSpec] = &[
     &geometry::PRIMITIVE,
     &geometry::MESH_FILE,
     &geometry::TRANSFORM_MESH,
+    &tessellate::TESSELLATE,
     &cloth::node::CLOTH_SIM,
     &mesh_sequence::MESH_SEQUENCE,
     &live_link::LIVE_LINK,

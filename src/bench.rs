@@ -194,6 +194,8 @@ pub fn attachments(
                 detail: true,
                 attached: Some(Arc::new(draw)),
                 cuboid: None,
+                tessellated: None,
+                pn_pixels: false,
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -228,6 +230,8 @@ pub fn attachments(
                     detail: true,
                     attached: None,
                     cuboid: None,
+                    tessellated: None,
+                    pn_pixels: false,
                 };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -593,6 +597,8 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
         detail: false,
         attached: None,
         cuboid: None,
+        tessellated: None,
+        pn_pixels: false,
     };
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
@@ -647,6 +653,196 @@ pub fn ssao(
             report(&row);
             rows.push(row);
         }
+    }
+    Ok(rows)
+}
+
+/// One row of `werkstatt bench tessellation`.
+#[derive(Debug, serde::Serialize)]
+pub struct TessellationRow {
+    /// "equal": every vertex at `level`; "random": vertex levels uniform in [1, level].
+    pub levels: &'static str,
+    pub mode: &'static str,
+    pub level: u32,
+    /// Triangles generated (counted by the CPU reference's `counts`).
+    pub triangles: u64,
+    /// Median time of the compute passes alone (recorded, submitted, waited for).
+    pub compute_ms: f64,
+    pub mtri_per_s: f64,
+    /// Median time of tessellation + G-buffer draw of the result at the bench size.
+    pub frame_ms: f64,
+}
+
+/// Fig. 5.11 on this machine: a 1024-triangle sphere tessellated in every mode at each level.
+pub fn tessellation(
+    gpu: &crate::gpu::GpuContext,
+    levels: &[u32],
+    frames: usize,
+    size: (u32, u32),
+    mut report: impl FnMut(&TessellationRow),
+) -> anyhow::Result<Vec<TessellationRow>> {
+    use crate::draw::{SceneDrawer, render_gbuffer};
+    use crate::param::Choice;
+    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod, counts, triangle_edge_levels};
+    use glam::Vec3;
+
+    let mesh = tessellation_bench_mesh(1)?.0;
+    let camera = crate::scene::Camera {
+        eye: Vec3::new(0.0, 0.5, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        near: 0.05,
+        far: 100.0,
+    };
+    let view = crate::scene::View::new(&camera, size.0, size.1);
+    let mut tess = GpuTessellator::default();
+    let mut drawer = SceneDrawer::default();
+    let mut rows = Vec::new();
+    for (kind, random) in [("equal", false), ("random", true)] {
+        for &level in levels {
+            let level = level.clamp(1, 64);
+            let vertex_levels =
+                if random { tessellation_bench_mesh(level)?.1 } else { vec![level as f32; mesh.positions.len()] };
+            for mode in [Mode::Uniform, Mode::Dyadic, Mode::Pattern, Mode::PatternWarp] {
+                let s = Settings { mode, max_level: level, pn: true };
+                let triangles: u64 = mesh
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| {
+                        let n = triangle_edge_levels(&vertex_levels, [t[0], t[1], t[2]], &s);
+                        u64::from(counts(n, mode == Mode::Dyadic).1)
+                    })
+                    .sum();
+                let lod = ViewLod {
+                    view_proj: view.view_proj,
+                    eye: camera.eye,
+                    width: size.0 as f32,
+                    height: size.1 as f32,
+                    lod: Lod { near: 1.0, far: 10.0, max_level: level as f32, silhouette: 0.0 },
+                    metric: Metric::Distance,
+                    max_edge_px: 16.0,
+                };
+                let mut once = |draw: bool| -> anyhow::Result<f64> {
+                    let t = Instant::now();
+                    let out = tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &s)?;
+                    let item = crate::scene::DrawItem {
+                        tessellated: Some(std::sync::Arc::new(out)),
+                        ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
+                    };
+                    let g =
+                        draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;
+                    gpu.submit_checked()?;
+                    gpu.wait_idle();
+                    drop(g);
+                    Ok(t.elapsed().as_secs_f64() * 1e3)
+                };
+                let median = |once: &mut dyn FnMut(bool) -> anyhow::Result<f64>, draw: bool| -> anyhow::Result<f64> {
+                    once(draw)?;
+                    let mut v = (0..frames.max(1)).map(|_| once(draw)).collect::<anyhow::Result<Vec<f64>>>()?;
+                    v.sort_by(f64::total_cmp);
+                    Ok(v[v.len() / 2])
+                };
+                let compute_ms = median(&mut once, false)?;
+                let frame_ms = median(&mut once, true)?;
+                let row = TessellationRow {
+                    levels: kind,
+                    mode: mode.name(),
+                    level,
+                    triangles,
+                    compute_ms,
+                    mtri_per_s: triangles as f64 / compute_ms / 1e3,
+                    frame_ms,
+                };
+                report(&row);
+                rows.push(row);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// Warping's cost in `werkstatt bench tessellation`: compute time of the pattern without and
+/// with warping, measured in interleaved pairs (alternating which runs first) so that load
+/// changes on a shared machine hit both alike.
+#[derive(Debug, serde::Serialize)]
+pub struct WarpCostRow {
+    pub level: u32,
+    pub pairs: usize,
+    /// Medians over the pairs (ms).
+    pub pattern_ms: f64,
+    pub pattern_warp_ms: f64,
+    /// The median over pairs of pattern_warp / pattern, minus 1 (0.05 = 5% slower).
+    pub cost: f64,
+}
+
+/// The 1024-triangle sphere of the tessellation bench and its random vertex levels in [1, level].
+fn tessellation_bench_mesh(level: u32) -> anyhow::Result<(std::sync::Arc<crate::mesh::Mesh>, Vec<f32>)> {
+    let mesh = std::sync::Arc::new(crate::nodes::geometry::sphere(1.0, 32, 16)?);
+    let mut rng = crate::rng::SplitMix64::new(5);
+    let levels = (0..mesh.positions.len()).map(|_| 1.0 + (level as f32 - 1.0) * rng.next_f32()).collect();
+    Ok((mesh, levels))
+}
+
+/// Warping's cost (Fig. 5.11's red against green line) at each level, random vertex levels.
+pub fn tessellation_warp_cost(
+    gpu: &crate::gpu::GpuContext,
+    levels: &[u32],
+    pairs: usize,
+    mut report: impl FnMut(&WarpCostRow),
+) -> anyhow::Result<Vec<WarpCostRow>> {
+    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod};
+    let mut tess = GpuTessellator::default();
+    let mut rows = Vec::new();
+    for &level in levels {
+        let level = level.clamp(1, 64);
+        let (mesh, vertex_levels) = tessellation_bench_mesh(level)?;
+        let lod = ViewLod {
+            view_proj: glam::Mat4::IDENTITY,
+            eye: glam::Vec3::ZERO,
+            width: 1.0,
+            height: 1.0,
+            lod: Lod { near: 1.0, far: 10.0, max_level: level as f32, silhouette: 0.0 },
+            metric: Metric::Distance,
+            max_edge_px: 16.0,
+        };
+        let mut once = |mode: Mode| -> anyhow::Result<f64> {
+            let t = Instant::now();
+            let out =
+                tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &Settings { mode, max_level: level, pn: true })?;
+            gpu.submit_checked()?;
+            gpu.wait_idle();
+            drop(out);
+            Ok(t.elapsed().as_secs_f64() * 1e3)
+        };
+        once(Mode::Pattern)?;
+        once(Mode::PatternWarp)?;
+        let (mut plain, mut warp, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..pairs.max(1) {
+            let (p, w) = if k % 2 == 0 {
+                let p = once(Mode::Pattern)?;
+                (p, once(Mode::PatternWarp)?)
+            } else {
+                let w = once(Mode::PatternWarp)?;
+                (once(Mode::Pattern)?, w)
+            };
+            plain.push(p);
+            warp.push(w);
+            ratio.push(w / p);
+        }
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let row = WarpCostRow {
+            level,
+            pairs: plain.len(),
+            pattern_ms: median(plain),
+            pattern_warp_ms: median(warp),
+            cost: median(ratio) - 1.0,
+        };
+        report(&row);
+        rows.push(row);
     }
     Ok(rows)
 }
@@ -835,6 +1031,8 @@ pub fn cuboids(
                 detail: false,
                 attached: None,
                 cuboid: None,
+                tessellated: None,
+                pn_pixels: false,
             }
         })
         .collect();
@@ -872,6 +1070,8 @@ pub fn cuboids(
             detail: false,
             attached: None,
             cuboid: None,
+            tessellated: None,
+            pn_pixels: false,
         };
         let turns = 6.0;
         let helix = |s: f64, phase: f64| {

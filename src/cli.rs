@@ -223,6 +223,20 @@ enum BenchWhat {
         #[command(flatten)]
         out: GpuBench,
     },
+    /// Adaptive tessellation (Fig. 5.11): for each mode and level, generated triangles, the
+    /// compute pass's time and triangles per second, and the frame time (tessellation + G-buffer)
+    /// on a 1024-triangle sphere; vertex levels all at the level ("equal") or random in
+    /// [1, level] ("random").
+    Tessellation {
+        /// Levels, comma-separated.
+        #[arg(long, default_value = "1,2,3,4,6,8,12,16", value_delimiter = ',')]
+        levels: Vec<u32>,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
     /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
     /// ms per frame of the Ssao passes for each mode at full and half resolution.
     Ssao {
@@ -648,6 +662,28 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
             })?;
             out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Tessellation { levels, frames, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| levels | mode | level | triangles | compute ms | Mtri/s (compute) | frame ms |\n|---|---|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::tessellation(&gpu, &levels, frames, size, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {:.2} | {:.1} | {:.2} |",
+                    r.levels, r.mode, r.level, r.triangles, r.compute_ms, r.mtri_per_s, r.frame_ms
+                );
+            })?;
+            let pairs = 4 * frames.max(1);
+            println!(
+                "\nwarping's cost, random levels, median of {pairs} interleaved pairs:\n| level | pattern ms | pattern_warp ms | cost |\n|---:|---:|---:|---:|"
+            );
+            let costs = crate::bench::tessellation_warp_cost(&gpu, &levels, pairs, |r| {
+                println!("| {} | {:.2} | {:.2} | {:+.1}% |", r.level, r.pattern_ms, r.pattern_warp_ms, 100.0 * r.cost);
+            })?;
+            out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Ssao { samples, frames, out } } => {

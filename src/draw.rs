@@ -21,6 +21,7 @@ use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
 
 /// The most tiles one depth draw fills (the size of the views array in shaders/depth.wgsl).
 pub const MAX_TILES: usize = 64;
+const _: () = assert!(crate::tessellation::MAX_INDIRECT_INSTANCES as usize == MAX_TILES);
 
 /// One tile of a depth target: the view drawn into it and where it lies in the texture.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -145,6 +146,8 @@ struct Prepared {
     object: wgpu::BindGroup,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
     cuboid: Option<wgpu::BindGroup>,
+    /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
+    pn: Option<wgpu::BindGroup>,
 }
 
 /// Corner indices in the shared buffer are carried as f32 in the object uniform.
@@ -164,6 +167,7 @@ pub struct SceneDrawer {
     tile_index: Bindings,
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
+    pn_meshes: Vec<Bindings>,
     /// The corners of every non-linear grid a draw uses, in one storage buffer per draw.
     grid_corners: BufferRing,
     grid_group: Bindings,
@@ -174,11 +178,12 @@ pub struct SceneDrawer {
 impl Default for SceneDrawer {
     fn default() -> Self {
         SceneDrawer {
-            frame: Bindings::new(wgpu::ShaderStages::VERTEX),
+            frame: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
             objects: Vec::new(),
             warps: Vec::new(),
+            pn_meshes: Vec::new(),
             grid_corners: BufferRing::new("cuboid grid corners", wgpu::BufferUsages::STORAGE),
             grid_group: Bindings::new(wgpu::ShaderStages::VERTEX),
             white: Image8::new(1, 1, vec![255; 4]),
@@ -211,10 +216,12 @@ impl SceneDrawer {
         object_layout: &wgpu::BindGroupLayout,
         warp_layout: Option<&wgpu::BindGroupLayout>,
         cuboid_layout: Option<&wgpu::BindGroupLayout>,
+        pn_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
         while self.objects.len() < items.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
+            self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
         // The linear fast path, tested once per composed transform right before drawing; the
         // corners of the grids that stay non-linear go into one buffer, each item's header
@@ -266,7 +273,16 @@ impl SceneDrawer {
                 _ => None,
             };
             let cuboid = grids.clone().filter(|_| trilinear);
-            prepared.push(Prepared { object, warp, cuboid });
+            let pn = match pn_layout {
+                Some(layout) if item.pn_pixels => {
+                    // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
+                    let mesh = item.mesh.gpu(gpu);
+                    let binds = [Bind::Storage(&mesh.vertices), Bind::Storage(&mesh.indices)];
+                    Some(self.pn_meshes[i].bind_group(gpu, layout, &binds))
+                }
+                _ => None,
+            };
+            prepared.push(Prepared { object, warp, cuboid, pn });
         }
         Ok(prepared)
     }
@@ -328,7 +344,24 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref())?;
+        let pn_layout = items.iter().find(|i| i.pn_pixels).map(|item| {
+            let mesh = item.mesh.gpu(gpu);
+            Bindings::new(OBJECT_VISIBILITY).layout(gpu, &[Bind::Storage(&mesh.vertices), Bind::Storage(&mesh.indices)])
+        });
+        let pn = match &pn_layout {
+            Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
+                depth: depth_test,
+                ..RenderPipelineDesc::new(
+                    "gbuffer_pn.wgsl",
+                    &[Some(&frame_layout), Some(&object_layout), Some(layout)],
+                    &[],
+                    &targets,
+                )
+            })?),
+            None => None,
+        };
+        let prepared =
+            self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), pn_layout.as_ref())?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -344,7 +377,12 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &frame_bg, &[]);
-            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref() };
+            let pipelines = Pipelines {
+                plain: &plain,
+                attached: attached.as_ref(),
+                trilinear: trilinear.as_ref(),
+                pn: pn.as_ref(),
+            };
             draw_items(gpu, &mut pass, items, &prepared, &pipelines, 1, &[]);
         });
         Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
@@ -426,7 +464,7 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref())?;
+        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), None)?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
@@ -453,7 +491,8 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &tiles_bg, &[]);
-            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref() };
+            let pipelines =
+                Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref(), pn: None };
             draw_items(gpu, &mut pass, items, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
         });
         Ok(target)
@@ -466,6 +505,8 @@ struct Pipelines<'a> {
     plain: &'a wgpu::RenderPipeline,
     attached: Option<&'a wgpu::RenderPipeline>,
     trilinear: Option<&'a wgpu::RenderPipeline>,
+    /// Per-pixel PN depth (G-buffer only; elsewhere such items draw plainly).
+    pn: Option<&'a wgpu::RenderPipeline>,
 }
 
 /// Records the draws of `items`: plain and cuboid ones `plain_instances` instances each
@@ -481,8 +522,30 @@ fn draw_items(
     per_draw: &[wgpu::BindGroup],
 ) {
     for (item, p) in items.iter().zip(prepared) {
-        let mesh = item.mesh.gpu(gpu);
         pass.set_bind_group(1, &p.object, &[]);
+        if let Some(t) = &item.tessellated {
+            // Written by the compute pass this frame: counts never come back to the CPU.
+            pass.set_vertex_buffer(0, t.vertices.slice(..));
+            pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
+            match (&p.cuboid, pipelines.trilinear) {
+                (Some(group), Some(pipeline)) => {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(2, group, &[]);
+                }
+                _ => pass.set_pipeline(pipelines.plain),
+            }
+            let instances = plain_instances.min(crate::tessellation::MAX_INDIRECT_INSTANCES);
+            pass.draw_indexed_indirect(&t.indirect, crate::tessellation::TessMesh::indirect_offset(instances));
+            continue;
+        }
+        let mesh = item.mesh.gpu(gpu);
+        if let (Some(group), Some(pipeline)) = (&p.pn, pipelines.pn) {
+            // No vertex buffers: the shader reads the triangle's corners from group 2.
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(2, group, &[]);
+            pass.draw(0..mesh.index_count, 0..plain_instances);
+            continue;
+        }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
         if let (Some(group), Some(pipeline)) = (&p.cuboid, pipelines.trilinear) {

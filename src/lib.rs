@@ -35,6 +35,7 @@ pub mod scene;
 pub mod shaders;
 pub mod signal;
 pub mod spec;
+pub mod tessellation;
 pub mod warp;
 
 #[path = "../nodes/mod.rs"]

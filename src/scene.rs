@@ -146,6 +146,28 @@ pub struct DrawItem {
     /// A non-linear (cuboid grid) transform applied after `model`: the vertex lands at
     /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
     pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
+    /// A GPU-resident tessellation of `mesh` (the `Tessellate` node): drawn instead of `mesh`
+    /// from its own buffers with an indirect draw.
+    pub tessellated: Option<Arc<crate::tessellation::TessMesh>>,
+    /// Per-pixel PN depth (dissertation 4.1.3): the G-buffer evaluates the PN patch of each
+    /// triangle per fragment (shaders/gbuffer_pn.wgsl); other targets draw the mesh as it is.
+    pub pn_pixels: bool,
+}
+
+impl DrawItem {
+    /// A coarse (non-detail) item drawn as it is: no attachment, cuboid, tessellation or PN.
+    pub fn plain(mesh: Arc<Mesh>, material: Arc<Material>, model: Mat4) -> DrawItem {
+        DrawItem {
+            mesh,
+            material,
+            model,
+            detail: false,
+            attached: None,
+            cuboid: None,
+            tessellated: None,
+            pn_pixels: false,
+        }
+    }
 }
 
 /// The deferred renderer's multiple render targets.

@@ -180,6 +180,8 @@ fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
         detail: false,
         attached: None,
         cuboid: None,
+        tessellated: None,
+        pn_pixels: false,
     };
     let mut items = Vec::new();
     for c in colliders {

@@ -331,6 +331,8 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
             detail: false,
             attached: None,
             cuboid,
+            tessellated: None,
+            pn_pixels: false,
         };
         // Drawn after another non-linear grid (of the other normal method) that puts its copy
         // beyond the far plane: both grids share one corner buffer, so the plate's grid must

@@ -31,6 +31,7 @@ mod roundtrip;
 mod scene_drawer;
 mod shadow;
 mod ssao;
+mod tessellation;
 mod warping;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be

@@ -322,6 +322,8 @@ fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
             detail: false,
             attached: None,
             cuboid: None,
+            tessellated: None,
+            pn_pixels: false,
         })
         .collect()
 }
