@@ -175,3 +175,54 @@ fn cloth_presets_animate_deterministically() {
         }
     }
 }
+
+/// What ExportGeometry writes is the CPU twin's warp of the same attachments (src/warp.rs,
+/// threaded, no GPU): the same triangles kept, every vertex where the CPU puts it. An export
+/// that dropped, shifted or mis-ordered instances, or kept outliers, fails here.
+#[test]
+fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
+    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
+    use werkstatt::nodes::export::{assemble, warped_layout_cpu};
+    use werkstatt::port::Value;
+    let gpu = gpu();
+    let text = r#"(version: 1, nodes: {
+        "cloth": (kind: "ClothSim", params: {"triangles": 400}),
+        "matrix": (kind: "MatrixTexture", params: {"resolution": 128}),
+        "grid": (kind: "GridPlacement", params: {"columns": 5, "rows": 4}),
+        "button": (kind: "Primitive", params: {"shape": "disc", "radius": 0.5, "height": 0.2, "segments_u": 16}),
+        "buttons": (kind: "PointAttachment", params: {"scale": 0.1}),
+        "out": (kind: "ExportGeometry"),
+    }, links: [("cloth.surface", "matrix.surface"), ("cloth.surface", "grid.surface"),
+        ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"),
+        ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene")])"#;
+    let graph = werkstatt::graph::Graph::load_str(text, "export.ron".as_ref()).unwrap();
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let resources = werkstatt::resources::Resources::new(false);
+    let settings = FrameSettings { width: 64, height: 64, base_dir: root(), frames: None };
+    let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu), &resources, &settings);
+    assert_eq!((summary.failed, summary.pending), (0, 0), "{:?}", ev.report("out").map(|r| r.status.clone()));
+    let (Some(Value::Mesh(exported)), Some(Value::Scene(items))) =
+        (ev.output("out", "mesh").cloned(), ev.output("buttons", "scene").cloned())
+    else {
+        panic!("no export")
+    };
+    let item = &items[0];
+    let draw = item.attached.as_ref().expect("attached buttons");
+    let texels = werkstatt::nodes::matrix_texture::read_matrix(gpu, &draw.matrix).unwrap();
+    let cpu =
+        assemble(&item.mesh, warped_layout_cpu(&texels, &draw.settings, &item.mesh, &draw.instances.to_vec())).unwrap();
+    let per_button = item.mesh.triangle_count();
+    assert_eq!(draw.instances.len(), 20, "every placement is on the cloth");
+    assert!(
+        exported.triangle_count() >= 18 * per_button,
+        "at least 18 of 20 buttons exported whole: {} triangles of {per_button} each",
+        exported.triangle_count()
+    );
+    assert_eq!(exported.indices, cpu.indices, "the export keeps other triangles than the CPU twin");
+    assert_eq!(exported.positions.len(), cpu.positions.len());
+    let worst = exported.positions.iter().zip(&cpu.positions).map(|(a, b)| a.distance(*b)).fold(0.0f32, f32::max);
+    let worst_normal = exported.normals.iter().zip(&cpu.normals).map(|(a, b)| a.distance(*b)).fold(0.0f32, f32::max);
+    eprintln!("export vs CPU twin: positions within {worst:.2e}, normals within {worst_normal:.2e}");
+    assert!(worst < 1e-4, "an exported vertex is {worst} from the CPU twin's");
+    assert!(worst_normal < 1e-3, "an exported normal is {worst_normal} from the CPU twin's");
+}

@@ -51,8 +51,8 @@ fn render_on(
         graph_path: root().join("graphs").join(graph),
         frames,
         fps: 30.0,
-        width: 160,
-        height: 120,
+        width: 96,
+        height: 72,
         out_dir: out.to_path_buf(),
         sets: Vec::new(),
         dumps: dumps.iter().map(|s| s.to_string()).collect(),
@@ -109,12 +109,12 @@ fn every_graph_renders_on_gl() {
         let text = std::fs::read_to_string(root().join("graphs").join(name)).unwrap();
         if text.contains("\"EnvironmentMap\"") {
             // Image-based lighting refuses GL with a clear error (src/ibl/gpu.rs GL_UNSUPPORTED).
-            let err = render_on(&gpu, name, &out, (0, 1), &[]).expect_err(name);
+            let err = render_on(&gpu, name, &out, (0, 0), &[]).expect_err(name);
             let msg = format!("{err:#}");
             assert!(msg.contains("does not run on the GL backend"), "{name} on GL: {msg}");
             continue;
         }
-        render_on(&gpu, name, &out, (0, 1), &[]).unwrap_or_else(|e| panic!("{name} on GL: {e:#}"));
+        render_on(&gpu, name, &out, (0, 0), &[]).unwrap_or_else(|e| panic!("{name} on GL: {e:#}"));
         let images: Vec<_> = std::fs::read_dir(&out)
             .unwrap()
             .map(|e| e.unwrap().path())

@@ -555,7 +555,7 @@ fn hybrid_occlusion_is_closer_to_the_ray_traced_reference_than_either_part() {
     let probe = probe(&out, 180.0);
     let size = (160, 120);
     let low_res = r#""tile_size": 32"#;
-    let ((global, local, hybrid), reference) = spheres_errors(&probe, 128, size, low_res, None);
+    let ((global, local, hybrid), _) = spheres_errors(&probe, 128, size, low_res, None);
     eprintln!(
         "hybrid MSE is {:.0}% below global's and {:.0}% below SSAO's",
         100.0 * (1.0 - hybrid / global),
@@ -563,14 +563,9 @@ fn hybrid_occlusion_is_closer_to_the_ray_traced_reference_than_either_part() {
     );
     assert!(hybrid <= 0.7 * global, "hybrid {hybrid} is not 30% below global {global}");
     assert!(hybrid <= 0.7 * local, "hybrid {hybrid} is not 30% below SSAO {local}");
-    // More lights, smaller regions, narrower blurs: the global part alone gets closer.
-    let ((global_many, _, hybrid_many), _) = spheres_errors(&probe, 512, size, low_res, Some(reference));
-    assert!(global_many < global, "global-only at 512 lights {global_many} is not below 128 lights {global}");
-    // The dissertation's claim (hybrid at 128 lights no worse than global-only at 512) is
-    // close but not met here: printed for the record, not asserted.
-    eprintln!(
-        "hybrid at 128 lights {hybrid:.5} against global-only at 512 {global_many:.5} (hybrid at 512: {hybrid_many:.5})"
-    );
+    // The dissertation's second claim (hybrid at 128 lights no worse than global-only at 512)
+    // needs a 512-light run, half a minute on lavapipe: measured in docs/occlusion.md (hybrid
+    // 0.0120 at 128 against global 0.0107 at 512: close, not met), not repeated in every CI run.
 }
 
 /// Figs. 5.24, 5.26 and 5.27 at a small size and with fewer lights than the graphs (128, 64
