@@ -51,14 +51,9 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
     cx.count("triangles", instances.len() * c.mesh.triangle_count());
     let attached = AttachedDraw::new(c.matrix, settings, instances);
     let item = DrawItem {
-        mesh: c.mesh,
-        material: c.material,
-        model: Mat4::IDENTITY,
         detail: true,
         attached: Some(Arc::new(attached)),
-        cuboid: None,
-        tessellated: None,
-        pn_pixels: false,
+        ..DrawItem::plain(c.mesh, c.material, Mat4::IDENTITY)
     };
     cx.set("scene", Arc::new(vec![item]));
 }

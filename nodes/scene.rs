@@ -169,16 +169,7 @@ impl Node for DrawNode {
         let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
         let model = crate::nodes::geometry::model_matrix(cx)?;
         cx.count("triangles", mesh.triangle_count());
-        let item = DrawItem {
-            mesh,
-            material,
-            model,
-            detail: cx.bool("detail"),
-            attached: None,
-            cuboid: None,
-            tessellated: None,
-            pn_pixels: false,
-        };
+        let item = DrawItem { detail: cx.bool("detail"), ..DrawItem::plain(mesh, material, model) };
         cx.set("scene", Arc::new(vec![item]));
         Ok(())
     }

@@ -188,14 +188,9 @@ pub fn attachments(
                 instances.clone(),
             );
             let item = DrawItem {
-                mesh: button.clone(),
-                material: material.clone(),
-                model: Mat4::IDENTITY,
                 detail: true,
                 attached: Some(Arc::new(draw)),
-                cuboid: None,
-                tessellated: None,
-                pn_pixels: false,
+                ..DrawItem::plain(button.clone(), material.clone(), Mat4::IDENTITY)
             };
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
@@ -223,16 +218,8 @@ pub fn attachments(
                     normals,
                     indices.clone(),
                 );
-                let item = DrawItem {
-                    mesh: Arc::new(mesh),
-                    material: material.clone(),
-                    model: Mat4::IDENTITY,
-                    detail: true,
-                    attached: None,
-                    cuboid: None,
-                    tessellated: None,
-                    pn_pixels: false,
-                };
+                let item =
+                    DrawItem { detail: true, ..DrawItem::plain(Arc::new(mesh), material.clone(), Mat4::IDENTITY) };
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
                 gpu.wait_idle();
@@ -590,16 +577,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::scene::DrawItem>, crate::
     use crate::scene::{Camera, DrawItem, Material};
 
     let material = Arc::new(Material::default());
-    let item = |mesh: &Arc<crate::mesh::Mesh>, model: Mat4| DrawItem {
-        mesh: mesh.clone(),
-        material: material.clone(),
-        model,
-        detail: false,
-        attached: None,
-        cuboid: None,
-        tessellated: None,
-        pn_pixels: false,
-    };
+    let item = |mesh: &Arc<crate::mesh::Mesh>, model: Mat4| DrawItem::plain(mesh.clone(), material.clone(), model);
     let floor = Arc::new(geometry::plane(4.0, 1, 1)?);
     let ball = Arc::new(geometry::sphere(1.0, 64, 32)?);
     let mut items = vec![item(&floor, Mat4::IDENTITY)];
@@ -1024,16 +1002,11 @@ pub fn cuboids(
         .map(|i| {
             let (x, y, z) = (i % 8, (i / 8) % 4, i / 32);
             let p = Vec3::new(-2.8 + 0.8 * x as f32, -0.8 + 0.5 * y as f32, -0.8 + 0.3 * (z % 6) as f32);
-            DrawItem {
-                mesh: mesh.clone(),
-                material: material.clone(),
-                model: Mat4::from_scale_rotation_translation(Vec3::splat(0.18), Default::default(), p),
-                detail: false,
-                attached: None,
-                cuboid: None,
-                tessellated: None,
-                pn_pixels: false,
-            }
+            DrawItem::plain(
+                mesh.clone(),
+                material.clone(),
+                Mat4::from_scale_rotation_translation(Vec3::splat(0.18), Default::default(), p),
+            )
         })
         .collect();
     let animate = |linear: bool, i: usize| -> Vec<DrawItem> {
@@ -1063,16 +1036,7 @@ pub fn cuboids(
     // (linear) or the cuboid whose corners follow the helix over the object's extent.
     for &(count, tris) in helices {
         let mesh = ball(tris)?;
-        let base = DrawItem {
-            mesh: mesh.clone(),
-            material: material.clone(),
-            model: Mat4::IDENTITY,
-            detail: false,
-            attached: None,
-            cuboid: None,
-            tessellated: None,
-            pn_pixels: false,
-        };
+        let base = DrawItem::plain(mesh.clone(), material.clone(), Mat4::IDENTITY);
         let turns = 6.0;
         let helix = |s: f64, phase: f64| {
             let a = s * turns * std::f64::consts::TAU + phase;

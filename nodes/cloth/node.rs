@@ -173,16 +173,7 @@ pub fn presets_markdown() -> anyhow::Result<String> {
 /// Drawable stand-ins for the colliders (a capsule as a cylinder with two spheres).
 fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
     let material = Arc::new(Material { base_color: Vec3::new(0.55, 0.55, 0.6), glossiness: 0.3, ..Default::default() });
-    let item = |mesh: Mesh, model: Mat4| DrawItem {
-        mesh: Arc::new(mesh),
-        material: material.clone(),
-        model,
-        detail: false,
-        attached: None,
-        cuboid: None,
-        tessellated: None,
-        pn_pixels: false,
-    };
+    let item = |mesh: Mesh, model: Mat4| DrawItem::plain(Arc::new(mesh), material.clone(), model);
     let mut items = Vec::new();
     for c in colliders {
         match c {
