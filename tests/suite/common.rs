@@ -13,12 +13,40 @@ use werkstatt::render::{RenderOptions, Stats, render};
 /// errors and pass timings are collected per device), and tests run in parallel threads.
 pub fn gpu() -> &'static GpuContext {
     thread_local! {
-        static GPU: &'static GpuContext = Box::leak(Box::new(
-            GpuContext::headless(Backend::from_env().unwrap())
-                .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}")),
-        ));
+        static GPU: &'static GpuContext = {
+            let gpu = GpuContext::headless(Backend::from_env().unwrap())
+                .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}"));
+            skip_driver_teardown_at_exit();
+            Box::leak(Box::new(gpu))
+        };
     }
     GPU.with(|g| *g)
+}
+
+/// Ends the test process with its exit status as soon as `exit` starts, before the C
+/// library's teardown. This binary leaves hundreds of GPU devices (Vulkan, GL, the editor's)
+/// alive at exit, and Mesa's exit handlers then tear the drivers down under their still
+/// running threads: the process crashed with SIGSEGV after every test had passed, in about
+/// one run of two. Exit handlers run in reverse order of registration, so this is registered
+/// again after each device is made (after the driver registered its own). A single
+/// `werkstatt` process drops its one device before exiting and does not need this.
+pub fn skip_driver_teardown_at_exit() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn on_exit(function: extern "C" fn(i32, *mut std::ffi::c_void), arg: *mut std::ffi::c_void) -> i32;
+            fn _exit(status: i32) -> !;
+        }
+        extern "C" fn leave(status: i32, _: *mut std::ffi::c_void) {
+            use std::io::Write;
+            let _ = std::io::stdout().flush();
+            let _ = std::io::stderr().flush();
+            // SAFETY: _exit ends the process at once; nothing runs after it.
+            unsafe { _exit(status) }
+        }
+        // SAFETY: registers a plain function with no captured state.
+        unsafe { on_exit(leave, std::ptr::null_mut()) };
+    }
 }
 
 /// How long a test waits for resource loads before it fails (generous: a loaded 2-core

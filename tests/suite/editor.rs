@@ -52,6 +52,7 @@ fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options
         .with_max_steps(200)
         .wgpu_setup(wgpu_setup())
         .build_eframe(move |cc| EditorApp::new(cc, Some(graph), options));
+    crate::common::skip_driver_teardown_at_exit();
     settle(&mut h);
     h
 }

@@ -23,6 +23,7 @@ fn gl() -> Option<GpuContext> {
     match GpuContext::headless(Backend::Gl) {
         Ok(gpu) => {
             assert_eq!(gpu.info.backend, wgpu::Backend::Gl);
+            crate::common::skip_driver_teardown_at_exit();
             Some(gpu)
         }
         Err(e) => {
