@@ -11,17 +11,28 @@ struct VertexOut {
     @location(2) view_depth: f32,
 };
 
-@vertex
-fn vs_main(v: VertexIn) -> VertexOut {
+fn cuboid_vertex(v: VertexIn, direct_normals: bool) -> VertexOut {
     let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
     let world = vec4<f32>(d.position, 1.0);
     var out: VertexOut;
     out.clip = frame.view_proj * world;
     // Normalized per vertex: J scales normals differently at each vertex.
-    out.normal = normalize(cuboid_normal(d.jacobian, (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz));
+    let n = (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz;
+    out.normal = normalize(cuboid_normal(d.jacobian, n, direct_normals));
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
     return out;
+}
+
+// One entry point per normal method (NormalMethod in src/cuboid.rs).
+@vertex
+fn vs_tangent_space(v: VertexIn) -> VertexOut {
+    return cuboid_vertex(v, false);
+}
+
+@vertex
+fn vs_direct(v: VertexIn) -> VertexOut {
+    return cuboid_vertex(v, true);
 }
 
 @fragment

@@ -934,7 +934,7 @@ pub struct CuboidRow {
     /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.
     pub fps_linear: f64,
     pub fps_trilinear: f64,
-    /// fps_trilinear / fps_linear.
+    /// The median over interleaved pairs of frames of linear time / trilinear time.
     pub ratio: f64,
 }
 
@@ -972,21 +972,40 @@ pub fn cuboids(
         far: 50.0,
     };
     let mut drawer = SceneDrawer::default();
-    // Median frames per second of `frame(i)` (compose, draw, wait), after one untimed frame.
-    let mut fps = |make: &dyn Fn(usize) -> Vec<DrawItem>| -> anyhow::Result<f64> {
-        let mut once = |i: usize| -> anyhow::Result<f64> {
+    // Frames per second of each path and their ratio, from interleaved frames: linear and
+    // trilinear alternate (each goes first in half the pairs) so that a change of the machine's
+    // load during the run falls on both paths alike. Each frame composes, draws and waits; the
+    // rates are the median frame times', the ratio the median of the pairs' ratios.
+    let mut compare = |make: &dyn Fn(bool, usize) -> Vec<DrawItem>| -> anyhow::Result<(f64, f64, f64)> {
+        let mut once = |linear: bool, i: usize| -> anyhow::Result<f64> {
             let t = Instant::now();
-            let items = make(i);
+            let items = make(linear, i);
             let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
             gpu.submit_checked()?;
             gpu.wait_idle();
             drop(g);
             Ok(t.elapsed().as_secs_f64())
         };
-        once(0)?;
-        let mut s = (1..=frames.max(1)).map(&mut once).collect::<anyhow::Result<Vec<f64>>>()?;
-        s.sort_by(f64::total_cmp);
-        Ok(1.0 / s[s.len() / 2])
+        once(true, 0)?;
+        once(false, 0)?;
+        let (mut lin, mut tri, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 1..=frames.max(1) {
+            let (l, t) = if i % 2 == 0 {
+                let l = once(true, i)?;
+                (l, once(false, i)?)
+            } else {
+                let t = once(false, i)?;
+                (once(true, i)?, t)
+            };
+            lin.push(l);
+            tri.push(t);
+            ratios.push(l / t);
+        }
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        Ok((1.0 / median(lin), 1.0 / median(tri), median(ratios)))
     };
     let mut rows = Vec::new();
     let mut push = |row: CuboidRow| {
@@ -1029,8 +1048,8 @@ pub fn cuboids(
             .collect()
     };
     let triangles = count * mesh.indices.len() / 3;
-    let (l, t) = (fps(&|i| animate(true, i))?, fps(&|i| animate(false, i))?);
-    push(CuboidRow { scene: "spheres", objects: count, triangles, fps_linear: l, fps_trilinear: t, ratio: t / l });
+    let (fps_linear, fps_trilinear, ratio) = compare(&animate)?;
+    push(CuboidRow { scene: "spheres", objects: count, triangles, fps_linear, fps_trilinear, ratio });
 
     // Helices: object k sits at parameter s_k; its transform is the helix's frame there
     // (linear) or the cuboid whose corners follow the helix over the object's extent.
@@ -1077,8 +1096,8 @@ pub fn cuboids(
                 .collect()
         };
         let triangles = count * mesh.indices.len() / 3;
-        let (l, t) = (fps(&|i| make(true, i))?, fps(&|i| make(false, i))?);
-        push(CuboidRow { scene: "helix", objects: count, triangles, fps_linear: l, fps_trilinear: t, ratio: t / l });
+        let (fps_linear, fps_trilinear, ratio) = compare(&make)?;
+        push(CuboidRow { scene: "helix", objects: count, triangles, fps_linear, fps_trilinear, ratio });
     }
     Ok(rows)
 }

@@ -125,16 +125,17 @@ impl Cuboid {
 }
 
 /// How normals follow a trilinear transform (Fig. 4.5); both are evaluated at the vertex,
-/// since the Jacobian `J` varies with position.
+/// since the Jacobian `J` varies with position. The discriminant indexes the drawer's
+/// trilinear pipelines (one vertex entry point each, shaders/cuboid_gbuffer.wgsl).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum NormalMethod {
     /// Transform the tangent space: `n' = (J t) x (J b) = cof(J) n`, orthogonal to the
     /// deformed surface; the shading shows the cells' C0 seams.
     #[default]
-    TangentSpace,
+    TangentSpace = 0,
     /// Transform the normal directly as a direction: `n' = J n`; not orthogonal to the
     /// deformed surface in general, but it varies less across cell borders.
-    Direct,
+    Direct = 1,
 }
 
 impl NormalMethod {
@@ -145,14 +146,6 @@ impl NormalMethod {
             NormalMethod::Direct => jacobian * n,
         };
         out.normalize_or_zero()
-    }
-
-    /// The value the vertex shader reads (shaders/cuboid.wgsl).
-    pub fn shader_flag(self) -> f32 {
-        match self {
-            NormalMethod::TangentSpace => 0.0,
-            NormalMethod::Direct => 1.0,
-        }
     }
 }
 
@@ -345,24 +338,41 @@ impl CuboidGrid {
         .expect("a resampled grid keeps a valid box")
     }
 
-    /// Appends the corner positions as `vec4<f32>` in corner order to `texels`, the one
-    /// storage buffer of all grids a draw uses: the dissertation's 3D texture of positions,
-    /// read as plain memory (shaders/cuboid.wgsl does the trilinear step, eq. 3.4, itself;
-    /// texel fetches in the vertex stage cost lavapipe far more than buffer loads, and one
-    /// buffer for all grids saves a buffer and a bind group per object and frame).
-    pub fn append_corners(&self, texels: &mut Vec<[f32; 4]>) {
-        texels.extend(self.corners.iter().map(|c| c.as_vec3().extend(1.0).to_array()));
+    /// Appends each cell's coefficient matrix C (eq. 3.4, 3x8, computed in f64 from the
+    /// corners) as 6 `vec4<f32>` per cell, cells in corner order (x fastest), to `rows`, the one
+    /// storage buffer of all grids a draw uses. Per coordinate r two vec4: (c_xyz, c_yz, c_xz,
+    /// c_xy)[r] and (c_z, c_y, c_x, c_1)[r], so shaders/cuboid.wgsl evaluates eq. 3.4 as six dot
+    /// products after six loads. This replaces the dissertation's 3D texture of positions: the
+    /// vertex stage would otherwise load the cell's 8 corners and form C itself for every
+    /// vertex (per-lane gathers are most of the trilinear path's cost on lavapipe, and texel
+    /// fetches there cost more still), and one buffer for all grids saves a buffer and a bind
+    /// group per object and frame.
+    pub fn append_cells(&self, rows: &mut Vec<[f32; 4]>) {
+        for z in 0..self.cells[2] {
+            for y in 0..self.cells[1] {
+                for x in 0..self.cells[0] {
+                    let c = self.cell(x, y, z).coefficients().0;
+                    for r in 0..3 {
+                        rows.push([c[0][r], c[1][r], c[2][r], c[3][r]].map(|v| v as f32));
+                        rows.push([c[4][r], c[5][r], c[6][r], c[7][r]].map(|v| v as f32));
+                    }
+                }
+            }
+        }
     }
 
+    /// Rows [`CuboidGrid::append_cells`] appends per cell.
+    pub const ROWS_PER_CELL: usize = 6;
+
     /// The grid's header in the object uniform (shaders/object.wgsl `grid_*`): box origin
-    /// (w: normal method), 1/box size (w: index of the first corner in the shared buffer),
-    /// cells per axis.
-    pub fn header(&self, first_corner: u32) -> [[f32; 4]; 3] {
+    /// (w unused: the normal method picks the vertex entry point), 1/box size (w: index of the
+    /// grid's first row in the shared buffer), cells per axis.
+    pub fn header(&self, first_row: u32) -> [[f32; 4]; 3] {
         let inv = (1.0 / (self.box_max - self.box_min)).as_vec3();
         // f32 holds every index below 2^24 exactly; the drawer checks the total.
         [
-            self.box_min.as_vec3().extend(self.normals.shader_flag()).to_array(),
-            inv.extend(first_corner as f32).to_array(),
+            self.box_min.as_vec3().extend(0.0).to_array(),
+            inv.extend(first_row as f32).to_array(),
             [self.cells[0] as f32, self.cells[1] as f32, self.cells[2] as f32, 0.0],
         ]
     }

@@ -10,7 +10,7 @@
 
 use glam::{Mat4, Vec4};
 
-use crate::cuboid::{LINEAR_TOLERANCE, fast_path};
+use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
 use crate::gpu::pass::{Bindings, storage_entry_for, texture_entry, uniform_entry};
 use crate::gpu::{
     Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
@@ -141,21 +141,55 @@ fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUn
 }
 
 /// An item's bind groups for one draw: its object group, for attachments the warp group
-/// and the instance buffer, for non-linear cuboid transforms the group of all grids' corners.
+/// and the instance buffer, for non-linear cuboid transforms the group of all grids' cells.
 struct Prepared {
     object: wgpu::BindGroup,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
-    cuboid: Option<wgpu::BindGroup>,
+    /// The group of all grids' cells, and the item's normal method (which entry point draws it).
+    cuboid: Option<(wgpu::BindGroup, NormalMethod)>,
     /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
     pn: Option<wgpu::BindGroup>,
 }
 
-/// Corner indices in the shared buffer are carried as f32 in the object uniform.
-const MAX_GRID_CORNERS: usize = 1 << 24;
+/// Row indices in the shared buffer of grid cells are carried as f32 in the object uniform.
+const MAX_GRID_ROWS: usize = 1 << 24;
 
-/// Whether any item still needs the trilinear vertex stage after the linear fast path.
-fn any_nonlinear(items: &[DrawItem]) -> bool {
-    items.iter().any(|i| i.cuboid.as_ref().is_some_and(|g| g.as_affine(LINEAR_TOLERANCE).is_none()))
+/// The items' transforms after the linear fast path, tested once per composed transform right
+/// before drawing: per item its model matrix (an affine grid folded in), the header of a grid
+/// that stays non-linear and its normal method; the cells of those grids in one buffer, each
+/// header (with its first row) going into its item's object uniform.
+struct Composed {
+    transforms: Vec<(Mat4, [[f32; 4]; 3], Option<NormalMethod>)>,
+    rows: Vec<[f32; 4]>,
+}
+
+impl Composed {
+    fn new(items: &[DrawItem]) -> anyhow::Result<Composed> {
+        let mut rows: Vec<[f32; 4]> = Vec::new();
+        let transforms = items
+            .iter()
+            .map(|item| match fast_path(item.model, item.cuboid.clone()) {
+                (model, Some(grid)) => {
+                    let header = grid.header(rows.len() as u32);
+                    grid.append_cells(&mut rows);
+                    (model, header, Some(grid.normals))
+                }
+                (model, None) => (model, [[0.0; 4]; 3], None),
+            })
+            .collect();
+        anyhow::ensure!(
+            rows.len() <= MAX_GRID_ROWS,
+            "the scene's cuboid grids have {} cells; one draw holds at most {}",
+            rows.len() / CuboidGrid::ROWS_PER_CELL,
+            MAX_GRID_ROWS / CuboidGrid::ROWS_PER_CELL
+        );
+        Ok(Composed { transforms, rows })
+    }
+
+    /// Whether any item still needs the trilinear vertex stage.
+    fn any_nonlinear(&self) -> bool {
+        !self.rows.is_empty()
+    }
 }
 
 /// What a pass that draws scenes keeps between frames: per item its uniform buffers and
@@ -168,8 +202,9 @@ pub struct SceneDrawer {
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
-    /// The corners of every non-linear grid a draw uses, in one storage buffer per draw.
-    grid_corners: BufferRing,
+    /// The cells (coefficient matrices) of every non-linear grid a draw uses, in one storage
+    /// buffer per draw.
+    grid_cells: BufferRing,
     grid_group: Bindings,
     white: Image8,
     resolver: InstanceResolver,
@@ -184,7 +219,7 @@ impl Default for SceneDrawer {
             objects: Vec::new(),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
-            grid_corners: BufferRing::new("cuboid grid corners", wgpu::BufferUsages::STORAGE),
+            grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
             grid_group: Bindings::new(wgpu::ShaderStages::VERTEX),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
@@ -203,7 +238,7 @@ impl SceneDrawer {
         Bindings::new(OBJECT_VISIBILITY).layout(gpu, &shape)
     }
 
-    /// The layout of group 2 for cuboid items (the storage buffer of all grids' corners).
+    /// The layout of group 2 for cuboid items (the storage buffer of all grids' cells).
     fn cuboid_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
         gpu.bind_group_layout(&[storage_entry_for(0, wgpu::ShaderStages::VERTEX, true)])
     }
@@ -213,6 +248,7 @@ impl SceneDrawer {
         &mut self,
         gpu: &GpuContext,
         items: &[DrawItem],
+        composed: Composed,
         object_layout: &wgpu::BindGroupLayout,
         warp_layout: Option<&wgpu::BindGroupLayout>,
         cuboid_layout: Option<&wgpu::BindGroupLayout>,
@@ -223,35 +259,16 @@ impl SceneDrawer {
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
-        // The linear fast path, tested once per composed transform right before drawing; the
-        // corners of the grids that stay non-linear go into one buffer, each item's header
-        // (with its first corner) into its object uniform.
-        let mut corners: Vec<[f32; 4]> = Vec::new();
-        let transforms: Vec<(Mat4, [[f32; 4]; 3], bool)> = items
-            .iter()
-            .map(|item| match fast_path(item.model, item.cuboid.clone()) {
-                (model, Some(grid)) => {
-                    let header = grid.header(corners.len() as u32);
-                    grid.append_corners(&mut corners);
-                    (model, header, true)
-                }
-                (model, None) => (model, [[0.0; 4]; 3], false),
-            })
-            .collect();
-        anyhow::ensure!(
-            corners.len() <= MAX_GRID_CORNERS,
-            "the scene's cuboid grids have {} corners; one draw holds at most {MAX_GRID_CORNERS}",
-            corners.len()
-        );
+        let Composed { transforms, rows } = composed;
         let grids = match cuboid_layout {
-            Some(layout) if !corners.is_empty() => {
-                let buffer = self.grid_corners.write(gpu, bytemuck::cast_slice(&corners)).clone();
+            Some(layout) if !rows.is_empty() => {
+                let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
                 Some(self.grid_group.bind_group(gpu, layout, &[Bind::Storage(&buffer)]))
             }
             _ => None,
         };
         let mut prepared = Vec::with_capacity(items.len());
-        for (i, (item, &(model, header, trilinear))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, &(model, header, normals))) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
             let uniform = object_uniform(item, model, header);
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
@@ -272,7 +289,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let cuboid = grids.clone().filter(|_| trilinear);
+            let cuboid = grids.clone().zip(normals);
             let pn = match pn_layout {
                 Some(layout) if item.pn_pixels => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
@@ -331,17 +348,20 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let cuboid_layout = any_nonlinear(items).then(|| self.cuboid_layout(gpu));
+        let composed = Composed::new(items)?;
+        let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
         let trilinear = match &cuboid_layout {
-            Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
-                depth: depth_test,
-                ..RenderPipelineDesc::new(
-                    "cuboid_gbuffer.wgsl",
-                    &[Some(&frame_layout), Some(&object_layout), Some(layout)],
-                    &vertex,
-                    &targets,
-                )
-            })?),
+            Some(layout) => {
+                let groups = [Some(&frame_layout), Some(&object_layout), Some(layout)];
+                let pipeline = |vertex_entry| {
+                    gpu.render_pipeline(&RenderPipelineDesc {
+                        vertex_entry,
+                        depth: depth_test,
+                        ..RenderPipelineDesc::new("cuboid_gbuffer.wgsl", &groups, &vertex, &targets)
+                    })
+                };
+                Some([pipeline("vs_tangent_space")?, pipeline("vs_direct")?])
+            }
             None => None,
         };
         let pn_layout = items.iter().find(|i| i.pn_pixels).map(|item| {
@@ -360,8 +380,15 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared =
-            self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), pn_layout.as_ref())?;
+        let prepared = self.prepare(
+            gpu,
+            items,
+            composed,
+            &object_layout,
+            warp_layout.as_ref(),
+            cuboid_layout.as_ref(),
+            pn_layout.as_ref(),
+        )?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -380,7 +407,7 @@ impl SceneDrawer {
             let pipelines = Pipelines {
                 plain: &plain,
                 attached: attached.as_ref(),
-                trilinear: trilinear.as_ref(),
+                trilinear: trilinear.as_ref().map(|[tangent, direct]| [tangent, direct]),
                 pn: pn.as_ref(),
             };
             draw_items(gpu, &mut pass, items, &prepared, &pipelines, 1, &[]);
@@ -451,7 +478,8 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let cuboid_layout = any_nonlinear(items).then(|| self.cuboid_layout(gpu));
+        let composed = Composed::new(items)?;
+        let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
         let trilinear = match &cuboid_layout {
             Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
                 depth: depth_test,
@@ -464,7 +492,8 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), None)?;
+        let prepared =
+            self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), None)?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
@@ -491,8 +520,9 @@ impl SceneDrawer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &tiles_bg, &[]);
-            let pipelines =
-                Pipelines { plain: &plain, attached: attached.as_ref(), trilinear: trilinear.as_ref(), pn: None };
+            // Depth only: no normals, one pipeline for both methods.
+            let trilinear = trilinear.as_ref().map(|p| [p, p]);
+            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear, pn: None };
             draw_items(gpu, &mut pass, items, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
         });
         Ok(target)
@@ -504,7 +534,8 @@ impl SceneDrawer {
 struct Pipelines<'a> {
     plain: &'a wgpu::RenderPipeline,
     attached: Option<&'a wgpu::RenderPipeline>,
-    trilinear: Option<&'a wgpu::RenderPipeline>,
+    /// By normal method: tangent space, direct.
+    trilinear: Option<[&'a wgpu::RenderPipeline; 2]>,
     /// Per-pixel PN depth (G-buffer only; elsewhere such items draw plainly).
     pn: Option<&'a wgpu::RenderPipeline>,
 }
@@ -528,8 +559,8 @@ fn draw_items(
             pass.set_vertex_buffer(0, t.vertices.slice(..));
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
             match (&p.cuboid, pipelines.trilinear) {
-                (Some(group), Some(pipeline)) => {
-                    pass.set_pipeline(pipeline);
+                (Some((group, normals)), Some(trilinear)) => {
+                    pass.set_pipeline(trilinear[*normals as usize]);
                     pass.set_bind_group(2, group, &[]);
                 }
                 _ => pass.set_pipeline(pipelines.plain),
@@ -548,8 +579,8 @@ fn draw_items(
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        if let (Some(group), Some(pipeline)) = (&p.cuboid, pipelines.trilinear) {
-            pass.set_pipeline(pipeline);
+        if let (Some((group, normals)), Some(trilinear)) = (&p.cuboid, pipelines.trilinear) {
+            pass.set_pipeline(trilinear[*normals as usize]);
             pass.set_bind_group(2, group, &[]);
             pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             continue;
