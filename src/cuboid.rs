@@ -352,10 +352,8 @@ impl CuboidGrid {
             for y in 0..self.cells[1] {
                 for x in 0..self.cells[0] {
                     let c = self.cell(x, y, z).coefficients().0;
-                    for r in 0..3 {
-                        rows.push([c[0][r], c[1][r], c[2][r], c[3][r]].map(|v| v as f32));
-                        rows.push([c[4][r], c[5][r], c[6][r], c[7][r]].map(|v| v as f32));
-                    }
+                    let row = |cols: &[DVec3], r: usize| std::array::from_fn(|k| cols[k][r] as f32);
+                    rows.extend((0..3).flat_map(|r| [row(&c[..4], r), row(&c[4..], r)]));
                 }
             }
         }

@@ -251,7 +251,6 @@ impl SceneDrawer {
         composed: Composed,
         object_layout: &wgpu::BindGroupLayout,
         warp_layout: Option<&wgpu::BindGroupLayout>,
-        cuboid_layout: Option<&wgpu::BindGroupLayout>,
         pn_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
         while self.objects.len() < items.len() {
@@ -260,13 +259,10 @@ impl SceneDrawer {
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
         let Composed { transforms, rows } = composed;
-        let grids = match cuboid_layout {
-            Some(layout) if !rows.is_empty() => {
-                let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
-                Some(self.grid_group.bind_group(gpu, layout, &[Bind::Storage(&buffer)]))
-            }
-            _ => None,
-        };
+        let grids = (!rows.is_empty()).then(|| {
+            let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
+            self.grid_group.bind_group(gpu, &self.cuboid_layout(gpu), &[Bind::Storage(&buffer)])
+        });
         let mut prepared = Vec::with_capacity(items.len());
         for (i, (item, &(model, header, normals))) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
@@ -380,15 +376,7 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(
-            gpu,
-            items,
-            composed,
-            &object_layout,
-            warp_layout.as_ref(),
-            cuboid_layout.as_ref(),
-            pn_layout.as_ref(),
-        )?;
+        let prepared = self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), pn_layout.as_ref())?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -492,8 +480,7 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared =
-            self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), cuboid_layout.as_ref(), None)?;
+        let prepared = self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), None)?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
