@@ -13,6 +13,7 @@ pub mod export;
 pub mod gbuffer;
 pub mod geometry;
 pub mod hybrid_occlusion;
+pub mod image_difference;
 pub mod ibl_shading;
 pub mod live_link;
 pub mod matrix_texture;
@@ -70,6 +71,7 @@ pub static ALL: &[&NodeSpec] = &[
     &hybrid_occlusion::HYBRID_OCCLUSION,
     &reference_occlusion::REFERENCE_OCCLUSION,
     &tonemap::TONEMAP,
+    &image_difference::IMAGE_DIFFERENCE,
     &output::IMAGE_WRITE,
     &output::PREVIEW,
     &export::EXPORT_GEOMETRY,

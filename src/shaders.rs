@@ -14,6 +14,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("fullscreen.wgsl", include_str!("../shaders/fullscreen.wgsl")),
     ("direct_light.wgsl", include_str!("../shaders/direct_light.wgsl")),
     ("tonemap.wgsl", include_str!("../shaders/tonemap.wgsl")),
+    ("image_difference.wgsl", include_str!("../shaders/image_difference.wgsl")),
     ("display.wgsl", include_str!("../shaders/display.wgsl")),
     ("matrix_out.wgsl", include_str!("../shaders/matrix_out.wgsl")),
     ("matrix_texture.wgsl", include_str!("../shaders/matrix_texture.wgsl")),

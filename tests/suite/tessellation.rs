@@ -333,3 +333,26 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     // fixed-point steps) was 0.089 from both.
     assert!(off_fine < off_flat / 20.0, "per-pixel PN depth is {off_fine} from the PN surface, {off_flat} from flat");
 }
+
+/// Fig. 5.13 (graphs/fig5_13_tess_icosahedron.ron): `ImageDifference` of the pattern without
+/// and with warping is non-zero (warping moves the wireframe), and exactly zero when both
+/// branches use the same mode.
+#[test]
+fn fig5_13_difference_is_zero_for_equal_modes_and_not_with_warping() {
+    use werkstatt::port::Value;
+    let path = crate::common::root().join("graphs/fig5_13_tess_icosahedron.ron");
+    let mut graph = werkstatt::graph::Graph::load(&path).unwrap();
+    let scalar = |ev: &werkstatt::eval::Evaluator, port: &str| match ev.output("difference", port) {
+        Some(Value::Scalar(v)) => *v,
+        other => panic!("difference.{port}: {:?}", other.map(Value::port_type)),
+    };
+    let ev = crate::common::run_graph(&graph, 96, 72);
+    let (max, mean) = (scalar(&ev, "max"), scalar(&ev, "mean"));
+    assert!(max > 0.5 && mean > 0.01, "warping should move wireframe lines: max {max}, mean {mean}");
+    let mode = werkstatt::param::ParamValue::Str("pattern".into());
+    graph.nodes.get_mut("tess_warp").unwrap().params.insert("mode".into(), mode);
+    // The Watch guards exactly this in the graph; without it the equal images can be checked.
+    graph.nodes.get_mut("changed").unwrap().params.insert("min".into(), werkstatt::param::ParamValue::Float(0.0));
+    let ev = crate::common::run_graph(&graph, 96, 72);
+    assert_eq!((scalar(&ev, "max"), scalar(&ev, "mean")), (0.0, 0.0));
+}
