@@ -6,17 +6,22 @@ use crate::gpu::texture::copy_bits;
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, TextureDesc, read_back};
 use crate::mesh::{Mesh, Vertex};
 use crate::node::prelude::*;
+use crate::scene::DrawItem;
+use crate::tessellation::TessMesh;
 use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
 
 pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
     kind: "MatrixTexture",
     category: Category::Attachment,
     doc: "Renders a surface in UV space into a matrix texture: per texel the orthonormal frame (t_u, n, t_v) and position of eq. (3). Empty texels stay zero so lookups outside the pieces are detected.",
-    inputs: &[PortSpec::required(
-        "surface",
-        PortType::Surface,
-        "The deformed surface; its UVs are the packed pattern coordinates.",
-    )],
+    inputs: &[
+        PortSpec::required("surface", PortType::Surface, "The deformed surface; its UVs are the packed pattern coordinates."),
+        PortSpec::optional(
+            "refined",
+            PortType::Scene,
+            "The scene of a Tessellate node refining this surface: the matrix texture then rasterizes the refined (PN-smoothed) GPU mesh, so attachments sit on the surface the G-buffer draws. Needs translate, rotate and scale at their defaults (transform the surface before Tessellate).",
+        ),
+    ],
     outputs: &[
         PortSpec::output("matrix", PortType::MatrixTexture, "The matrix texture, for attachment nodes."),
         PortSpec::output("normal", PortType::Texture, "The normal column (n in rgb, position y in a), for inspection."),
@@ -101,6 +106,7 @@ impl MatrixTextureNode {
         resolution: u32,
         format: wgpu::TextureFormat,
         filter_radius: u32,
+        refined: Option<&TessMesh>,
     ) -> anyhow::Result<MatrixTexture> {
         // Where 32-bit floats cannot be rendered (llvmpipe's GL) the passes write their bits
         // into Rgba32Uint targets, copied into the Rgba32Float texture: the same values.
@@ -125,9 +131,21 @@ impl MatrixTextureNode {
                 multiview_mask: None,
             });
             pass.set_pipeline(&pipeline);
-            pass.set_vertex_buffer(0, gpu_mesh.vertices.slice(..));
-            pass.set_index_buffer(gpu_mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
+            match refined {
+                // Written by this frame's compute pass, in the mesh's vertex layout: its counts
+                // never come back to the CPU. Its pieces have the coarse triangles' UV outlines
+                // (refinement keeps edges straight in UV), so the seam and piece maps still hold.
+                Some(t) => {
+                    pass.set_vertex_buffer(0, t.vertices.slice(..));
+                    pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed_indirect(&t.indirect, TessMesh::indirect_offset(1));
+                }
+                None => {
+                    pass.set_vertex_buffer(0, gpu_mesh.vertices.slice(..));
+                    pass.set_index_buffer(gpu_mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..gpu_mesh.index_count, 0, 0..1);
+                }
+            }
         });
         let key = topology_key(mesh, resolution);
         if self.seam_map.as_ref().is_none_or(|(k, _)| *k != key) {
@@ -208,6 +226,10 @@ impl Node for MatrixTextureNode {
         }
         // The surface in world space: moved by its model transform, as the Draw that shows it.
         let model = crate::nodes::geometry::model_matrix(cx)?;
+        let refined = match cx.optional::<Arc<Vec<DrawItem>>>("refined") {
+            Some(scene) => Some(refined_mesh(&scene, &mesh, model)?),
+            None => None,
+        };
         let mut mesh: Arc<Mesh> = if model == glam::Mat4::IDENTITY {
             mesh
         } else {
@@ -237,6 +259,11 @@ impl Node for MatrixTextureNode {
         } else {
             vec![]
         };
+        if !flipped.is_empty() && refined.is_some() {
+            return Err(NodeError::msg(
+                "flip_left_handed cannot flip t_v on the refined mesh (it is computed on the GPU); unlink `refined` or mirror the UVs of the left-handed pieces",
+            ));
+        }
         if !flipped.is_empty() {
             let mut m = (*mesh).clone();
             for (i, t) in m.tangents_v.iter_mut().enumerate() {
@@ -250,12 +277,38 @@ impl Node for MatrixTextureNode {
             Precision::F16 => gpu.formats().matrix_f16,
             Precision::F32 => wgpu::TextureFormat::Rgba32Float,
         };
-        let m = self.render(gpu, &mesh, resolution, format, cx.int("filter_radius") as u32)?;
+        let filter_radius = cx.int("filter_radius") as u32;
+        let m = self.render(gpu, &mesh, resolution, format, filter_radius, refined.as_deref())?;
         cx.set("normal", Arc::new(m.col_n.share()));
         cx.set("matrix", Arc::new(m));
         cx.set("min_resolution", min_res);
         Ok(())
     }
+}
+
+/// The GPU mesh a Tessellate node made of `surface`, from its scene on the `refined` input.
+fn refined_mesh(scene: &[DrawItem], surface: &Mesh, model: glam::Mat4) -> Result<Arc<TessMesh>, NodeError> {
+    let Some(item) = scene.iter().find(|i| i.tessellated.is_some()) else {
+        return Err(NodeError::msg(
+            "refined: the scene holds no GPU-refined mesh (link a Tessellate node's scene; its per_pixel mode does not refine)",
+        ));
+    };
+    let coarse = &item.mesh;
+    if coarse.indices != surface.indices || coarse.uvs != surface.uvs || coarse.positions != surface.positions {
+        return Err(NodeError::msg(format!(
+            "refined: the Tessellate node refines another mesh ({} vertices, {} triangles) than this surface ({} vertices, {} triangles); link the same surface into both",
+            coarse.positions.len(),
+            coarse.triangle_count(),
+            surface.positions.len(),
+            surface.triangle_count()
+        )));
+    }
+    if model != glam::Mat4::IDENTITY {
+        return Err(NodeError::msg(
+            "refined: translate, rotate and scale move the coarse surface only; transform the mesh before the Tessellate node instead",
+        ));
+    }
+    Ok(item.tessellated.clone().expect("found above"))
 }
 
 /// Copies a matrix texture to the CPU.

@@ -107,7 +107,7 @@ pub fn attachments(
 
     let surface = geometry::plane(1.0, 64, 64)?;
     let matrix =
-        Arc::new(MatrixTextureNode::default().render(gpu, &surface, 512, wgpu::TextureFormat::Rgba32Float, 0)?);
+        Arc::new(MatrixTextureNode::default().render(gpu, &surface, 512, wgpu::TextureFormat::Rgba32Float, 0, None)?);
     let texels = read_matrix(gpu, &matrix)?;
     let button = Arc::new(geometry::disc(0.5, 0.2, 232)?);
     assert_eq!(button.triangle_count(), 928);
@@ -1280,7 +1280,7 @@ pub fn table1(
         let mut matrix_node = MatrixTextureNode::default();
         let mut drawer = SceneDrawer::default();
         let matrix_ms = median_ms(frames, &mut || {
-            matrix_node.render(gpu, &surface, resolution, wgpu::TextureFormat::Rgba32Float, 0)?;
+            matrix_node.render(gpu, &surface, resolution, wgpu::TextureFormat::Rgba32Float, 0, None)?;
             gpu.submit_checked()?;
             gpu.wait_idle();
             Ok(())

@@ -356,3 +356,48 @@ fn fig5_13_difference_is_zero_for_equal_modes_and_not_with_warping() {
     let ev = crate::common::run_graph(&graph, 96, 72);
     assert_eq!((scalar(&ev, "max"), scalar(&ev, "mean")), (0.0, 0.0));
 }
+
+/// graphs/tess_matrix_texture.ron: a coarse UV sphere (radius 0.5, 10 x 5 segments) whose
+/// matrix texture rasterizes the Tessellate node's refined GPU mesh lies on the PN-smoothed
+/// surface: its texels' distance to the centre errs far less than the coarse triangles', over
+/// the same UV footprint; a model transform with `refined` linked is a node error.
+#[test]
+fn a_matrix_texture_of_the_refined_surface_follows_the_smooth_surface() {
+    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::nodes::matrix_texture::read_matrix;
+    use werkstatt::port::Value;
+    let path = crate::common::root().join("graphs/tess_matrix_texture.ron");
+    let mut graph = werkstatt::graph::Graph::load(&path).unwrap();
+    let ev = crate::common::run_graph(&graph, 96, 72);
+    // Mean radial error and covered texels of a matrix texture of the sphere about `centre`.
+    let radial = |node: &str, centre: Vec3| {
+        let Some(Value::MatrixTexture(m)) = ev.output(node, "matrix") else { panic!("no matrix texture on {node}") };
+        let texels = read_matrix(gpu(), m).unwrap();
+        let errors: Vec<f32> = texels
+            .frames
+            .iter()
+            .filter(|f| f.n.length_squared() > 0.25)
+            .map(|f| ((f.p - centre).length() - 0.5).abs())
+            .collect();
+        (errors.iter().sum::<f32>() / errors.len() as f32, errors.len())
+    };
+    let (coarse, coarse_texels) = radial("matrix_coarse", Vec3::new(-1.2, 0.0, 0.0));
+    let (refined, refined_texels) = radial("matrix_refined", Vec3::ZERO);
+    eprintln!("mean radial error: coarse {coarse} ({coarse_texels} texels), refined {refined} ({refined_texels} texels)");
+    assert!(coarse > 0.01, "the coarse sphere's triangles should cut inside it: mean radial error {coarse}");
+    assert!(refined < coarse / 3.0, "refined mean radial error {refined} against coarse {coarse}");
+    let footprint = refined_texels as f64 / coarse_texels as f64;
+    assert!((footprint - 1.0).abs() < 0.02, "covered texels: refined {refined_texels}, coarse {coarse_texels}");
+
+    let translate = werkstatt::param::ParamValue::Vec(vec![0.5, 0.0, 0.0]);
+    graph.nodes.get_mut("matrix_refined").unwrap().params.insert("translate".into(), translate);
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let resources = werkstatt::resources::Resources::new(false);
+    let settings = FrameSettings { width: 96, height: 72, base_dir: crate::common::root(), frames: None };
+    let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &resources, &settings);
+    assert_eq!(summary.pending, 0, "nothing in this graph loads files");
+    match &ev.report("matrix_refined").unwrap().status {
+        NodeStatus::Failed(m) => assert!(m.contains("before the Tessellate node"), "{m}"),
+        other => panic!("a translated refined matrix texture should fail, not {other:?}"),
+    }
+}

@@ -25,7 +25,7 @@ fn matrix(
     filter: u32,
 ) -> (Arc<werkstatt::warp::MatrixTexture>, MatrixTexels) {
     let gpu = common::gpu();
-    let m = MatrixTextureNode::default().render(gpu, mesh, res, format, filter).unwrap();
+    let m = MatrixTextureNode::default().render(gpu, mesh, res, format, filter, None).unwrap();
     let texels = read_matrix(gpu, &m).unwrap();
     (Arc::new(m), texels)
 }
