@@ -15,7 +15,11 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
     category: Category::Attachment,
     doc: "Renders a surface in UV space into a matrix texture: per texel the orthonormal frame (t_u, n, t_v) and position of eq. (3). Empty texels stay zero so lookups outside the pieces are detected.",
     inputs: &[
-        PortSpec::required("surface", PortType::Surface, "The deformed surface; its UVs are the packed pattern coordinates."),
+        PortSpec::required(
+            "surface",
+            PortType::Surface,
+            "The deformed surface; its UVs are the packed pattern coordinates.",
+        ),
         PortSpec::optional(
             "refined",
             PortType::Scene,

@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
-use crate::gpu::pass::{Bindings, storage_entry_for, texture_entry, uniform_entry};
+use crate::gpu::pass::{Bindings, dynamic_uniform_entry, storage_entry_for, texture_entry, uniform_entry};
 use crate::gpu::{
     Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
 };
@@ -49,6 +49,8 @@ struct ObjectUniform {
     /// A non-linear cuboid grid's header ([`CuboidGrid::header`]), zero without one.
     grid: [[f32; 4]; 3],
 }
+
+const OBJECT_UNIFORM_SIZE: u64 = std::mem::size_of::<ObjectUniform>() as u64;
 
 /// shaders/depth.wgsl `TileView`: a tile's view-projection folded with the map from clip
 /// space into its rectangle of the texture, and that rectangle in texels (x0, y0, x1, y1) for
@@ -143,7 +145,8 @@ fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUn
 /// An item's bind groups for one draw: its object group, for attachments the warp group
 /// and the instance buffer, for non-linear cuboid transforms the group of all grids' cells.
 struct Prepared {
-    object: wgpu::BindGroup,
+    /// The object group and the item's dynamic offset into its uniform buffer.
+    object: (wgpu::BindGroup, u32),
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
     /// The group of all grids' cells, and the item's normal method (which entry point draws it).
     cuboid: Option<(wgpu::BindGroup, NormalMethod)>,
@@ -199,7 +202,9 @@ pub struct SceneDrawer {
     frame: Bindings,
     tiles: Bindings,
     tile_index: Bindings,
-    objects: Vec<Bindings>,
+    /// All items' object uniforms (one buffer per draw) and their groups, by maps bound.
+    object_uniforms: BufferRing,
+    object_group: Bindings,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
     /// The cells (coefficient matrices) of every non-linear grid a draw uses, in one storage
@@ -216,7 +221,8 @@ impl Default for SceneDrawer {
             frame: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
-            objects: Vec::new(),
+            object_uniforms: BufferRing::uniform("object uniforms"),
+            object_group: Bindings::new(OBJECT_VISIBILITY),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
             grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
@@ -235,7 +241,9 @@ impl SceneDrawer {
         let white = self.white.gpu(gpu);
         let shape =
             [Bind::Uniform(&[]), Bind::Texture(white), Bind::Sampler(SamplerKind::LinearRepeat), Bind::Texture(white)];
-        Bindings::new(OBJECT_VISIBILITY).layout(gpu, &shape)
+        let mut entries = Bindings::new(OBJECT_VISIBILITY).layout_entries(&shape);
+        entries[0] = dynamic_uniform_entry(0, OBJECT_VISIBILITY, OBJECT_UNIFORM_SIZE);
+        gpu.bind_group_layout(&entries)
     }
 
     /// The layout of group 2 for cuboid items (the storage buffer of all grids' cells).
@@ -253,8 +261,7 @@ impl SceneDrawer {
         warp_layout: Option<&wgpu::BindGroupLayout>,
         pn_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
-        while self.objects.len() < items.len() {
-            self.objects.push(Bindings::new(OBJECT_VISIBILITY));
+        while self.warps.len() < items.len() {
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
@@ -263,19 +270,30 @@ impl SceneDrawer {
             let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
             self.grid_group.bind_group(gpu, &self.cuboid_layout(gpu), &[Bind::Storage(&buffer)])
         });
+        // Every item's object uniform in one buffer, one write per draw (a write per item made
+        // wgpu allocate a staging buffer each: most of a frame of thousands of small objects),
+        // each item's at its dynamic offset.
+        let stride = OBJECT_UNIFORM_SIZE.next_multiple_of(u64::from(gpu.limits.min_uniform_buffer_offset_alignment));
+        let mut uniforms = vec![0u8; stride as usize * items.len()];
+        for (i, (item, &(model, header, _))) in items.iter().zip(&transforms).enumerate() {
+            let at = i * stride as usize;
+            uniforms[at..at + OBJECT_UNIFORM_SIZE as usize]
+                .copy_from_slice(bytemuck::bytes_of(&object_uniform(item, model, header)));
+        }
+        let uniform_buffer = self.object_uniforms.write(gpu, &uniforms).clone();
         let mut prepared = Vec::with_capacity(items.len());
-        for (i, (item, &(model, header, normals))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, &(_, _, normals))) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
-            let uniform = object_uniform(item, model, header);
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
             let binds = [
-                Bind::Uniform(bytemuck::bytes_of(&uniform)),
+                Bind::DynamicUniform(&uniform_buffer, OBJECT_UNIFORM_SIZE),
                 Bind::Texture(tex),
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            let object = self.objects[i].bind_group(gpu, object_layout, &binds);
+            // Items with the same maps share the group (cached by the resources bound).
+            let object = (self.object_group.bind_group(gpu, object_layout, &binds), (i as u64 * stride) as u32);
             let warp = match (&item.attached, warp_layout) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
@@ -540,7 +558,7 @@ fn draw_items(
     per_draw: &[wgpu::BindGroup],
 ) {
     for (item, p) in items.iter().zip(prepared) {
-        pass.set_bind_group(1, &p.object, &[]);
+        pass.set_bind_group(1, &p.object.0, &[p.object.1]);
         if let Some(t) = &item.tessellated {
             // Written by the compute pass this frame: counts never come back to the CPU.
             pass.set_vertex_buffer(0, t.vertices.slice(..));

@@ -20,6 +20,21 @@ pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::Bind
     }
 }
 
+/// A uniform block read at a dynamic offset (`set_bind_group`'s offsets) from a buffer that
+/// holds many of `size` bytes each.
+pub fn dynamic_uniform_entry(binding: u32, visibility: wgpu::ShaderStages, size: u64) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: true,
+            min_binding_size: wgpu::BufferSize::new(size),
+        },
+        count: None,
+    }
+}
+
 /// A 2D float texture (`texture_2d<f32>`).
 pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages, filterable: bool) -> wgpu::BindGroupLayoutEntry {
     texture_kind_entry(
@@ -127,6 +142,9 @@ pub enum Bind<'a> {
     StorageRw(&'a wgpu::Buffer),
     /// A uniform buffer owned elsewhere.
     UniformBuffer(&'a wgpu::Buffer),
+    /// Blocks of this many bytes in a uniform buffer owned elsewhere, one chosen per draw by a
+    /// dynamic offset: one bind group serves many draws.
+    DynamicUniform(&'a wgpu::Buffer, u64),
 }
 
 /// What identifies a bound resource, for the bind group cache.
@@ -166,6 +184,7 @@ impl Bindings {
                 let binding = i as u32;
                 match b {
                     Bind::Uniform(_) | Bind::UniformBuffer(_) => uniform_entry(binding, self.visibility),
+                    Bind::DynamicUniform(_, size) => dynamic_uniform_entry(binding, self.visibility, *size),
                     Bind::Texture(img) => texture_kind_entry(
                         binding,
                         self.visibility,
@@ -207,7 +226,9 @@ impl Bindings {
                     ring += 1;
                     Some(buf)
                 }
-                Bind::Storage(buf) | Bind::StorageRw(buf) | Bind::UniformBuffer(buf) => Some((*buf).clone()),
+                Bind::Storage(buf) | Bind::StorageRw(buf) | Bind::UniformBuffer(buf) | Bind::DynamicUniform(buf, _) => {
+                    Some((*buf).clone())
+                }
                 _ => None,
             };
             key.push(match (b, &buffer) {
@@ -230,6 +251,13 @@ impl Bindings {
             .map(|(i, b)| wgpu::BindGroupEntry {
                 binding: i as u32,
                 resource: match (b, &buffers[i], &samplers[i]) {
+                    (Bind::DynamicUniform(_, size), Some(buf), _) => {
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: buf,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(*size),
+                        })
+                    }
                     (_, Some(buf), _) => buf.as_entire_binding(),
                     (_, _, Some(s)) => wgpu::BindingResource::Sampler(s),
                     (Bind::Texture(img), ..) => wgpu::BindingResource::TextureView(&img.view),

@@ -40,6 +40,16 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
     })
 }
 
+/// Inputs that need a particular producer rather than any of their type.
+fn input_producer(kind: &str, input: &str) -> Option<(&'static str, &'static str, Params)> {
+    match (kind, input) {
+        // The refined mesh of the surface: Tessellate of an equal Primitive (both producers
+        // make the same small sphere).
+        ("MatrixTexture", "refined") => Some(("Tessellate", "scene", vec![])),
+        _ => None,
+    }
+}
+
 /// Parameters that make a node do real work in the test (files that exist, small sizes).
 fn fixture_params(kind: &str) -> Params {
     let data = |p: &str| ParamValue::Str(common::root().join(p).display().to_string());
@@ -74,7 +84,8 @@ impl Builder {
         doc_params.extend(params.into_iter().map(|(k, v)| (k.to_string(), v)));
         self.graph.nodes.insert(id.clone(), NodeDoc { kind: kind.into(), params: doc_params, pos: [0.0, 0.0] });
         for input in spec.inputs {
-            let (pkind, port, pparams) = producer(input.ty)
+            let (pkind, port, pparams) = input_producer(kind, input.name)
+                .or_else(|| producer(input.ty))
                 .unwrap_or_else(|| panic!("no producer for {} (input {} of {kind})", input.ty, input.name));
             let src = self.add(pkind, pparams);
             self.graph.links.push(Link {

@@ -383,7 +383,9 @@ fn a_matrix_texture_of_the_refined_surface_follows_the_smooth_surface() {
     };
     let (coarse, coarse_texels) = radial("matrix_coarse", Vec3::new(-1.2, 0.0, 0.0));
     let (refined, refined_texels) = radial("matrix_refined", Vec3::ZERO);
-    eprintln!("mean radial error: coarse {coarse} ({coarse_texels} texels), refined {refined} ({refined_texels} texels)");
+    eprintln!(
+        "mean radial error: coarse {coarse} ({coarse_texels} texels), refined {refined} ({refined_texels} texels)"
+    );
     assert!(coarse > 0.01, "the coarse sphere's triangles should cut inside it: mean radial error {coarse}");
     assert!(refined < coarse / 3.0, "refined mean radial error {refined} against coarse {coarse}");
     let footprint = refined_texels as f64 / coarse_texels as f64;
