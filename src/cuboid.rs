@@ -312,8 +312,7 @@ impl CuboidGrid {
         let size = self.box_max - self.box_min;
         let content_to_unit = DMat4::from_scale(1.0 / size) * DMat4::from_translation(-self.box_min);
         let scale = unit_to_world.x_axis.length().max(unit_to_world.y_axis.length()).max(unit_to_world.z_axis.length());
-        let affine = lattice(self.cells)
-            .into_iter()
+        let affine = lattice_points(self.cells)
             .zip(&self.corners)
             .all(|(u, c)| unit_to_world.transform_point3(u).distance(*c) <= tolerance * scale.max(f64::MIN_POSITIVE));
         affine.then(|| unit_to_world * content_to_unit)
@@ -423,16 +422,17 @@ pub fn torus(lo: DVec3, hi: DVec3, degrees: f64, radius: f64, minor_radius: f64)
 
 /// The unit-cube positions of a grid's corners, in corner order.
 pub fn lattice(cells: [usize; 3]) -> Vec<DVec3> {
+    lattice_points(cells).collect()
+}
+
+/// [`lattice`] without collecting it (the fast path test runs per item and frame).
+pub fn lattice_points(cells: [usize; 3]) -> impl Iterator<Item = DVec3> {
     let [nx, ny, nz] = cells;
-    let mut out = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
-    for z in 0..=nz {
-        for y in 0..=ny {
-            for x in 0..=nx {
-                out.push(DVec3::new(x as f64 / nx as f64, y as f64 / ny as f64, z as f64 / nz as f64));
-            }
-        }
-    }
-    out
+    (0..=nz).flat_map(move |z| {
+        (0..=ny).flat_map(move |y| {
+            (0..=nx).map(move |x| DVec3::new(x as f64 / nx as f64, y as f64 / ny as f64, z as f64 / nz as f64))
+        })
+    })
 }
 
 /// A draw item's placement: an affine model matrix, then optionally a non-linear grid.

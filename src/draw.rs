@@ -557,6 +557,7 @@ fn draw_items(
     plain_instances: u32,
     per_draw: &[wgpu::BindGroup],
 ) {
+    let mut bound = Bound::default();
     for (item, p) in items.iter().zip(prepared) {
         pass.set_bind_group(1, &p.object.0, &[p.object.1]);
         if let Some(t) = &item.tessellated {
@@ -565,10 +566,10 @@ fn draw_items(
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
             match (&p.cuboid, pipelines.trilinear) {
                 (Some((group, normals)), Some(trilinear)) => {
-                    pass.set_pipeline(trilinear[*normals as usize]);
-                    pass.set_bind_group(2, group, &[]);
+                    bound.pipeline(pass, trilinear[*normals as usize]);
+                    bound.group2(pass, group);
                 }
-                _ => pass.set_pipeline(pipelines.plain),
+                _ => bound.pipeline(pass, pipelines.plain),
             }
             let instances = plain_instances.min(crate::tessellation::MAX_INDIRECT_INSTANCES);
             pass.draw_indexed_indirect(&t.indirect, crate::tessellation::TessMesh::indirect_offset(instances));
@@ -577,16 +578,16 @@ fn draw_items(
         let mesh = item.mesh.gpu(gpu);
         if let (Some(group), Some(pipeline)) = (&p.pn, pipelines.pn) {
             // No vertex buffers: the shader reads the triangle's corners from group 2.
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(2, group, &[]);
+            bound.pipeline(pass, pipeline);
+            bound.group2(pass, group);
             pass.draw(0..mesh.index_count, 0..plain_instances);
             continue;
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
         if let (Some((group, normals)), Some(trilinear)) = (&p.cuboid, pipelines.trilinear) {
-            pass.set_pipeline(trilinear[*normals as usize]);
-            pass.set_bind_group(2, group, &[]);
+            bound.pipeline(pass, trilinear[*normals as usize]);
+            bound.group2(pass, group);
             pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             continue;
         }
@@ -595,8 +596,8 @@ fn draw_items(
                 if a.instances.is_empty() {
                     continue;
                 }
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(2, warp_bg, &[]);
+                bound.pipeline(pass, pipeline);
+                bound.group2(pass, warp_bg);
                 pass.set_vertex_buffer(1, buffer.slice(..));
                 let instances = 0..a.instances.len() as u32;
                 if per_draw.is_empty() {
@@ -608,9 +609,34 @@ fn draw_items(
                 }
             }
             _ => {
-                pass.set_pipeline(pipelines.plain);
+                bound.pipeline(pass, pipelines.plain);
                 pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             }
+        }
+    }
+}
+
+/// What a pass has bound: a row of draws with the same pipeline or group 2 (all the items
+/// under cuboid grids share one) binds it once (lavapipe copies descriptor state per bind).
+/// Group 2 stays bound across pipelines whose layouts agree on it, as WebGPU specifies.
+#[derive(Default)]
+struct Bound {
+    pipeline: Option<wgpu::RenderPipeline>,
+    group2: Option<wgpu::BindGroup>,
+}
+
+impl Bound {
+    fn pipeline(&mut self, pass: &mut wgpu::RenderPass<'_>, pipeline: &wgpu::RenderPipeline) {
+        if self.pipeline.as_ref() != Some(pipeline) {
+            pass.set_pipeline(pipeline);
+            self.pipeline = Some(pipeline.clone());
+        }
+    }
+
+    fn group2(&mut self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup) {
+        if self.group2.as_ref() != Some(group) {
+            pass.set_bind_group(2, group, &[]);
+            self.group2 = Some(group.clone());
         }
     }
 }
