@@ -752,6 +752,36 @@ pub struct WarpCostRow {
     pub frame_rate_loss: f64,
 }
 
+/// Times `run(false, k)` (A) against `run(true, k)` (B) in `pairs` interleaved pairs, each
+/// going first in half of them, so that a change of the machine's load during the run falls on
+/// both alike (one untimed call of each first). Returns the medians of A's and B's times and
+/// the median of the pairs' ratios B / A.
+fn interleaved_pairs(
+    pairs: usize,
+    mut run: impl FnMut(bool, usize) -> anyhow::Result<f64>,
+) -> anyhow::Result<(f64, f64, f64)> {
+    run(false, 0)?;
+    run(true, 0)?;
+    let (mut a, mut b, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 1..=pairs.max(1) {
+        let (ta, tb) = if k % 2 == 0 {
+            let ta = run(false, k)?;
+            (ta, run(true, k)?)
+        } else {
+            let tb = run(true, k)?;
+            (run(false, k)?, tb)
+        };
+        a.push(ta);
+        b.push(tb);
+        ratio.push(tb / ta);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Ok((median(a), median(b), median(ratio)))
+}
+
 /// The tessellation bench's view of its sphere.
 fn tessellation_bench_camera() -> crate::scene::Camera {
     crate::scene::Camera {
@@ -814,31 +844,10 @@ pub fn tessellation_warp_cost(
             drop(g);
             Ok(t.elapsed().as_secs_f64() * 1e3)
         };
-        // Medians of pattern and pattern_warp times and of their pairs' ratios (warp / plain).
-        let mut interleaved = |draw: bool| -> anyhow::Result<(f64, f64, f64)> {
-            once(Mode::Pattern, draw)?;
-            once(Mode::PatternWarp, draw)?;
-            let (mut plain, mut warp, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
-            for k in 0..pairs.max(1) {
-                let (p, w) = if k % 2 == 0 {
-                    let p = once(Mode::Pattern, draw)?;
-                    (p, once(Mode::PatternWarp, draw)?)
-                } else {
-                    let w = once(Mode::PatternWarp, draw)?;
-                    (once(Mode::Pattern, draw)?, w)
-                };
-                plain.push(p);
-                warp.push(w);
-                ratio.push(w / p);
-            }
-            let median = |mut v: Vec<f64>| {
-                v.sort_by(f64::total_cmp);
-                v[v.len() / 2]
-            };
-            Ok((median(plain), median(warp), median(ratio)))
-        };
-        let (pattern_ms, pattern_warp_ms, ratio) = interleaved(false)?;
-        let (frame_pattern_ms, frame_pattern_warp_ms, frame_ratio) = interleaved(true)?;
+        let mode = |warp: bool| if warp { Mode::PatternWarp } else { Mode::Pattern };
+        let (pattern_ms, pattern_warp_ms, ratio) = interleaved_pairs(pairs, |warp, _| once(mode(warp), false))?;
+        let (frame_pattern_ms, frame_pattern_warp_ms, frame_ratio) =
+            interleaved_pairs(pairs, |warp, _| once(mode(warp), true))?;
         let row = WarpCostRow {
             level,
             pairs: pairs.max(1),
@@ -964,7 +973,8 @@ pub struct CuboidRow {
     /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.
     pub fps_linear: f64,
     pub fps_trilinear: f64,
-    /// The median over interleaved pairs of frames of linear time / trilinear time.
+    /// Linear time / trilinear time over interleaved pairs of frames (the reciprocal of the
+    /// median pair ratio trilinear / linear).
     pub ratio: f64,
 }
 
@@ -1002,40 +1012,20 @@ pub fn cuboids(
         far: 50.0,
     };
     let mut drawer = SceneDrawer::default();
-    // Frames per second of each path and their ratio, from interleaved frames: linear and
-    // trilinear alternate (each goes first in half the pairs) so that a change of the machine's
-    // load during the run falls on both paths alike. Each frame composes, draws and waits; the
-    // rates are the median frame times', the ratio the median of the pairs' ratios.
+    // Frames per second of each path (median frame times) and their ratio (trilinear / linear
+    // rate: the reciprocal of the pairs' median time ratio), from interleaved frames. Each
+    // frame composes, draws and waits.
     let mut compare = |make: &dyn Fn(bool, usize) -> Vec<DrawItem>| -> anyhow::Result<(f64, f64, f64)> {
-        let mut once = |linear: bool, i: usize| -> anyhow::Result<f64> {
+        let (linear, trilinear, ratio) = interleaved_pairs(frames, |trilinear, i| {
             let t = Instant::now();
-            let items = make(linear, i);
+            let items = make(!trilinear, i);
             let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
             gpu.submit_checked()?;
             gpu.wait_idle();
             drop(g);
             Ok(t.elapsed().as_secs_f64())
-        };
-        once(true, 0)?;
-        once(false, 0)?;
-        let (mut lin, mut tri, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
-        for i in 1..=frames.max(1) {
-            let (l, t) = if i % 2 == 0 {
-                let l = once(true, i)?;
-                (l, once(false, i)?)
-            } else {
-                let t = once(false, i)?;
-                (once(true, i)?, t)
-            };
-            lin.push(l);
-            tri.push(t);
-            ratios.push(l / t);
-        }
-        let median = |mut v: Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
-        Ok((1.0 / median(lin), 1.0 / median(tri), median(ratios)))
+        })?;
+        Ok((1.0 / linear, 1.0 / trilinear, 1.0 / ratio))
     };
     let mut rows = Vec::new();
     let mut push = |row: CuboidRow| {
