@@ -202,9 +202,10 @@ pub struct SceneDrawer {
     frame: Bindings,
     tiles: Bindings,
     tile_index: Bindings,
-    /// All items' object uniforms (one buffer per draw) and their groups, by maps bound.
+    /// All items' object uniforms, one buffer per draw; per item its object group (cached while
+    /// the buffer and its maps stay: a cache shared by all items would thrash with many maps).
     object_uniforms: BufferRing,
-    object_group: Bindings,
+    objects: Vec<Bindings>,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
     /// The cells (coefficient matrices) of every non-linear grid a draw uses, in one storage
@@ -222,7 +223,7 @@ impl Default for SceneDrawer {
             tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
             object_uniforms: BufferRing::uniform("object uniforms"),
-            object_group: Bindings::new(OBJECT_VISIBILITY),
+            objects: Vec::new(),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
             grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
@@ -261,7 +262,8 @@ impl SceneDrawer {
         warp_layout: Option<&wgpu::BindGroupLayout>,
         pn_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
-        while self.warps.len() < items.len() {
+        while self.objects.len() < items.len() {
+            self.objects.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
@@ -292,8 +294,7 @@ impl SceneDrawer {
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            // Items with the same maps share the group (cached by the resources bound).
-            let object = (self.object_group.bind_group(gpu, object_layout, &binds), (i as u64 * stride) as u32);
+            let object = (self.objects[i].bind_group(gpu, object_layout, &binds), (i as u64 * stride) as u32);
             let warp = match (&item.attached, warp_layout) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
