@@ -332,6 +332,37 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     // Measured: 0.0035 against 0.175; the patch point at the pixel's own barycentrics (no
     // fixed-point steps) was 0.089 from both.
     assert!(off_fine < off_flat / 20.0, "per-pixel PN depth is {off_fine} from the PN surface, {off_flat} from flat");
+
+    // C0 across the coarse edges: neighbouring patches agree on their shared edge, so between
+    // neighbouring pixels the per-pixel depth steps as the PN surface's does (the level-16
+    // tessellation of it); a crack or step where two patches meet would not. Pixels within R
+    // of the silhouette are left out: there the flat triangle a fragment comes from and the
+    // bulging PN surface part ways.
+    const R: i32 = 2;
+    let covered = |img: &[f32], x: i32, y: i32| img[(y * w as i32 + x) as usize] > 0.0;
+    let inside = |x: i32, y: i32| {
+        (-R..=R).all(|dy| {
+            (-R..=R).all(|dx| {
+                let (a, b) = (x + dx, y + dy);
+                a >= 0 && b >= 0 && a < w as i32 && b < h as i32 && covered(&per_pixel, a, b) && covered(&fine, a, b)
+            })
+        })
+    };
+    let at = |img: &[f32], x: i32, y: i32| img[(y * w as i32 + x) as usize];
+    let mut worst = 0.0f32;
+    for y in 0..h as i32 - 1 {
+        for x in 0..w as i32 - 1 {
+            if inside(x, y) {
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    let step = at(&per_pixel, x + dx, y + dy) - at(&per_pixel, x, y);
+                    let surface_step = at(&fine, x + dx, y + dy) - at(&fine, x, y);
+                    worst = worst.max((step - surface_step).abs());
+                }
+            }
+        }
+    }
+    eprintln!("largest difference of neighbouring-pixel depth steps, per-pixel against tessellated PN: {worst:.5}");
+    assert!(worst < 0.025, "per-pixel PN depth steps by {worst} more than the PN surface between two pixels");
 }
 
 /// Fig. 5.13 (graphs/fig5_13_tess_icosahedron.ron): `ImageDifference` of the pattern without
