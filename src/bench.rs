@@ -659,15 +659,13 @@ pub fn tessellation(
     size: (u32, u32),
     mut report: impl FnMut(&TessellationRow),
 ) -> anyhow::Result<Vec<TessellationRow>> {
-    use crate::draw::{SceneDrawer, render_gbuffer};
     use crate::param::Choice;
-    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod, counts, triangle_edge_levels};
+    use crate::tessellation::{Lod, Metric, Mode, Settings, ViewLod, counts, triangle_edge_levels};
 
     let mesh = tessellation_bench_mesh(1)?.0;
     let camera = tessellation_bench_camera();
     let view = crate::scene::View::new(&camera, size.0, size.1);
-    let mut tess = GpuTessellator::default();
-    let mut drawer = SceneDrawer::default();
+    let mut timer = TessTimer::new(size);
     let mut rows = Vec::new();
     for (kind, random) in [("equal", false), ("random", true)] {
         for &level in levels {
@@ -693,20 +691,7 @@ pub fn tessellation(
                     metric: Metric::Distance,
                     max_edge_px: 16.0,
                 };
-                let mut once = |draw: bool| -> anyhow::Result<f64> {
-                    let t = Instant::now();
-                    let out = tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &s)?;
-                    let item = crate::scene::DrawItem {
-                        tessellated: Some(std::sync::Arc::new(out)),
-                        ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
-                    };
-                    let g =
-                        draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;
-                    gpu.submit_checked()?;
-                    gpu.wait_idle();
-                    drop(g);
-                    Ok(t.elapsed().as_secs_f64() * 1e3)
-                };
+                let mut once = |draw: bool| timer.time(gpu, &mesh, &vertex_levels, &lod, &s, draw);
                 let median = |once: &mut dyn FnMut(bool) -> anyhow::Result<f64>, draw: bool| -> anyhow::Result<f64> {
                     once(draw)?;
                     let mut v = (0..frames.max(1)).map(|_| once(draw)).collect::<anyhow::Result<Vec<f64>>>()?;
@@ -782,6 +767,46 @@ fn interleaved_pairs(
     Ok((median(a), median(b), median(ratio)))
 }
 
+/// Times one tessellation of the bench mesh (recorded, submitted, waited for), optionally with
+/// the G-buffer draw of the result at `size` from the bench camera: what both tessellation
+/// tables time.
+struct TessTimer {
+    tess: crate::tessellation::GpuTessellator,
+    drawer: crate::draw::SceneDrawer,
+    size: (u32, u32),
+}
+
+impl TessTimer {
+    fn new(size: (u32, u32)) -> Self {
+        TessTimer { tess: Default::default(), drawer: Default::default(), size }
+    }
+
+    /// Milliseconds of one run.
+    fn time(
+        &mut self,
+        gpu: &crate::gpu::GpuContext,
+        mesh: &std::sync::Arc<crate::mesh::Mesh>,
+        levels: &[f32],
+        lod: &crate::tessellation::ViewLod,
+        settings: &crate::tessellation::Settings,
+        draw: bool,
+    ) -> anyhow::Result<f64> {
+        let t = Instant::now();
+        let out = self.tess.run(gpu, mesh, Some(levels), lod, settings)?;
+        let item = crate::scene::DrawItem {
+            tessellated: Some(std::sync::Arc::new(out)),
+            ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
+        };
+        let (w, h) = self.size;
+        let camera = tessellation_bench_camera();
+        let g = draw.then(|| crate::draw::render_gbuffer(gpu, &mut self.drawer, &[item], camera, w, h)).transpose()?;
+        gpu.submit_checked()?;
+        gpu.wait_idle();
+        drop(g);
+        Ok(t.elapsed().as_secs_f64() * 1e3)
+    }
+}
+
 /// The tessellation bench's view of its sphere.
 fn tessellation_bench_camera() -> crate::scene::Camera {
     crate::scene::Camera {
@@ -812,11 +837,8 @@ pub fn tessellation_warp_cost(
     size: (u32, u32),
     mut report: impl FnMut(&WarpCostRow),
 ) -> anyhow::Result<Vec<WarpCostRow>> {
-    use crate::draw::{SceneDrawer, render_gbuffer};
-    use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod};
-    let camera = tessellation_bench_camera();
-    let mut tess = GpuTessellator::default();
-    let mut drawer = SceneDrawer::default();
+    use crate::tessellation::{Lod, Metric, Mode, Settings, ViewLod};
+    let mut timer = TessTimer::new(size);
     let mut rows = Vec::new();
     for &level in levels {
         let level = level.clamp(1, 64);
@@ -830,19 +852,8 @@ pub fn tessellation_warp_cost(
             metric: Metric::Distance,
             max_edge_px: 16.0,
         };
-        let mut once = |mode: Mode, draw: bool| -> anyhow::Result<f64> {
-            let t = Instant::now();
-            let out =
-                tess.run(gpu, &mesh, Some(&vertex_levels), &lod, &Settings { mode, max_level: level, pn: true })?;
-            let item = crate::scene::DrawItem {
-                tessellated: Some(std::sync::Arc::new(out)),
-                ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
-            };
-            let g = draw.then(|| render_gbuffer(gpu, &mut drawer, &[item], camera, size.0, size.1)).transpose()?;
-            gpu.submit_checked()?;
-            gpu.wait_idle();
-            drop(g);
-            Ok(t.elapsed().as_secs_f64() * 1e3)
+        let mut once = |mode: Mode, draw: bool| {
+            timer.time(gpu, &mesh, &vertex_levels, &lod, &Settings { mode, max_level: level, pn: true }, draw)
         };
         let mode = |warp: bool| if warp { Mode::PatternWarp } else { Mode::Pattern };
         let (pattern_ms, pattern_warp_ms, ratio) = interleaved_pairs(pairs, |warp, _| once(mode(warp), false))?;
