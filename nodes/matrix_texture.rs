@@ -291,14 +291,17 @@ impl Node for MatrixTextureNode {
 }
 
 /// The GPU mesh a Tessellate node made of `surface`, from its scene on the `refined` input.
-fn refined_mesh(scene: &[DrawItem], surface: &Mesh, model: glam::Mat4) -> Result<Arc<TessMesh>, NodeError> {
+fn refined_mesh(scene: &[DrawItem], surface: &Arc<Mesh>, model: glam::Mat4) -> Result<Arc<TessMesh>, NodeError> {
     let Some(item) = scene.iter().find(|i| i.tessellated.is_some()) else {
         return Err(NodeError::msg(
             "refined: the scene holds no GPU-refined mesh (link a Tessellate node's scene; its per_pixel mode does not refine)",
         ));
     };
     let coarse = &item.mesh;
-    if coarse.indices != surface.indices || coarse.uvs != surface.uvs || coarse.positions != surface.positions {
+    // The same upstream output in the usual wiring: no per-frame comparison of the arrays.
+    let same = Arc::ptr_eq(coarse, surface)
+        || (coarse.indices == surface.indices && coarse.uvs == surface.uvs && coarse.positions == surface.positions);
+    if !same {
         return Err(NodeError::msg(format!(
             "refined: the Tessellate node refines another mesh ({} vertices, {} triangles) than this surface ({} vertices, {} triangles); link the same surface into both",
             coarse.positions.len(),
