@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::geometry_io::GeometryFormat;
 use crate::gpu::readback::read_buffer_with;
@@ -12,7 +12,7 @@ use crate::gpu::{Bind, BufferRing, ComputePass, GpuContext, read_buffer};
 use crate::mesh::{GpuMesh, Mesh};
 use crate::node::prelude::*;
 use crate::scene::DrawItem;
-use crate::warp::{AttachedDraw, InstanceData, WarpedVertex};
+use crate::warp::{AttachedDraw, InstanceData, WarpedLayout, WarpedVertex};
 
 use crate::draw::{InstanceResolver, warp_binds};
 
@@ -27,6 +27,11 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
             "format",
             ParamKind::Choice { default: "obj", options: GeometryFormat::OPTIONS },
             "File format (PLY is binary little-endian).",
+        ),
+        ParamSpec::new(
+            "warp",
+            ParamKind::Choice { default: "auto", options: WarpDevice::OPTIONS },
+            "Where attachments are warped: the GPU's compute pass, or the threaded CPU twin (the same geometry); auto takes the CPU on a CPU adapter such as lavapipe, where it is faster (werkstatt bench export).",
         ),
         ParamSpec::new(
             "frame",
@@ -57,7 +62,10 @@ impl Node for ExportNode {
         // scene of this frame before the first one.
         let mesh = match &self.last {
             Some(last) if !export => last.clone(),
-            _ => Arc::new(flatten(gpu, &mut self.warper, &items)?),
+            _ => {
+                let device = WarpDevice::resolve(cx.choice("warp"), gpu);
+                Arc::new(flatten(gpu, &mut self.warper, &items, device)?)
+            }
         };
         if export {
             cx.count("triangles", mesh.triangle_count());
@@ -90,44 +98,26 @@ impl Default for GpuWarper {
     }
 }
 
-/// Warped vertices in the exported layout: instance-major positions and normals (zero for
-/// outliers) and whether each vertex is valid.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct WarpedLayout {
-    pub positions: Vec<Vec3>,
-    pub normals: Vec<Vec3>,
-    pub valid: Vec<bool>,
-}
-
-impl WarpedLayout {
-    fn with_len(n: usize) -> Self {
-        WarpedLayout { positions: vec![Vec3::ZERO; n], normals: vec![Vec3::ZERO; n], valid: vec![false; n] }
+crate::choice!(
+    /// Where `ExportGeometry` warps attachments.
+    pub enum WarpDevice {
+        Auto = "auto",
+        Gpu = "gpu",
+        Cpu = "cpu",
     }
+);
 
-    /// As per-vertex structs (tests compare them with the CPU reference).
-    pub fn vertices(&self) -> Vec<WarpedVertex> {
-        (0..self.positions.len())
-            .map(|i| WarpedVertex { position: self.positions[i], normal: self.normals[i], valid: self.valid[i] })
-            .collect()
-    }
-}
-
-/// The threaded CPU twin of `GpuWarper::warp_layout` (`warp_all_cpu` into the same layout),
-/// which `werkstatt bench export` compares with the GPU path.
-pub fn warped_layout_cpu(
-    texels: &crate::warp::MatrixTexels,
-    settings: &crate::warp::WarpSettings,
-    mesh: &Mesh,
-    instances: &[InstanceData],
-) -> WarpedLayout {
-    let warped = crate::warp::warp_all_cpu(texels, settings, mesh, instances);
-    let mut out = WarpedLayout::with_len(warped.len());
-    for (i, w) in warped.iter().enumerate() {
-        if w.valid {
-            (out.positions[i], out.normals[i], out.valid[i]) = (w.position, w.normal, true);
+impl WarpDevice {
+    /// `Auto` made concrete: on a CPU adapter (lavapipe, llvmpipe) the compute shader runs on
+    /// the same cores as the threaded CPU twin, which `werkstatt bench export` measured
+    /// faster there; on a real GPU the compute pass.
+    pub fn resolve(self, gpu: &GpuContext) -> WarpDevice {
+        match self {
+            WarpDevice::Auto if gpu.info.device_type == wgpu::DeviceType::Cpu => WarpDevice::Cpu,
+            WarpDevice::Auto => WarpDevice::Gpu,
+            concrete => concrete,
         }
     }
-    out
 }
 
 /// Whether triangle `t` has an area (a collapsed one is left out of exports, as `Mesh::build` does).
@@ -138,25 +128,51 @@ fn has_area(positions: &[Vec3], t: [u32; 3]) -> bool {
 
 /// The mesh of warped instances of `mesh`: vertices as warped, each instance's UVs, and its
 /// triangles except those touching an outlier vertex. No tangents (an exported mesh is drawn
-/// or written, not parametrized again).
+/// or written, not parametrized again). Instances are split over the CPU's threads; each
+/// chunk writes its kept triangles at the start of its own region, which are then moved
+/// together.
 pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
     let nv = mesh.positions.len();
     let n = warped.positions.len();
     anyhow::ensure!(nv > 0 && n.is_multiple_of(nv), "{n} warped vertices are not whole instances of {nv}");
-    let mut indices = Vec::with_capacity(mesh.indices.len() * (n / nv));
-    for (k, valid) in warped.valid.chunks(nv).enumerate() {
-        let base = (k * nv) as u32;
-        for t in mesh.indices.chunks_exact(3) {
-            let global = [t[0] + base, t[1] + base, t[2] + base];
-            if t.iter().all(|&i| valid[i as usize]) && has_area(&warped.positions, global) {
-                indices.extend_from_slice(&global);
-            }
-        }
+    let per_instance = mesh.indices.len();
+    let chunk = crate::warp::instances_per_thread(n / nv);
+    let mut indices = vec![0u32; per_instance * (n / nv)];
+    let mut uvs = vec![Vec2::ZERO; n];
+    let (positions, valid) = (&warped.positions, &warped.valid);
+    let kept: Vec<usize> = std::thread::scope(|scope| {
+        let threads: Vec<_> = indices
+            .chunks_mut(chunk * per_instance)
+            .zip(uvs.chunks_mut(chunk * nv))
+            .enumerate()
+            .map(|(c, (region, uvs))| {
+                scope.spawn(move || {
+                    let mut kept = 0;
+                    for (k, uvs) in uvs.chunks_mut(nv).enumerate() {
+                        uvs.copy_from_slice(&mesh.uvs);
+                        let first = (c * chunk + k) * nv;
+                        let valid = &valid[first..first + nv];
+                        for t in mesh.indices.chunks_exact(3) {
+                            let global = [t[0], t[1], t[2]].map(|i| i + first as u32);
+                            if t.iter().all(|&i| valid[i as usize]) && has_area(positions, global) {
+                                region[kept..kept + 3].copy_from_slice(&global);
+                                kept += 3;
+                            }
+                        }
+                    }
+                    kept
+                })
+            })
+            .collect();
+        threads.into_iter().map(|t| t.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+    });
+    let mut end = 0;
+    for (c, count) in kept.into_iter().enumerate() {
+        let start = c * chunk * per_instance;
+        indices.copy_within(start..start + count, end);
+        end += count;
     }
-    let mut uvs = Vec::with_capacity(n);
-    for _ in 0..n / nv {
-        uvs.extend_from_slice(&mesh.uvs);
-    }
+    indices.truncate(end);
     Ok(Mesh::from_raw(warped.positions, warped.normals, uvs, Vec::new(), Vec::new(), indices))
 }
 
@@ -166,7 +182,24 @@ impl GpuWarper {
         Ok(self.warp_layout(gpu, mesh, draw)?.vertices())
     }
 
-    /// Warps every instance of `mesh` straight into the exported layout (instance-major).
+    /// Warps every instance of `mesh` into the exported layout on `device`: the compute pass,
+    /// or the CPU twin on the matrix texture read back (the same geometry).
+    pub fn warp_layout_on(
+        &mut self,
+        gpu: &GpuContext,
+        mesh: &Mesh,
+        draw: &AttachedDraw,
+        device: WarpDevice,
+    ) -> anyhow::Result<WarpedLayout> {
+        if device.resolve(gpu) == WarpDevice::Cpu {
+            let texels = crate::nodes::matrix_texture::read_matrix(gpu, &draw.matrix)?;
+            return Ok(crate::warp::warp_layout_cpu(&texels, &draw.settings, mesh, &draw.instances));
+        }
+        self.warp_layout(gpu, mesh, draw)
+    }
+
+    /// Warps every instance of `mesh` with the compute pass straight into the exported
+    /// layout (instance-major).
     pub fn warp_layout(&mut self, gpu: &GpuContext, mesh: &Mesh, draw: &AttachedDraw) -> anyhow::Result<WarpedLayout> {
         let nv = mesh.positions.len();
         let per_instance = (nv * 28) as u64;
@@ -234,10 +267,15 @@ impl GpuWarper {
 }
 
 /// One mesh of everything the scene draws: plain items transformed by their model matrix,
-/// attached items warped per instance on the GPU straight into the exported layout (on
-/// lavapipe too: `werkstatt bench export` measured it faster than the threaded CPU twin on
-/// this machine); triangles touching an outlier vertex are left out. A scene of one attachment is its mesh as assembled.
-pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> anyhow::Result<Mesh> {
+/// attached items warped per instance on `device` straight into the exported layout;
+/// triangles touching an outlier vertex are left out. A scene of one attachment is its mesh
+/// as assembled.
+pub fn flatten(
+    gpu: &GpuContext,
+    warper: &mut GpuWarper,
+    items: &[DrawItem],
+    device: WarpDevice,
+) -> anyhow::Result<Mesh> {
     let mut parts = Vec::with_capacity(items.len());
     for item in items {
         let m = &item.mesh;
@@ -262,7 +300,7 @@ pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> 
                 ));
             }
             Some(a) => {
-                parts.push(assemble(m, warper.warp_layout(gpu, m, a)?)?);
+                parts.push(assemble(m, warper.warp_layout_on(gpu, m, a, device)?)?);
             }
         }
     }
@@ -281,4 +319,34 @@ pub fn flatten(gpu: &GpuContext, warper: &mut GpuWarper, items: &[DrawItem]) -> 
         indices.extend(p.indices.iter().map(|i| i + base));
     }
     Ok(Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices))
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3};
+
+    use super::assemble;
+    use crate::mesh::Mesh;
+    use crate::warp::WarpedLayout;
+
+    /// Five instances of a quad (split over threads where there are several): an outlier
+    /// vertex drops the triangles touching it, a collapsed instance drops all, and the kept
+    /// triangles of later instances move down in order with their own vertex numbers.
+    #[test]
+    fn assembly_drops_outliers_and_collapsed_triangles_in_instance_order() {
+        let quad = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z];
+        let uvs = vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y];
+        let mesh = Mesh::from_raw(quad.to_vec(), vec![Vec3::Y; 4], uvs.clone(), vec![], vec![], vec![0, 1, 2, 0, 2, 3]);
+        let mut warped = WarpedLayout::with_len(20);
+        for k in 0..5 {
+            for (v, p) in quad.iter().enumerate() {
+                let collapsed = k == 3;
+                warped.positions[4 * k + v] = if collapsed { Vec3::ONE } else { *p + Vec3::Y * k as f32 };
+                warped.valid[4 * k + v] = !(k == 1 && v == 3);
+            }
+        }
+        let out = assemble(&mesh, warped).unwrap();
+        assert_eq!(out.indices, [0, 1, 2, 0, 2, 3, 4, 5, 6, 8, 9, 10, 8, 10, 11, 16, 17, 18, 16, 18, 19]);
+        assert_eq!(out.uvs, uvs.repeat(5));
+    }
 }

@@ -103,7 +103,7 @@ pub fn attachments(
     use crate::nodes::geometry;
     use crate::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
     use crate::scene::{Camera, DrawItem, Material};
-    use crate::warp::{AttachedDraw, InstanceData, Placement, WarpMode, WarpSettings, warp_all_cpu};
+    use crate::warp::{AttachedDraw, InstanceData, Placement, WarpMode, WarpSettings, warp_layout_cpu};
 
     let surface = geometry::plane(1.0, 64, 64)?;
     let matrix =
@@ -207,11 +207,10 @@ pub fn attachments(
                 (0..count as u32).flat_map(|i| button.indices.iter().map(move |&k| k + i * nv as u32)).collect();
             let uvs: Vec<Vec2> = (0..count).flat_map(|_| button.uvs.iter().copied()).collect();
             let ms = median_ms(&mut || {
-                let warped = warp_all_cpu(&texels, &settings, &button, &point);
-                let normals: Vec<Vec3> = warped.iter().map(|w| w.normal).collect();
-                let positions = warped.iter().map(|w| w.position).collect();
+                let warped = warp_layout_cpu(&texels, &settings, &button, &point);
+                let normals = warped.normals;
                 let mesh = crate::mesh::Mesh::from_raw(
-                    positions,
+                    warped.positions,
                     normals.clone(),
                     uvs.clone(),
                     normals.clone(),
@@ -1367,7 +1366,7 @@ pub fn export(
     out: &std::path::Path,
     mut report: impl FnMut(&ExportRow),
 ) -> anyhow::Result<Vec<ExportRow>> {
-    use crate::nodes::export::{GpuWarper, assemble, warped_layout_cpu};
+    use crate::nodes::export::{GpuWarper, WarpDevice, assemble};
     use crate::port::Value;
 
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
@@ -1406,11 +1405,10 @@ pub fn export(
             mesh = Some(assemble(&item.mesh, warper.warp_layout(gpu, &item.mesh, draw)?)?);
             Ok(())
         })?;
-        let texels = crate::nodes::matrix_texture::read_matrix(gpu, &draw.matrix)?;
-        let instances: Vec<crate::warp::InstanceData> = draw.instances.to_vec();
         let mut cpu_mesh = None;
+        // As the export does it on a CPU adapter: the matrix texture read back, then the twin.
         let cpu_produce_ms = median_ms(frames, &mut || {
-            let l = warped_layout_cpu(&texels, &draw.settings, &item.mesh, &instances);
+            let l = warper.warp_layout_on(gpu, &item.mesh, draw, WarpDevice::Cpu)?;
             cpu_mesh = Some(assemble(&item.mesh, l)?);
             Ok(())
         })?;
@@ -1422,6 +1420,8 @@ pub fn export(
             mesh.triangle_count(),
             cpu_mesh.triangle_count()
         );
+        let worst = mesh.positions.iter().zip(&cpu_mesh.positions).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
+        anyhow::ensure!(worst < 1e-4, "the GPU and the CPU twin place a vertex {worst} apart");
         let path = out.join(format!("export_{count}.ply"));
         let write_ms = median_ms(frames, &mut || crate::geometry_io::write_ply(&path, &mesh))?;
         let megabytes = std::fs::metadata(&path).map(|m| m.len() as f64 / 1e6).unwrap_or(0.0);

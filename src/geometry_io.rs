@@ -67,22 +67,30 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
         mesh.positions.len(),
         mesh.triangle_count()
     );
-    // One pass per element into a buffer of the exact size: 32 bytes a vertex, 13 a face.
-    let mut out = Vec::with_capacity(header.len() + mesh.positions.len() * 32 + mesh.triangle_count() * 13);
-    out.extend_from_slice(header.as_bytes());
-    for i in 0..mesh.positions.len() {
+    // Streamed through the writer's buffer: a 10k-button export is 420 MB, which would
+    // otherwise be built whole in memory and then copied again into the file.
+    let vertex = |i: usize| {
         let (p, n, uv) = (mesh.positions[i], mesh.normals[i], mesh.uvs[i]);
-        let record = [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, 1.0 - uv.y].map(f32::to_le_bytes);
-        out.extend_from_slice(record.as_flattened());
-    }
-    for t in mesh.indices.chunks_exact(3) {
+        [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, 1.0 - uv.y].map(f32::to_le_bytes)
+    };
+    let face = |t: &[u32]| {
         let mut face = [3u8; 13];
         for (k, i) in t.iter().enumerate() {
             face[1 + 4 * k..5 + 4 * k].copy_from_slice(&i.to_le_bytes());
         }
-        out.extend_from_slice(&face);
-    }
-    crate::atomic::write_atomic(path, &out).with_context(|| format!("cannot write {}", path.display()))
+        face
+    };
+    crate::atomic::write_atomic_with(path, |out| {
+        out.write_all(header.as_bytes())?;
+        for i in 0..mesh.positions.len() {
+            out.write_all(vertex(i).as_flattened())?;
+        }
+        for t in mesh.indices.chunks_exact(3) {
+            out.write_all(&face(t))?;
+        }
+        Ok(())
+    })
+    .with_context(|| format!("cannot write {}", path.display()))
 }
 
 #[cfg(test)]

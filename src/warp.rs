@@ -412,6 +412,16 @@ impl InstanceData {
         InstanceData::default().with_tex(glam::Affine2::IDENTITY).with_tan(Mat4::IDENTITY)
     }
 
+    fn m_tan_matrix(&self) -> Mat4 {
+        Mat4::from_cols_array_2d(&self.m_tan)
+    }
+
+    /// M_tan's linear part: the Jacobian of a point attachment (eq. 5).
+    fn m_tan_linear(&self) -> Mat3 {
+        let col = |i: usize| Vec4::from_array(self.m_tan[i]).truncate();
+        Mat3::from_cols(col(0), col(1), col(2))
+    }
+
     fn curve(&self) -> [Vec2; 4] {
         [
             Vec2::new(self.curve01[0], self.curve01[1]),
@@ -541,46 +551,94 @@ pub fn warp_vertex_cpu(
             }
         }
     }
-    let h = uv_in.extend(1.0);
-    let uv = Vec2::new(Vec3::from_slice(&inst.m_tex0).dot(h), Vec3::from_slice(&inst.m_tex1).dot(h));
-    let found = if s.mode == WarpMode::Unattached {
-        let frame = TexelFrame { tu: Vec3::X, n: Vec3::Y, tv: Vec3::Z, p: Vec3::new(uv.x, 0.0, uv.y) };
-        Some(SurfaceFrame { frame, dpdu: Vec3::X, dpdv: Vec3::Z })
-    } else {
-        texels.lookup_surface(uv, s.min_weight)
-    };
-    let Some(sf) = found else {
-        return WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false };
+    let Some(sf) = frame_at(texels, s, inst, uv_in) else {
+        return OUTLIER;
     };
     let f = sf.frame;
-    let m_tan = Mat4::from_cols_array_2d(&inst.m_tan);
-    let mut q = (m_tan * f_map).truncate();
+    let q = (inst.m_tan_matrix() * f_map).truncate();
     let to_frame = |w: Vec3| Vec3::new(f.tu.dot(w), f.n.dot(w), f.tv.dot(w));
     let uv_to_frame = |d: Vec2| {
         let e = Vec2::new(inst.m_tex0[0] * d.x + inst.m_tex0[1] * d.y, inst.m_tex1[0] * d.x + inst.m_tex1[1] * d.y);
         to_frame(sf.dpdu * e.x + sf.dpdv * e.y)
     };
     let col = |i: usize| Vec4::from_array(inst.m_tan[i]).truncate();
-    let mut jac = Mat3::from_cols(col(0), col(1), col(2));
-    match s.mode {
-        WarpMode::Area => jac = Mat3::from_cols(uv_to_frame(Vec2::X), col(1), uv_to_frame(Vec2::Y)),
+    let jac = match s.mode {
+        WarpMode::Area => Mat3::from_cols(uv_to_frame(Vec2::X), col(1), uv_to_frame(Vec2::Y)),
         WarpMode::Curve | WarpMode::CurveAligned => {
             let r = inst.range;
             let speed = bezier_tangent(&c, t).length().max(1e-6) * (r[1] - r[0]) / (r[3] - r[2]).max(1e-12);
             let along = uv_to_frame(curve_direction(&c, t) * speed);
-            jac = Mat3::from_cols(col(0) * nc.x + col(2) * nc.y, col(1), along);
+            Mat3::from_cols(col(0) * nc.x + col(2) * nc.y, col(1), along)
         }
-        WarpMode::Point | WarpMode::Unattached => {}
+        WarpMode::Point | WarpMode::Unattached => inst.m_tan_linear(),
+    };
+    place_in_frame(&f, s.gravity, q, jac, normal)
+}
+
+const OUTLIER: WarpedVertex = WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false };
+
+/// The surface frame at M_tex . f_uv (eq. 1), or None for an outlier.
+fn frame_at(texels: &MatrixTexels, s: &WarpSettings, inst: &InstanceData, uv_in: Vec2) -> Option<SurfaceFrame> {
+    let h = uv_in.extend(1.0);
+    let uv = Vec2::new(Vec3::from_slice(&inst.m_tex0).dot(h), Vec3::from_slice(&inst.m_tex1).dot(h));
+    if s.mode == WarpMode::Unattached {
+        let frame = TexelFrame { tu: Vec3::X, n: Vec3::Y, tv: Vec3::Z, p: Vec3::new(uv.x, 0.0, uv.y) };
+        return Some(SurfaceFrame { frame, dpdu: Vec3::X, dpdv: Vec3::Z });
     }
-    if s.gravity > 0.0 {
-        let (bent, db) = fur_bend(&f, q, s.gravity);
+    texels.lookup_surface(uv, s.min_weight)
+}
+
+/// The last step of `warp_vertex_cpu`: fur gravity (eqs. 11-12) on the point `q` in frame
+/// coordinates, then frame to world; the normal goes through the cofactor of `jac`.
+fn place_in_frame(f: &TexelFrame, gravity: f32, mut q: Vec3, mut jac: Mat3, normal: Vec3) -> WarpedVertex {
+    if gravity > 0.0 {
+        let (bent, db) = fur_bend(f, q, gravity);
         q = bent;
         jac = Mat3::from_cols(Vec3::X, db, Vec3::Z) * jac;
     }
+    frame_to_world(f, q, normal_matrix(jac) * normal)
+}
+
+fn frame_to_world(f: &TexelFrame, q: Vec3, nt: Vec3) -> WarpedVertex {
     let position = f.tu * q.x + f.n * q.y + f.tv * q.z + f.p;
-    let nt = normal_matrix(jac) * normal;
     let normal = (f.tu * nt.x + f.n * nt.y + f.tv * nt.z).normalize();
     WarpedVertex { position, normal, valid: true }
+}
+
+/// `warp_vertex_cpu` for every vertex of one instance, into `put(vertex index, result)`. A
+/// point attachment looks up one frame for all its vertices (eq. 4: f_uv is constant), and
+/// without fur gravity one normal matrix, as attach_resolve.wgsl does on the GPU; the
+/// arithmetic per vertex is the same, so results are bit-identical to `warp_vertex_cpu`.
+pub fn warp_instance_cpu(
+    texels: &MatrixTexels,
+    s: &WarpSettings,
+    inst: &InstanceData,
+    mesh: &Mesh,
+    mut put: impl FnMut(usize, WarpedVertex),
+) {
+    let vertices = mesh.positions.iter().zip(&mesh.normals).enumerate();
+    if !matches!(s.mode, WarpMode::Point | WarpMode::Unattached) {
+        for (v, (&p, &n)) in vertices {
+            put(v, warp_vertex_cpu(texels, s, inst, p, n));
+        }
+        return;
+    }
+    let Some(sf) = frame_at(texels, s, inst, Vec2::ZERO) else {
+        (0..mesh.positions.len()).for_each(|v| put(v, OUTLIER));
+        return;
+    };
+    let (m_tan, jac) = (inst.m_tan_matrix(), inst.m_tan_linear());
+    let straight = (s.gravity <= 0.0).then(|| normal_matrix(jac));
+    for (v, (&p, &n)) in vertices {
+        let q = (m_tan * p.extend(1.0)).truncate();
+        put(
+            v,
+            match straight {
+                Some(nm) => frame_to_world(&sf.frame, q, nm * n),
+                None => place_in_frame(&sf.frame, s.gravity, q, jac, n),
+            },
+        );
+    }
 }
 
 /// The CPU twin of `fur_bend` in shaders/warp.wgsl (eqs. 11-12 in frame coordinates): the
@@ -615,28 +673,61 @@ pub fn curve_direction(c: &[Vec2; 4], t: f32) -> Vec2 {
         .map_or(Vec2::Y, Vec2::normalize)
 }
 
-/// Warps every instance of `mesh` on the CPU with all threads: the classic path the paper
-/// compares against (the result would be uploaded every frame).
-pub fn warp_all_cpu(
+/// Warped vertices in the exported layout: instance-major positions and normals (zero for
+/// outliers) and whether each vertex is valid.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WarpedLayout {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub valid: Vec<bool>,
+}
+
+impl WarpedLayout {
+    pub fn with_len(n: usize) -> Self {
+        WarpedLayout { positions: vec![Vec3::ZERO; n], normals: vec![Vec3::ZERO; n], valid: vec![false; n] }
+    }
+
+    /// As per-vertex structs (tests compare them with the CPU reference).
+    pub fn vertices(&self) -> Vec<WarpedVertex> {
+        (0..self.positions.len())
+            .map(|i| WarpedVertex { position: self.positions[i], normal: self.normals[i], valid: self.valid[i] })
+            .collect()
+    }
+}
+
+/// How many of `instances` each CPU thread takes (all threads, whole instances).
+pub fn instances_per_thread(instances: usize) -> usize {
+    let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).max(1);
+    instances.div_ceil(threads).max(1)
+}
+
+/// Warps every instance of `mesh` on the CPU with all threads into the exported layout: the
+/// classic path the paper compares against (uploaded every frame), and the export path on a
+/// CPU adapter (`werkstatt bench export` measures both).
+pub fn warp_layout_cpu(
     texels: &MatrixTexels,
     s: &WarpSettings,
     mesh: &Mesh,
     instances: &[InstanceData],
-) -> Vec<WarpedVertex> {
+) -> WarpedLayout {
     let n = mesh.positions.len();
-    let mut out = vec![WarpedVertex { position: Vec3::ZERO, normal: Vec3::Y, valid: false }; n * instances.len()];
+    let mut out = WarpedLayout::with_len(n * instances.len());
     if n == 0 || instances.is_empty() {
         return out;
     }
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).max(1);
-    let chunk = instances.len().div_ceil(threads).max(1);
+    let chunk = instances_per_thread(instances.len());
+    let outputs =
+        out.positions.chunks_mut(chunk * n).zip(out.normals.chunks_mut(chunk * n)).zip(out.valid.chunks_mut(chunk * n));
     std::thread::scope(|scope| {
-        for (insts, outs) in instances.chunks(chunk).zip(out.chunks_mut(chunk * n)) {
+        for (insts, ((positions, normals), valid)) in instances.chunks(chunk).zip(outputs) {
             scope.spawn(move || {
-                for (inst, o) in insts.iter().zip(outs.chunks_mut(n)) {
-                    for (v, slot) in o.iter_mut().enumerate() {
-                        *slot = warp_vertex_cpu(texels, s, inst, mesh.positions[v], mesh.normals[v]);
-                    }
+                for (k, inst) in insts.iter().enumerate() {
+                    warp_instance_cpu(texels, s, inst, mesh, |v, w| {
+                        if w.valid {
+                            let i = k * n + v;
+                            (positions[i], normals[i], valid[i]) = (w.position, w.normal, true);
+                        }
+                    });
                 }
             });
         }

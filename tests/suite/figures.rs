@@ -176,13 +176,14 @@ fn cloth_presets_animate_deterministically() {
     }
 }
 
-/// What ExportGeometry writes is the CPU twin's warp of the same attachments (src/warp.rs,
-/// threaded, no GPU): the same triangles kept, every vertex where the CPU puts it. An export
-/// that dropped, shifted or mis-ordered instances, or kept outliers, fails here.
+/// What ExportGeometry writes from the GPU's warp is the CPU twin's warp of the same
+/// attachments (src/warp.rs, threaded, no GPU): the same triangles kept, every vertex where the
+/// CPU puts it; with `warp: cpu` it is the twin's exactly. An export that dropped, shifted or
+/// mis-ordered instances, or kept outliers, fails here.
 #[test]
 fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
     use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
-    use werkstatt::nodes::export::{assemble, warped_layout_cpu};
+    use werkstatt::nodes::export::assemble;
     use werkstatt::port::Value;
     let gpu = gpu();
     let text = r#"(version: 1, nodes: {
@@ -191,10 +192,12 @@ fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
         "grid": (kind: "GridPlacement", params: {"columns": 5, "rows": 4}),
         "button": (kind: "Primitive", params: {"shape": "disc", "radius": 0.5, "height": 0.2, "segments_u": 16}),
         "buttons": (kind: "PointAttachment", params: {"scale": 0.1}),
-        "out": (kind: "ExportGeometry"),
+        "out": (kind: "ExportGeometry", params: {"warp": "gpu"}),
+        "out_cpu": (kind: "ExportGeometry", params: {"warp": "cpu"}),
     }, links: [("cloth.surface", "matrix.surface"), ("cloth.surface", "grid.surface"),
         ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"),
-        ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene")])"#;
+        ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene"),
+        ("buttons.scene", "out_cpu.scene")])"#;
     let graph = werkstatt::graph::Graph::load_str(text, "export.ron".as_ref()).unwrap();
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let resources = werkstatt::resources::Resources::new(false);
@@ -210,7 +213,14 @@ fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
     let draw = item.attached.as_ref().expect("attached buttons");
     let texels = werkstatt::nodes::matrix_texture::read_matrix(gpu, &draw.matrix).unwrap();
     let cpu =
-        assemble(&item.mesh, warped_layout_cpu(&texels, &draw.settings, &item.mesh, &draw.instances.to_vec())).unwrap();
+        assemble(&item.mesh, werkstatt::warp::warp_layout_cpu(&texels, &draw.settings, &item.mesh, &draw.instances))
+            .unwrap();
+    let Some(Value::Mesh(exported_on_cpu)) = ev.output("out_cpu", "mesh") else { panic!("no CPU export") };
+    assert!(
+        (&exported_on_cpu.positions, &exported_on_cpu.normals, &exported_on_cpu.indices)
+            == (&cpu.positions, &cpu.normals, &cpu.indices),
+        "warp: cpu exports other geometry than the CPU twin"
+    );
     let per_button = item.mesh.triangle_count();
     assert_eq!(draw.instances.len(), 20, "every placement is on the cloth");
     assert!(

@@ -12,7 +12,9 @@ use werkstatt::nodes::attach::point_instance;
 use werkstatt::nodes::export::GpuWarper;
 use werkstatt::nodes::geometry;
 use werkstatt::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
-use werkstatt::warp::{AttachedDraw, InstanceData, MatrixTexels, Placement, WarpMode, WarpSettings, warp_all_cpu};
+use werkstatt::warp::{
+    AttachedDraw, InstanceData, MatrixTexels, Placement, WarpMode, WarpSettings, warp_layout_cpu, warp_vertex_cpu,
+};
 
 use crate::common;
 
@@ -188,7 +190,12 @@ fn gpu_warp_equals_the_cpu_reference_for_every_mode() {
     let cases = [
         (
             WarpMode::Point,
-            vec![point_instance(&Placement { piece: 0, u: 0.3, v: 0.4, angle: 30.0, scale: 1.0 }, 0.1, 2.0, 0.0, 0.0)],
+            // The second lies off the texture: an outlier on both sides.
+            [0.3, 1.5]
+                .map(|u| {
+                    point_instance(&Placement { piece: 0, u, v: 0.4, angle: 30.0, scale: 1.0 }, 0.1, 2.0, 0.0, 0.0)
+                })
+                .to_vec(),
         ),
         (
             WarpMode::Area,
@@ -219,11 +226,22 @@ fn gpu_warp_equals_the_cpu_reference_for_every_mode() {
         for gravity in [0.0, 2.0] {
             let s = WarpSettings { mode, gravity, min_weight: 0.5 };
             let gpu = warp_gpu(m.clone(), &detail, s, instances.clone());
-            let cpu = warp_all_cpu(&texels, &s, &detail, &instances);
+            let cpu = warp_layout_cpu(&texels, &s, &detail, &instances).vertices();
+            // The threaded twin (one frame per point instance) is exactly the per-vertex reference.
+            let nv = detail.positions.len();
+            for (i, c) in cpu.iter().enumerate() {
+                let (k, v) = (i / nv, i % nv);
+                let r = warp_vertex_cpu(&texels, &s, &instances[k], detail.positions[v], detail.normals[v]);
+                assert_eq!(c.valid, r.valid, "{mode:?} gravity {gravity}: instance {k} vertex {v}");
+                if r.valid {
+                    assert_eq!((c.position, c.normal), (r.position, r.normal), "{mode:?} gravity {gravity}");
+                }
+            }
             // Equal lengths, and something valid: an empty or all-outlier GPU result must fail.
             assert_eq!(gpu.len(), instances.len() * detail.positions.len(), "{mode:?}");
             assert_eq!(gpu.len(), cpu.len(), "{mode:?}");
             assert!(gpu.iter().any(|g| g.valid), "{mode:?}: no valid vertex");
+            assert!(mode != WarpMode::Point || gpu.iter().any(|g| !g.valid), "the point outlier is kept");
             for (g, c) in gpu.iter().zip(&cpu) {
                 assert_eq!(g.valid, c.valid, "{mode:?}");
                 if g.valid {
