@@ -138,7 +138,7 @@ pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
     let per_instance = mesh.indices.len();
     let chunk = crate::warp::instances_per_thread(n / nv);
     let mut indices = vec![0u32; per_instance * (n / nv)];
-    let mut uvs = vec![Vec2::ZERO; n];
+    let mut uvs: Vec<Vec2> = bytemuck::zeroed_vec(n);
     let (positions, valid) = (&warped.positions, &warped.valid);
     let kept: Vec<usize> = std::thread::scope(|scope| {
         let threads: Vec<_> = indices

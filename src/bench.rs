@@ -1343,13 +1343,16 @@ pub fn table1(
 pub struct ExportRow {
     pub buttons: usize,
     pub triangles: usize,
-    /// Producing the warped geometry in memory: GPU warp and read-back into the output layout.
-    pub warp_ms: f64,
-    /// Assembling the mesh from it (outliers dropped): produce_ms - warp_ms.
-    pub assemble_ms: f64,
-    pub produce_ms: f64,
-    /// The threaded CPU twin producing the same geometry (warp + assemble).
+    /// GPU path: the compute warp and read-back into the output layout.
+    pub gpu_warp_ms: f64,
+    /// GPU path: warp, then the mesh assembled (outliers dropped): the geometry in memory.
+    pub gpu_produce_ms: f64,
+    /// CPU path: the matrix texture read back and the threaded twin's warp.
+    pub cpu_warp_ms: f64,
+    /// CPU path: warp, then the same assembly.
     pub cpu_produce_ms: f64,
+    /// The path `ExportGeometry`'s `warp: auto` takes on this adapter ("gpu" or "cpu").
+    pub auto: &'static str,
     /// Writing binary PLY to `out`.
     pub write_ms: f64,
     pub megabytes: f64,
@@ -1399,21 +1402,17 @@ pub fn export(
         let item = &items[0];
         let draw = item.attached.as_ref().expect("an attachment");
         let mut warper = GpuWarper::default();
-        let warp_ms = median_ms(frames, &mut || warper.warp_layout(gpu, &item.mesh, draw).map(drop))?;
-        let mut mesh = None;
-        let produce_ms = median_ms(frames, &mut || {
-            mesh = Some(assemble(&item.mesh, warper.warp_layout(gpu, &item.mesh, draw)?)?);
-            Ok(())
-        })?;
-        let mut cpu_mesh = None;
-        // As the export does it on a CPU adapter: the matrix texture read back, then the twin.
-        let cpu_produce_ms = median_ms(frames, &mut || {
-            let l = warper.warp_layout_on(gpu, &item.mesh, draw, WarpDevice::Cpu)?;
-            cpu_mesh = Some(assemble(&item.mesh, l)?);
-            Ok(())
-        })?;
-        let mesh = mesh.expect("assembled above");
-        let cpu_mesh = cpu_mesh.expect("assembled above");
+        let mut time = |device: WarpDevice| -> anyhow::Result<(f64, f64, crate::mesh::Mesh)> {
+            let warp_ms = median_ms(frames, &mut || warper.warp_layout_on(gpu, &item.mesh, draw, device).map(drop))?;
+            let mut mesh = None;
+            let produce_ms = median_ms(frames, &mut || {
+                mesh = Some(assemble(&item.mesh, warper.warp_layout_on(gpu, &item.mesh, draw, device)?)?);
+                Ok(())
+            })?;
+            Ok((warp_ms, produce_ms, mesh.expect("assembled above")))
+        };
+        let (gpu_warp_ms, gpu_produce_ms, mesh) = time(WarpDevice::Gpu)?;
+        let (cpu_warp_ms, cpu_produce_ms, cpu_mesh) = time(WarpDevice::Cpu)?;
         anyhow::ensure!(
             mesh.indices == cpu_mesh.indices,
             "the GPU and the CPU twin keep different triangles ({} and {})",
@@ -1429,10 +1428,11 @@ pub fn export(
         let row = ExportRow {
             buttons: draw.instances.len(),
             triangles: mesh.triangle_count(),
-            warp_ms,
-            assemble_ms: produce_ms - warp_ms,
-            produce_ms,
+            gpu_warp_ms,
+            gpu_produce_ms,
+            cpu_warp_ms,
             cpu_produce_ms,
+            auto: crate::param::Choice::name(WarpDevice::Auto.resolve(gpu)),
             write_ms,
             megabytes,
         };

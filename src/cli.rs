@@ -610,17 +610,18 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let (gpu, _) = out.open()?;
             println!("adapter: {}, median of {frames} run(s), PLY into {}", gpu.adapter_name(), dir.display());
             println!(
-                "| buttons | triangles | GPU warp + read-back ms | assemble ms | GPU produce ms | CPU twin produce ms | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---:|---:|"
+                "| buttons | triangles | GPU warp + read-back ms | GPU produce ms | CPU warp ms | CPU produce ms | auto | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---|---:|---:|"
             );
             let rows = crate::bench::export(&gpu, &counts, frames, &dir, |r| {
                 println!(
-                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {:.1} |",
                     r.buttons,
                     r.triangles,
-                    r.warp_ms,
-                    r.assemble_ms,
-                    r.produce_ms,
+                    r.gpu_warp_ms,
+                    r.gpu_produce_ms,
+                    r.cpu_warp_ms,
                     r.cpu_produce_ms,
+                    r.auto,
                     r.write_ms,
                     r.megabytes
                 );

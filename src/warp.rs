@@ -683,8 +683,11 @@ pub struct WarpedLayout {
 }
 
 impl WarpedLayout {
+    /// Zeroed: an outlier's position and normal are zero. Allocated zeroed rather than filled,
+    /// so the pages are touched first by the threads that write them.
     pub fn with_len(n: usize) -> Self {
-        WarpedLayout { positions: vec![Vec3::ZERO; n], normals: vec![Vec3::ZERO; n], valid: vec![false; n] }
+        use bytemuck::zeroed_vec;
+        WarpedLayout { positions: zeroed_vec(n), normals: zeroed_vec(n), valid: zeroed_vec(n) }
     }
 
     /// As per-vertex structs (tests compare them with the CPU reference).
