@@ -67,8 +67,8 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
         mesh.positions.len(),
         mesh.triangle_count()
     );
-    // Streamed through the writer's buffer: a 10k-button export is 420 MB, which would
-    // otherwise be built whole in memory and then copied again into the file.
+    // Streamed in blocks (a 10k-button export is 420 MB, never whole in memory), each built
+    // on another thread while the previous one is written.
     let vertex = |i: usize| {
         let (p, n, uv) = (mesh.positions[i], mesh.normals[i], mesh.uvs[i]);
         [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, 1.0 - uv.y].map(f32::to_le_bytes)
@@ -80,17 +80,54 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
         }
         face
     };
+    const PER_BLOCK: usize = 1 << 16;
     crate::atomic::write_atomic_with(path, |out| {
         out.write_all(header.as_bytes())?;
-        for i in 0..mesh.positions.len() {
-            out.write_all(vertex(i).as_flattened())?;
-        }
-        for t in mesh.indices.chunks_exact(3) {
-            out.write_all(&face(t))?;
-        }
-        Ok(())
+        write_pipelined(out, mesh.positions.len(), PER_BLOCK, |range, block| {
+            range.for_each(|i| block.extend_from_slice(vertex(i).as_flattened()));
+        })?;
+        write_pipelined(out, mesh.triangle_count(), PER_BLOCK, |range, block| {
+            range.for_each(|t| block.extend_from_slice(&face(&mesh.indices[3 * t..3 * t + 3])));
+        })
     })
     .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `items` records in blocks of `per_block`: `fill` appends a range's records to a
+/// block on a second thread while `out` takes the block before, so building the bytes and the
+/// kernel's copy overlap. Three blocks are reused throughout.
+fn write_pipelined(
+    out: &mut impl std::io::Write,
+    items: usize,
+    per_block: usize,
+    fill: impl Fn(std::ops::Range<usize>, &mut Vec<u8>) + Send,
+) -> std::io::Result<()> {
+    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(2);
+    let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Vec<u8>>();
+    for _ in 0..3 {
+        let _ = empty_tx.send(Vec::new());
+    }
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            for start in (0..items).step_by(per_block.max(1)) {
+                // Both channels close when the writer stops (done or failed).
+                let Ok(mut block) = empty_rx.recv() else { return };
+                block.clear();
+                fill(start..(start + per_block).min(items), &mut block);
+                if full_tx.send(block).is_err() {
+                    return;
+                }
+            }
+        });
+        // Owns the writer's channel ends, so an error drops them and the builder stops.
+        (move || {
+            for block in full_rx {
+                out.write_all(&block)?;
+                let _ = empty_tx.send(block);
+            }
+            Ok(())
+        })()
+    })
 }
 
 #[cfg(test)]
