@@ -134,6 +134,25 @@ fn write_pipelined(
 mod tests {
     use glam::{Vec2, Vec3};
 
+    /// Blocks arrive in order and whole, and a failing writer stops the builder (no hang).
+    #[test]
+    fn pipelined_blocks_keep_their_order_and_stop_on_a_write_error() {
+        let fill = |range: std::ops::Range<usize>, block: &mut Vec<u8>| block.extend(range.map(|i| i as u8));
+        let mut out = Vec::new();
+        super::write_pipelined(&mut out, 100, 7, fill).unwrap();
+        assert_eq!(out, (0..100u8).collect::<Vec<_>>());
+        struct Full;
+        impl std::io::Write for Full {
+            fn write(&mut self, _: &[u8]) -> std::io::Result<usize> {
+                Err(std::io::Error::other("disk full"))
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        assert!(super::write_pipelined(&mut Full, 1000, 7, fill).is_err());
+    }
+
     /// Binary PLY: the header's counts, 32 bytes per vertex (position, normal, s, t = 1 - v),
     /// 13 per face (count 3, three indices), little-endian.
     #[test]
