@@ -121,8 +121,9 @@ impl WarpDevice {
 }
 
 /// Whether triangle `t` has an area (a collapsed one is left out of exports, as `Mesh::build` does).
+#[inline]
 fn has_area(positions: &[Vec3], t: [u32; 3]) -> bool {
-    let [a, b, c] = t.map(|i| positions[i as usize]);
+    let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
     (b - a).cross(c - a).length() > f32::MIN_POSITIVE
 }
 
@@ -151,11 +152,16 @@ pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
                     for (k, uvs) in uvs.chunks_mut(nv).enumerate() {
                         uvs.copy_from_slice(&mesh.uvs);
                         let first = (c * chunk + k) * nv;
-                        let valid = &valid[first..first + nv];
+                        let (valid, positions) = (&valid[first..first + nv], &positions[first..first + nv]);
                         for t in mesh.indices.chunks_exact(3) {
-                            let global = [t[0], t[1], t[2]].map(|i| i + first as u32);
-                            if t.iter().all(|&i| valid[i as usize]) && has_area(positions, global) {
-                                region[kept..kept + 3].copy_from_slice(&global);
+                            let local = [t[0], t[1], t[2]];
+                            if local.iter().all(|&i| valid[i as usize]) && has_area(positions, local) {
+                                let base = first as u32;
+                                region[kept..kept + 3].copy_from_slice(&[
+                                    local[0] + base,
+                                    local[1] + base,
+                                    local[2] + base,
+                                ]);
                                 kept += 3;
                             }
                         }
