@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::{DVec2, DVec3};
 
 use super::cuboid::{BOX_MAX, BOX_MIN, NORMALS, Normals, content_box};
-use crate::cuboid::{Anchor, CuboidGrid, Transform, anchor_grid, anchor_row, bend, torus, twist};
+use crate::cuboid::{Anchor, CuboidGrid, Lift, Transform, anchor_grid, anchor_row, bend, torus, twist};
 use crate::mesh::Mesh;
 use crate::node::prelude::*;
 
@@ -76,6 +76,11 @@ pub static CUBOID_GRID: NodeSpec = NodeSpec {
             ParamKind::Float { default: 0.2, min: -1e4, max: 1e4 },
             "Anchors: the grid's top layer lies this far along each anchor's normal.",
         ),
+        ParamSpec::new(
+            "lift",
+            ParamKind::Choice { default: "normal", options: Lift::OPTIONS },
+            "Anchors (2D array): lift the top layer along each anchor's own normal (follows the surface; splays where it curves fast), or along their mean normal (parallel layers: a shoe on a sole that curves up at its rim).",
+        ),
         BOX_MIN,
         BOX_MAX,
         NORMALS,
@@ -106,7 +111,7 @@ impl Node for CuboidGridNode {
                 let (cols, rows) = (cells[0] + 1, cells[1] + 1);
                 let (a, b) = (cx.vec3("uv_min").as_dvec3().truncate(), cx.vec3("uv_max").as_dvec3().truncate());
                 let frames = anchor_frames(&mesh, a, b, cols, rows)?;
-                anchor_grid(&frames, cols, rows, cx.f64("height"), lo, hi, normals)
+                anchor_grid(&frames, cols, rows, cx.f64("height"), cx.choice("lift"), lo, hi, normals)
             }
             Source::AnchorRow => {
                 let mesh: Arc<Mesh> = cx

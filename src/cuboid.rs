@@ -618,14 +618,29 @@ fn barycentric_2d(a: glam::DVec2, b: glam::DVec2, c: glam::DVec2, p: glam::DVec2
     barycentric_2d_unclamped(a, b, c, p).filter(|w| w.min_element() >= -1e-9)
 }
 
+crate::choice!(
+    /// Which way an anchor grid's top layer is lifted from its anchors.
+    pub enum Lift {
+        /// Along each anchor's own normal: the grid follows a curved surface, and splays
+        /// where the surface curves fast.
+        Normal = "normal",
+        /// Along the anchors' mean normal: parallel layers, so a tall grid on a surface that
+        /// curves (a sole rising at its rim) stays a slab.
+        MeanNormal = "mean_normal",
+    }
+);
+
 /// A 2D array of anchors (`cols` x `rows`, u fastest) driving a grid of
 /// `(cols-1) x (rows-1) x 1` cells: corner `(i, j, 0)` is anchor `(i, j)`'s origin, corner
-/// `(i, j, 1)` lies `height` along its normal. The box maps the content onto it.
+/// `(i, j, 1)` lies `height` along its normal or the mean normal (`lift`). The box maps the
+/// content onto it.
+#[allow(clippy::too_many_arguments)]
 pub fn anchor_grid(
     frames: &[Frame],
     cols: usize,
     rows: usize,
     height: f64,
+    lift: Lift,
     box_min: DVec3,
     box_max: DVec3,
     normals: NormalMethod,
@@ -637,10 +652,18 @@ pub fn anchor_grid(
         ));
     }
     let cells = [cols - 1, rows - 1, 1];
+    let mean = frames.iter().map(|f| f.normal).sum::<DVec3>().normalize_or_zero();
+    if lift == Lift::MeanNormal && mean == DVec3::ZERO {
+        return Err("the anchors' normals cancel out: they have no mean normal to lift the grid along".into());
+    }
     let mut corners = Vec::with_capacity(cols * rows * 2);
     for z in 0..2 {
+        let h = height * z as f64;
         for f in frames {
-            corners.push(f.point(DVec3::new(0.0, 0.0, height * z as f64)));
+            corners.push(match lift {
+                Lift::Normal => f.point(DVec3::new(0.0, 0.0, h)),
+                Lift::MeanNormal => f.origin + mean * h,
+            });
         }
     }
     CuboidGrid::new(box_min, box_max, cells, corners, normals)
@@ -742,6 +765,6 @@ mod tests {
         assert!(
             CuboidGrid::new(DVec3::ZERO, DVec3::ONE, [1, 1, 1], vec![DVec3::ZERO; 7], NormalMethod::Direct).is_err()
         );
-        assert!(anchor_grid(&[], 1, 1, 1.0, DVec3::ZERO, DVec3::ONE, NormalMethod::Direct).is_err());
+        assert!(anchor_grid(&[], 1, 1, 1.0, Lift::Normal, DVec3::ZERO, DVec3::ONE, NormalMethod::Direct).is_err());
     }
 }

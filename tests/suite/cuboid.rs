@@ -9,8 +9,8 @@ use std::sync::Arc;
 use glam::{DMat4, DQuat, DVec2, DVec3, Mat4, Vec3};
 use proptest::prelude::*;
 use werkstatt::cuboid::{
-    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, NormalMethod, Transform, anchor_grid, anchor_row, bend, compose,
-    unit_corner,
+    Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, Lift, NormalMethod, Transform, anchor_grid, anchor_row, bend,
+    compose, unit_corner,
 };
 use werkstatt::draw::SceneDrawer;
 use werkstatt::gpu::read_back;
@@ -172,21 +172,50 @@ fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
         }
         frames
     };
-    let grid_on = |mesh: &Mesh| {
-        anchor_grid(&frames_on(mesh), cols, rows, 0.2, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap()
+    let grid_on = |mesh: &Mesh, lift: Lift| {
+        anchor_grid(&frames_on(mesh), cols, rows, 0.2, lift, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace)
+            .unwrap()
     };
     let (r, t) = (DQuat::from_scaled_axis(DVec3::new(0.3, -1.1, 0.5)), DVec3::new(0.7, -2.0, 1.3));
-    let before = grid_on(&body);
-    let after = grid_on(&rotate_mesh(&body, r, t));
-    assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the anchored grid follows the sphere's curvature");
-    let object = werkstatt::nodes::geometry::cube(1.5).unwrap();
-    let size = before.corners.iter().fold(0.0f64, |m, c| m.max(c.length()));
-    let mut worst: f64 = 0.0;
-    for p in &object.positions {
-        let expected = r * before.eval(p.as_dvec3()) + t;
-        worst = worst.max(after.eval(p.as_dvec3()).distance(expected) / size);
+    for lift in [Lift::Normal, Lift::MeanNormal] {
+        let before = grid_on(&body, lift);
+        let after = grid_on(&rotate_mesh(&body, r, t), lift);
+        assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the anchored grid follows the sphere's curvature");
+        let object = werkstatt::nodes::geometry::cube(1.5).unwrap();
+        let size = before.corners.iter().fold(0.0f64, |m, c| m.max(c.length()));
+        let mut worst: f64 = 0.0;
+        for p in &object.positions {
+            let expected = r * before.eval(p.as_dvec3()) + t;
+            worst = worst.max(after.eval(p.as_dvec3()).distance(expected) / size);
+        }
+        assert!(worst < 1e-5, "{lift:?}: relative error {worst}");
     }
-    assert!(worst < 1e-5, "relative error {worst}");
+}
+
+/// Lifted along the mean normal, a tall anchor grid on a curved surface is a slab: every
+/// corner's column is `height` times the same unit vector, the normalized mean of the anchors'
+/// normals; lifted along each anchor's normal, the columns splay (by the sphere's curvature).
+#[test]
+fn an_anchor_grid_lifted_along_the_mean_normal_has_parallel_columns() {
+    let body = werkstatt::nodes::geometry::sphere(1.0, 48, 32).unwrap();
+    let (cols, rows, height) = (3, 3, 0.5);
+    let frames: Vec<_> = (0..cols * rows)
+        .map(|k| {
+            let uv = DVec2::new(0.3 + 0.08 * (k % cols) as f64, 0.35 + 0.08 * (k / cols) as f64);
+            Anchor::at_uv(&body, uv, 0.01).unwrap().frame(&body).unwrap()
+        })
+        .collect();
+    let mean = frames.iter().map(|f| f.normal).sum::<DVec3>().normalize();
+    let columns = |lift: Lift| {
+        let g = anchor_grid(&frames, cols, rows, height, lift, -DVec3::ONE, DVec3::ONE, NormalMethod::Direct).unwrap();
+        let n = cols * rows;
+        (0..n).map(|i| g.corners[n + i] - g.corners[i]).collect::<Vec<_>>()
+    };
+    for c in columns(Lift::MeanNormal) {
+        assert!(c.distance(mean * height) < 1e-12, "column {c} is not {}", mean * height);
+    }
+    let splay = columns(Lift::Normal).iter().map(|c| c.angle_between(mean).to_degrees()).fold(0.0, f64::max);
+    assert!(splay > 10.0, "per-anchor normals on this patch splay by {splay} degrees");
 }
 
 /// A row of anchors across a flat plane (y = 0, normal +y) gives the affine grid it should:
