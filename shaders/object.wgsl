@@ -14,7 +14,7 @@ struct Object {
     // A non-linear cuboid grid (shaders/cuboid.wgsl; zero otherwise). xyz: the content box's
     // minimum, w: normal method (0 tangent space, 1 direct).
     grid_min: vec4<f32>,
-    // xyz: 1 / the box's size, w: index of the grid's first row in the shared buffer of cells.
+    // xyz: 1 / the box's size.
     grid_inv_size: vec4<f32>,
     // xyz: cells per axis.
     grid_cells: vec4<f32>,

@@ -362,14 +362,13 @@ impl CuboidGrid {
     pub const ROWS_PER_CELL: usize = 6;
 
     /// The grid's header in the object uniform (shaders/object.wgsl `grid_*`): box origin
-    /// (w unused: the normal method picks the vertex entry point), 1/box size (w: index of the
-    /// grid's first row in the shared buffer), cells per axis.
-    pub fn header(&self, first_row: u32) -> [[f32; 4]; 3] {
+    /// and 1/box size (w unused: the normal method picks the vertex entry point, and each draw
+    /// binds its grid's rows from the first), cells per axis.
+    pub fn header(&self) -> [[f32; 4]; 3] {
         let inv = (1.0 / (self.box_max - self.box_min)).as_vec3();
-        // f32 holds every index below 2^24 exactly; the drawer checks the total.
         [
             self.box_min.as_vec3().extend(0.0).to_array(),
-            inv.extend(first_row as f32).to_array(),
+            inv.extend(0.0).to_array(),
             [self.cells[0] as f32, self.cells[1] as f32, self.cells[2] as f32, 0.0],
         ]
     }

@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
-use crate::gpu::pass::{Bindings, dynamic_uniform_entry, storage_entry_for, texture_entry, uniform_entry};
+use crate::gpu::pass::{Bindings, dynamic_storage_entry, dynamic_uniform_entry, texture_entry, uniform_entry};
 use crate::gpu::{
     Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
 };
@@ -148,45 +148,60 @@ struct Prepared {
     /// The object group and the item's dynamic offset into its uniform buffer.
     object: (wgpu::BindGroup, u32),
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
-    /// The group of all grids' cells, and the item's normal method (which entry point draws it).
-    cuboid: Option<(wgpu::BindGroup, NormalMethod)>,
+    /// The group of all grids' cells, the item's normal method (which entry point draws it)
+    /// and the byte offset of its grid's rows.
+    cuboid: Option<(wgpu::BindGroup, NormalMethod, u32)>,
     /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
     pn: Option<wgpu::BindGroup>,
 }
 
-/// Row indices in the shared buffer of grid cells are carried as f32 in the object uniform.
-const MAX_GRID_ROWS: usize = 1 << 24;
-
 /// The items' transforms after the linear fast path, tested once per composed transform right
 /// before drawing: per item its model matrix (an affine grid folded in), the header of a grid
-/// that stays non-linear and its normal method; the cells of those grids in one buffer, each
-/// header (with its first row) going into its item's object uniform.
+/// that stays non-linear, its normal method and the first row of its cells; the cells of those
+/// grids in one buffer. Each draw binds only its own grid's rows (a dynamic offset): lavapipe
+/// copies a bound storage range for every draw, and the whole buffer made a frame of 4617
+/// helix objects twice as slow as with affine transforms.
 struct Composed {
-    transforms: Vec<(Mat4, [[f32; 4]; 3], Option<NormalMethod>)>,
+    transforms: Vec<(Mat4, [[f32; 4]; 3], Option<NormalMethod>, u32)>,
     rows: Vec<[f32; 4]>,
+    /// The rows one draw binds: the largest grid's.
+    range_rows: usize,
 }
 
+/// One row of a grid's cells (a vec4 of f32).
+const ROW_BYTES: u64 = 16;
+
 impl Composed {
-    fn new(items: &[DrawItem]) -> anyhow::Result<Composed> {
+    fn new(gpu: &GpuContext, items: &[DrawItem]) -> anyhow::Result<Composed> {
+        // Each grid starts where a dynamic offset may point.
+        let align = (u64::from(gpu.limits.min_storage_buffer_offset_alignment) / ROW_BYTES).max(1) as usize;
         let mut rows: Vec<[f32; 4]> = Vec::new();
+        let mut range_rows = 0;
         let transforms = items
             .iter()
             .map(|item| match fast_path(item.model, item.cuboid.clone()) {
                 (model, Some(grid)) => {
-                    let header = grid.header(rows.len() as u32);
+                    rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
+                    let first = rows.len();
                     grid.append_cells(&mut rows);
-                    (model, header, Some(grid.normals))
+                    range_rows = range_rows.max(rows.len() - first);
+                    (model, grid.header(), Some(grid.normals), first as u32)
                 }
-                (model, None) => (model, [[0.0; 4]; 3], None),
+                (model, None) => (model, [[0.0; 4]; 3], None, 0),
             })
-            .collect();
+            .collect::<Vec<_>>();
+        // The last grid's range may reach past its own rows.
+        if let Some(&(.., first)) = transforms.iter().rev().find(|t| t.2.is_some()) {
+            rows.resize(first as usize + range_rows, [0.0; 4]);
+        }
+        let range = range_rows as u64 * ROW_BYTES;
         anyhow::ensure!(
-            rows.len() <= MAX_GRID_ROWS,
-            "the scene's cuboid grids have {} cells; one draw holds at most {}",
-            rows.len() / CuboidGrid::ROWS_PER_CELL,
-            MAX_GRID_ROWS / CuboidGrid::ROWS_PER_CELL
+            range <= u64::from(gpu.limits.max_storage_buffer_binding_size),
+            "a cuboid grid of {} cells is more than one draw can bind ({} bytes at most)",
+            range_rows / CuboidGrid::ROWS_PER_CELL,
+            gpu.limits.max_storage_buffer_binding_size
         );
-        Ok(Composed { transforms, rows })
+        Ok(Composed { transforms, rows, range_rows })
     }
 
     /// Whether any item still needs the trilinear vertex stage.
@@ -247,9 +262,11 @@ impl SceneDrawer {
         gpu.bind_group_layout(&entries)
     }
 
-    /// The layout of group 2 for cuboid items (the storage buffer of all grids' cells).
+    /// The layout of group 2 for cuboid items (a range of the buffer of all grids' cells, at
+    /// least one cell, placed per draw by a dynamic offset).
     fn cuboid_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
-        gpu.bind_group_layout(&[storage_entry_for(0, wgpu::ShaderStages::VERTEX, true)])
+        let one_cell = ROW_BYTES * CuboidGrid::ROWS_PER_CELL as u64;
+        gpu.bind_group_layout(&[dynamic_storage_entry(0, wgpu::ShaderStages::VERTEX, one_cell)])
     }
 
     /// Bind groups for every item (resolving point attachments' frames on first use).
@@ -267,24 +284,25 @@ impl SceneDrawer {
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
-        let Composed { transforms, rows } = composed;
+        let Composed { transforms, rows, range_rows } = composed;
         let grids = (!rows.is_empty()).then(|| {
             let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
-            self.grid_group.bind_group(gpu, &self.cuboid_layout(gpu), &[Bind::Storage(&buffer)])
+            let range = Bind::DynamicStorage(&buffer, range_rows as u64 * ROW_BYTES);
+            self.grid_group.bind_group(gpu, &self.cuboid_layout(gpu), &[range])
         });
         // Every item's object uniform in one buffer, one write per draw (a write per item made
         // wgpu allocate a staging buffer each: most of a frame of thousands of small objects),
         // each item's at its dynamic offset.
         let stride = OBJECT_UNIFORM_SIZE.next_multiple_of(u64::from(gpu.limits.min_uniform_buffer_offset_alignment));
         let mut uniforms = vec![0u8; stride as usize * items.len()];
-        for (i, (item, &(model, header, _))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, &(model, header, ..))) in items.iter().zip(&transforms).enumerate() {
             let at = i * stride as usize;
             uniforms[at..at + OBJECT_UNIFORM_SIZE as usize]
                 .copy_from_slice(bytemuck::bytes_of(&object_uniform(item, model, header)));
         }
         let uniform_buffer = self.object_uniforms.write(gpu, &uniforms).clone();
         let mut prepared = Vec::with_capacity(items.len());
-        for (i, (item, &(_, _, normals))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, &(_, _, normals, first_row))) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
@@ -304,7 +322,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let cuboid = grids.clone().zip(normals);
+            let cuboid = grids.clone().zip(normals).map(|(g, n)| (g, n, first_row * ROW_BYTES as u32));
             let pn = match pn_layout {
                 Some(layout) if item.pn_pixels => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
@@ -363,7 +381,7 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let composed = Composed::new(items)?;
+        let composed = Composed::new(gpu, items)?;
         let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
         let trilinear = match &cuboid_layout {
             Some(layout) => {
@@ -485,7 +503,7 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let composed = Composed::new(items)?;
+        let composed = Composed::new(gpu, items)?;
         let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
         let trilinear = match &cuboid_layout {
             Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
@@ -566,9 +584,9 @@ fn draw_items(
             pass.set_vertex_buffer(0, t.vertices.slice(..));
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
             match (&p.cuboid, pipelines.trilinear) {
-                (Some((group, normals)), Some(trilinear)) => {
+                (Some((group, normals, offset)), Some(trilinear)) => {
                     bound.pipeline(pass, trilinear[*normals as usize]);
-                    bound.group2(pass, group);
+                    bound.group2(pass, group, Some(*offset));
                 }
                 _ => bound.pipeline(pass, pipelines.plain),
             }
@@ -580,15 +598,15 @@ fn draw_items(
         if let (Some(group), Some(pipeline)) = (&p.pn, pipelines.pn) {
             // No vertex buffers: the shader reads the triangle's corners from group 2.
             bound.pipeline(pass, pipeline);
-            bound.group2(pass, group);
+            bound.group2(pass, group, None);
             pass.draw(0..mesh.index_count, 0..plain_instances);
             continue;
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        if let (Some((group, normals)), Some(trilinear)) = (&p.cuboid, pipelines.trilinear) {
+        if let (Some((group, normals, offset)), Some(trilinear)) = (&p.cuboid, pipelines.trilinear) {
             bound.pipeline(pass, trilinear[*normals as usize]);
-            bound.group2(pass, group);
+            bound.group2(pass, group, Some(*offset));
             pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             continue;
         }
@@ -598,7 +616,7 @@ fn draw_items(
                     continue;
                 }
                 bound.pipeline(pass, pipeline);
-                bound.group2(pass, warp_bg);
+                bound.group2(pass, warp_bg, None);
                 pass.set_vertex_buffer(1, buffer.slice(..));
                 let instances = 0..a.instances.len() as u32;
                 if per_draw.is_empty() {
@@ -617,13 +635,15 @@ fn draw_items(
     }
 }
 
-/// What a pass has bound: a row of draws with the same pipeline or group 2 (all the items
-/// under cuboid grids share one) binds it once (lavapipe copies descriptor state per bind).
-/// Group 2 stays bound across pipelines whose layouts agree on it, as WebGPU specifies.
+/// What a pass has bound: a row of draws with the same pipeline or group 2 (and offset: the
+/// items under cuboid grids share one group at their own offsets) binds it once (lavapipe
+/// copies descriptor state per bind). Group 2 stays bound across pipelines whose layouts
+/// agree on it, as WebGPU specifies. `offset` is the cuboid group's dynamic offset (other
+/// groups 2 have none).
 #[derive(Default)]
 struct Bound {
     pipeline: Option<wgpu::RenderPipeline>,
-    group2: Option<wgpu::BindGroup>,
+    group2: Option<(wgpu::BindGroup, Option<u32>)>,
 }
 
 impl Bound {
@@ -634,10 +654,10 @@ impl Bound {
         }
     }
 
-    fn group2(&mut self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup) {
-        if self.group2.as_ref() != Some(group) {
-            pass.set_bind_group(2, group, &[]);
-            self.group2 = Some(group.clone());
+    fn group2(&mut self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup, offset: Option<u32>) {
+        if self.group2.as_ref().is_none_or(|(g, o)| g != group || *o != offset) {
+            pass.set_bind_group(2, group, offset.as_slice());
+            self.group2 = Some((group.clone(), offset));
         }
     }
 }
