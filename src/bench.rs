@@ -766,6 +766,31 @@ fn interleaved_pairs(
     Ok((median(a), median(b), median(ratio)))
 }
 
+/// Like [`interleaved_pairs`], but each path runs `frames` frames in a row, in blocks A B B A
+/// (drift cancels): what a scene that keeps one kind of transform does every frame. A path
+/// whose cost depends on what the frame before left behind (buffers, caches, descriptor
+/// state) shows it here, where alternating frames would hide it. Medians of each path's
+/// frames, and their ratio b / a.
+fn abba_blocks(
+    frames: usize,
+    mut run: impl FnMut(bool, usize) -> anyhow::Result<f64>,
+) -> anyhow::Result<(f64, f64, f64)> {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for (block, second) in [false, true, true, false].into_iter().enumerate() {
+        run(second, 0)?;
+        for k in 0..frames.max(1) {
+            let t = run(second, block * frames + k)?;
+            if second { b.push(t) } else { a.push(t) }
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (ma, mb) = (median(a), median(b));
+    Ok((ma, mb, mb / ma))
+}
+
 /// Times one tessellation of the bench mesh (recorded, submitted, waited for), optionally with
 /// the G-buffer draw of the result at `size` from the bench camera: what both tessellation
 /// tables time.
@@ -1023,10 +1048,9 @@ pub fn cuboids(
     };
     let mut drawer = SceneDrawer::default();
     // Frames per second of each path (median frame times) and their ratio (trilinear / linear
-    // rate: the reciprocal of the pairs' median time ratio), from interleaved frames. Each
-    // frame composes, draws and waits.
+    // rate), from blocks of frames of one path each. Each frame composes, draws and waits.
     let mut compare = |make: &dyn Fn(bool, usize) -> Vec<DrawItem>| -> anyhow::Result<(f64, f64, f64)> {
-        let (linear, trilinear, ratio) = interleaved_pairs(frames, |trilinear, i| {
+        let (linear, trilinear, ratio) = abba_blocks(frames, |trilinear, i| {
             let t = Instant::now();
             let items = make(!trilinear, i);
             let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
