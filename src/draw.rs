@@ -162,10 +162,19 @@ struct Prepared {
 /// copies a bound storage range for every draw, and the whole buffer made a frame of 4617
 /// helix objects twice as slow as with affine transforms.
 struct Composed {
-    transforms: Vec<(Mat4, [[f32; 4]; 3], Option<NormalMethod>, u32)>,
+    transforms: Vec<ComposedItem>,
     rows: Vec<[f32; 4]>,
     /// The rows one draw binds: the largest grid's.
     range_rows: usize,
+}
+
+/// One item's transform after the fast path.
+struct ComposedItem {
+    model: Mat4,
+    /// The object uniform's grid header (zero without a non-linear grid).
+    header: [[f32; 4]; 3],
+    /// A non-linear grid's normal method and the first row of its cells.
+    grid: Option<(NormalMethod, u32)>,
 }
 
 /// One row of a grid's cells (a vec4 of f32).
@@ -185,18 +194,18 @@ impl Composed {
                     let first = rows.len();
                     grid.append_cells(&mut rows);
                     range_rows = range_rows.max(rows.len() - first);
-                    (model, grid.header(), Some(grid.normals), first as u32)
+                    ComposedItem { model, header: grid.header(), grid: Some((grid.normals, first as u32)) }
                 }
-                (model, None) => (model, [[0.0; 4]; 3], None, 0),
+                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None },
             })
             .collect::<Vec<_>>();
         // The last grid's range may reach past its own rows.
-        if let Some(&(.., first)) = transforms.iter().rev().find(|t| t.2.is_some()) {
+        if let Some((_, first)) = transforms.iter().rev().find_map(|t| t.grid) {
             rows.resize(first as usize + range_rows, [0.0; 4]);
         }
         let range = range_rows as u64 * ROW_BYTES;
         anyhow::ensure!(
-            range <= u64::from(gpu.limits.max_storage_buffer_binding_size),
+            range <= gpu.limits.max_storage_buffer_binding_size,
             "a cuboid grid of {} cells is more than one draw can bind ({} bytes at most)",
             range_rows / CuboidGrid::ROWS_PER_CELL,
             gpu.limits.max_storage_buffer_binding_size
@@ -295,14 +304,14 @@ impl SceneDrawer {
         // each item's at its dynamic offset.
         let stride = OBJECT_UNIFORM_SIZE.next_multiple_of(u64::from(gpu.limits.min_uniform_buffer_offset_alignment));
         let mut uniforms = vec![0u8; stride as usize * items.len()];
-        for (i, (item, &(model, header, ..))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, t)) in items.iter().zip(&transforms).enumerate() {
             let at = i * stride as usize;
             uniforms[at..at + OBJECT_UNIFORM_SIZE as usize]
-                .copy_from_slice(bytemuck::bytes_of(&object_uniform(item, model, header)));
+                .copy_from_slice(bytemuck::bytes_of(&object_uniform(item, t.model, t.header)));
         }
         let uniform_buffer = self.object_uniforms.write(gpu, &uniforms).clone();
         let mut prepared = Vec::with_capacity(items.len());
-        for (i, (item, &(_, _, normals, first_row))) in items.iter().zip(&transforms).enumerate() {
+        for (i, (item, t)) in items.iter().zip(&transforms).enumerate() {
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
@@ -322,7 +331,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let cuboid = grids.clone().zip(normals).map(|(g, n)| (g, n, first_row * ROW_BYTES as u32));
+            let cuboid = grids.clone().zip(t.grid).map(|(g, (normals, first))| (g, normals, first * ROW_BYTES as u32));
             let pn = match pn_layout {
                 Some(layout) if item.pn_pixels => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
