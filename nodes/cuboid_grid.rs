@@ -74,7 +74,7 @@ pub static CUBOID_GRID: NodeSpec = NodeSpec {
         ParamSpec::new(
             "height",
             ParamKind::Float { default: 0.2, min: -1e4, max: 1e4 },
-            "Anchors: the grid's top layer lies this far along each anchor's normal.",
+            "Anchors: the grid's top layer lies this far along each anchor's normal (or their mean normal, see lift); negative: against it.",
         ),
         ParamSpec::new(
             "lift",

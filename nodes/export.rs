@@ -137,10 +137,22 @@ pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
     let n = warped.positions.len();
     anyhow::ensure!(nv > 0 && n.is_multiple_of(nv), "{n} warped vertices are not whole instances of {nv}");
     let per_instance = mesh.indices.len();
+    if per_instance == 0 {
+        return Ok(Mesh::from_raw(
+            warped.positions,
+            warped.normals,
+            vec![Vec2::ZERO; n],
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+        ));
+    }
     let chunk = crate::warp::instances_per_thread(n / nv);
+    // A mesh without one UV per vertex exports zeros.
+    let instance_uvs = if mesh.uvs.len() == nv { mesh.uvs.clone() } else { vec![Vec2::ZERO; nv] };
     let mut indices = vec![0u32; per_instance * (n / nv)];
     let mut uvs: Vec<Vec2> = bytemuck::zeroed_vec(n);
-    let (positions, valid) = (&warped.positions, &warped.valid);
+    let (positions, valid, instance_uvs) = (&warped.positions, &warped.valid, &instance_uvs);
     let kept: Vec<usize> = std::thread::scope(|scope| {
         let threads: Vec<_> = indices
             .chunks_mut(chunk * per_instance)
@@ -150,7 +162,7 @@ pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
                 scope.spawn(move || {
                     let mut kept = 0;
                     for (k, uvs) in uvs.chunks_mut(nv).enumerate() {
-                        uvs.copy_from_slice(&mesh.uvs);
+                        uvs.copy_from_slice(&instance_uvs);
                         let first = (c * chunk + k) * nv;
                         let (valid, positions) = (&valid[first..first + nv], &positions[first..first + nv]);
                         for t in mesh.indices.chunks_exact(3) {

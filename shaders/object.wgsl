@@ -12,7 +12,7 @@ struct Object {
     // x: glossiness where the gloss map is 0.
     extra: vec4<f32>,
     // A non-linear cuboid grid (shaders/cuboid.wgsl; zero otherwise). xyz: the content box's
-    // minimum, w: normal method (0 tangent space, 1 direct).
+    // minimum (w unused: each normal method is its own vertex entry point).
     grid_min: vec4<f32>,
     // xyz: 1 / the box's size.
     grid_inv_size: vec4<f32>,

@@ -16,18 +16,22 @@ pub fn write_atomic_with(
 ) -> std::io::Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let written = (|| {
-        let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
-        write(&mut f)?;
-        let f = f.into_inner().map_err(std::io::IntoInnerError::into_error)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+    let tmp = Temporary(dir.join(format!(".{name}.{}.tmp", std::process::id())));
+    let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp.0)?);
+    write(&mut f)?;
+    let f = f.into_inner().map_err(std::io::IntoInnerError::into_error)?;
+    f.sync_all()?;
+    std::fs::rename(&tmp.0, path)
+}
+
+/// A temporary file removed when dropped: after a failed write, or a panic while writing; a
+/// renamed one is gone already and the removal fails harmlessly.
+struct Temporary(std::path::PathBuf);
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
     }
-    written
 }
 
 #[cfg(test)]
@@ -44,6 +48,23 @@ mod tests {
         assert_eq!(left, ["occupied"], "only the directory remains");
         super::write_atomic(&dir.join("file"), b"data").unwrap();
         assert_eq!(std::fs::read(dir.join("file")).unwrap(), b"data");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A writer that panics half-way (a bug in a streamed export) leaves no temporary either.
+    #[test]
+    fn a_panic_while_writing_leaves_no_temporary() {
+        let dir = std::env::temp_dir().join(format!("werkstatt-atomic-panic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("export.ply");
+        let result = std::panic::catch_unwind(|| {
+            super::write_atomic_with(&target, |f| {
+                std::io::Write::write_all(f, b"half")?;
+                panic!("a bug while writing")
+            })
+        });
+        assert!(result.is_err());
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "the temporary is removed");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -1008,8 +1008,8 @@ pub struct CuboidRow {
     /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.
     pub fps_linear: f64,
     pub fps_trilinear: f64,
-    /// Linear time / trilinear time over interleaved pairs of frames (the reciprocal of the
-    /// median pair ratio trilinear / linear).
+    /// The trilinear frame rate over the linear one (median frame times of each path's
+    /// blocks of frames, A B B A).
     pub ratio: f64,
 }
 

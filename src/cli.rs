@@ -323,7 +323,8 @@ enum BenchWhat {
         /// Helices: count x triangles per object, comma-separated.
         #[arg(long, default_value = "4617x36,2566x256", value_delimiter = ',')]
         helices: Vec<String>,
-        /// Timed frames per measurement (median reported).
+        /// Timed frames per block: each path runs two blocks (A B B A), each after one
+        /// untimed frame; the medians of each path's frames are reported.
         #[arg(long, default_value_t = 5)]
         frames: usize,
         #[command(flatten)]

@@ -203,6 +203,12 @@ impl Composed {
         if let Some((_, first)) = transforms.iter().rev().find_map(|t| t.grid) {
             rows.resize(first as usize + range_rows, [0.0; 4]);
         }
+        let bytes = rows.len() as u64 * ROW_BYTES;
+        anyhow::ensure!(
+            bytes <= gpu.limits.max_buffer_size.min(u64::from(u32::MAX)),
+            "the scene's cuboid grids need {bytes} bytes of cells; one draw holds at most {}",
+            gpu.limits.max_buffer_size.min(u64::from(u32::MAX))
+        );
         let range = range_rows as u64 * ROW_BYTES;
         anyhow::ensure!(
             range <= gpu.limits.max_storage_buffer_binding_size,

@@ -67,8 +67,9 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
         mesh.positions.len(),
         mesh.triangle_count()
     );
-    // Streamed in blocks (a 10k-button export is 420 MB, never whole in memory), each built
-    // on another thread while the previous one is written.
+    // The file's bytes are streamed in blocks (a 10k-button export is 420 MB, never a second
+    // copy of the mesh in memory), each built on another thread while the previous one is
+    // written.
     let vertex = |i: usize| {
         let (p, n, uv) = (mesh.positions[i], mesh.normals[i], mesh.uvs[i]);
         [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, 1.0 - uv.y].map(f32::to_le_bytes)
@@ -102,6 +103,7 @@ fn write_pipelined(
     per_block: usize,
     fill: impl Fn(std::ops::Range<usize>, &mut Vec<u8>) + Send,
 ) -> std::io::Result<()> {
+    let per_block = per_block.max(1);
     let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Vec<u8>>(2);
     let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Vec<u8>>();
     for _ in 0..3 {
@@ -109,7 +111,7 @@ fn write_pipelined(
     }
     std::thread::scope(|scope| {
         scope.spawn(move || {
-            for start in (0..items).step_by(per_block.max(1)) {
+            for start in (0..items).step_by(per_block) {
                 // Both channels close when the writer stops (done or failed).
                 let Ok(mut block) = empty_rx.recv() else { return };
                 block.clear();

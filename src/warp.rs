@@ -616,7 +616,7 @@ pub fn warp_instance_cpu(
     mesh: &Mesh,
     mut put: impl FnMut(usize, WarpedVertex),
 ) {
-    let vertices = mesh.positions.iter().zip(&mesh.normals).enumerate();
+    let vertices = mesh.positions.iter().enumerate().map(|(v, p)| (v, (p, &mesh.normals[v])));
     if !matches!(s.mode, WarpMode::Point | WarpMode::Unattached) {
         for (v, (&p, &n)) in vertices {
             put(v, warp_vertex_cpu(texels, s, inst, p, n));

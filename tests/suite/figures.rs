@@ -215,6 +215,10 @@ fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
     let cpu =
         assemble(&item.mesh, werkstatt::warp::warp_layout_cpu(&texels, &draw.settings, &item.mesh, &draw.instances))
             .unwrap();
+    use werkstatt::nodes::export::WarpDevice;
+    assert_eq!((WarpDevice::Gpu.resolve(gpu), WarpDevice::Cpu.resolve(gpu)), (WarpDevice::Gpu, WarpDevice::Cpu));
+    let cpu_adapter = gpu.info.device_type == wgpu::DeviceType::Cpu;
+    assert_eq!(WarpDevice::Auto.resolve(gpu), if cpu_adapter { WarpDevice::Cpu } else { WarpDevice::Gpu });
     let Some(Value::Mesh(exported_on_cpu)) = ev.output("out_cpu", "mesh") else { panic!("no CPU export") };
     assert!(
         (&exported_on_cpu.positions, &exported_on_cpu.normals, &exported_on_cpu.indices)

@@ -197,6 +197,11 @@ fn gpu_warp_equals_the_cpu_reference_for_every_mode() {
                 })
                 .to_vec(),
         ),
+        // Unattached (mode 4) also takes the CPU twin's one-frame-per-instance path.
+        (
+            WarpMode::Unattached,
+            vec![point_instance(&Placement { piece: 0, u: 0.6, v: 0.2, angle: 10.0, scale: 1.0 }, 0.1, 2.0, 0.0, 0.0)],
+        ),
         (
             WarpMode::Area,
             vec![InstanceData::identity().with_tex(glam::Affine2::from_scale_angle_translation(
