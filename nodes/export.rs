@@ -162,7 +162,7 @@ pub fn assemble(mesh: &Mesh, warped: WarpedLayout) -> anyhow::Result<Mesh> {
                 scope.spawn(move || {
                     let mut kept = 0;
                     for (k, uvs) in uvs.chunks_mut(nv).enumerate() {
-                        uvs.copy_from_slice(&instance_uvs);
+                        uvs.copy_from_slice(instance_uvs);
                         let first = (c * chunk + k) * nv;
                         let (valid, positions) = (&valid[first..first + nv], &positions[first..first + nv]);
                         for t in mesh.indices.chunks_exact(3) {
