@@ -2,11 +2,11 @@
 // the grid's box and cells are in the object uniform (object.wgsl `grid_*`), its cells'
 // coefficient matrices C (3x8, six vec4 per cell: per coordinate the left and the right half,
 // cells x fastest, then y, then z) in one storage buffer shared by every grid of the pass, of
-// which each draw binds its own grid's rows (a dynamic offset; CuboidGrid::append_cells): six
+// which each draw binds its own grid's rows (binding 4 of the object group, at a dynamic offset; CuboidGrid::append_cells): six
 // loads per vertex instead of the cell's eight corners, and C is formed once per cell on the
 // CPU, not once per vertex.
 
-@group(2) @binding(0) var<storage, read> cuboid_cells: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> cuboid_cells: array<vec4<f32>>;
 
 struct Deformed {
     position: vec3<f32>,

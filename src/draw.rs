@@ -145,12 +145,13 @@ fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUn
 /// An item's bind groups for one draw: its object group, for attachments the warp group
 /// and the instance buffer, for non-linear cuboid transforms the group of all grids' cells.
 struct Prepared {
-    /// The object group and the item's dynamic offset into its uniform buffer.
-    object: (wgpu::BindGroup, u32),
+    /// The object group, and its dynamic offsets (how many): the item's object uniform, and
+    /// for an item under a non-linear grid its grid's first row of cells.
+    object: wgpu::BindGroup,
+    offsets: ([u32; 2], usize),
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
-    /// The group of all grids' cells, the item's normal method (which entry point draws it)
-    /// and the byte offset of its grid's rows.
-    cuboid: Option<(wgpu::BindGroup, NormalMethod, u32)>,
+    /// For an item under a non-linear grid, its normal method (which entry point draws it).
+    cuboid: Option<NormalMethod>,
     /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
     pn: Option<wgpu::BindGroup>,
 }
@@ -241,7 +242,6 @@ pub struct SceneDrawer {
     /// The cells (coefficient matrices) of every non-linear grid a draw uses, in one storage
     /// buffer per draw.
     grid_cells: BufferRing,
-    grid_group: Bindings,
     white: Image8,
     resolver: InstanceResolver,
 }
@@ -257,7 +257,6 @@ impl Default for SceneDrawer {
             warps: Vec::new(),
             pn_meshes: Vec::new(),
             grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
-            grid_group: Bindings::new(wgpu::ShaderStages::VERTEX),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
         }
@@ -267,21 +266,21 @@ impl Default for SceneDrawer {
 const OBJECT_VISIBILITY: wgpu::ShaderStages = wgpu::ShaderStages::VERTEX_FRAGMENT;
 
 impl SceneDrawer {
-    /// The layout of group 1 (the object: uniform, base map, sampler, gloss map).
-    fn object_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
+    /// The layout of group 1 (the object: uniform, base map, sampler, gloss map) and, for
+    /// items under a non-linear grid, binding 4: their grid's range of the buffer of cells (at
+    /// least one cell, placed by a second dynamic offset). One group per draw on both paths:
+    /// a third group rebound for every trilinear draw cost lavapipe a few percent.
+    fn object_layout(&self, gpu: &GpuContext, with_cells: bool) -> wgpu::BindGroupLayout {
         let white = self.white.gpu(gpu);
         let shape =
             [Bind::Uniform(&[]), Bind::Texture(white), Bind::Sampler(SamplerKind::LinearRepeat), Bind::Texture(white)];
         let mut entries = Bindings::new(OBJECT_VISIBILITY).layout_entries(&shape);
         entries[0] = dynamic_uniform_entry(0, OBJECT_VISIBILITY, OBJECT_UNIFORM_SIZE);
+        if with_cells {
+            let one_cell = ROW_BYTES * CuboidGrid::ROWS_PER_CELL as u64;
+            entries.push(dynamic_storage_entry(4, wgpu::ShaderStages::VERTEX, one_cell));
+        }
         gpu.bind_group_layout(&entries)
-    }
-
-    /// The layout of group 2 for cuboid items (a range of the buffer of all grids' cells, at
-    /// least one cell, placed per draw by a dynamic offset).
-    fn cuboid_layout(&self, gpu: &GpuContext) -> wgpu::BindGroupLayout {
-        let one_cell = ROW_BYTES * CuboidGrid::ROWS_PER_CELL as u64;
-        gpu.bind_group_layout(&[dynamic_storage_entry(0, wgpu::ShaderStages::VERTEX, one_cell)])
     }
 
     /// Bind groups for every item (resolving point attachments' frames on first use).
@@ -291,6 +290,7 @@ impl SceneDrawer {
         items: &[DrawItem],
         composed: Composed,
         object_layout: &wgpu::BindGroupLayout,
+        cuboid_object_layout: Option<&wgpu::BindGroupLayout>,
         warp_layout: Option<&wgpu::BindGroupLayout>,
         pn_layout: Option<&wgpu::BindGroupLayout>,
     ) -> anyhow::Result<Vec<Prepared>> {
@@ -300,11 +300,7 @@ impl SceneDrawer {
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
         let Composed { transforms, rows, range_rows } = composed;
-        let grids = (!rows.is_empty()).then(|| {
-            let buffer = self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone();
-            let range = Bind::DynamicStorage(&buffer, range_rows as u64 * ROW_BYTES);
-            self.grid_group.bind_group(gpu, &self.cuboid_layout(gpu), &[range])
-        });
+        let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone());
         // Every item's object uniform in one buffer, one write per draw (a write per item made
         // wgpu allocate a staging buffer each: most of a frame of thousands of small objects),
         // each item's at its dynamic offset.
@@ -321,13 +317,24 @@ impl SceneDrawer {
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
-            let binds = [
+            let mut binds = vec![
                 Bind::DynamicUniform(&uniform_buffer, OBJECT_UNIFORM_SIZE),
                 Bind::Texture(tex),
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            let object = (self.objects[i].bind_group(gpu, object_layout, &binds), (i as u64 * stride) as u32);
+            let mut offsets = ([(i as u64 * stride) as u32, 0], 1);
+            let mut layout = object_layout;
+            let cuboid = match (t.grid, &cells, cuboid_object_layout) {
+                (Some((normals, first)), Some(cells), Some(with_cells)) => {
+                    binds.push(Bind::DynamicStorage(cells, range_rows as u64 * ROW_BYTES));
+                    offsets = ([offsets.0[0], first * ROW_BYTES as u32], 2);
+                    layout = with_cells;
+                    Some(normals)
+                }
+                _ => None,
+            };
+            let object = self.objects[i].bind_group(gpu, layout, &binds);
             let warp = match (&item.attached, warp_layout) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
@@ -337,7 +344,6 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let cuboid = grids.clone().zip(t.grid).map(|(g, (normals, first))| (g, normals, first * ROW_BYTES as u32));
             let pn = match pn_layout {
                 Some(layout) if item.pn_pixels => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
@@ -347,7 +353,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            prepared.push(Prepared { object, warp, cuboid, pn });
+            prepared.push(Prepared { object, offsets, warp, cuboid, pn });
         }
         Ok(prepared)
     }
@@ -373,7 +379,7 @@ impl SceneDrawer {
         let frame_binds = [Bind::Uniform(bytemuck::bytes_of(&frame_uniform))];
         let frame_layout = self.frame.layout(gpu, &frame_binds);
         let frame_bg = self.frame.bind_group(gpu, &frame_layout, &frame_binds);
-        let object_layout = self.object_layout(gpu);
+        let object_layout = self.object_layout(gpu, false);
         // The attached pipeline only where something is attached: the node then depends on attach.wgsl.
         let warp_layout =
             items.iter().any(|i| i.attached.is_some()).then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
@@ -397,10 +403,10 @@ impl SceneDrawer {
             None => None,
         };
         let composed = Composed::new(gpu, items)?;
-        let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
-        let trilinear = match &cuboid_layout {
+        let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
+        let trilinear = match &object_cells_layout {
             Some(layout) => {
-                let groups = [Some(&frame_layout), Some(&object_layout), Some(layout)];
+                let groups = [Some(&frame_layout), Some(layout)];
                 let pipeline = |vertex_entry| {
                     gpu.render_pipeline(&RenderPipelineDesc {
                         vertex_entry,
@@ -428,7 +434,15 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), pn_layout.as_ref())?;
+        let prepared = self.prepare(
+            gpu,
+            items,
+            composed,
+            &object_layout,
+            object_cells_layout.as_ref(),
+            warp_layout.as_ref(),
+            pn_layout.as_ref(),
+        )?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -490,7 +504,7 @@ impl SceneDrawer {
         let tile_binds = [Bind::Uniform(bytemuck::bytes_of(&uniform))];
         let tiles_layout = self.tiles.layout(gpu, &tile_binds);
         let tiles_bg = self.tiles.bind_group(gpu, &tiles_layout, &tile_binds);
-        let object_layout = self.object_layout(gpu);
+        let object_layout = self.object_layout(gpu, false);
         let any_attached = items.iter().any(|i| i.attached.is_some());
         let warp_layout = any_attached.then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
         let index_layout = self.tile_index.layout(gpu, &[Bind::Uniform(&[0u8; 16])]);
@@ -519,20 +533,28 @@ impl SceneDrawer {
             None => None,
         };
         let composed = Composed::new(gpu, items)?;
-        let cuboid_layout = composed.any_nonlinear().then(|| self.cuboid_layout(gpu));
-        let trilinear = match &cuboid_layout {
+        let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
+        let trilinear = match &object_cells_layout {
             Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
                 depth: depth_test,
                 ..RenderPipelineDesc::new(
                     "cuboid_depth.wgsl",
-                    &[Some(&tiles_layout), Some(&object_layout), Some(layout)],
+                    &[Some(&tiles_layout), Some(layout)],
                     &[Some(Vertex::layout())],
                     &[],
                 )
             })?),
             None => None,
         };
-        let prepared = self.prepare(gpu, items, composed, &object_layout, warp_layout.as_ref(), None)?;
+        let prepared = self.prepare(
+            gpu,
+            items,
+            composed,
+            &object_layout,
+            object_cells_layout.as_ref(),
+            warp_layout.as_ref(),
+            None,
+        )?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
@@ -593,16 +615,13 @@ fn draw_items(
 ) {
     let mut bound = Bound::default();
     for (item, p) in items.iter().zip(prepared) {
-        pass.set_bind_group(1, &p.object.0, &[p.object.1]);
+        pass.set_bind_group(1, &p.object, &p.offsets.0[..p.offsets.1]);
         if let Some(t) = &item.tessellated {
             // Written by the compute pass this frame: counts never come back to the CPU.
             pass.set_vertex_buffer(0, t.vertices.slice(..));
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
-            match (&p.cuboid, pipelines.trilinear) {
-                (Some((group, normals, offset)), Some(trilinear)) => {
-                    bound.pipeline(pass, trilinear[*normals as usize]);
-                    bound.group2(pass, group, Some(*offset));
-                }
+            match (p.cuboid, pipelines.trilinear) {
+                (Some(normals), Some(trilinear)) => bound.pipeline(pass, trilinear[normals as usize]),
                 _ => bound.pipeline(pass, pipelines.plain),
             }
             let instances = plain_instances.min(crate::tessellation::MAX_INDIRECT_INSTANCES);
@@ -613,15 +632,14 @@ fn draw_items(
         if let (Some(group), Some(pipeline)) = (&p.pn, pipelines.pn) {
             // No vertex buffers: the shader reads the triangle's corners from group 2.
             bound.pipeline(pass, pipeline);
-            bound.group2(pass, group, None);
+            bound.group2(pass, group);
             pass.draw(0..mesh.index_count, 0..plain_instances);
             continue;
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        if let (Some((group, normals, offset)), Some(trilinear)) = (&p.cuboid, pipelines.trilinear) {
-            bound.pipeline(pass, trilinear[*normals as usize]);
-            bound.group2(pass, group, Some(*offset));
+        if let (Some(normals), Some(trilinear)) = (p.cuboid, pipelines.trilinear) {
+            bound.pipeline(pass, trilinear[normals as usize]);
             pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             continue;
         }
@@ -631,7 +649,7 @@ fn draw_items(
                     continue;
                 }
                 bound.pipeline(pass, pipeline);
-                bound.group2(pass, warp_bg, None);
+                bound.group2(pass, warp_bg);
                 pass.set_vertex_buffer(1, buffer.slice(..));
                 let instances = 0..a.instances.len() as u32;
                 if per_draw.is_empty() {
@@ -650,15 +668,13 @@ fn draw_items(
     }
 }
 
-/// What a pass has bound: a row of draws with the same pipeline or group 2 (and offset: the
-/// items under cuboid grids share one group at their own offsets) binds it once (lavapipe
-/// copies descriptor state per bind). Group 2 stays bound across pipelines whose layouts
-/// agree on it, as WebGPU specifies. `offset` is the cuboid group's dynamic offset (other
-/// groups 2 have none).
+/// What a pass has bound: a row of draws with the same pipeline or group 2 binds it once
+/// (lavapipe copies descriptor state per bind). Group 2 stays bound across pipelines whose
+/// layouts agree on it, as WebGPU specifies.
 #[derive(Default)]
 struct Bound {
     pipeline: Option<wgpu::RenderPipeline>,
-    group2: Option<(wgpu::BindGroup, Option<u32>)>,
+    group2: Option<wgpu::BindGroup>,
 }
 
 impl Bound {
@@ -669,10 +685,10 @@ impl Bound {
         }
     }
 
-    fn group2(&mut self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup, offset: Option<u32>) {
-        if self.group2.as_ref().is_none_or(|(g, o)| g != group || *o != offset) {
-            pass.set_bind_group(2, group, offset.as_slice());
-            self.group2 = Some((group.clone(), offset));
+    fn group2(&mut self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup) {
+        if self.group2.as_ref() != Some(group) {
+            pass.set_bind_group(2, group, &[]);
+            self.group2 = Some(group.clone());
         }
     }
 }
