@@ -169,6 +169,17 @@ struct Composed {
     range_rows: usize,
 }
 
+/// The layouts of a pass's per-item groups: the object group, with a grid's cells (where any
+/// item is under a non-linear grid), the warp group (where anything is attached) and the
+/// per-pixel PN group (G-buffer only).
+#[derive(Clone, Copy)]
+struct ItemLayouts<'a> {
+    object: &'a wgpu::BindGroupLayout,
+    object_cells: Option<&'a wgpu::BindGroupLayout>,
+    warp: Option<&'a wgpu::BindGroupLayout>,
+    pn: Option<&'a wgpu::BindGroupLayout>,
+}
+
 /// One item's transform after the fast path.
 struct ComposedItem {
     model: Mat4,
@@ -289,10 +300,7 @@ impl SceneDrawer {
         gpu: &GpuContext,
         items: &[DrawItem],
         composed: Composed,
-        object_layout: &wgpu::BindGroupLayout,
-        cuboid_object_layout: Option<&wgpu::BindGroupLayout>,
-        warp_layout: Option<&wgpu::BindGroupLayout>,
-        pn_layout: Option<&wgpu::BindGroupLayout>,
+        layouts: ItemLayouts<'_>,
     ) -> anyhow::Result<Vec<Prepared>> {
         while self.objects.len() < items.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
@@ -324,8 +332,8 @@ impl SceneDrawer {
                 Bind::Texture(gloss),
             ];
             let mut offsets = ([(i as u64 * stride) as u32, 0], 1);
-            let mut layout = object_layout;
-            let cuboid = match (t.grid, &cells, cuboid_object_layout) {
+            let mut layout = layouts.object;
+            let cuboid = match (t.grid, &cells, layouts.object_cells) {
                 (Some((normals, first)), Some(cells), Some(with_cells)) => {
                     binds.push(Bind::DynamicStorage(cells, range_rows as u64 * ROW_BYTES));
                     offsets = ([offsets.0[0], first * ROW_BYTES as u32], 2);
@@ -335,7 +343,7 @@ impl SceneDrawer {
                 _ => None,
             };
             let object = self.objects[i].bind_group(gpu, layout, &binds);
-            let warp = match (&item.attached, warp_layout) {
+            let warp = match (&item.attached, layouts.warp) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
                     let buffer = a.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, a))?.clone();
@@ -344,7 +352,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let pn = match pn_layout {
+            let pn = match layouts.pn {
                 Some(layout) if item.pn_pixels => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
                     let mesh = item.mesh.gpu(gpu);
@@ -434,15 +442,13 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(
-            gpu,
-            items,
-            composed,
-            &object_layout,
-            object_cells_layout.as_ref(),
-            warp_layout.as_ref(),
-            pn_layout.as_ref(),
-        )?;
+        let layouts = ItemLayouts {
+            object: &object_layout,
+            object_cells: object_cells_layout.as_ref(),
+            warp: warp_layout.as_ref(),
+            pn: pn_layout.as_ref(),
+        };
+        let prepared = self.prepare(gpu, items, composed, layouts)?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -546,15 +552,13 @@ impl SceneDrawer {
             })?),
             None => None,
         };
-        let prepared = self.prepare(
-            gpu,
-            items,
-            composed,
-            &object_layout,
-            object_cells_layout.as_ref(),
-            warp_layout.as_ref(),
-            None,
-        )?;
+        let layouts = ItemLayouts {
+            object: &object_layout,
+            object_cells: object_cells_layout.as_ref(),
+            warp: warp_layout.as_ref(),
+            pn: None,
+        };
+        let prepared = self.prepare(gpu, items, composed, layouts)?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
