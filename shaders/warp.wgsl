@@ -64,12 +64,17 @@ fn load_texel(q: vec2<i32>) -> Texel {
     return Texel(cu.xyz, cn.xyz, cv.xyz, vec3<f32>(cu.w, cn.w, cv.w), dot(cn.xyz, cn.xyz) >= 0.25);
 }
 
+// Whether the partner reads are compiled in (src/draw.rs builds a variant without them for
+// surfaces without seams: lavapipe runs the masked branch below for every footprint texel,
+// which doubled the cost of area and curve attachments).
+override SEAMS: bool = true;
+
 // A footprint texel's frame: its own where a piece covers it; in the gutter beside a seam, the
 // partner piece's frame with its tangents turned into this piece's UV directions, so lookups
 // blend both pieces across the seam (dissertation section 4.1.2, "Outliers and Seams").
 fn texel_or_partner(q: vec2<i32>, dims: vec2<i32>) -> Texel {
     let own = load_texel(q);
-    if own.valid {
+    if own.valid || !SEAMS {
         return own;
     }
     // A surface without seams binds a 1x1 placeholder.

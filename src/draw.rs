@@ -399,16 +399,19 @@ impl SceneDrawer {
             ..RenderPipelineDesc::new("gbuffer.wgsl", &[Some(&frame_layout), Some(&object_layout)], &vertex, &targets)
         })?;
         let attached = match &warp_layout {
-            Some(warp_layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
-                depth: depth_test,
-                ..RenderPipelineDesc::new(
-                    "attach.wgsl",
-                    &[Some(&frame_layout), Some(&object_layout), Some(warp_layout)],
-                    &[Some(Vertex::layout()), Some(InstanceData::layout())],
-                    &targets,
-                )
-            })?),
-            None => None,
+            Some(warp_layout) => attached_variants(items, |constants| {
+                gpu.render_pipeline(&RenderPipelineDesc {
+                    depth: depth_test,
+                    constants,
+                    ..RenderPipelineDesc::new(
+                        "attach.wgsl",
+                        &[Some(&frame_layout), Some(&object_layout), Some(warp_layout)],
+                        &[Some(Vertex::layout()), Some(InstanceData::layout())],
+                        &targets,
+                    )
+                })
+            })?,
+            None => [None, None],
         };
         let composed = Composed::new(gpu, items)?;
         let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
@@ -466,7 +469,7 @@ impl SceneDrawer {
             pass.set_bind_group(0, &frame_bg, &[]);
             let pipelines = Pipelines {
                 plain: &plain,
-                attached: attached.as_ref(),
+                attached: [attached[0].as_ref(), attached[1].as_ref()],
                 trilinear: trilinear.as_ref().map(|[tangent, direct]| [tangent, direct]),
                 pn: pn.as_ref(),
             };
@@ -526,17 +529,20 @@ impl SceneDrawer {
             )
         })?;
         let attached = match &warp_layout {
-            Some(warp_layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
-                vertex_entry: "vs_attached",
-                depth: depth_test,
-                ..RenderPipelineDesc::new(
-                    "depth.wgsl",
-                    &[Some(&tiles_layout), Some(&object_layout), Some(warp_layout), Some(&index_layout)],
-                    &[Some(Vertex::layout()), Some(InstanceData::layout())],
-                    &[],
-                )
-            })?),
-            None => None,
+            Some(warp_layout) => attached_variants(items, |constants| {
+                gpu.render_pipeline(&RenderPipelineDesc {
+                    vertex_entry: "vs_attached",
+                    depth: depth_test,
+                    constants,
+                    ..RenderPipelineDesc::new(
+                        "depth.wgsl",
+                        &[Some(&tiles_layout), Some(&object_layout), Some(warp_layout), Some(&index_layout)],
+                        &[Some(Vertex::layout()), Some(InstanceData::layout())],
+                        &[],
+                    )
+                })
+            })?,
+            None => [None, None],
         };
         let composed = Composed::new(gpu, items)?;
         let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
@@ -587,18 +593,37 @@ impl SceneDrawer {
             pass.set_bind_group(0, &tiles_bg, &[]);
             // Depth only: no normals, one pipeline for both methods.
             let trilinear = trilinear.as_ref().map(|p| [p, p]);
-            let pipelines = Pipelines { plain: &plain, attached: attached.as_ref(), trilinear, pn: None };
+            let pipelines = Pipelines {
+                plain: &plain,
+                attached: [attached[0].as_ref(), attached[1].as_ref()],
+                trilinear,
+                pn: None,
+            };
             draw_items(gpu, &mut pass, items, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
         });
         Ok(target)
     }
 }
 
+/// The attached-item pipelines a pass needs, by whether the surface has seams (index 1): the
+/// variant without seams compiles the partner reads out (`SEAMS` in shaders/warp.wgsl); each is
+/// built only if some item needs it.
+fn attached_variants(
+    items: &[DrawItem],
+    build: impl Fn(&[(&str, u32)]) -> Result<wgpu::RenderPipeline, crate::gpu::ShaderError>,
+) -> Result<[Option<wgpu::RenderPipeline>; 2], crate::gpu::ShaderError> {
+    let needs = |seams: bool| items.iter().any(|i| i.attached.as_ref().is_some_and(|a| a.matrix.has_seams() == seams));
+    let variant = |seams: bool| needs(seams).then(|| build(&[("SEAMS", u32::from(seams))])).transpose();
+    Ok([variant(false)?, variant(true)?])
+}
+
 /// The pipelines of one target: plain meshes, deferred-warped attachments and items under a
 /// non-linear cuboid transform (the latter two only where the scene has such items).
 struct Pipelines<'a> {
     plain: &'a wgpu::RenderPipeline,
-    attached: Option<&'a wgpu::RenderPipeline>,
+    /// Attached items by whether their surface has seams (the variant without seams compiles
+    /// the partner reads out).
+    attached: [Option<&'a wgpu::RenderPipeline>; 2],
     /// By normal method: tangent space, direct.
     trilinear: Option<[&'a wgpu::RenderPipeline; 2]>,
     /// Per-pixel PN depth (G-buffer only; elsewhere such items draw plainly).
@@ -647,7 +672,8 @@ fn draw_items(
             pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
             continue;
         }
-        match (&item.attached, &p.warp, pipelines.attached) {
+        let attached = item.attached.as_ref().and_then(|a| pipelines.attached[usize::from(a.matrix.has_seams())]);
+        match (&item.attached, &p.warp, attached) {
             (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
                 if a.instances.is_empty() {
                     continue;

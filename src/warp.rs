@@ -20,6 +20,13 @@ pub struct MatrixTexture {
     pub resolution: u32,
 }
 
+impl MatrixTexture {
+    /// Whether the surface has sewn seams (a surface without binds a 1x1 placeholder map).
+    pub fn has_seams(&self) -> bool {
+        self.seams.width > 1
+    }
+}
+
 /// A frame read back from the matrix texture (for tests and CPU paths).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TexelFrame {

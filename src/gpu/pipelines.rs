@@ -48,6 +48,10 @@ pub struct RenderPipelineDesc<'a> {
     /// A depth buffer: its format and test; depth is written.
     pub depth: Option<(wgpu::TextureFormat, wgpu::CompareFunction)>,
     pub cull: Option<wgpu::Face>,
+    /// Values of the shader's pipeline-overridable constants (`override`; a bool as 0 or 1):
+    /// a variant with a feature compiled out where a branch would cost (lavapipe runs a
+    /// branch's body masked rather than jumping over it).
+    pub constants: &'a [(&'a str, u32)],
 }
 
 impl<'a> RenderPipelineDesc<'a> {
@@ -67,6 +71,7 @@ impl<'a> RenderPipelineDesc<'a> {
             targets,
             depth: None,
             cull: None,
+            constants: &[],
         }
     }
 
@@ -297,6 +302,8 @@ pub(crate) fn render_pipeline(
             bind_group_layouts: desc.groups,
             immediate_size: 0,
         });
+        let constants: Vec<(&str, f64)> = desc.constants.iter().map(|&(name, v)| (name, f64::from(v))).collect();
+        let options = wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() };
         let targets: Vec<Option<wgpu::ColorTargetState>> = desc
             .targets
             .iter()
@@ -309,13 +316,13 @@ pub(crate) fn render_pipeline(
                 module,
                 entry_point: Some(desc.vertex_entry),
                 buffers: desc.vertex_buffers,
-                compilation_options: Default::default(),
+                compilation_options: options.clone(),
             },
             fragment: Some(wgpu::FragmentState {
                 module,
                 entry_point: Some(desc.fragment_entry),
                 targets: &targets,
-                compilation_options: Default::default(),
+                compilation_options: options,
             }),
             primitive: wgpu::PrimitiveState { cull_mode: desc.cull, ..Default::default() },
             depth_stencil: desc.depth.map(|(format, compare)| wgpu::DepthStencilState {
