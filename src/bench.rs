@@ -69,8 +69,13 @@ fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<()>) -> any
         work()?;
         samples.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    samples.sort_by(f64::total_cmp);
-    Ok(samples[samples.len() / 2])
+    Ok(median(samples))
+}
+
+/// The median of samples (the upper one of an even count); `v` is not empty.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// One row of `werkstatt bench attachments`.
@@ -759,10 +764,6 @@ fn interleaved_pairs(
         b.push(tb);
         ratio.push(tb / ta);
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     Ok((median(a), median(b), median(ratio)))
 }
 
@@ -783,10 +784,6 @@ fn abba_blocks(
             if second { b.push(t) } else { a.push(t) }
         }
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let (ma, mb) = (median(a), median(b));
     Ok((ma, mb, mb / ma))
 }

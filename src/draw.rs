@@ -145,10 +145,10 @@ fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUn
 /// An item's bind groups for one draw: its object group, for attachments the warp group
 /// and the instance buffer, for non-linear cuboid transforms the group of all grids' cells.
 struct Prepared {
-    /// The object group, and its dynamic offsets (how many): the item's object uniform, and
-    /// for an item under a non-linear grid its grid's first row of cells.
+    /// The object group, and its dynamic offsets: the item's object uniform, and for an item
+    /// under a non-linear grid (`cuboid`) its grid's first row of cells.
     object: wgpu::BindGroup,
-    offsets: ([u32; 2], usize),
+    offsets: [u32; 2],
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
     /// For an item under a non-linear grid, its normal method (which entry point draws it).
     cuboid: Option<NormalMethod>,
@@ -331,12 +331,12 @@ impl SceneDrawer {
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            let mut offsets = ([(i as u64 * stride) as u32, 0], 1);
+            let mut offsets = [(i as u64 * stride) as u32, 0];
             let mut layout = layouts.object;
             let cuboid = match (t.grid, &cells, layouts.object_cells) {
                 (Some((normals, first)), Some(cells), Some(with_cells)) => {
                     binds.push(Bind::DynamicStorage(cells, range_rows as u64 * ROW_BYTES));
-                    offsets = ([offsets.0[0], first * ROW_BYTES as u32], 2);
+                    offsets[1] = first * ROW_BYTES as u32;
                     layout = with_cells;
                     Some(normals)
                 }
@@ -644,7 +644,7 @@ fn draw_items(
 ) {
     let mut bound = Bound::default();
     for (item, p) in items.iter().zip(prepared) {
-        pass.set_bind_group(1, &p.object, &p.offsets.0[..p.offsets.1]);
+        pass.set_bind_group(1, &p.object, &p.offsets[..1 + usize::from(p.cuboid.is_some())]);
         if let Some(t) = &item.tessellated {
             // Written by the compute pass this frame: counts never come back to the CPU.
             pass.set_vertex_buffer(0, t.vertices.slice(..));
