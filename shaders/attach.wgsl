@@ -33,5 +33,7 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
     if in.outlier > 0.0 {
         discard;
     }
+    // An attached item draws alone: its object is the first of the draw's range.
+    use_object(0u);
     return write_gbuffer(in.normal, in.uv, in.view_depth, front);
 }

@@ -1,10 +1,11 @@
 // The trilinear (cuboid grid) transform of a draw item (src/cuboid.rs, dissertation eq. 3.4):
-// the grid's box and cells are in the object uniform (object.wgsl `grid_*`), its cells'
-// coefficient matrices C (3x8, six vec4 per cell: per coordinate the left and the right half,
-// cells x fastest, then y, then z) in one storage buffer shared by every grid of the pass, of
-// which each draw binds its own grid's rows (binding 4 of the object group, at a dynamic offset; CuboidGrid::append_cells): six
-// loads per vertex instead of the cell's eight corners, and C is formed once per cell on the
-// CPU, not once per vertex.
+// the grid's box and cells are in the object (object.wgsl `grid_*`), its cells' coefficient
+// matrices C (3x8, six vec4 per cell: per coordinate the left and the right half, cells x
+// fastest, then y, then z) in one storage buffer shared by every grid of the pass, of which
+// each draw binds the rows of its items' grids (binding 4 of the object group, at a dynamic
+// offset; the object's `grid_rows.x` says where its grid starts in them; CuboidGrid::append_cells):
+// six loads per vertex instead of the cell's eight corners, and C is formed once per cell on
+// the CPU, not once per vertex.
 
 @group(1) @binding(4) var<storage, read> cuboid_cells: array<vec4<f32>>;
 
@@ -22,7 +23,7 @@ fn cuboid_deform(p: vec3<f32>) -> Deformed {
     let cell = clamp(floor(t), vec3<f32>(0.0), n - 1.0);
     let l = t - cell;
     let index = i32(cell.x + n.x * (cell.y + n.y * cell.z));
-    let first = 6 * index;
+    let first = i32(object.grid_rows.x) + 6 * index;
     // Rows of C: left half (c_xyz, c_yz, c_xz, c_xy) and right half (c_z, c_y, c_x, c_1).
     let x_left = cuboid_cells[first];
     let x_right = cuboid_cells[first + 1];

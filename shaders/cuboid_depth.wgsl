@@ -1,5 +1,5 @@
 // Depth tiles (shaders/depth.wgsl) for items under a non-linear cuboid transform: drawn
-// instanced once per tile like plain meshes, the vertex deformed by the grid first.
+// instanced once per tile and item like plain meshes, the vertex deformed by the grid first.
 
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
@@ -12,7 +12,9 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_main(v: VertexIn, @builtin(instance_index) tile: u32) -> VertexOut {
+fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
+    use_object(instance / views.count.x);
+    let tile = instance % views.count.x;
     let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
     var out: VertexOut;
     out.clip = views.tiles[tile].to_tile * vec4<f32>(d.position, 1.0);

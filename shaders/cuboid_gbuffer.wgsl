@@ -9,9 +9,12 @@ struct VertexOut {
     @location(0) normal: vec3<f32>,
     @location(1) uv: vec2<f32>,
     @location(2) view_depth: f32,
+    @location(3) @interpolate(flat) object: u32,
 };
 
-fn cuboid_vertex(v: VertexIn, direct_normals: bool) -> VertexOut {
+// One instance per item of the draw.
+fn cuboid_vertex(v: VertexIn, item: u32, direct_normals: bool) -> VertexOut {
+    use_object(item);
     let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
     let world = vec4<f32>(d.position, 1.0);
     var out: VertexOut;
@@ -21,21 +24,23 @@ fn cuboid_vertex(v: VertexIn, direct_normals: bool) -> VertexOut {
     out.normal = normalize(cuboid_normal(d.jacobian, n, direct_normals));
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
+    out.object = item;
     return out;
 }
 
 // One entry point per normal method (NormalMethod in src/cuboid.rs).
 @vertex
-fn vs_tangent_space(v: VertexIn) -> VertexOut {
-    return cuboid_vertex(v, false);
+fn vs_tangent_space(v: VertexIn, @builtin(instance_index) item: u32) -> VertexOut {
+    return cuboid_vertex(v, item, false);
 }
 
 @vertex
-fn vs_direct(v: VertexIn) -> VertexOut {
-    return cuboid_vertex(v, true);
+fn vs_direct(v: VertexIn, @builtin(instance_index) item: u32) -> VertexOut {
+    return cuboid_vertex(v, item, true);
 }
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
+    use_object(in.object);
     return write_gbuffer(in.normal, in.uv, in.view_depth, front);
 }

@@ -1,6 +1,6 @@
 // Depth only, into tiles of one texture, one view per tile (src/draw.rs `depth_tiles`):
-// shadow maps of many lights in one pass. Plain meshes are drawn instanced once per tile (the
-// instance index is the tile); attached items once per tile with the tile in group 3.
+// shadow maps of many lights in one pass. Plain meshes are drawn instanced once per tile and
+// item (depth_tiles.wgsl `count`); attached items once per tile with the tile in group 3.
 
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
@@ -18,7 +18,9 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_plain(v: VertexIn, @builtin(instance_index) tile: u32) -> VertexOut {
+fn vs_plain(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
+    use_object(instance / views.count.x);
+    let tile = instance % views.count.x;
     var out: VertexOut;
     out.clip = views.tiles[tile].to_tile * object.model * vec4<f32>(v.position, 1.0);
     out.tile = tile;

@@ -58,6 +58,8 @@ fn flat_barycentrics(eye: vec3<f32>, x: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>,
 
 @vertex
 fn vs_main(@builtin(vertex_index) vi: u32) -> PnVertexOut {
+    // A PN item draws alone: its object is the first of the draw's range.
+    use_object(0u);
     let k = vi % 3u;
     var out: PnVertexOut;
     out.clip = frame.view_proj * vec4<f32>(world_position(mesh_indices[vi]), 1.0);
@@ -68,6 +70,7 @@ fn vs_main(@builtin(vertex_index) vi: u32) -> PnVertexOut {
 
 @fragment
 fn fs_main(in: PnVertexOut, @builtin(front_facing) front: bool) -> PnGBufferOut {
+    use_object(0u);
     let i0 = mesh_indices[in.triangle * 3u];
     let i1 = mesh_indices[in.triangle * 3u + 1u];
     let i2 = mesh_indices[in.triangle * 3u + 2u];

@@ -1,5 +1,7 @@
 // A drawn object (group 1): its transform and material, shared by every pass that draws
-// the scene (src/draw.rs `ObjectUniform`).
+// the scene (src/draw.rs `ObjectUniform`). All items' objects lie in one storage buffer; a draw
+// binds the range from its first item (a dynamic offset), so items that share a mesh and maps
+// draw as one instanced draw, each entry point picking its instance's object with `use_object`.
 
 struct Object {
     model: mat4x4<f32>,
@@ -18,9 +20,19 @@ struct Object {
     grid_inv_size: vec4<f32>,
     // xyz: cells per axis.
     grid_cells: vec4<f32>,
+    // x: the grid's first row of cells, counted from the draw's range (cuboid.wgsl).
+    grid_rows: vec4<u32>,
+    // Pads the object to 256 bytes, the largest storage offset alignment an adapter may ask.
+    unused: vec4<f32>,
 };
 
-@group(1) @binding(0) var<uniform> object: Object;
+@group(1) @binding(0) var<storage, read> objects: array<Object>;
+// The object this invocation draws, set first thing by every entry point.
+var<private> object: Object;
+
+fn use_object(index: u32) {
+    object = objects[index];
+}
 @group(1) @binding(1) var base_map: texture_2d<f32>;
 @group(1) @binding(2) var base_sampler: sampler;
 // Glossiness parameter map (dissertation Fig. 5.23), red channel.

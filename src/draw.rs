@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
-use crate::gpu::pass::{Bindings, dynamic_storage_entry, dynamic_uniform_entry, texture_entry, uniform_entry};
+use crate::gpu::pass::{Bindings, dynamic_storage_entry, texture_entry, uniform_entry};
 use crate::gpu::{
     Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
 };
@@ -48,9 +48,15 @@ struct ObjectUniform {
     extra: [f32; 4],
     /// A non-linear cuboid grid's header ([`CuboidGrid::header`]), zero without one.
     grid: [[f32; 4]; 3],
+    /// x: the first row of the grid's cells, counted from the first row its draw binds.
+    grid_rows: [u32; 4],
+    unused: [f32; 4],
 }
 
-const OBJECT_UNIFORM_SIZE: u64 = std::mem::size_of::<ObjectUniform>() as u64;
+/// An object's size in the storage buffer of all objects: a multiple of every storage offset
+/// alignment an adapter may ask (at most 256), so a draw's range can start at any item.
+const OBJECT_SIZE: u64 = std::mem::size_of::<ObjectUniform>() as u64;
+const _: () = assert!(OBJECT_SIZE == 256);
 
 /// shaders/depth.wgsl `TileView`: a tile's view-projection folded with the map from clip
 /// space into its rectangle of the texture, and that rectangle in texels (x0, y0, x1, y1) for
@@ -66,6 +72,8 @@ struct TileUniform {
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct TilesUniform {
     tiles: [TileUniform; MAX_TILES],
+    /// x: the number of tiles (instances per item of a plain or cuboid draw).
+    count: [u32; 4],
 }
 
 /// Group 2 of shaders/warp.wgsl: the matrix texture's three columns, the warp settings
@@ -123,10 +131,10 @@ impl InstanceResolver {
     }
 }
 
-/// `model` is the item's own matrix, or the composed one where the linear fast path folded
-/// an affine cuboid grid into it; `grid` the header of a remaining non-linear grid.
-fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUniform {
-    let m = &item.material;
+/// `t.model` is the item's own matrix, or the composed one where the linear fast path folded
+/// an affine cuboid grid into it; `t.header` the header of a remaining non-linear grid.
+fn object_uniform(item: &DrawItem, t: &ComposedItem) -> ObjectUniform {
+    let (model, m) = (t.model, &item.material);
     ObjectUniform {
         model: model.to_cols_array_2d(),
         normal_matrix: model.inverse().transpose().to_cols_array_2d(),
@@ -138,35 +146,50 @@ fn object_uniform(item: &DrawItem, model: Mat4, grid: [[f32; 4]; 3]) -> ObjectUn
             f32::from(u8::from(m.gloss_map.is_some())),
         ],
         extra: [m.gloss_min, 0.0, 0.0, 0.0],
-        grid,
+        grid: t.header,
+        grid_rows: [t.grid.map_or(0, |(_, row)| row), 0, 0, 0],
+        unused: [0.0; 4],
     }
 }
 
-/// An item's bind groups for one draw: its object group, for attachments the warp group
-/// and the instance buffer, for non-linear cuboid transforms the group of all grids' cells.
+/// One draw's bind groups: its object group, for an attachment the warp group and the
+/// instance buffer, for per-pixel PN depth the mesh's buffers.
 struct Prepared {
-    /// The object group, and its dynamic offsets: the item's object uniform, and for an item
-    /// under a non-linear grid (`cuboid`) its grid's first row of cells.
+    /// The object group, and its dynamic offsets: the draw's first object, and where the draw
+    /// has items under non-linear grids, its first row of cells.
     object: wgpu::BindGroup,
     offsets: [u32; 2],
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
-    /// For an item under a non-linear grid, its normal method (which entry point draws it).
+    /// For items under a non-linear grid, their normal method (which entry point draws them).
     cuboid: Option<NormalMethod>,
     /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
     pn: Option<wgpu::BindGroup>,
 }
 
 /// The items' transforms after the linear fast path, tested once per composed transform right
-/// before drawing: per item its model matrix (an affine grid folded in), the header of a grid
-/// that stays non-linear, its normal method and the first row of its cells; the cells of those
-/// grids in one buffer. Each draw binds only its own grid's rows (a dynamic offset): lavapipe
-/// copies a bound storage range for every draw, and the whole buffer made a frame of 4617
-/// helix objects twice as slow as with affine transforms.
+/// before drawing, and the draws they make: consecutive items that share a mesh, maps and
+/// pipeline draw as one instanced draw, each instance reading its own object (and grid).
+/// The cells of all non-linear grids lie in one buffer; each draw binds only its own items'
+/// rows (a dynamic offset): lavapipe copies a bound storage range for every draw, and binding
+/// the whole buffer made a frame of 4617 separately drawn helix objects twice as slow as with
+/// affine transforms.
 struct Composed {
     transforms: Vec<ComposedItem>,
+    draws: Vec<DrawRange>,
     rows: Vec<[f32; 4]>,
-    /// The rows one draw binds: the largest grid's.
+    /// The rows one draw binds: the most any draw needs.
     range_rows: usize,
+    /// The objects one draw binds: the most items of any draw.
+    range_objects: usize,
+}
+
+/// Consecutive items drawn by one draw call, and the rows of their grids' cells.
+#[derive(Clone, Copy)]
+struct DrawRange {
+    first: usize,
+    count: usize,
+    first_row: usize,
+    row_count: usize,
 }
 
 /// The layouts of a pass's per-item groups: the object group, with a grid's cells (where any
@@ -185,50 +208,97 @@ struct ComposedItem {
     model: Mat4,
     /// The object uniform's grid header (zero without a non-linear grid).
     header: [[f32; 4]; 3],
-    /// A non-linear grid's normal method and the first row of its cells.
+    /// A non-linear grid's normal method and the first row of its cells, counted from its
+    /// draw's first row.
     grid: Option<(NormalMethod, u32)>,
+    grid_rows: Option<Vec<[f32; 4]>>,
 }
 
 /// One row of a grid's cells (a vec4 of f32).
 const ROW_BYTES: u64 = 16;
 
+/// Whether `b` can join the instanced draw of `a`: both plain or both under non-linear grids
+/// of one normal method, on one mesh with the same maps (one object group).
+fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bool {
+    let alone = |i: &DrawItem| i.attached.is_some() || i.tessellated.is_some() || i.pn_pixels;
+    let same_map = |x: &Option<std::sync::Arc<Image8>>, y: &Option<std::sync::Arc<Image8>>| match (x, y) {
+        (None, None) => true,
+        (Some(x), Some(y)) => std::sync::Arc::ptr_eq(x, y),
+        _ => false,
+    };
+    let ((ai, at), (bi, bt)) = (a, b);
+    !alone(ai)
+        && !alone(bi)
+        && std::sync::Arc::ptr_eq(&ai.mesh, &bi.mesh)
+        && same_map(&ai.material.texture, &bi.material.texture)
+        && same_map(&ai.material.gloss_map, &bi.material.gloss_map)
+        && at.grid.map(|(normals, _)| normals) == bt.grid.map(|(normals, _)| normals)
+}
+
 impl Composed {
     fn new(gpu: &GpuContext, items: &[DrawItem]) -> anyhow::Result<Composed> {
-        // Each grid starts where a dynamic offset may point.
-        let align = (u64::from(gpu.limits.min_storage_buffer_offset_alignment) / ROW_BYTES).max(1) as usize;
-        let mut rows: Vec<[f32; 4]> = Vec::new();
-        let mut range_rows = 0;
-        let transforms = items
+        let max_range = gpu.limits.max_storage_buffer_binding_size;
+        let mut transforms: Vec<ComposedItem> = items
             .iter()
             .map(|item| match fast_path(item.model, item.cuboid.clone()) {
                 (model, Some(grid)) => {
-                    rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
-                    let first = rows.len();
+                    let mut rows = Vec::new();
                     grid.append_cells(&mut rows);
-                    range_rows = range_rows.max(rows.len() - first);
-                    ComposedItem { model, header: grid.header(), grid: Some((grid.normals, first as u32)) }
+                    let header = grid.header();
+                    ComposedItem { model, header, grid: Some((grid.normals, 0)), grid_rows: Some(rows) }
                 }
-                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None },
+                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None, grid_rows: None },
             })
-            .collect::<Vec<_>>();
-        // The last grid's range may reach past its own rows.
-        if let Some((_, first)) = transforms.iter().rev().find_map(|t| t.grid) {
-            rows.resize(first as usize + range_rows, [0.0; 4]);
+            .collect();
+        if let Some(rows) = transforms
+            .iter()
+            .filter_map(|t| t.grid_rows.as_ref())
+            .find(|rows| rows.len() as u64 * ROW_BYTES > max_range)
+        {
+            anyhow::bail!(
+                "a cuboid grid of {} cells is more than one draw can bind ({max_range} bytes at most)",
+                rows.len() / CuboidGrid::ROWS_PER_CELL
+            );
+        }
+        // Each draw's rows start where a dynamic offset may point.
+        let align = (u64::from(gpu.limits.min_storage_buffer_offset_alignment) / ROW_BYTES).max(1) as usize;
+        let mut rows: Vec<[f32; 4]> = Vec::new();
+        let mut draws: Vec<DrawRange> = Vec::new();
+        for i in 0..items.len() {
+            let grid_len = transforms[i].grid_rows.as_ref().map_or(0, Vec::len);
+            let joins = draws.last().is_some_and(|d| {
+                let first = d.first;
+                same_draw((&items[first], &transforms[first]), (&items[i], &transforms[i]))
+                    && ((rows.len() + grid_len - d.first_row) as u64 * ROW_BYTES) <= max_range
+            });
+            if !joins {
+                rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
+                draws.push(DrawRange { first: i, count: 0, first_row: rows.len(), row_count: 0 });
+            }
+            let draw = draws.last_mut().expect("pushed above");
+            draw.count += 1;
+            let t = &mut transforms[i];
+            if let (Some((_, first)), Some(grid)) = (&mut t.grid, t.grid_rows.take()) {
+                *first = (rows.len() - draw.first_row) as u32;
+                rows.extend(grid);
+                draw.row_count = rows.len() - draw.first_row;
+            }
+        }
+        let range_rows = draws.iter().map(|d| d.row_count).max().unwrap_or(0);
+        let range_objects = draws.iter().map(|d| d.count).max().unwrap_or(1);
+        // The last draw's ranges may reach past its own rows and objects.
+        if let Some(last) = draws.last()
+            && !rows.is_empty()
+        {
+            rows.resize(last.first_row + range_rows, [0.0; 4]);
         }
         let bytes = rows.len() as u64 * ROW_BYTES;
+        let most = gpu.limits.max_buffer_size.min(u64::from(u32::MAX));
         anyhow::ensure!(
-            bytes <= gpu.limits.max_buffer_size.min(u64::from(u32::MAX)),
-            "the scene's cuboid grids need {bytes} bytes of cells; one draw holds at most {}",
-            gpu.limits.max_buffer_size.min(u64::from(u32::MAX))
+            bytes <= most,
+            "the scene's cuboid grids need {bytes} bytes of cells; one draw holds at most {most}"
         );
-        let range = range_rows as u64 * ROW_BYTES;
-        anyhow::ensure!(
-            range <= gpu.limits.max_storage_buffer_binding_size,
-            "a cuboid grid of {} cells is more than one draw can bind ({} bytes at most)",
-            range_rows / CuboidGrid::ROWS_PER_CELL,
-            gpu.limits.max_storage_buffer_binding_size
-        );
-        Ok(Composed { transforms, rows, range_rows })
+        Ok(Composed { transforms, draws, rows, range_rows, range_objects })
     }
 
     /// Whether any item still needs the trilinear vertex stage.
@@ -244,8 +314,8 @@ pub struct SceneDrawer {
     frame: Bindings,
     tiles: Bindings,
     tile_index: Bindings,
-    /// All items' object uniforms, one buffer per draw; per item its object group (cached while
-    /// the buffer and its maps stay: a cache shared by all items would thrash with many maps).
+    /// All items' objects, one buffer per pass; per draw its object group (cached while the
+    /// buffer and its maps stay: a cache shared by all draws would thrash with many maps).
     object_uniforms: BufferRing,
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
@@ -255,6 +325,8 @@ pub struct SceneDrawer {
     grid_cells: BufferRing,
     white: Image8,
     resolver: InstanceResolver,
+    /// The draws the last pass recorded (an attached item counts once).
+    draw_count: usize,
 }
 
 impl Default for SceneDrawer {
@@ -263,13 +335,14 @@ impl Default for SceneDrawer {
             frame: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
-            object_uniforms: BufferRing::uniform("object uniforms"),
+            object_uniforms: BufferRing::new("objects", wgpu::BufferUsages::STORAGE),
             objects: Vec::new(),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
             grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
+            draw_count: 0,
         }
     }
 }
@@ -277,8 +350,14 @@ impl Default for SceneDrawer {
 const OBJECT_VISIBILITY: wgpu::ShaderStages = wgpu::ShaderStages::VERTEX_FRAGMENT;
 
 impl SceneDrawer {
-    /// The layout of group 1 (the object: uniform, base map, sampler, gloss map) and, for
-    /// items under a non-linear grid, binding 4: their grid's range of the buffer of cells (at
+    /// The draws the last pass recorded: items that share a mesh, maps and pipeline count once
+    /// (an attached item counts once, whatever its tiles).
+    pub fn draw_count(&self) -> usize {
+        self.draw_count
+    }
+
+    /// The layout of group 1 (the objects of a draw, base map, sampler, gloss map) and, for
+    /// items under a non-linear grid, binding 4: their grids' range of the buffer of cells (at
     /// least one cell, placed by a second dynamic offset). One group per draw on both paths:
     /// a third group rebound for every trilinear draw cost lavapipe a few percent.
     fn object_layout(&self, gpu: &GpuContext, with_cells: bool) -> wgpu::BindGroupLayout {
@@ -286,7 +365,7 @@ impl SceneDrawer {
         let shape =
             [Bind::Uniform(&[]), Bind::Texture(white), Bind::Sampler(SamplerKind::LinearRepeat), Bind::Texture(white)];
         let mut entries = Bindings::new(OBJECT_VISIBILITY).layout_entries(&shape);
-        entries[0] = dynamic_uniform_entry(0, OBJECT_VISIBILITY, OBJECT_UNIFORM_SIZE);
+        entries[0] = dynamic_storage_entry(0, OBJECT_VISIBILITY, OBJECT_SIZE);
         if with_cells {
             let one_cell = ROW_BYTES * CuboidGrid::ROWS_PER_CELL as u64;
             entries.push(dynamic_storage_entry(4, wgpu::ShaderStages::VERTEX, one_cell));
@@ -294,61 +373,60 @@ impl SceneDrawer {
         gpu.bind_group_layout(&entries)
     }
 
-    /// Bind groups for every item (resolving point attachments' frames on first use).
+    /// Bind groups for every draw (resolving point attachments' frames on first use).
     fn prepare(
         &mut self,
         gpu: &GpuContext,
         items: &[DrawItem],
-        composed: Composed,
+        composed: &Composed,
         layouts: ItemLayouts<'_>,
     ) -> anyhow::Result<Vec<Prepared>> {
-        while self.objects.len() < items.len() {
+        let Composed { transforms, draws, rows, range_rows, range_objects } = composed;
+        self.draw_count = draws.len();
+        while self.objects.len() < draws.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
-        let Composed { transforms, rows, range_rows } = composed;
-        let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(&rows)).clone());
-        // Every item's object uniform in one buffer, one write per draw (a write per item made
-        // wgpu allocate a staging buffer each: most of a frame of thousands of small objects),
-        // each item's at its dynamic offset.
-        let stride = OBJECT_UNIFORM_SIZE.next_multiple_of(u64::from(gpu.limits.min_uniform_buffer_offset_alignment));
-        let mut uniforms = vec![0u8; stride as usize * items.len()];
-        for (i, (item, t)) in items.iter().zip(&transforms).enumerate() {
-            let at = i * stride as usize;
-            uniforms[at..at + OBJECT_UNIFORM_SIZE as usize]
-                .copy_from_slice(bytemuck::bytes_of(&object_uniform(item, t.model, t.header)));
-        }
-        let uniform_buffer = self.object_uniforms.write(gpu, &uniforms).clone();
-        let mut prepared = Vec::with_capacity(items.len());
-        for (i, (item, t)) in items.iter().zip(&transforms).enumerate() {
+        let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(rows)).clone());
+        // Every item's object in one buffer, one write per draw (a write per item made wgpu
+        // allocate a staging buffer each: most of a frame of thousands of small objects), padded
+        // so that the last draw's range fits.
+        let last_first = draws.last().map_or(0, |d| d.first);
+        let mut objects: Vec<ObjectUniform> =
+            items.iter().zip(transforms).map(|(item, t)| object_uniform(item, t)).collect();
+        objects.resize(objects.len().max(last_first + range_objects), bytemuck::Zeroable::zeroed());
+        let object_buffer = self.object_uniforms.write(gpu, bytemuck::cast_slice(&objects)).clone();
+        let mut prepared = Vec::with_capacity(draws.len());
+        for (d, draw) in draws.iter().enumerate() {
+            let (item, t) = (&items[draw.first], &transforms[draw.first]);
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
             let mut binds = vec![
-                Bind::DynamicUniform(&uniform_buffer, OBJECT_UNIFORM_SIZE),
+                Bind::DynamicStorage(&object_buffer, *range_objects as u64 * OBJECT_SIZE),
                 Bind::Texture(tex),
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            let mut offsets = [(i as u64 * stride) as u32, 0];
+            let mut offsets = [(draw.first as u64 * OBJECT_SIZE) as u32, 0];
             let mut layout = layouts.object;
             let cuboid = match (t.grid, &cells, layouts.object_cells) {
-                (Some((normals, first)), Some(cells), Some(with_cells)) => {
-                    binds.push(Bind::DynamicStorage(cells, range_rows as u64 * ROW_BYTES));
-                    offsets[1] = first * ROW_BYTES as u32;
+                (Some((normals, _)), Some(cells), Some(with_cells)) => {
+                    binds.push(Bind::DynamicStorage(cells, *range_rows as u64 * ROW_BYTES));
+                    offsets[1] = (draw.first_row as u64 * ROW_BYTES) as u32;
                     layout = with_cells;
                     Some(normals)
                 }
                 _ => None,
             };
-            let object = self.objects[i].bind_group(gpu, layout, &binds);
+            let object = self.objects[d].bind_group(gpu, layout, &binds);
             let warp = match (&item.attached, layouts.warp) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
                     let buffer = a.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, a))?.clone();
                     let uniform = a.settings.uniform(a.per_instance_frames());
-                    Some((self.warps[i].bind_group(gpu, layout, &warp_binds(&a.matrix, &uniform)), buffer))
+                    Some((self.warps[d].bind_group(gpu, layout, &warp_binds(&a.matrix, &uniform)), buffer))
                 }
                 _ => None,
             };
@@ -357,7 +435,7 @@ impl SceneDrawer {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
                     let mesh = item.mesh.gpu(gpu);
                     let binds = [Bind::Storage(&mesh.vertices), Bind::Storage(&mesh.indices)];
-                    Some(self.pn_meshes[i].bind_group(gpu, layout, &binds))
+                    Some(self.pn_meshes[d].bind_group(gpu, layout, &binds))
                 }
                 _ => None,
             };
@@ -451,7 +529,7 @@ impl SceneDrawer {
             warp: warp_layout.as_ref(),
             pn: pn_layout.as_ref(),
         };
-        let prepared = self.prepare(gpu, items, composed, layouts)?;
+        let prepared = self.prepare(gpu, items, &composed, layouts)?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -473,7 +551,7 @@ impl SceneDrawer {
                 trilinear: trilinear.as_ref().map(|[tangent, direct]| [tangent, direct]),
                 pn: pn.as_ref(),
             };
-            draw_items(gpu, &mut pass, items, &prepared, &pipelines, 1, &[]);
+            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, 1, &[]);
         });
         Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
     }
@@ -506,7 +584,10 @@ impl SceneDrawer {
                 wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             ),
         );
-        let mut uniform = TilesUniform { tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES] };
+        let mut uniform = TilesUniform {
+            tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES],
+            count: [tiles.len() as u32, 0, 0, 0],
+        };
         for (u, t) in uniform.tiles.iter_mut().zip(tiles) {
             *u = tile_uniform(t, width, height);
         }
@@ -564,7 +645,7 @@ impl SceneDrawer {
             warp: warp_layout.as_ref(),
             pn: None,
         };
-        let prepared = self.prepare(gpu, items, composed, layouts)?;
+        let prepared = self.prepare(gpu, items, &composed, layouts)?;
         // Attached items draw once per tile; each draw reads its tile index from group 3.
         let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
             (0..tiles.len() as u32)
@@ -599,7 +680,7 @@ impl SceneDrawer {
                 trilinear,
                 pn: None,
             };
-            draw_items(gpu, &mut pass, items, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
+            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
         });
         Ok(target)
     }
@@ -630,20 +711,23 @@ struct Pipelines<'a> {
     pn: Option<&'a wgpu::RenderPipeline>,
 }
 
-/// Records the draws of `items`: plain and cuboid ones `plain_instances` instances each
-/// (one per tile of a depth target); attached ones once, or once per bind group of
-/// `per_draw` (bound as group 3) where there are some.
+/// Records the draws of `items`: plain and cuboid ones `plain_instances` instances per item
+/// (one per tile of a depth target) of each draw's items; attached ones once, or once per bind
+/// group of `per_draw` (bound as group 3) where there are some.
+#[allow(clippy::too_many_arguments)]
 fn draw_items(
     gpu: &GpuContext,
     pass: &mut wgpu::RenderPass<'_>,
     items: &[DrawItem],
+    draws: &[DrawRange],
     prepared: &[Prepared],
     pipelines: &Pipelines<'_>,
     plain_instances: u32,
     per_draw: &[wgpu::BindGroup],
 ) {
     let mut bound = Bound::default();
-    for (item, p) in items.iter().zip(prepared) {
+    for (draw, p) in draws.iter().zip(prepared) {
+        let item = &items[draw.first];
         pass.set_bind_group(1, &p.object, &p.offsets[..1 + usize::from(p.cuboid.is_some())]);
         if let Some(t) = &item.tessellated {
             // Written by the compute pass this frame: counts never come back to the CPU.
@@ -667,9 +751,10 @@ fn draw_items(
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        let instances = 0..draw.count as u32 * plain_instances;
         if let (Some(normals), Some(trilinear)) = (p.cuboid, pipelines.trilinear) {
             bound.pipeline(pass, trilinear[normals as usize]);
-            pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
+            pass.draw_indexed(0..mesh.index_count, 0, instances);
             continue;
         }
         let attached = item.attached.as_ref().and_then(|a| pipelines.attached[usize::from(a.matrix.has_seams())]);
@@ -692,7 +777,7 @@ fn draw_items(
             }
             _ => {
                 bound.pipeline(pass, pipelines.plain);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..plain_instances);
+                pass.draw_indexed(0..mesh.index_count, 0, instances);
             }
         }
     }

@@ -410,6 +410,85 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     }
 }
 
+/// Items that share a mesh and maps draw as one instanced draw per run of equal pipelines, each
+/// instance with its own transform, grid and colour: the G-buffer and the depth tiles must equal,
+/// to the bit, those of the same items drawn one by one (each with its own copy of the mesh).
+#[test]
+fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
+    let gpu = common::gpu();
+    let ball = Arc::new(werkstatt::nodes::geometry::sphere(0.5, 12, 6).unwrap());
+    let (lo, hi) = (DVec3::splat(-0.5), DVec3::splat(0.5));
+    let grid = |k: usize, method| {
+        let twist = 0.4 + 0.3 * k as f64;
+        Arc::new(
+            CuboidGrid::from_fn(lo, hi, [2, 1, 1 + k % 2], method, |u| {
+                let p = lo + u * (hi - lo);
+                DQuat::from_rotation_y(twist * p.y).mul_vec3(p) + DVec3::new(0.1 * p.y * p.y, 0.0, 0.0)
+            })
+            .unwrap(),
+        )
+    };
+    // Eight items in a row: plain, plain, three under grids (tangent space), one under a grid
+    // with direct normals, plain, plain. Runs of equal pipelines make four draws.
+    let kinds = [None, None, Some(NormalMethod::TangentSpace), Some(NormalMethod::TangentSpace)];
+    let kinds = kinds.iter().chain(&[Some(NormalMethod::TangentSpace), Some(NormalMethod::Direct), None, None]);
+    let shared: Vec<DrawItem> = kinds
+        .enumerate()
+        .map(|(k, kind)| {
+            let material =
+                Material { base_color: Vec3::new(0.1 * k as f32, 0.5, 1.0 - 0.1 * k as f32), ..Default::default() };
+            let x = -2.1 + 0.6 * k as f32;
+            let model =
+                Mat4::from_translation(Vec3::new(x, 0.2 * (k % 3) as f32, 0.0)) * Mat4::from_rotation_z(0.3 * k as f32);
+            let cuboid = kind.map(|method| grid(k, method));
+            DrawItem {
+                mesh: ball.clone(),
+                material: Arc::new(material),
+                cuboid,
+                ..DrawItem::plain(ball.clone(), Arc::default(), model)
+            }
+        })
+        .collect();
+    let separate: Vec<DrawItem> =
+        shared.iter().map(|item| DrawItem { mesh: Arc::new((*item.mesh).clone()), ..item.clone() }).collect();
+    let camera = Camera {
+        eye: Vec3::new(0.0, 0.5, 4.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 60.0,
+        near: 0.1,
+        far: 20.0,
+    };
+    let (w, h) = (96u32, 48u32);
+    let view = View::new(&camera, w, h);
+    let tiles = [
+        werkstatt::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w / 2, h] },
+        werkstatt::draw::Tile { view_proj: Mat4::from_rotation_y(0.4) * view.view_proj, rect: [w / 2, 0, w / 2, h] },
+    ];
+    let mut drawer = SceneDrawer::default();
+    let mut draw = |items: &[DrawItem]| {
+        let g = drawer.gbuffer(gpu, items, camera, view).unwrap();
+        let draws = drawer.draw_count();
+        let shadow = drawer.depth_tiles(gpu, items, &tiles, w, h).unwrap();
+        assert_eq!(drawer.draw_count(), draws, "both targets draw the same runs");
+        gpu.submit_checked().unwrap();
+        let images = [&g.color, &g.normal, &g.depth, &shadow].map(|image| read_back(gpu, image).unwrap().rgba);
+        (draws, images)
+    };
+    let (shared_draws, shared_images) = draw(&shared);
+    let (separate_draws, separate_images) = draw(&separate);
+    assert_eq!(separate_draws, shared.len());
+    assert_eq!(shared_draws, 4, "plain x2, tangent-space grids x3, direct grid, plain x2");
+    let covered = shared_images[2].iter().step_by(4).filter(|&&z| z > 0.0).count();
+    assert!(covered > 400, "the balls cover only {covered} pixels");
+    for (name, (a, b)) in
+        ["colour", "normal", "depth", "shadow depth"].iter().zip(shared_images.iter().zip(&separate_images))
+    {
+        let differing = a.iter().zip(b).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
+        assert_eq!(differing, 0, "{name}: {differing} values differ between instanced and separate draws");
+    }
+}
+
 /// Fig. 4.5: a tube along x through a 2x1 bend grid, its seam at x = 0. Across the seam only
 /// the Jacobian's x column jumps (the y and z columns are derivatives within the shared face).
 /// The direct method, J n, uses only those columns for the tube's normals (n_x = 0), so it is
