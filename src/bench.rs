@@ -767,25 +767,35 @@ fn interleaved_pairs(
     Ok((median(a), median(b), median(ratio)))
 }
 
-/// Like [`interleaved_pairs`], but each path runs `frames` frames in a row, in blocks A B B A
-/// (drift cancels): what a scene that keeps one kind of transform does every frame. A path
-/// whose cost depends on what the frame before left behind (buffers, caches, descriptor
-/// state) shows it here, where alternating frames would hide it. Medians of each path's
-/// frames, and their ratio b / a.
+/// Like [`interleaved_pairs`], but each path runs `frames` frames in a row, in `rounds` rounds
+/// of blocks A B B A (drift cancels within a round): what a scene that keeps one kind of
+/// transform does every frame. A path whose cost depends on what the frame before left behind
+/// (buffers, caches, descriptor state) shows it here, where alternating frames would hide it.
+/// Each block starts with one untimed frame. Returns the medians of each path's frames, and
+/// the median over rounds of each round's ratio b / a (of its frames' medians): a round takes
+/// seconds, so a change of the machine's speed between rounds does not enter a ratio.
 fn abba_blocks(
     frames: usize,
+    rounds: usize,
     mut run: impl FnMut(bool, usize) -> anyhow::Result<f64>,
 ) -> anyhow::Result<(f64, f64, f64)> {
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for (block, second) in [false, true, true, false].into_iter().enumerate() {
-        run(second, 0)?;
-        for k in 0..frames.max(1) {
-            let t = run(second, block * frames + k)?;
-            if second { b.push(t) } else { a.push(t) }
+    let (mut a, mut b, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let mut frame = 0;
+    for _ in 0..rounds.max(1) {
+        let (mut round_a, mut round_b) = (Vec::new(), Vec::new());
+        for second in [false, true, true, false] {
+            run(second, frame)?;
+            for _ in 0..frames.max(1) {
+                frame += 1;
+                let t = run(second, frame)?;
+                if second { round_b.push(t) } else { round_a.push(t) }
+            }
         }
+        ratios.push(median(round_b.clone()) / median(round_a.clone()));
+        a.extend(round_a);
+        b.extend(round_b);
     }
-    let (ma, mb) = (median(a), median(b));
-    Ok((ma, mb, mb / ma))
+    Ok((median(a), median(b), median(ratios)))
 }
 
 /// Times one tessellation of the bench mesh (recorded, submitted, waited for), optionally with
@@ -1001,12 +1011,14 @@ pub struct CuboidRow {
     pub scene: &'static str,
     pub objects: usize,
     pub triangles: usize,
+    /// The draw calls of a frame (objects that share a mesh draw instanced).
+    pub draws: usize,
     /// Frames per second with linear (affine, fast path) and trilinear transforms: each
     /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.
     pub fps_linear: f64,
     pub fps_trilinear: f64,
-    /// The trilinear frame rate over the linear one (median frame times of each path's
-    /// blocks of frames, A B B A).
+    /// The trilinear frame rate over the linear one: the median over rounds of blocks
+    /// A B B A of each round's ratio of median frame times.
     pub ratio: f64,
 }
 
@@ -1020,6 +1032,7 @@ pub fn cuboids(
     spheres: (usize, usize),
     helices: &[(usize, usize)],
     frames: usize,
+    rounds: usize,
     size: (u32, u32),
     mut report: impl FnMut(&CuboidRow),
 ) -> anyhow::Result<Vec<CuboidRow>> {
@@ -1046,8 +1059,8 @@ pub fn cuboids(
     let mut drawer = SceneDrawer::default();
     // Frames per second of each path (median frame times) and their ratio (trilinear / linear
     // rate), from blocks of frames of one path each. Each frame composes, draws and waits.
-    let mut compare = |make: &dyn Fn(bool, usize) -> Vec<DrawItem>| -> anyhow::Result<(f64, f64, f64)> {
-        let (linear, trilinear, ratio) = abba_blocks(frames, |trilinear, i| {
+    let mut compare = |make: &dyn Fn(bool, usize) -> Vec<DrawItem>| -> anyhow::Result<(f64, f64, f64, usize)> {
+        let (linear, trilinear, ratio) = abba_blocks(frames, rounds, |trilinear, i| {
             let t = Instant::now();
             let items = make(!trilinear, i);
             let g = render_gbuffer(gpu, &mut drawer, &items, camera, size.0, size.1)?;
@@ -1056,7 +1069,7 @@ pub fn cuboids(
             drop(g);
             Ok(t.elapsed().as_secs_f64())
         })?;
-        Ok((1.0 / linear, 1.0 / trilinear, 1.0 / ratio))
+        Ok((1.0 / linear, 1.0 / trilinear, 1.0 / ratio, drawer.draw_count()))
     };
     let mut rows = Vec::new();
     let mut push = |row: CuboidRow| {
@@ -1099,8 +1112,8 @@ pub fn cuboids(
             .collect()
     };
     let triangles = count * mesh.indices.len() / 3;
-    let (fps_linear, fps_trilinear, ratio) = compare(&animate)?;
-    push(CuboidRow { scene: "spheres", objects: count, triangles, fps_linear, fps_trilinear, ratio });
+    let (fps_linear, fps_trilinear, ratio, draws) = compare(&animate)?;
+    push(CuboidRow { scene: "spheres", objects: count, triangles, draws, fps_linear, fps_trilinear, ratio });
 
     // Helices: object k sits at parameter s_k; its transform is the helix's frame there
     // (linear) or the cuboid whose corners follow the helix over the object's extent.
@@ -1147,8 +1160,8 @@ pub fn cuboids(
                 .collect()
         };
         let triangles = count * mesh.indices.len() / 3;
-        let (fps_linear, fps_trilinear, ratio) = compare(&make)?;
-        push(CuboidRow { scene: "helix", objects: count, triangles, fps_linear, fps_trilinear, ratio });
+        let (fps_linear, fps_trilinear, ratio, draws) = compare(&make)?;
+        push(CuboidRow { scene: "helix", objects: count, triangles, draws, fps_linear, fps_trilinear, ratio });
     }
     Ok(rows)
 }

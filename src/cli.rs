@@ -323,10 +323,13 @@ enum BenchWhat {
         /// Helices: count x triangles per object, comma-separated.
         #[arg(long, default_value = "4617x36,2566x256", value_delimiter = ',')]
         helices: Vec<String>,
-        /// Timed frames per block: each path runs two blocks (A B B A), each after one
-        /// untimed frame; the medians of each path's frames are reported.
+        /// Timed frames per block: each round runs each path in two blocks (A B B A), each
+        /// after one untimed frame; the medians of each path's frames are reported.
         #[arg(long, default_value_t = 5)]
         frames: usize,
+        /// Rounds of blocks A B B A; the ratio is the median of the rounds' ratios.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
         #[command(flatten)]
         out: GpuBench,
     },
@@ -713,7 +716,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, out } } => {
+        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, rounds, out } } => {
             let (gpu, size) = out.open()?;
             let pair = |s: &str| -> anyhow::Result<(usize, usize)> {
                 let bad = || anyhow::anyhow!("expected COUNTxTRIANGLES such as 185x2000, not {s:?}");
@@ -727,16 +730,22 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let spheres = pair(&spheres)?;
             let helices = helices.iter().map(|h| pair(h)).collect::<anyhow::Result<Vec<_>>>()?;
-            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!(
-                "| scene | objects | triangles | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|"
+                "adapter: {}, {}x{}, {rounds} round(s) of blocks A B B A of {frames} frame(s)",
+                gpu.adapter_name(),
+                size.0,
+                size.1
             );
-            let rows = crate::bench::cuboids(&gpu, spheres, &helices, frames, size, |r| {
+            println!(
+                "| scene | objects | triangles | draws | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| {
                 println!(
-                    "| {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
+                    "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
                     r.scene,
                     r.objects,
                     r.triangles,
+                    r.draws,
                     r.fps_linear,
                     r.fps_trilinear,
                     100.0 * r.ratio
