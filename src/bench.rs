@@ -1011,7 +1011,8 @@ pub struct CuboidRow {
     pub scene: &'static str,
     pub objects: usize,
     pub triangles: usize,
-    /// The draw calls of a frame (objects that share a mesh draw instanced).
+    /// The draw calls of the last frame, a linear one (objects that share a mesh draw
+    /// instanced; the trilinear frames of these scenes draw as many).
     pub draws: usize,
     /// Frames per second with linear (affine, fast path) and trilinear transforms: each
     /// frame composes the transforms on the CPU, draws the G-buffer and waits for it.

@@ -4,8 +4,8 @@
 //! - [`SceneDrawer::gbuffer`]: the deferred renderer's G-buffer (dissertation section 4.2);
 //! - [`SceneDrawer::depth_tiles`]: depth only, into tiles of one depth texture, one view per
 //!   tile (shadow maps: a light per tile of an atlas). Plain meshes fill every tile in one
-//!   instanced draw (the instance index picks the tile's view, wgpu having no geometry shader);
-//!   attached items draw once per tile. A fragment outside its tile is discarded, so a tile
+//!   instanced draw (the instance index picks the item and the tile's view, wgpu having no
+//!   geometry shader); attached items draw once per tile. A fragment outside its tile is discarded, so a tile
 //!   never spills into its neighbours.
 
 use glam::{Mat4, Vec4};
@@ -177,10 +177,6 @@ struct Composed {
     transforms: Vec<ComposedItem>,
     draws: Vec<DrawRange>,
     rows: Vec<[f32; 4]>,
-    /// The rows one draw binds: the most any draw needs.
-    range_rows: usize,
-    /// The objects one draw binds: the most items of any draw.
-    range_objects: usize,
 }
 
 /// Consecutive items drawn by one draw call, and the rows of their grids' cells.
@@ -270,6 +266,7 @@ impl Composed {
                 let first = d.first;
                 same_draw((&items[first], &transforms[first]), (&items[i], &transforms[i]))
                     && ((rows.len() + grid_len - d.first_row) as u64 * ROW_BYTES) <= max_range
+                    && (d.count as u64 + 1) * OBJECT_SIZE <= max_range
             });
             if !joins {
                 rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
@@ -284,21 +281,20 @@ impl Composed {
                 draw.row_count = rows.len() - draw.first_row;
             }
         }
-        let range_rows = draws.iter().map(|d| d.row_count).max().unwrap_or(0);
-        let range_objects = draws.iter().map(|d| d.count).max().unwrap_or(1);
-        // The last draw's ranges may reach past its own rows and objects.
-        if let Some(last) = draws.last()
-            && !rows.is_empty()
-        {
-            rows.resize(last.first_row + range_rows, [0.0; 4]);
-        }
-        let bytes = rows.len() as u64 * ROW_BYTES;
+        // Dynamic offsets are u32, and a buffer has a size limit.
         let most = gpu.limits.max_buffer_size.min(u64::from(u32::MAX));
+        let bytes = rows.len() as u64 * ROW_BYTES;
         anyhow::ensure!(
             bytes <= most,
-            "the scene's cuboid grids need {bytes} bytes of cells; one draw holds at most {most}"
+            "the scene's cuboid grids need {bytes} bytes of cells; a pass holds at most {most}"
         );
-        Ok(Composed { transforms, draws, rows, range_rows, range_objects })
+        let bytes = items.len() as u64 * OBJECT_SIZE;
+        anyhow::ensure!(
+            bytes <= most,
+            "the scene's {} items need {bytes} bytes of objects; a pass holds at most {most}",
+            items.len()
+        );
+        Ok(Composed { transforms, draws, rows })
     }
 
     /// Whether any item still needs the trilinear vertex stage.
@@ -307,8 +303,8 @@ impl Composed {
     }
 }
 
-/// What a pass that draws scenes keeps between frames: per item its uniform buffers and
-/// cached bind groups, and the point-attachment resolver (the pipelines live in the
+/// What a pass that draws scenes keeps between frames: the buffers of objects and grid cells,
+/// per draw its cached bind groups, and the point-attachment resolver (the pipelines live in the
 /// context's cache, so a shader reload reaches them).
 pub struct SceneDrawer {
     frame: Bindings,
@@ -320,8 +316,8 @@ pub struct SceneDrawer {
     objects: Vec<Bindings>,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
-    /// The cells (coefficient matrices) of every non-linear grid a draw uses, in one storage
-    /// buffer per draw.
+    /// The cells (coefficient matrices) of every non-linear grid a pass uses, in one storage
+    /// buffer per pass.
     grid_cells: BufferRing,
     white: Image8,
     resolver: InstanceResolver,
@@ -381,7 +377,7 @@ impl SceneDrawer {
         composed: &Composed,
         layouts: ItemLayouts<'_>,
     ) -> anyhow::Result<Vec<Prepared>> {
-        let Composed { transforms, draws, rows, range_rows, range_objects } = composed;
+        let Composed { transforms, draws, rows } = composed;
         self.draw_count = draws.len();
         while self.objects.len() < draws.len() {
             self.objects.push(Bindings::new(OBJECT_VISIBILITY));
@@ -389,13 +385,10 @@ impl SceneDrawer {
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
         let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(rows)).clone());
-        // Every item's object in one buffer, one write per draw (a write per item made wgpu
-        // allocate a staging buffer each: most of a frame of thousands of small objects), padded
-        // so that the last draw's range fits.
-        let last_first = draws.last().map_or(0, |d| d.first);
-        let mut objects: Vec<ObjectUniform> =
+        // Every item's object in one buffer, one write per pass (a write per item made wgpu
+        // allocate a staging buffer each: most of a frame of thousands of small objects).
+        let objects: Vec<ObjectUniform> =
             items.iter().zip(transforms).map(|(item, t)| object_uniform(item, t)).collect();
-        objects.resize(objects.len().max(last_first + range_objects), bytemuck::Zeroable::zeroed());
         let object_buffer = self.object_uniforms.write(gpu, bytemuck::cast_slice(&objects)).clone();
         let mut prepared = Vec::with_capacity(draws.len());
         for (d, draw) in draws.iter().enumerate() {
@@ -403,8 +396,10 @@ impl SceneDrawer {
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
+            // Each draw binds its own items' objects and rows only: lavapipe copies a bound range
+            // for every draw.
             let mut binds = vec![
-                Bind::DynamicStorage(&object_buffer, *range_objects as u64 * OBJECT_SIZE),
+                Bind::DynamicStorage(&object_buffer, draw.count as u64 * OBJECT_SIZE),
                 Bind::Texture(tex),
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
@@ -413,7 +408,7 @@ impl SceneDrawer {
             let mut layout = layouts.object;
             let cuboid = match (t.grid, &cells, layouts.object_cells) {
                 (Some((normals, _)), Some(cells), Some(with_cells)) => {
-                    binds.push(Bind::DynamicStorage(cells, *range_rows as u64 * ROW_BYTES));
+                    binds.push(Bind::DynamicStorage(cells, draw.row_count as u64 * ROW_BYTES));
                     offsets[1] = (draw.first_row as u64 * ROW_BYTES) as u32;
                     layout = with_cells;
                     Some(normals)
@@ -430,8 +425,10 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
+            // Per-pixel PN depth reads the mesh as it is: an item under a non-linear grid draws
+            // through the grid instead.
             let pn = match layouts.pn {
-                Some(layout) if item.pn_pixels => {
+                Some(layout) if item.pn_pixels && cuboid.is_none() => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
                     let mesh = item.mesh.gpu(gpu);
                     let binds = [Bind::Storage(&mesh.vertices), Bind::Storage(&mesh.indices)];
