@@ -207,7 +207,8 @@ struct ComposedItem {
     /// A non-linear grid's normal method and the first row of its cells, counted from its
     /// draw's first row.
     grid: Option<(NormalMethod, u32)>,
-    grid_rows: Option<Vec<[f32; 4]>>,
+    /// That grid, until its cells are placed.
+    nonlinear: Option<std::sync::Arc<CuboidGrid>>,
 }
 
 /// One row of a grid's cells (a vec4 of f32).
@@ -238,30 +239,32 @@ impl Composed {
             .iter()
             .map(|item| match fast_path(item.model, item.cuboid.clone()) {
                 (model, Some(grid)) => {
-                    let mut rows = Vec::new();
-                    grid.append_cells(&mut rows);
-                    let header = grid.header();
-                    ComposedItem { model, header, grid: Some((grid.normals, 0)), grid_rows: Some(rows) }
+                    let (header, normals) = (grid.header(), grid.normals);
+                    ComposedItem { model, header, grid: Some((normals, 0)), nonlinear: Some(grid) }
                 }
-                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None, grid_rows: None },
+                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None, nonlinear: None },
             })
             .collect();
-        if let Some(rows) = transforms
+        let rows_of = |grid: &CuboidGrid| grid.cells.iter().product::<usize>() * CuboidGrid::ROWS_PER_CELL;
+        if let Some(grid) = transforms
             .iter()
-            .filter_map(|t| t.grid_rows.as_ref())
-            .find(|rows| rows.len() as u64 * ROW_BYTES > max_range)
+            .filter_map(|t| t.nonlinear.as_deref())
+            .find(|grid| rows_of(grid) as u64 * ROW_BYTES > max_range)
         {
             anyhow::bail!(
                 "a cuboid grid of {} cells is more than one draw can bind ({max_range} bytes at most)",
-                rows.len() / CuboidGrid::ROWS_PER_CELL
+                rows_of(grid) / CuboidGrid::ROWS_PER_CELL
             );
         }
         // Each draw's rows start where a dynamic offset may point.
         let align = (u64::from(gpu.limits.min_storage_buffer_offset_alignment) / ROW_BYTES).max(1) as usize;
         let mut rows: Vec<[f32; 4]> = Vec::new();
         let mut draws: Vec<DrawRange> = Vec::new();
+        // The last grid placed in the current draw and its first row: items that share a grid
+        // (a group's transform over many objects) share its rows.
+        let mut last_grid: Option<(std::sync::Arc<CuboidGrid>, u32)> = None;
         for i in 0..items.len() {
-            let grid_len = transforms[i].grid_rows.as_ref().map_or(0, Vec::len);
+            let grid_len = transforms[i].nonlinear.as_deref().map_or(0, rows_of);
             let joins = draws.last().is_some_and(|d| {
                 let first = d.first;
                 same_draw((&items[first], &transforms[first]), (&items[i], &transforms[i]))
@@ -271,14 +274,21 @@ impl Composed {
             if !joins {
                 rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
                 draws.push(DrawRange { first: i, count: 0, first_row: rows.len(), row_count: 0 });
+                last_grid = None;
             }
             let draw = draws.last_mut().expect("pushed above");
             draw.count += 1;
             let t = &mut transforms[i];
-            if let (Some((_, first)), Some(grid)) = (&mut t.grid, t.grid_rows.take()) {
-                *first = (rows.len() - draw.first_row) as u32;
-                rows.extend(grid);
-                draw.row_count = rows.len() - draw.first_row;
+            if let (Some((_, first)), Some(grid)) = (&mut t.grid, t.nonlinear.take()) {
+                match &last_grid {
+                    Some((placed, row)) if std::sync::Arc::ptr_eq(placed, &grid) => *first = *row,
+                    _ => {
+                        *first = (rows.len() - draw.first_row) as u32;
+                        grid.append_cells(&mut rows);
+                        draw.row_count = rows.len() - draw.first_row;
+                        last_grid = Some((grid, *first));
+                    }
+                }
             }
         }
         // Dynamic offsets are u32, and a buffer has a size limit.

@@ -432,6 +432,7 @@ fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
     // with direct normals, plain, plain. Runs of equal pipelines make four draws.
     let kinds = [None, None, Some(NormalMethod::TangentSpace), Some(NormalMethod::TangentSpace)];
     let kinds = kinds.iter().chain(&[Some(NormalMethod::TangentSpace), Some(NormalMethod::Direct), None, None]);
+    let shared_grid = grid(3, NormalMethod::TangentSpace);
     let shared: Vec<DrawItem> = kinds
         .enumerate()
         .map(|(k, kind)| {
@@ -440,7 +441,8 @@ fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
             let x = -2.1 + 0.6 * k as f32;
             let model =
                 Mat4::from_translation(Vec3::new(x, 0.2 * (k % 3) as f32, 0.0)) * Mat4::from_rotation_z(0.3 * k as f32);
-            let cuboid = kind.map(|method| grid(k, method));
+            // Items 3 and 4 share one grid (and so its rows in the draw).
+            let cuboid = kind.map(|method| if k == 3 || k == 4 { shared_grid.clone() } else { grid(k, method) });
             DrawItem {
                 mesh: ball.clone(),
                 material: Arc::new(material),
