@@ -8,6 +8,8 @@
 //!   geometry shader); attached items draw once per tile. A fragment outside its tile is discarded, so a tile
 //!   never spills into its neighbours.
 
+use std::sync::Arc;
+
 use glam::{Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
@@ -208,7 +210,7 @@ struct ComposedItem {
     /// draw's first row.
     grid: Option<(NormalMethod, u32)>,
     /// That grid, until its cells are placed.
-    nonlinear: Option<std::sync::Arc<CuboidGrid>>,
+    nonlinear: Option<Arc<CuboidGrid>>,
 }
 
 /// One row of a grid's cells (a vec4 of f32).
@@ -218,15 +220,15 @@ const ROW_BYTES: u64 = 16;
 /// of one normal method, on one mesh with the same maps (one object group).
 fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bool {
     let alone = |i: &DrawItem| i.attached.is_some() || i.tessellated.is_some() || i.pn_pixels;
-    let same_map = |x: &Option<std::sync::Arc<Image8>>, y: &Option<std::sync::Arc<Image8>>| match (x, y) {
+    let same_map = |x: &Option<Arc<Image8>>, y: &Option<Arc<Image8>>| match (x, y) {
         (None, None) => true,
-        (Some(x), Some(y)) => std::sync::Arc::ptr_eq(x, y),
+        (Some(x), Some(y)) => Arc::ptr_eq(x, y),
         _ => false,
     };
     let ((ai, at), (bi, bt)) = (a, b);
     !alone(ai)
         && !alone(bi)
-        && std::sync::Arc::ptr_eq(&ai.mesh, &bi.mesh)
+        && Arc::ptr_eq(&ai.mesh, &bi.mesh)
         && same_map(&ai.material.texture, &bi.material.texture)
         && same_map(&ai.material.gloss_map, &bi.material.gloss_map)
         && at.grid.map(|(normals, _)| normals) == bt.grid.map(|(normals, _)| normals)
@@ -262,7 +264,7 @@ impl Composed {
         let mut draws: Vec<DrawRange> = Vec::new();
         // The last grid placed in the current draw and its first row: items that share a grid
         // (a group's transform over many objects) share its rows.
-        let mut last_grid: Option<(std::sync::Arc<CuboidGrid>, u32)> = None;
+        let mut last_grid: Option<(Arc<CuboidGrid>, u32)> = None;
         for i in 0..items.len() {
             let grid_len = transforms[i].nonlinear.as_deref().map_or(0, rows_of);
             let joins = draws.last().is_some_and(|d| {
@@ -281,7 +283,7 @@ impl Composed {
             let t = &mut transforms[i];
             if let (Some((_, first)), Some(grid)) = (&mut t.grid, t.nonlinear.take()) {
                 match &last_grid {
-                    Some((placed, row)) if std::sync::Arc::ptr_eq(placed, &grid) => *first = *row,
+                    Some((placed, row)) if Arc::ptr_eq(placed, &grid) => *first = *row,
                     _ => {
                         *first = (rows.len() - draw.first_row) as u32;
                         grid.append_cells(&mut rows);

@@ -20,27 +20,16 @@ pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::Bind
     }
 }
 
-/// A uniform block read at a dynamic offset (`set_bind_group`'s offsets) from a buffer that
-/// holds many of `size` bytes each.
-pub fn dynamic_uniform_entry(binding: u32, visibility: wgpu::ShaderStages, size: u64) -> wgpu::BindGroupLayoutEntry {
-    dynamic_entry(binding, visibility, wgpu::BufferBindingType::Uniform, size)
-}
-
-/// A read-only storage range of `size` bytes at a dynamic offset.
+/// A read-only storage range of `size` bytes at a dynamic offset (`set_bind_group`'s offsets).
 pub fn dynamic_storage_entry(binding: u32, visibility: wgpu::ShaderStages, size: u64) -> wgpu::BindGroupLayoutEntry {
-    dynamic_entry(binding, visibility, wgpu::BufferBindingType::Storage { read_only: true }, size)
-}
-
-fn dynamic_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    ty: wgpu::BufferBindingType,
-    size: u64,
-) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
-        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: true, min_binding_size: wgpu::BufferSize::new(size) },
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: true,
+            min_binding_size: wgpu::BufferSize::new(size),
+        },
         count: None,
     }
 }
@@ -152,9 +141,6 @@ pub enum Bind<'a> {
     StorageRw(&'a wgpu::Buffer),
     /// A uniform buffer owned elsewhere.
     UniformBuffer(&'a wgpu::Buffer),
-    /// Blocks of this many bytes in a uniform buffer owned elsewhere, one chosen per draw by a
-    /// dynamic offset: one bind group serves many draws.
-    DynamicUniform(&'a wgpu::Buffer, u64),
     /// A read-only storage range of this many bytes, placed per draw by a dynamic offset (a
     /// draw binds only its own part of a large buffer: lavapipe copies a bound storage range
     /// for every draw).
@@ -199,7 +185,6 @@ impl Bindings {
                 let binding = i as u32;
                 match b {
                     Bind::Uniform(_) | Bind::UniformBuffer(_) => uniform_entry(binding, self.visibility),
-                    Bind::DynamicUniform(_, size) => dynamic_uniform_entry(binding, self.visibility, *size),
                     Bind::DynamicStorage(_, size) => dynamic_storage_entry(binding, self.visibility, *size),
                     Bind::Texture(img) => texture_kind_entry(
                         binding,
@@ -242,18 +227,14 @@ impl Bindings {
                     ring += 1;
                     Some(buf)
                 }
-                Bind::Storage(buf)
-                | Bind::StorageRw(buf)
-                | Bind::UniformBuffer(buf)
-                | Bind::DynamicUniform(buf, _)
-                | Bind::DynamicStorage(buf, _) => Some((*buf).clone()),
+                Bind::Storage(buf) | Bind::StorageRw(buf) | Bind::UniformBuffer(buf) | Bind::DynamicStorage(buf, _) => {
+                    Some((*buf).clone())
+                }
                 _ => None,
             };
             key.push(match (b, &buffer) {
                 // The range's size is part of the group: the same buffer with another size is another group.
-                (Bind::DynamicUniform(_, size) | Bind::DynamicStorage(_, size), Some(buf)) => {
-                    Key::Range(buf.clone(), *size)
-                }
+                (Bind::DynamicStorage(_, size), Some(buf)) => Key::Range(buf.clone(), *size),
                 (_, Some(buf)) => Key::Buffer(buf.clone()),
                 (Bind::Texture(img), _) => Key::View(img.view.clone()),
                 (Bind::View(view, ..), _) => Key::View((*view).clone()),
@@ -273,7 +254,7 @@ impl Bindings {
             .map(|(i, b)| wgpu::BindGroupEntry {
                 binding: i as u32,
                 resource: match (b, &buffers[i], &samplers[i]) {
-                    (Bind::DynamicUniform(_, size) | Bind::DynamicStorage(_, size), Some(buf), _) => {
+                    (Bind::DynamicStorage(_, size), Some(buf), _) => {
                         wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                             buffer: buf,
                             offset: 0,
