@@ -72,10 +72,11 @@ fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<()>) -> any
     Ok(median(samples))
 }
 
-/// The median of samples (the upper one of an even count); `v` is not empty.
+/// The median of samples (the mean of the middle two of an even count); `v` is not empty.
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    let mid = v.len() / 2;
+    if v.len().is_multiple_of(2) { (v[mid - 1] + v[mid]) / 2.0 } else { v[mid] }
 }
 
 /// One row of `werkstatt bench attachments`.
@@ -1475,4 +1476,16 @@ pub fn export(
         rows.push(row);
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median;
+
+    #[test]
+    fn the_median_of_an_even_count_is_the_mean_of_the_middle_two() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median(vec![7.0]), 7.0);
+    }
 }
