@@ -1,6 +1,6 @@
 // A drawn object (group 1): its transform and material, shared by every pass that draws
-// the scene (src/draw.rs `ObjectUniform`). All items' objects lie in one storage buffer; a draw
-// binds the range from its first item (a dynamic offset), so items that share a mesh and maps
+// the scene (src/draw.rs `GpuObject`). All items' objects lie in one storage buffer; a draw
+// binds its own items' range (a dynamic offset), so items that share a mesh and maps
 // draw as one instanced draw, each entry point picking its instance's object with `use_object`.
 
 struct Object {

@@ -361,7 +361,7 @@ impl CuboidGrid {
     /// Rows [`CuboidGrid::append_cells`] appends per cell.
     pub const ROWS_PER_CELL: usize = 6;
 
-    /// The grid's header in the object uniform (shaders/object.wgsl `grid_*`): box origin
+    /// The grid's header in its item's object (shaders/object.wgsl `grid_*`): box origin
     /// and 1/box size (w unused: the normal method picks the vertex entry point, and each draw
     /// binds its grid's rows from the first), cells per axis.
     pub fn header(&self) -> [[f32; 4]; 3] {

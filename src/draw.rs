@@ -40,9 +40,10 @@ struct FrameUniform {
     view: [[f32; 4]; 4],
 }
 
+/// shaders/object.wgsl `Object`: one entry of the storage buffer of all objects of a pass.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct ObjectUniform {
+struct GpuObject {
     model: [[f32; 4]; 4],
     normal_matrix: [[f32; 4]; 4],
     base_color: [f32; 4],
@@ -57,7 +58,7 @@ struct ObjectUniform {
 
 /// An object's size in the storage buffer of all objects: a multiple of every storage offset
 /// alignment an adapter may ask (at most 256), so a draw's range can start at any item.
-const OBJECT_SIZE: u64 = std::mem::size_of::<ObjectUniform>() as u64;
+const OBJECT_SIZE: u64 = std::mem::size_of::<GpuObject>() as u64;
 const _: () = assert!(OBJECT_SIZE == 256);
 
 /// shaders/depth.wgsl `TileView`: a tile's view-projection folded with the map from clip
@@ -134,10 +135,10 @@ impl InstanceResolver {
 }
 
 /// `t.model` is the item's own matrix, or the composed one where the linear fast path folded
-/// an affine cuboid grid into it; `t.header` the header of a remaining non-linear grid.
-fn object_uniform(item: &DrawItem, t: &ComposedItem) -> ObjectUniform {
+/// an affine cuboid grid into it; a remaining non-linear grid gives the grid fields.
+fn gpu_object(item: &DrawItem, t: &ComposedItem) -> GpuObject {
     let (model, m) = (t.model, &item.material);
-    ObjectUniform {
+    GpuObject {
         model: model.to_cols_array_2d(),
         normal_matrix: model.inverse().transpose().to_cols_array_2d(),
         base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
@@ -148,8 +149,8 @@ fn object_uniform(item: &DrawItem, t: &ComposedItem) -> ObjectUniform {
             f32::from(u8::from(m.gloss_map.is_some())),
         ],
         extra: [m.gloss_min, 0.0, 0.0, 0.0],
-        grid: t.header,
-        grid_rows: [t.grid.map_or(0, |(_, row)| row), 0, 0, 0],
+        grid: t.grid.as_ref().map_or([[0.0; 4]; 3], |g| g.header()),
+        grid_rows: [t.grid_row, 0, 0, 0],
         unused: [0.0; 4],
     }
 }
@@ -204,13 +205,17 @@ struct ItemLayouts<'a> {
 /// One item's transform after the fast path.
 struct ComposedItem {
     model: Mat4,
-    /// The object uniform's grid header (zero without a non-linear grid).
-    header: [[f32; 4]; 3],
-    /// A non-linear grid's normal method and the first row of its cells, counted from its
-    /// draw's first row.
-    grid: Option<(NormalMethod, u32)>,
-    /// That grid, until its cells are placed.
-    nonlinear: Option<Arc<CuboidGrid>>,
+    /// The grid that stays non-linear, and the first row of its cells, counted from its draw's
+    /// first row.
+    grid: Option<Arc<CuboidGrid>>,
+    grid_row: u32,
+}
+
+impl ComposedItem {
+    /// The normal method of a non-linear grid (which entry point draws the item).
+    fn normals(&self) -> Option<NormalMethod> {
+        self.grid.as_ref().map(|g| g.normals)
+    }
 }
 
 /// One row of a grid's cells (a vec4 of f32).
@@ -231,7 +236,7 @@ fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bo
         && Arc::ptr_eq(&ai.mesh, &bi.mesh)
         && same_map(&ai.material.texture, &bi.material.texture)
         && same_map(&ai.material.gloss_map, &bi.material.gloss_map)
-        && at.grid.map(|(normals, _)| normals) == bt.grid.map(|(normals, _)| normals)
+        && at.normals() == bt.normals()
 }
 
 impl Composed {
@@ -239,18 +244,15 @@ impl Composed {
         let max_range = gpu.limits.max_storage_buffer_binding_size;
         let mut transforms: Vec<ComposedItem> = items
             .iter()
-            .map(|item| match fast_path(item.model, item.cuboid.clone()) {
-                (model, Some(grid)) => {
-                    let (header, normals) = (grid.header(), grid.normals);
-                    ComposedItem { model, header, grid: Some((normals, 0)), nonlinear: Some(grid) }
-                }
-                (model, None) => ComposedItem { model, header: [[0.0; 4]; 3], grid: None, nonlinear: None },
+            .map(|item| {
+                let (model, grid) = fast_path(item.model, item.cuboid.clone());
+                ComposedItem { model, grid, grid_row: 0 }
             })
             .collect();
         let rows_of = |grid: &CuboidGrid| grid.cells.iter().product::<usize>() * CuboidGrid::ROWS_PER_CELL;
         if let Some(grid) = transforms
             .iter()
-            .filter_map(|t| t.nonlinear.as_deref())
+            .filter_map(|t| t.grid.as_deref())
             .find(|grid| rows_of(grid) as u64 * ROW_BYTES > max_range)
         {
             anyhow::bail!(
@@ -266,7 +268,7 @@ impl Composed {
         // (a group's transform over many objects) share its rows.
         let mut last_grid: Option<(Arc<CuboidGrid>, u32)> = None;
         for i in 0..items.len() {
-            let grid_len = transforms[i].nonlinear.as_deref().map_or(0, rows_of);
+            let grid_len = transforms[i].grid.as_deref().map_or(0, rows_of);
             let joins = draws.last().is_some_and(|d| {
                 let first = d.first;
                 same_draw((&items[first], &transforms[first]), (&items[i], &transforms[i]))
@@ -281,14 +283,14 @@ impl Composed {
             let draw = draws.last_mut().expect("pushed above");
             draw.count += 1;
             let t = &mut transforms[i];
-            if let (Some((_, first)), Some(grid)) = (&mut t.grid, t.nonlinear.take()) {
+            if let Some(grid) = &t.grid {
                 match &last_grid {
-                    Some((placed, row)) if Arc::ptr_eq(placed, &grid) => *first = *row,
+                    Some((placed, row)) if Arc::ptr_eq(placed, grid) => t.grid_row = *row,
                     _ => {
-                        *first = (rows.len() - draw.first_row) as u32;
+                        t.grid_row = (rows.len() - draw.first_row) as u32;
                         grid.append_cells(&mut rows);
                         draw.row_count = rows.len() - draw.first_row;
-                        last_grid = Some((grid, *first));
+                        last_grid = Some((grid.clone(), t.grid_row));
                     }
                 }
             }
@@ -324,8 +326,8 @@ pub struct SceneDrawer {
     tile_index: Bindings,
     /// All items' objects, one buffer per pass; per draw its object group (cached while the
     /// buffer and its maps stay: a cache shared by all draws would thrash with many maps).
-    object_uniforms: BufferRing,
-    objects: Vec<Bindings>,
+    objects: BufferRing,
+    object_groups: Vec<Bindings>,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
     /// The cells (coefficient matrices) of every non-linear grid a pass uses, in one storage
@@ -343,8 +345,8 @@ impl Default for SceneDrawer {
             frame: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
-            object_uniforms: BufferRing::new("objects", wgpu::BufferUsages::STORAGE),
-            objects: Vec::new(),
+            objects: BufferRing::new("objects", wgpu::BufferUsages::STORAGE),
+            object_groups: Vec::new(),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
             grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
@@ -391,17 +393,16 @@ impl SceneDrawer {
     ) -> anyhow::Result<Vec<Prepared>> {
         let Composed { transforms, draws, rows } = composed;
         self.draw_count = draws.len();
-        while self.objects.len() < draws.len() {
-            self.objects.push(Bindings::new(OBJECT_VISIBILITY));
+        while self.object_groups.len() < draws.len() {
+            self.object_groups.push(Bindings::new(OBJECT_VISIBILITY));
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
         let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(rows)).clone());
         // Every item's object in one buffer, one write per pass (a write per item made wgpu
         // allocate a staging buffer each: most of a frame of thousands of small objects).
-        let objects: Vec<ObjectUniform> =
-            items.iter().zip(transforms).map(|(item, t)| object_uniform(item, t)).collect();
-        let object_buffer = self.object_uniforms.write(gpu, bytemuck::cast_slice(&objects)).clone();
+        let objects: Vec<GpuObject> = items.iter().zip(transforms).map(|(item, t)| gpu_object(item, t)).collect();
+        let object_buffer = self.objects.write(gpu, bytemuck::cast_slice(&objects)).clone();
         let mut prepared = Vec::with_capacity(draws.len());
         for (d, draw) in draws.iter().enumerate() {
             let (item, t) = (&items[draw.first], &transforms[draw.first]);
@@ -418,8 +419,8 @@ impl SceneDrawer {
             ];
             let mut offsets = [(draw.first as u64 * OBJECT_SIZE) as u32, 0];
             let mut layout = layouts.object;
-            let cuboid = match (t.grid, &cells, layouts.object_cells) {
-                (Some((normals, _)), Some(cells), Some(with_cells)) => {
+            let cuboid = match (t.normals(), &cells, layouts.object_cells) {
+                (Some(normals), Some(cells), Some(with_cells)) => {
                     binds.push(Bind::DynamicStorage(cells, draw.row_count as u64 * ROW_BYTES));
                     offsets[1] = (draw.first_row as u64 * ROW_BYTES) as u32;
                     layout = with_cells;
@@ -427,7 +428,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            let object = self.objects[d].bind_group(gpu, layout, &binds);
+            let object = self.object_groups[d].bind_group(gpu, layout, &binds);
             let warp = match (&item.attached, layouts.warp) {
                 (Some(a), Some(layout)) => {
                     let resolver = &mut self.resolver;
