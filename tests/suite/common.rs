@@ -227,3 +227,8 @@ pub fn world_positions(ev: &werkstatt::eval::Evaluator, margin_percent: u32) -> 
         })
         .collect()
 }
+
+/// A camera at `eye` looking at the origin, y up, near plane 0.1.
+pub fn camera_toward_origin(eye: glam::Vec3, fov_y_degrees: f32, far: f32) -> werkstatt::scene::Camera {
+    werkstatt::scene::Camera { eye, target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_degrees, near: 0.1, far }
+}

@@ -17,7 +17,7 @@ use werkstatt::gpu::read_back;
 use werkstatt::graph::Graph;
 use werkstatt::mesh::Mesh;
 use werkstatt::port::Value;
-use werkstatt::scene::{Camera, DrawItem, Material, View};
+use werkstatt::scene::{DrawItem, Material, View};
 
 fn vec3() -> impl Strategy<Value = DVec3> {
     (-10.0..10.0f64, -10.0..10.0f64, -10.0..10.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z))
@@ -327,14 +327,7 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     let plate = werkstatt::nodes::geometry::plane(2.0, 24, 24).unwrap();
     let model = Mat4::from_rotation_x(0.3);
     let (lo, hi) = (DVec3::new(-1.0, -0.6, -1.0), DVec3::new(1.0, 0.6, 1.0));
-    let camera = Camera {
-        eye: Vec3::new(0.3, 2.2, 3.0),
-        target: Vec3::ZERO,
-        up: Vec3::Y,
-        fov_y_degrees: 45.0,
-        near: 0.1,
-        far: 20.0,
-    };
+    let camera = common::camera_toward_origin(Vec3::new(0.3, 2.2, 3.0), 45.0, 20.0);
     let (w, h) = (64u32, 64u32);
     let view = View::new(&camera, w, h);
     for method in [NormalMethod::TangentSpace, NormalMethod::Direct] {
@@ -453,14 +446,7 @@ fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
         .collect();
     let separate: Vec<DrawItem> =
         shared.iter().map(|item| DrawItem { mesh: Arc::new((*item.mesh).clone()), ..item.clone() }).collect();
-    let camera = Camera {
-        eye: Vec3::new(0.0, 0.5, 4.0),
-        target: Vec3::ZERO,
-        up: Vec3::Y,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 20.0,
-    };
+    let camera = common::camera_toward_origin(Vec3::new(0.0, 0.5, 4.0), 60.0, 20.0);
     let (w, h) = (96u32, 48u32);
     let view = View::new(&camera, w, h);
     let tiles = [

@@ -282,17 +282,10 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     use werkstatt::draw::SceneDrawer;
     use werkstatt::gpu::read_back;
     use werkstatt::nodes::geometry::plane;
-    use werkstatt::scene::{Camera, DrawItem, View};
+    use werkstatt::scene::{DrawItem, View};
 
     let g = gpu();
-    let camera = Camera {
-        eye: Vec3::new(0.4, 1.2, 2.6),
-        target: Vec3::ZERO,
-        up: Vec3::Y,
-        fov_y_degrees: 45.0,
-        near: 0.1,
-        far: 10.0,
-    };
+    let camera = crate::common::camera_toward_origin(Vec3::new(0.4, 1.2, 2.6), 45.0, 10.0);
     let (w, h) = (64u32, 48u32);
     let v = View::new(&camera, w, h);
     let mut drawer = SceneDrawer::default();
