@@ -108,10 +108,15 @@ fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
     let settings = FrameSettings { width: 32, height: 24, base_dir: PathBuf::from("."), frames: None };
     // Twice, so nodes with state see a second frame; loads are waited for in between.
     for frame in 0..2 {
+        // Stops when nothing is pending, or when no load was in flight across a whole
+        // evaluation (a load that finished right after the evaluation that asked for it is
+        // picked up by the next one; LiveLink stays pending for good).
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        let mut idle_evaluations = 0;
         loop {
             let summary = ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(common::gpu()), &resources, &settings);
-            if summary.pending == 0 || resources.in_flight() == 0 || std::time::Instant::now() > deadline {
+            idle_evaluations = if resources.in_flight() == 0 { idle_evaluations + 1 } else { 0 };
+            if summary.pending == 0 || idle_evaluations == 2 || std::time::Instant::now() > deadline {
                 break;
             }
             common::wait_idle(&resources);
