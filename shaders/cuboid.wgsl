@@ -1,36 +1,42 @@
 // The trilinear (cuboid grid) transform of a draw item (src/cuboid.rs, dissertation eq. 3.4):
-// the grid's box and cells are in the object (object.wgsl `grid_*`), its cells' coefficient
-// matrices C (3x8, six vec4 per cell: per coordinate the left and the right half, cells x
-// fastest, then y, then z) in one storage buffer shared by every grid of the pass, of which
-// each draw binds the rows of its items' grids (binding 4 of the object group, at a dynamic
-// offset; the object's `grid_rows.x` says where its grid starts in them; CuboidGrid::append_cells):
-// six loads per vertex instead of the cell's eight corners, and C is formed once per cell on
-// the CPU, not once per vertex.
+// the item's transform (item_in.wgsl) takes a vertex into the grid's cell coordinates; its
+// cells' coefficient matrices C (3x8, six texels per cell: per coordinate the left and the
+// right half, cells x fastest, then y, then z; CuboidGrid::append_cells) lie in one texture
+// shared by every grid of the pass (binding 4 of the object group; the item's `grid.w` is
+// its grid's first cell there; src/draw.rs `CellTextures`): six loads per vertex instead of
+// the cell's eight corners, and C is formed once per cell on the CPU, not once per vertex.
 
-@group(1) @binding(4) var<storage, read> cuboid_cells: array<vec4<f32>>;
+@group(1) @binding(4) var cuboid_cells: texture_2d<f32>;
+
+// Cells per texel row of `cuboid_cells` (src/draw.rs `CELLS_PER_ROW`).
+const CELLS_PER_ROW: u32 = 1024u;
+
+// Row `k` of cell `cell`'s coefficient matrix.
+fn cell_row(cell: u32, k: u32) -> vec4<f32> {
+    return textureLoad(cuboid_cells, vec2<u32>(6u * (cell % CELLS_PER_ROW) + k, cell / CELLS_PER_ROW), 0);
+}
 
 struct Deformed {
     position: vec3<f32>,
-    // d(position)/d(input point), for normals.
+    // d(position)/d(cell coordinates), for normals (the item's normal transform holds the
+    // cell map's scale).
     jacobian: mat3x3<f32>,
 };
 
-// Maps `p` (after the model matrix) through the grid: into the box's unit cube, into its
-// cell (the nearest one outside the box), then eq. 3.4 with the cell's coefficient matrix.
-fn cuboid_deform(p: vec3<f32>) -> Deformed {
-    let n = object.grid_cells.xyz;
-    let t = (p - object.grid_min.xyz) * object.grid_inv_size.xyz * n;
+// Maps `t` (cell coordinates of `grid`: cells per axis in xyz, first row in w) through its cell
+// (the nearest one outside the grid), eq. 3.4 with the cell's coefficient matrix.
+fn cuboid_deform(t: vec3<f32>, grid: vec4<u32>) -> Deformed {
+    let n = vec3<f32>(grid.xyz);
     let cell = clamp(floor(t), vec3<f32>(0.0), n - 1.0);
     let l = t - cell;
-    let index = i32(cell.x + n.x * (cell.y + n.y * cell.z));
-    let first = i32(object.grid_rows.x) + 6 * index;
+    let index = grid.w + u32(cell.x + n.x * (cell.y + n.y * cell.z));
     // Rows of C: left half (c_xyz, c_yz, c_xz, c_xy) and right half (c_z, c_y, c_x, c_1).
-    let x_left = cuboid_cells[first];
-    let x_right = cuboid_cells[first + 1];
-    let y_left = cuboid_cells[first + 2];
-    let y_right = cuboid_cells[first + 3];
-    let z_left = cuboid_cells[first + 4];
-    let z_right = cuboid_cells[first + 5];
+    let x_left = cell_row(index, 0u);
+    let x_right = cell_row(index, 1u);
+    let y_left = cell_row(index, 2u);
+    let y_right = cell_row(index, 3u);
+    let z_left = cell_row(index, 4u);
+    let z_right = cell_row(index, 5u);
     let x = l.x;
     let y = l.y;
     let z = l.z;
@@ -50,8 +56,7 @@ fn cuboid_deform(p: vec3<f32>) -> Deformed {
     let dx = vec3<f32>(dot(x_left, ddx) + x_right.z, dot(y_left, ddx) + y_right.z, dot(z_left, ddx) + z_right.z);
     let dy = vec3<f32>(dot(x_left, ddy) + x_right.y, dot(y_left, ddy) + y_right.y, dot(z_left, ddy) + z_right.y);
     let dz = vec3<f32>(dot(x_left, ddz) + x_right.x, dot(y_left, ddz) + y_right.x, dot(z_left, ddz) + z_right.x);
-    let s = n * object.grid_inv_size.xyz;
-    out.jacobian = mat3x3<f32>(dx * s.x, dy * s.y, dz * s.z);
+    out.jacobian = mat3x3<f32>(dx, dy, dz);
     return out;
 }
 

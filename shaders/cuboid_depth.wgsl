@@ -1,8 +1,9 @@
 // Depth tiles (shaders/depth.wgsl) for items under a non-linear cuboid transform: drawn
-// instanced once per tile and item like plain meshes, the vertex deformed by the grid first.
+// instanced over the draw's items like plain meshes, the vertex deformed by the grid first.
 
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
+// #include "item_in.wgsl"
 // #include "cuboid.wgsl"
 // #include "depth_tiles.wgsl"
 
@@ -12,10 +13,9 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
-    use_object(instance / views.count.x);
-    let tile = instance % views.count.x;
-    let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
+fn vs_main(v: VertexIn, item: ItemIn) -> VertexOut {
+    let tile = draw_tile.x;
+    let d = cuboid_deform(item_point(item, v.position).xyz, item.grid);
     var out: VertexOut;
     out.clip = views.tiles[tile].to_tile * vec4<f32>(d.position, 1.0);
     out.tile = tile;

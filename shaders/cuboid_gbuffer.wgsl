@@ -1,7 +1,8 @@
 // G-buffer pass for items under a non-linear cuboid transform (src/draw.rs): the vertex lands
-// at cuboid(model * p); the fragment stage is the plain G-buffer's.
+// at cuboid(cell map * model * p); the fragment stage is the plain G-buffer's.
 
 // #include "gbuffer_common.wgsl"
+// #include "item_in.wgsl"
 // #include "cuboid.wgsl"
 
 struct VertexOut {
@@ -12,31 +13,29 @@ struct VertexOut {
     @location(3) @interpolate(flat) object: u32,
 };
 
-// One instance per item of the draw.
-fn cuboid_vertex(v: VertexIn, item: u32, direct_normals: bool) -> VertexOut {
-    use_object(item);
-    let d = cuboid_deform((object.model * vec4<f32>(v.position, 1.0)).xyz);
+// One instance per item of the draw (`index` picks its object for the fragment stage).
+fn cuboid_vertex(v: VertexIn, item: ItemIn, index: u32, direct_normals: bool) -> VertexOut {
+    let d = cuboid_deform(item_point(item, v.position).xyz, item.grid);
     let world = vec4<f32>(d.position, 1.0);
     var out: VertexOut;
     out.clip = frame.view_proj * world;
     // Normalized per vertex: J scales normals differently at each vertex.
-    let n = (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz;
-    out.normal = normalize(cuboid_normal(d.jacobian, n, direct_normals));
+    out.normal = normalize(cuboid_normal(d.jacobian, item_normal(item, v.normal), direct_normals));
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
-    out.object = item;
+    out.object = index;
     return out;
 }
 
 // One entry point per normal method (NormalMethod in src/cuboid.rs).
 @vertex
-fn vs_tangent_space(v: VertexIn, @builtin(instance_index) item: u32) -> VertexOut {
-    return cuboid_vertex(v, item, false);
+fn vs_tangent_space(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return cuboid_vertex(v, item, index, false);
 }
 
 @vertex
-fn vs_direct(v: VertexIn, @builtin(instance_index) item: u32) -> VertexOut {
-    return cuboid_vertex(v, item, true);
+fn vs_direct(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return cuboid_vertex(v, item, index, true);
 }
 
 @fragment

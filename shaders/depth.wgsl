@@ -1,14 +1,13 @@
 // Depth only, into tiles of one texture, one view per tile (src/draw.rs `depth_tiles`):
-// shadow maps of many lights in one pass. Plain meshes are drawn instanced once per tile and
-// item (depth_tiles.wgsl `count`); attached items once per tile with the tile in group 3.
+// shadow maps of many lights in one pass. Each draw fills one tile (group 3): plain meshes
+// instanced over the draw's items, attached items over their attachments.
 
 // #include "object.wgsl"
 // #include "vertex_in.wgsl"
+// #include "item_in.wgsl"
 // #include "warp.wgsl"
 // #include "instance_in.wgsl"
 // #include "depth_tiles.wgsl"
-
-@group(3) @binding(0) var<uniform> attached_tile: vec4<u32>;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -18,11 +17,10 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_plain(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
-    use_object(instance / views.count.x);
-    let tile = instance % views.count.x;
+fn vs_plain(v: VertexIn, item: ItemIn) -> VertexOut {
+    let tile = draw_tile.x;
     var out: VertexOut;
-    out.clip = views.tiles[tile].to_tile * object.model * vec4<f32>(v.position, 1.0);
+    out.clip = views.tiles[tile].to_tile * item_point(item, v.position);
     out.tile = tile;
     out.outlier = 0.0;
     return out;
@@ -32,7 +30,7 @@ fn vs_plain(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
 fn vs_attached(v: VertexIn, i: InstanceIn) -> VertexOut {
     let inst = Instance(i.m_tex0, i.m_tex1, i.m_tan0, i.m_tan1, i.m_tan2, i.m_tan3, i.curve01, i.curve23, i.range);
     let w = warp_vertex(v.position, v.normal, inst);
-    let tile = attached_tile.x;
+    let tile = draw_tile.x;
     var out: VertexOut;
     out.clip = views.tiles[tile].to_tile * vec4<f32>(w.position, 1.0);
     out.tile = tile;

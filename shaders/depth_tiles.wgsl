@@ -10,9 +10,9 @@ struct TileView {
 
 struct Tiles {
     tiles: array<TileView, 64>,
-    // x: the number of tiles. Plain and cuboid draws have that many instances per item:
-    // instance i draws item i / count into tile i % count.
-    count: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> views: Tiles;
+// x: the tile this draw fills (a draw per tile: wgpu has no geometry shader, and an instance
+// per item and tile would need the items' instance-rate transforms repeated per tile).
+@group(3) @binding(0) var<uniform> draw_tile: vec4<u32>;

@@ -1,6 +1,7 @@
 // G-buffer pass (dissertation section 4.2) for plain meshes.
 
 // #include "gbuffer_common.wgsl"
+// #include "item_in.wgsl"
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -10,17 +11,16 @@ struct VertexOut {
     @location(3) @interpolate(flat) object: u32,
 };
 
-// One instance per item of the draw.
+// One instance per item of the draw (`index` picks its object for the fragment stage).
 @vertex
-fn vs_main(v: VertexIn, @builtin(instance_index) item: u32) -> VertexOut {
-    use_object(item);
-    let world = object.model * vec4<f32>(v.position, 1.0);
+fn vs_main(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    let world = item_point(item, v.position);
     var out: VertexOut;
     out.clip = frame.view_proj * world;
-    out.normal = (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz;
+    out.normal = item_normal(item, v.normal);
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
-    out.object = item;
+    out.object = index;
     return out;
 }
 

@@ -1,7 +1,9 @@
-// A drawn object (group 1): its transform and material, shared by every pass that draws
-// the scene (src/draw.rs `GpuObject`). All items' objects lie in one storage buffer; a draw
-// binds its own items' range (a dynamic offset), so items that share a mesh and maps
-// draw as one instanced draw, each entry point picking its instance's object with `use_object`.
+// A drawn object (group 1): its material, and its model matrix for per-pixel PN depth (whose
+// fragment stage transforms the triangle's corners), shared by every pass that draws the
+// scene (src/draw.rs `GpuObject`). All items' objects lie in one storage buffer; a draw binds
+// its own items' range (a dynamic offset), so items that share a mesh and maps draw as one
+// instanced draw, each entry point picking its instance's object with `use_object`. Vertex
+// stages take their transform from the instance-rate `ItemIn` instead (item_in.wgsl).
 
 struct Object {
     model: mat4x4<f32>,
@@ -13,17 +15,8 @@ struct Object {
     params: vec4<f32>,
     // x: glossiness where the gloss map is 0.
     extra: vec4<f32>,
-    // A non-linear cuboid grid (shaders/cuboid.wgsl; zero otherwise). xyz: the content box's
-    // minimum (w unused: each normal method is its own vertex entry point).
-    grid_min: vec4<f32>,
-    // xyz: 1 / the box's size.
-    grid_inv_size: vec4<f32>,
-    // xyz: cells per axis.
-    grid_cells: vec4<f32>,
-    // x: the grid's first row of cells, counted from the draw's range (cuboid.wgsl).
-    grid_rows: vec4<u32>,
     // Pads the object to 256 bytes, the largest storage offset alignment an adapter may ask.
-    unused: vec4<f32>,
+    unused: array<vec4<f32>, 5>,
 };
 
 @group(1) @binding(0) var<storage, read> objects: array<Object>;

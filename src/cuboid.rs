@@ -361,16 +361,28 @@ impl CuboidGrid {
     /// Rows [`CuboidGrid::append_cells`] appends per cell.
     pub const ROWS_PER_CELL: usize = 6;
 
-    /// The grid's header in its item's object (shaders/object.wgsl `grid_*`): box origin
-    /// and 1/box size (w unused: the normal method picks the vertex entry point, and each draw
-    /// binds its grid's rows from the first), cells per axis.
-    pub fn header(&self) -> [[f32; 4]; 3] {
-        let inv = (1.0 / (self.box_max - self.box_min)).as_vec3();
-        [
-            self.box_min.as_vec3().extend(0.0).to_array(),
-            inv.extend(0.0).to_array(),
-            [self.cells[0] as f32, self.cells[1] as f32, self.cells[2] as f32, 0.0],
-        ]
+    /// The map from a point of the grid's content space (its item's model matrix applied)
+    /// into the grid's cell coordinates, where cell (i, j, k) spans [i, i+1] x [j, j+1] x
+    /// [k, k+1] (shaders/cuboid.wgsl finds the cell and eq. 3.4's local point from these).
+    /// The item's transform (src/draw.rs `ItemVertex`) folds it after the model matrix.
+    pub fn cell_map(&self) -> DMat4 {
+        DMat4::from_scale(self.cell_scale()) * DMat4::from_translation(-self.box_min)
+    }
+
+    /// Cells per unit of content space, per axis: the cell map's scale.
+    fn cell_scale(&self) -> DVec3 {
+        DVec3::new(self.cells[0] as f64, self.cells[1] as f64, self.cells[2] as f64) / (self.box_max - self.box_min)
+    }
+
+    /// The scale the cell map leaves in normals, to fold into the item's normal transform: the
+    /// shader's Jacobian J is taken in cell coordinates, so content space sees J S with S the
+    /// cell map's scale. The tangent-space method transforms by cof(J S) = cof(J) det(S) S^-1
+    /// (det(S) > 0 dropped: normals are normalized), the direct method by J S.
+    pub fn normal_scale(&self) -> DVec3 {
+        match self.normals {
+            NormalMethod::TangentSpace => 1.0 / self.cell_scale(),
+            NormalMethod::Direct => self.cell_scale(),
+        }
     }
 }
 

@@ -3,14 +3,13 @@
 //!
 //! - [`SceneDrawer::gbuffer`]: the deferred renderer's G-buffer (dissertation section 4.2);
 //! - [`SceneDrawer::depth_tiles`]: depth only, into tiles of one depth texture, one view per
-//!   tile (shadow maps: a light per tile of an atlas). Plain meshes fill every tile in one
-//!   instanced draw (the instance index picks the item and the tile's view, wgpu having no
-//!   geometry shader); attached items draw once per tile. A fragment outside its tile is discarded, so a tile
-//!   never spills into its neighbours.
+//!   tile (shadow maps: a light per tile of an atlas). Each draw is recorded once per tile (the
+//!   tile's index in group 3, wgpu having no geometry shader). A fragment outside its tile is
+//!   discarded, so a tile never spills into its neighbours.
 
 use std::sync::Arc;
 
-use glam::{Mat4, Vec4};
+use glam::{DMat3, Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
 use crate::gpu::pass::{Bindings, dynamic_storage_entry, texture_entry, uniform_entry};
@@ -40,7 +39,8 @@ struct FrameUniform {
     view: [[f32; 4]; 4],
 }
 
-/// shaders/object.wgsl `Object`: one entry of the storage buffer of all objects of a pass.
+/// shaders/object.wgsl `Object`: one entry of the storage buffer of all objects of a pass
+/// (material, and the model matrix for per-pixel PN depth, whose fragment stage needs it).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct GpuObject {
@@ -49,11 +49,60 @@ struct GpuObject {
     base_color: [f32; 4],
     params: [f32; 4],
     extra: [f32; 4],
-    /// A non-linear cuboid grid's header ([`CuboidGrid::header`]), zero without one.
-    grid: [[f32; 4]; 3],
-    /// x: the first row of the grid's cells, counted from the first row its draw binds.
-    grid_rows: [u32; 4],
-    unused: [f32; 4],
+    unused: [[f32; 4]; 5],
+}
+
+/// shaders/item_in.wgsl `ItemIn`: an item's vertex-stage transform, one entry of the
+/// instance-rate vertex buffer of all items of a pass (lavapipe fetches it once per batch of
+/// vertices; read from the objects' storage buffer, it was a gather per vertex).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ItemVertex {
+    /// The model matrix, or under a non-linear grid the grid's cell map after it.
+    transform: [[f32; 4]; 4],
+    /// The model's inverse transpose (xyz of each column), under a non-linear grid scaled as
+    /// its normal method needs ([`CuboidGrid::normal_scale`]).
+    normal: [[f32; 4]; 3],
+    /// A non-linear grid: cells per axis, and its first cell in the pass's cell texture. Zero
+    /// without one.
+    grid: [u32; 4],
+}
+
+const ITEM_BYTES: u64 = std::mem::size_of::<ItemVertex>() as u64;
+
+impl ItemVertex {
+    const ATTRIBUTES: [wgpu::VertexAttribute; 8] = wgpu::vertex_attr_array![
+        5 => Float32x4, 6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
+        9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
+    ];
+
+    fn layout() -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout {
+            array_stride: ITEM_BYTES,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &Self::ATTRIBUTES,
+        }
+    }
+
+    /// `t.model` after the fast path; a remaining non-linear grid's cell map is folded after it
+    /// (in f64), so the vertex stage maps a vertex into cell coordinates with one matrix.
+    fn new(t: &ComposedItem) -> ItemVertex {
+        let model = t.model.as_dmat4();
+        let normal = DMat3::from_mat4(model).inverse().transpose();
+        let (transform, normal, grid) = match &t.grid {
+            None => (model, normal, [0; 4]),
+            Some(g) => {
+                let [x, y, z] = g.cells.map(|n| n as u32);
+                (g.cell_map() * model, DMat3::from_diagonal(g.normal_scale()) * normal, [x, y, z, t.grid_cell])
+            }
+        };
+        let normal = normal.as_mat3();
+        ItemVertex {
+            transform: transform.as_mat4().to_cols_array_2d(),
+            normal: [normal.x_axis, normal.y_axis, normal.z_axis].map(|c| c.extend(0.0).to_array()),
+            grid,
+        }
+    }
 }
 
 /// An object's size in the storage buffer of all objects: a multiple of every storage offset
@@ -75,8 +124,6 @@ struct TileUniform {
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct TilesUniform {
     tiles: [TileUniform; MAX_TILES],
-    /// x: the number of tiles (instances per item of a plain or cuboid draw).
-    count: [u32; 4],
 }
 
 /// Group 2 of shaders/warp.wgsl: the matrix texture's three columns, the warp settings
@@ -135,7 +182,7 @@ impl InstanceResolver {
 }
 
 /// `t.model` is the item's own matrix, or the composed one where the linear fast path folded
-/// an affine cuboid grid into it; a remaining non-linear grid gives the grid fields.
+/// an affine cuboid grid into it.
 fn gpu_object(item: &DrawItem, t: &ComposedItem) -> GpuObject {
     let (model, m) = (t.model, &item.material);
     GpuObject {
@@ -149,19 +196,16 @@ fn gpu_object(item: &DrawItem, t: &ComposedItem) -> GpuObject {
             f32::from(u8::from(m.gloss_map.is_some())),
         ],
         extra: [m.gloss_min, 0.0, 0.0, 0.0],
-        grid: t.grid.as_ref().map_or([[0.0; 4]; 3], |g| g.header()),
-        grid_rows: [t.grid_row, 0, 0, 0],
-        unused: [0.0; 4],
+        unused: [[0.0; 4]; 5],
     }
 }
 
 /// One draw's bind groups: its object group, for an attachment the warp group and the
 /// instance buffer, for per-pixel PN depth the mesh's buffers.
 struct Prepared {
-    /// The object group, and its dynamic offsets: the draw's first object, and where the draw
-    /// has items under non-linear grids, its first row of cells.
+    /// The object group, and its dynamic offset: the draw's first object.
     object: wgpu::BindGroup,
-    offsets: [u32; 2],
+    offset: u32,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
     /// For items under a non-linear grid, their normal method (which entry point draws them).
     cuboid: Option<NormalMethod>,
@@ -171,27 +215,23 @@ struct Prepared {
 
 /// The items' transforms after the linear fast path, tested once per composed transform right
 /// before drawing, and the draws they make: consecutive items that share a mesh, maps and
-/// pipeline draw as one instanced draw, each instance reading its own object (and grid).
-/// The cells of all non-linear grids lie in one buffer; each draw binds only its own items'
-/// rows (a dynamic offset): lavapipe copies a bound storage range for every draw, and binding
-/// the whole buffer made a frame of 4617 separately drawn helix objects twice as slow as with
-/// affine transforms.
+/// pipeline draw as one instanced draw, each instance reading its own object and transform.
+/// The cells of all non-linear grids lie in one texture per pass ([`CellTextures`]).
 struct Composed {
     transforms: Vec<ComposedItem>,
     draws: Vec<DrawRange>,
+    /// Every non-linear grid's cells, [`CuboidGrid::ROWS_PER_CELL`] rows each.
     rows: Vec<[f32; 4]>,
 }
 
-/// Consecutive items drawn by one draw call, and the rows of their grids' cells.
+/// Consecutive items drawn by one draw call.
 #[derive(Clone, Copy)]
 struct DrawRange {
     first: usize,
     count: usize,
-    first_row: usize,
-    row_count: usize,
 }
 
-/// The layouts of a pass's per-item groups: the object group, with a grid's cells (where any
+/// The layouts of a pass's per-item groups: the object group, with the grids' cells (where any
 /// item is under a non-linear grid), the warp group (where anything is attached) and the
 /// per-pixel PN group (G-buffer only).
 #[derive(Clone, Copy)]
@@ -205,10 +245,9 @@ struct ItemLayouts<'a> {
 /// One item's transform after the fast path.
 struct ComposedItem {
     model: Mat4,
-    /// The grid that stays non-linear, and the first row of its cells, counted from its draw's
-    /// first row.
+    /// The grid that stays non-linear, and its first cell in the pass's cell texture.
     grid: Option<Arc<CuboidGrid>>,
-    grid_row: u32,
+    grid_cell: u32,
 }
 
 impl ComposedItem {
@@ -218,8 +257,9 @@ impl ComposedItem {
     }
 }
 
-/// One row of a grid's cells (a vec4 of f32).
-const ROW_BYTES: u64 = 16;
+/// Cells per texel row of a pass's cell texture (shaders/cuboid.wgsl `CELLS_PER_ROW`), each
+/// cell [`CuboidGrid::ROWS_PER_CELL`] texels.
+const CELLS_PER_ROW: usize = 1024;
 
 /// Whether `b` can join the instanced draw of `a`: both plain or both under non-linear grids
 /// of one normal method, on one mesh with the same maps (one object group).
@@ -246,62 +286,40 @@ impl Composed {
             .iter()
             .map(|item| {
                 let (model, grid) = fast_path(item.model, item.cuboid.clone());
-                ComposedItem { model, grid, grid_row: 0 }
+                ComposedItem { model, grid, grid_cell: 0 }
             })
             .collect();
-        let rows_of = |grid: &CuboidGrid| grid.cells.iter().product::<usize>() * CuboidGrid::ROWS_PER_CELL;
-        if let Some(grid) = transforms
-            .iter()
-            .filter_map(|t| t.grid.as_deref())
-            .find(|grid| rows_of(grid) as u64 * ROW_BYTES > max_range)
-        {
-            anyhow::bail!(
-                "a cuboid grid of {} cells is more than one draw can bind ({max_range} bytes at most)",
-                rows_of(grid) / CuboidGrid::ROWS_PER_CELL
-            );
-        }
-        // Each draw's rows start where a dynamic offset may point.
-        let align = (u64::from(gpu.limits.min_storage_buffer_offset_alignment) / ROW_BYTES).max(1) as usize;
         let mut rows: Vec<[f32; 4]> = Vec::new();
         let mut draws: Vec<DrawRange> = Vec::new();
-        // The last grid placed in the current draw and its first row: items that share a grid
-        // (a group's transform over many objects) share its rows.
+        // The last grid placed and its first cell: consecutive items that share a grid (a
+        // group's transform over many objects) share its cells.
         let mut last_grid: Option<(Arc<CuboidGrid>, u32)> = None;
         for i in 0..items.len() {
-            let grid_len = transforms[i].grid.as_deref().map_or(0, rows_of);
             let joins = draws.last().is_some_and(|d| {
                 let first = d.first;
                 same_draw((&items[first], &transforms[first]), (&items[i], &transforms[i]))
-                    && ((rows.len() + grid_len - d.first_row) as u64 * ROW_BYTES) <= max_range
                     && (d.count as u64 + 1) * OBJECT_SIZE <= max_range
             });
             if !joins {
-                rows.resize(rows.len().next_multiple_of(align), [0.0; 4]);
-                draws.push(DrawRange { first: i, count: 0, first_row: rows.len(), row_count: 0 });
-                last_grid = None;
+                draws.push(DrawRange { first: i, count: 0 });
             }
-            let draw = draws.last_mut().expect("pushed above");
-            draw.count += 1;
+            draws.last_mut().expect("pushed above").count += 1;
             let t = &mut transforms[i];
             if let Some(grid) = &t.grid {
                 match &last_grid {
-                    Some((placed, row)) if Arc::ptr_eq(placed, grid) => t.grid_row = *row,
+                    Some((placed, cell)) if Arc::ptr_eq(placed, grid) => t.grid_cell = *cell,
                     _ => {
-                        t.grid_row = (rows.len() - draw.first_row) as u32;
+                        t.grid_cell = u32::try_from(rows.len() / CuboidGrid::ROWS_PER_CELL)?;
                         grid.append_cells(&mut rows);
-                        draw.row_count = rows.len() - draw.first_row;
-                        last_grid = Some((grid.clone(), t.grid_row));
+                        last_grid = Some((grid.clone(), t.grid_cell));
                     }
                 }
             }
         }
-        // Dynamic offsets are u32, and a buffer has a size limit.
+        let cells = rows.len() / CuboidGrid::ROWS_PER_CELL;
+        let most = CELLS_PER_ROW * gpu.limits.max_texture_dimension_2d as usize;
+        anyhow::ensure!(cells <= most, "the scene's cuboid grids have {cells} cells; a pass holds at most {most}");
         let most = gpu.limits.max_buffer_size.min(u64::from(u32::MAX));
-        let bytes = rows.len() as u64 * ROW_BYTES;
-        anyhow::ensure!(
-            bytes <= most,
-            "the scene's cuboid grids need {bytes} bytes of cells; a pass holds at most {most}"
-        );
         let bytes = items.len() as u64 * OBJECT_SIZE;
         anyhow::ensure!(
             bytes <= most,
@@ -314,6 +332,64 @@ impl Composed {
     /// Whether any item still needs the trilinear vertex stage.
     fn any_nonlinear(&self) -> bool {
         !self.rows.is_empty()
+    }
+}
+
+/// A pass's cell texture (shaders/cuboid.wgsl `cuboid_cells`: rgba32float, a row of C per
+/// texel, [`CELLS_PER_ROW`] cells per texel row), one per pass until the next submit:
+/// `queue.write_texture` runs before the submit's commands, so one texture written by two
+/// passes would show both the second pass's cells. Lavapipe loads a texel for each vertex
+/// with a few vector instructions; a storage buffer indexed per vertex costs it a loop over
+/// the lanes with a branch per component (a fifth of a helix frame).
+#[derive(Default)]
+struct CellTextures {
+    slots: Vec<GpuImage>,
+    epoch: u64,
+    used: usize,
+}
+
+impl CellTextures {
+    fn write(&mut self, gpu: &GpuContext, rows: &[[f32; 4]]) -> &GpuImage {
+        let epoch = gpu.epoch();
+        if epoch != self.epoch {
+            self.epoch = epoch;
+            self.used = 0;
+        }
+        let slot = self.used;
+        self.used += 1;
+        let row_texels = CELLS_PER_ROW * CuboidGrid::ROWS_PER_CELL;
+        let height = rows.len().div_ceil(row_texels).max(1) as u32;
+        if slot == self.slots.len() || self.slots[slot].height < height {
+            let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+            let desc =
+                TextureDesc::d2(row_texels as u32, height.next_power_of_two(), wgpu::TextureFormat::Rgba32Float, usage);
+            let image = GpuImage::create(gpu, "cuboid grid cells", desc);
+            if slot == self.slots.len() {
+                self.slots.push(image);
+            } else {
+                self.slots[slot] = image;
+            }
+        }
+        let texture = &self.slots[slot].texture;
+        // Whole texel rows, then the last, partial one.
+        let (full, rest) = rows.split_at(rows.len() / row_texels * row_texels);
+        for (y, part, width) in [(0, full, row_texels), (full.len() / row_texels, rest, rest.len())] {
+            if part.is_empty() {
+                continue;
+            }
+            gpu.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y: y as u32, z: 0 },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(part),
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(width as u32 * 16), rows_per_image: None },
+                wgpu::Extent3d { width: width as u32, height: (part.len() / width) as u32, depth_or_array_layers: 1 },
+            );
+        }
+        &self.slots[slot]
     }
 }
 
@@ -330,9 +406,11 @@ pub struct SceneDrawer {
     object_groups: Vec<Bindings>,
     warps: Vec<Bindings>,
     pn_meshes: Vec<Bindings>,
-    /// The cells (coefficient matrices) of every non-linear grid a pass uses, in one storage
-    /// buffer per pass.
-    grid_cells: BufferRing,
+    /// The cells (coefficient matrices) of every non-linear grid a pass uses.
+    grid_cells: CellTextures,
+    /// All items' vertex-stage transforms ([`ItemVertex`]), one instance-rate vertex buffer
+    /// per pass; each draw binds its items' range.
+    item_vertices: BufferRing,
     white: Image8,
     resolver: InstanceResolver,
     /// The draws the last pass recorded (an attached item counts once).
@@ -349,7 +427,8 @@ impl Default for SceneDrawer {
             object_groups: Vec::new(),
             warps: Vec::new(),
             pn_meshes: Vec::new(),
-            grid_cells: BufferRing::new("cuboid grid cells", wgpu::BufferUsages::STORAGE),
+            grid_cells: CellTextures::default(),
+            item_vertices: BufferRing::new("item transforms", wgpu::BufferUsages::VERTEX),
             white: Image8::new(1, 1, vec![255; 4]),
             resolver: InstanceResolver::default(),
             draw_count: 0,
@@ -367,9 +446,9 @@ impl SceneDrawer {
     }
 
     /// The layout of group 1 (the objects of a draw, base map, sampler, gloss map) and, for
-    /// items under a non-linear grid, binding 4: their grids' range of the buffer of cells (at
-    /// least one cell, placed by a second dynamic offset). One group per draw on both paths:
-    /// a third group rebound for every trilinear draw cost lavapipe a few percent.
+    /// items under a non-linear grid, binding 4: the pass's cell texture. One group per draw
+    /// on both paths: a third group rebound for every trilinear draw cost lavapipe a few
+    /// percent.
     fn object_layout(&self, gpu: &GpuContext, with_cells: bool) -> wgpu::BindGroupLayout {
         let white = self.white.gpu(gpu);
         let shape =
@@ -377,20 +456,20 @@ impl SceneDrawer {
         let mut entries = Bindings::new(OBJECT_VISIBILITY).layout_entries(&shape);
         entries[0] = dynamic_storage_entry(0, OBJECT_VISIBILITY, OBJECT_SIZE);
         if with_cells {
-            let one_cell = ROW_BYTES * CuboidGrid::ROWS_PER_CELL as u64;
-            entries.push(dynamic_storage_entry(4, wgpu::ShaderStages::VERTEX, one_cell));
+            entries.push(texture_entry(4, wgpu::ShaderStages::VERTEX, false));
         }
         gpu.bind_group_layout(&entries)
     }
 
-    /// Bind groups for every draw (resolving point attachments' frames on first use).
+    /// Bind groups for every draw (resolving point attachments' frames on first use), and the
+    /// buffer of the items' transforms.
     fn prepare(
         &mut self,
         gpu: &GpuContext,
         items: &[DrawItem],
         composed: &Composed,
         layouts: ItemLayouts<'_>,
-    ) -> anyhow::Result<Vec<Prepared>> {
+    ) -> anyhow::Result<(Vec<Prepared>, wgpu::Buffer)> {
         let Composed { transforms, draws, rows } = composed;
         self.draw_count = draws.len();
         while self.object_groups.len() < draws.len() {
@@ -398,31 +477,32 @@ impl SceneDrawer {
             self.warps.push(Bindings::new(wgpu::ShaderStages::VERTEX));
             self.pn_meshes.push(Bindings::new(OBJECT_VISIBILITY));
         }
-        let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, bytemuck::cast_slice(rows)).clone());
+        let cells = (!rows.is_empty()).then(|| self.grid_cells.write(gpu, rows).share());
         // Every item's object in one buffer, one write per pass (a write per item made wgpu
         // allocate a staging buffer each: most of a frame of thousands of small objects).
         let objects: Vec<GpuObject> = items.iter().zip(transforms).map(|(item, t)| gpu_object(item, t)).collect();
         let object_buffer = self.objects.write(gpu, bytemuck::cast_slice(&objects)).clone();
+        let item_vertices: Vec<ItemVertex> = transforms.iter().map(ItemVertex::new).collect();
+        let item_buffer = self.item_vertices.write(gpu, bytemuck::cast_slice(&item_vertices)).clone();
         let mut prepared = Vec::with_capacity(draws.len());
         for (d, draw) in draws.iter().enumerate() {
             let (item, t) = (&items[draw.first], &transforms[draw.first]);
             let m = &item.material;
             let tex = m.texture.as_deref().unwrap_or(&self.white).gpu(gpu);
             let gloss = m.gloss_map.as_deref().unwrap_or(&self.white).gpu(gpu);
-            // Each draw binds its own items' objects and rows only: lavapipe copies a bound range
-            // for every draw.
+            // Each draw binds its own items' objects only: lavapipe copies a bound range for
+            // every draw.
             let mut binds = vec![
                 Bind::DynamicStorage(&object_buffer, draw.count as u64 * OBJECT_SIZE),
                 Bind::Texture(tex),
                 Bind::Sampler(SamplerKind::LinearRepeat),
                 Bind::Texture(gloss),
             ];
-            let mut offsets = [(draw.first as u64 * OBJECT_SIZE) as u32, 0];
+            let offset = u32::try_from(draw.first as u64 * OBJECT_SIZE)?;
             let mut layout = layouts.object;
             let cuboid = match (t.normals(), &cells, layouts.object_cells) {
                 (Some(normals), Some(cells), Some(with_cells)) => {
-                    binds.push(Bind::DynamicStorage(cells, draw.row_count as u64 * ROW_BYTES));
-                    offsets[1] = (draw.first_row as u64 * ROW_BYTES) as u32;
+                    binds.push(Bind::Texture(cells));
                     layout = with_cells;
                     Some(normals)
                 }
@@ -449,9 +529,9 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            prepared.push(Prepared { object, offsets, warp, cuboid, pn });
+            prepared.push(Prepared { object, offset, warp, cuboid, pn });
         }
-        Ok(prepared)
+        Ok((prepared, item_buffer))
     }
 
     /// Draws `items` into a new G-buffer of the view's size (pooled targets; recorded, submitted
@@ -481,7 +561,7 @@ impl SceneDrawer {
             items.iter().any(|i| i.attached.is_some()).then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
         let targets = [formats.hdr, formats.hdr, formats.linear_depth];
         let depth_test = Some((formats.depth, wgpu::CompareFunction::Less));
-        let vertex = [Some(Vertex::layout())];
+        let vertex = [Some(Vertex::layout()), Some(ItemVertex::layout())];
         let plain = gpu.render_pipeline(&RenderPipelineDesc {
             depth: depth_test,
             ..RenderPipelineDesc::new("gbuffer.wgsl", &[Some(&frame_layout), Some(&object_layout)], &vertex, &targets)
@@ -539,7 +619,7 @@ impl SceneDrawer {
             warp: warp_layout.as_ref(),
             pn: pn_layout.as_ref(),
         };
-        let prepared = self.prepare(gpu, items, &composed, layouts)?;
+        let (prepared, item_buffer) = self.prepare(gpu, items, &composed, layouts)?;
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -561,7 +641,7 @@ impl SceneDrawer {
                 trilinear: trilinear.as_ref().map(|[tangent, direct]| [tangent, direct]),
                 pn: pn.as_ref(),
             };
-            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, 1, &[]);
+            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, &item_buffer, &[]);
         });
         Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
     }
@@ -594,10 +674,7 @@ impl SceneDrawer {
                 wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             ),
         );
-        let mut uniform = TilesUniform {
-            tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES],
-            count: [tiles.len() as u32, 0, 0, 0],
-        };
+        let mut uniform = TilesUniform { tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES] };
         for (u, t) in uniform.tiles.iter_mut().zip(tiles) {
             *u = tile_uniform(t, width, height);
         }
@@ -609,13 +686,15 @@ impl SceneDrawer {
         let warp_layout = any_attached.then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
         let index_layout = self.tile_index.layout(gpu, &[Bind::Uniform(&[0u8; 16])]);
         let depth_test = Some((format, wgpu::CompareFunction::Less));
+        let vertex = [Some(Vertex::layout()), Some(ItemVertex::layout())];
+        // Group 2 is the warp group of attached items; plain ones leave it empty.
         let plain = gpu.render_pipeline(&RenderPipelineDesc {
             vertex_entry: "vs_plain",
             depth: depth_test,
             ..RenderPipelineDesc::new(
                 "depth.wgsl",
-                &[Some(&tiles_layout), Some(&object_layout)],
-                &[Some(Vertex::layout())],
+                &[Some(&tiles_layout), Some(&object_layout), None, Some(&index_layout)],
+                &vertex,
                 &[],
             )
         })?;
@@ -642,8 +721,8 @@ impl SceneDrawer {
                 depth: depth_test,
                 ..RenderPipelineDesc::new(
                     "cuboid_depth.wgsl",
-                    &[Some(&tiles_layout), Some(layout)],
-                    &[Some(Vertex::layout())],
+                    &[Some(&tiles_layout), Some(layout), None, Some(&index_layout)],
+                    &vertex,
                     &[],
                 )
             })?),
@@ -655,18 +734,14 @@ impl SceneDrawer {
             warp: warp_layout.as_ref(),
             pn: None,
         };
-        let prepared = self.prepare(gpu, items, &composed, layouts)?;
-        // Attached items draw once per tile; each draw reads its tile index from group 3.
-        let index_bgs: Vec<wgpu::BindGroup> = if any_attached {
-            (0..tiles.len() as u32)
-                .map(|t| {
-                    let index = [t, 0, 0, 0];
-                    self.tile_index.bind_group(gpu, &index_layout, &[Bind::Uniform(bytemuck::bytes_of(&index))])
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let (prepared, item_buffer) = self.prepare(gpu, items, &composed, layouts)?;
+        // Each draw is recorded once per tile and reads its tile index from group 3.
+        let index_bgs: Vec<wgpu::BindGroup> = (0..tiles.len() as u32)
+            .map(|t| {
+                let index = [t, 0, 0, 0];
+                self.tile_index.bind_group(gpu, &index_layout, &[Bind::Uniform(bytemuck::bytes_of(&index))])
+            })
+            .collect();
 
         gpu.record(|enc| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -690,7 +765,7 @@ impl SceneDrawer {
                 trilinear,
                 pn: None,
             };
-            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, tiles.len() as u32, &index_bgs);
+            draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, &item_buffer, &index_bgs);
         });
         Ok(target)
     }
@@ -721,9 +796,9 @@ struct Pipelines<'a> {
     pn: Option<&'a wgpu::RenderPipeline>,
 }
 
-/// Records the draws of `items`: plain and cuboid ones `plain_instances` instances per item
-/// (one per tile of a depth target) of each draw's items; attached ones once, or once per bind
-/// group of `per_draw` (bound as group 3) where there are some.
+/// Records the draws of `items`, each item's transform from `item_buffer`: each draw once, or
+/// where `tiles` has bind groups (a depth target's tile indices), once per tile with its group
+/// bound as group 3.
 #[allow(clippy::too_many_arguments)]
 fn draw_items(
     gpu: &GpuContext,
@@ -732,23 +807,36 @@ fn draw_items(
     draws: &[DrawRange],
     prepared: &[Prepared],
     pipelines: &Pipelines<'_>,
-    plain_instances: u32,
-    per_draw: &[wgpu::BindGroup],
+    item_buffer: &wgpu::Buffer,
+    tiles: &[wgpu::BindGroup],
 ) {
+    let each_tile = |pass: &mut wgpu::RenderPass<'_>, draw: &dyn Fn(&mut wgpu::RenderPass<'_>)| {
+        if tiles.is_empty() {
+            draw(pass);
+        }
+        for group in tiles {
+            pass.set_bind_group(3, group, &[]);
+            draw(pass);
+        }
+    };
     let mut bound = Bound::default();
     for (draw, p) in draws.iter().zip(prepared) {
         let item = &items[draw.first];
-        pass.set_bind_group(1, &p.object, &p.offsets[..1 + usize::from(p.cuboid.is_some())]);
+        pass.set_bind_group(1, &p.object, &[p.offset]);
+        let trilinear = match (p.cuboid, pipelines.trilinear) {
+            (Some(normals), Some(trilinear)) => Some(trilinear[normals as usize]),
+            _ => None,
+        };
+        let transforms =
+            item_buffer.slice(draw.first as u64 * ITEM_BYTES..(draw.first + draw.count) as u64 * ITEM_BYTES);
         if let Some(t) = &item.tessellated {
             // Written by the compute pass this frame: counts never come back to the CPU.
             pass.set_vertex_buffer(0, t.vertices.slice(..));
+            pass.set_vertex_buffer(1, transforms);
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
-            match (p.cuboid, pipelines.trilinear) {
-                (Some(normals), Some(trilinear)) => bound.pipeline(pass, trilinear[normals as usize]),
-                _ => bound.pipeline(pass, pipelines.plain),
-            }
-            let instances = plain_instances.min(crate::tessellation::MAX_INDIRECT_INSTANCES);
-            pass.draw_indexed_indirect(&t.indirect, crate::tessellation::TessMesh::indirect_offset(instances));
+            bound.pipeline(pass, trilinear.unwrap_or(pipelines.plain));
+            let offset = crate::tessellation::TessMesh::indirect_offset(1);
+            each_tile(pass, &|pass| pass.draw_indexed_indirect(&t.indirect, offset));
             continue;
         }
         let mesh = item.mesh.gpu(gpu);
@@ -756,20 +844,14 @@ fn draw_items(
             // No vertex buffers: the shader reads the triangle's corners from group 2.
             bound.pipeline(pass, pipeline);
             bound.group2(pass, group);
-            pass.draw(0..mesh.index_count, 0..plain_instances);
+            pass.draw(0..mesh.index_count, 0..1);
             continue;
         }
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-        let instances = 0..draw.count as u32 * plain_instances;
-        if let (Some(normals), Some(trilinear)) = (p.cuboid, pipelines.trilinear) {
-            bound.pipeline(pass, trilinear[normals as usize]);
-            pass.draw_indexed(0..mesh.index_count, 0, instances);
-            continue;
-        }
         let attached = item.attached.as_ref().and_then(|a| pipelines.attached[usize::from(a.matrix.has_seams())]);
-        match (&item.attached, &p.warp, attached) {
-            (Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
+        match (trilinear, &item.attached, &p.warp, attached) {
+            (None, Some(a), Some((warp_bg, buffer)), Some(pipeline)) => {
                 if a.instances.is_empty() {
                     continue;
                 }
@@ -777,17 +859,13 @@ fn draw_items(
                 bound.group2(pass, warp_bg);
                 pass.set_vertex_buffer(1, buffer.slice(..));
                 let instances = 0..a.instances.len() as u32;
-                if per_draw.is_empty() {
-                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
-                }
-                for group in per_draw {
-                    pass.set_bind_group(3, group, &[]);
-                    pass.draw_indexed(0..mesh.index_count, 0, instances.clone());
-                }
+                each_tile(pass, &|pass| pass.draw_indexed(0..mesh.index_count, 0, instances.clone()));
             }
             _ => {
-                bound.pipeline(pass, pipelines.plain);
-                pass.draw_indexed(0..mesh.index_count, 0, instances);
+                pass.set_vertex_buffer(1, transforms);
+                bound.pipeline(pass, trilinear.unwrap_or(pipelines.plain));
+                let instances = 0..draw.count as u32;
+                each_tile(pass, &|pass| pass.draw_indexed(0..mesh.index_count, 0, instances.clone()));
             }
         }
     }

@@ -25,6 +25,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("pn.wgsl", include_str!("../shaders/pn.wgsl")),
     ("gbuffer_pn.wgsl", include_str!("../shaders/gbuffer_pn.wgsl")),
     ("instance_in.wgsl", include_str!("../shaders/instance_in.wgsl")),
+    ("item_in.wgsl", include_str!("../shaders/item_in.wgsl")),
     ("attach.wgsl", include_str!("../shaders/attach.wgsl")),
     ("attach_export.wgsl", include_str!("../shaders/attach_export.wgsl")),
     ("attach_resolve.wgsl", include_str!("../shaders/attach_resolve.wgsl")),
