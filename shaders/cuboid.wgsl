@@ -11,9 +11,24 @@
 // Cells per texel row of `cuboid_cells` (src/draw.rs `CELLS_PER_ROW`).
 const CELLS_PER_ROW: u32 = 1024u;
 
+// A cell's coefficient matrix C by rows: left half (c_xyz, c_yz, c_xz, c_xy) and right half
+// (c_z, c_y, c_x, c_1) of each coordinate.
+struct CellRows {
+    x_left: vec4<f32>,
+    x_right: vec4<f32>,
+    y_left: vec4<f32>,
+    y_right: vec4<f32>,
+    z_left: vec4<f32>,
+    z_right: vec4<f32>,
+};
+
 // Row `k` of cell `cell`'s coefficient matrix.
 fn cell_row(cell: u32, k: u32) -> vec4<f32> {
     return textureLoad(cuboid_cells, vec2<u32>(6u * (cell % CELLS_PER_ROW) + k, cell / CELLS_PER_ROW), 0);
+}
+
+fn cell_rows(cell: u32) -> CellRows {
+    return CellRows(cell_row(cell, 0u), cell_row(cell, 1u), cell_row(cell, 2u), cell_row(cell, 3u), cell_row(cell, 4u), cell_row(cell, 5u));
 }
 
 struct Deformed {
@@ -23,20 +38,24 @@ struct Deformed {
     jacobian: mat3x3<f32>,
 };
 
-// Maps `t` (cell coordinates of `grid`: cells per axis in xyz, first row in w) through its cell
-// (the nearest one outside the grid), eq. 3.4 with the cell's coefficient matrix.
+// Maps `t` (cell coordinates of `grid`: cells per axis in xyz, first cell in the cell texture
+// in w) through its cell (the nearest one outside the grid).
 fn cuboid_deform(t: vec3<f32>, grid: vec4<u32>) -> Deformed {
     let n = vec3<f32>(grid.xyz);
     let cell = clamp(floor(t), vec3<f32>(0.0), n - 1.0);
-    let l = t - cell;
     let index = grid.w + u32(cell.x + n.x * (cell.y + n.y * cell.z));
-    // Rows of C: left half (c_xyz, c_yz, c_xz, c_xy) and right half (c_z, c_y, c_x, c_1).
-    let x_left = cell_row(index, 0u);
-    let x_right = cell_row(index, 1u);
-    let y_left = cell_row(index, 2u);
-    let y_right = cell_row(index, 3u);
-    let z_left = cell_row(index, 4u);
-    let z_right = cell_row(index, 5u);
+    return cuboid_eval(t - cell, cell_rows(index));
+}
+
+// Eq. 3.4 at `l`, the point in the cell's unit cube (outside it, the cell's extrapolation),
+// and its Jacobian.
+fn cuboid_eval(l: vec3<f32>, c: CellRows) -> Deformed {
+    let x_left = c.x_left;
+    let x_right = c.x_right;
+    let y_left = c.y_left;
+    let y_right = c.y_right;
+    let z_left = c.z_left;
+    let z_right = c.z_right;
     let x = l.x;
     let y = l.y;
     let z = l.z;

@@ -13,11 +13,21 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_main(v: VertexIn, item: ItemIn) -> VertexOut {
+fn vs_main(v: MeshVertexIn, item: ItemIn) -> VertexOut {
+    return tile_vertex(cuboid_deform(item_point(item, v.position).xyz, item.grid).position);
+}
+
+// A single cuboid (item_in.wgsl `CuboidItemIn`).
+@vertex
+fn vs_cuboid(v: MeshVertexIn, c: CuboidItemIn) -> VertexOut {
+    let rows = CellRows(c.x_left, c.x_right, c.y_left, c.y_right, c.z_left, c.z_right);
+    return tile_vertex(cuboid_eval(item_point(cuboid_item(c), v.position).xyz, rows).position);
+}
+
+fn tile_vertex(world: vec3<f32>) -> VertexOut {
     let tile = draw_tile.x;
-    let d = cuboid_deform(item_point(item, v.position).xyz, item.grid);
     var out: VertexOut;
-    out.clip = views.tiles[tile].to_tile * vec4<f32>(d.position, 1.0);
+    out.clip = views.tiles[tile].to_tile * vec4<f32>(world, 1.0);
     out.tile = tile;
     return out;
 }

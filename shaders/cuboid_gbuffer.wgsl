@@ -14,8 +14,7 @@ struct VertexOut {
 };
 
 // One instance per item of the draw (`index` picks its object for the fragment stage).
-fn cuboid_vertex(v: VertexIn, item: ItemIn, index: u32, direct_normals: bool) -> VertexOut {
-    let d = cuboid_deform(item_point(item, v.position).xyz, item.grid);
+fn deformed_vertex(v: MeshVertexIn, item: ItemIn, d: Deformed, index: u32, direct_normals: bool) -> VertexOut {
     let world = vec4<f32>(d.position, 1.0);
     var out: VertexOut;
     out.clip = frame.view_proj * world;
@@ -27,15 +26,38 @@ fn cuboid_vertex(v: VertexIn, item: ItemIn, index: u32, direct_normals: bool) ->
     return out;
 }
 
-// One entry point per normal method (NormalMethod in src/cuboid.rs).
+fn grid_vertex(v: MeshVertexIn, item: ItemIn, index: u32, direct_normals: bool) -> VertexOut {
+    let d = cuboid_deform(item_point(item, v.position).xyz, item.grid);
+    return deformed_vertex(v, item, d, index, direct_normals);
+}
+
+fn single_cuboid_vertex(v: MeshVertexIn, c: CuboidItemIn, index: u32, direct_normals: bool) -> VertexOut {
+    let item = cuboid_item(c);
+    let rows = CellRows(c.x_left, c.x_right, c.y_left, c.y_right, c.z_left, c.z_right);
+    let d = cuboid_eval(item_point(item, v.position).xyz, rows);
+    return deformed_vertex(v, item, d, index, direct_normals);
+}
+
+// One entry point per normal method (NormalMethod in src/cuboid.rs), for grids and for
+// single cuboids.
 @vertex
-fn vs_tangent_space(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
-    return cuboid_vertex(v, item, index, false);
+fn vs_tangent_space(v: MeshVertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return grid_vertex(v, item, index, false);
 }
 
 @vertex
-fn vs_direct(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
-    return cuboid_vertex(v, item, index, true);
+fn vs_direct(v: MeshVertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return grid_vertex(v, item, index, true);
+}
+
+@vertex
+fn vs_cuboid_tangent_space(v: MeshVertexIn, item: CuboidItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return single_cuboid_vertex(v, item, index, false);
+}
+
+@vertex
+fn vs_cuboid_direct(v: MeshVertexIn, item: CuboidItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+    return single_cuboid_vertex(v, item, index, true);
 }
 
 @fragment

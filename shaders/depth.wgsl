@@ -17,7 +17,7 @@ struct VertexOut {
 };
 
 @vertex
-fn vs_plain(v: VertexIn, item: ItemIn) -> VertexOut {
+fn vs_plain(v: MeshVertexIn, item: ItemIn) -> VertexOut {
     let tile = draw_tile.x;
     var out: VertexOut;
     out.clip = views.tiles[tile].to_tile * item_point(item, v.position);

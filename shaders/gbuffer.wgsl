@@ -13,7 +13,7 @@ struct VertexOut {
 
 // One instance per item of the draw (`index` picks its object for the fragment stage).
 @vertex
-fn vs_main(v: VertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
+fn vs_main(v: MeshVertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {
     let world = item_point(item, v.position);
     var out: VertexOut;
     out.clip = frame.view_proj * world;

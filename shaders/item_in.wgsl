@@ -22,6 +22,32 @@ struct ItemIn {
     @location(12) grid: vec4<u32>,
 };
 
+// An item under a single cuboid, a grid of one cell (src/draw.rs `ItemVertex`): its transform
+// maps into the cuboid's unit cube, and its coefficient matrix C (eq. 3.4, rows as in
+// cuboid.wgsl) comes as six more instance attributes instead of six texel loads per vertex.
+// They take locations 2 and 4 (MeshVertexIn has no tangents) and 12-15: 16 attributes with
+// the vertex's three, WebGPU's limit.
+struct CuboidItemIn {
+    @location(5) transform0: vec4<f32>,
+    @location(6) transform1: vec4<f32>,
+    @location(7) transform2: vec4<f32>,
+    @location(8) transform3: vec4<f32>,
+    @location(9) normal0: vec4<f32>,
+    @location(10) normal1: vec4<f32>,
+    @location(11) normal2: vec4<f32>,
+    @location(2) x_left: vec4<f32>,
+    @location(4) x_right: vec4<f32>,
+    @location(12) y_left: vec4<f32>,
+    @location(13) y_right: vec4<f32>,
+    @location(14) z_left: vec4<f32>,
+    @location(15) z_right: vec4<f32>,
+};
+
+// The transform part of a single cuboid's item (one cell, none of it in the cell texture).
+fn cuboid_item(c: CuboidItemIn) -> ItemIn {
+    return ItemIn(c.transform0, c.transform1, c.transform2, c.transform3, c.normal0, c.normal1, c.normal2, vec4<u32>(1u, 1u, 1u, 0u));
+}
+
 fn item_point(item: ItemIn, p: vec3<f32>) -> vec4<f32> {
     return mat4x4<f32>(item.transform0, item.transform1, item.transform2, item.transform3) * vec4<f32>(p, 1.0);
 }

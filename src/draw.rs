@@ -63,9 +63,13 @@ struct ItemVertex {
     /// The model's inverse transpose (xyz of each column), under a non-linear grid scaled as
     /// its normal method needs ([`CuboidGrid::normal_scale`]).
     normal: [[f32; 4]; 3],
-    /// A non-linear grid: cells per axis, and its first cell in the pass's cell texture. Zero
-    /// without one.
+    /// A non-linear grid of several cells: cells per axis, and its first cell in the pass's cell
+    /// texture. Zero without one.
     grid: [u32; 4],
+    /// A single cuboid's (a grid of one cell) coefficient matrix C, by rows as in
+    /// shaders/cuboid.wgsl (zero otherwise): read as instance attributes, where a grid's cells
+    /// cost a texel load per row and vertex.
+    cuboid: [[f32; 4]; 6],
 }
 
 const ITEM_BYTES: u64 = std::mem::size_of::<ItemVertex>() as u64;
@@ -76,6 +80,30 @@ impl ItemVertex {
         9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
     ];
 
+    /// shaders/item_in.wgsl `CuboidItemIn`: the transform and normal, then C's rows at
+    /// locations 2, 4 and 12-15.
+    const CUBOID_ATTRIBUTES: [wgpu::VertexAttribute; 13] = {
+        let mut a =
+            [wgpu::VertexAttribute { format: wgpu::VertexFormat::Float32x4, offset: 0, shader_location: 0 }; 13];
+        let c_locations = [2, 4, 12, 13, 14, 15];
+        let c_offset = std::mem::offset_of!(ItemVertex, cuboid) as u64;
+        let mut i = 0;
+        while i < 13 {
+            a[i] = if i < 7 {
+                wgpu::VertexAttribute { offset: 16 * i as u64, shader_location: 5 + i as u32, ..a[i] }
+            } else {
+                wgpu::VertexAttribute {
+                    offset: c_offset + 16 * (i - 7) as u64,
+                    shader_location: c_locations[i - 7],
+                    ..a[i]
+                }
+            };
+            i += 1;
+        }
+        a
+    };
+
+    /// Items drawn plainly or under a grid of several cells.
     fn layout() -> wgpu::VertexBufferLayout<'static> {
         wgpu::VertexBufferLayout {
             array_stride: ITEM_BYTES,
@@ -84,16 +112,29 @@ impl ItemVertex {
         }
     }
 
+    /// Items under a single cuboid.
+    fn cuboid_layout() -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout { attributes: &Self::CUBOID_ATTRIBUTES, ..Self::layout() }
+    }
+
     /// `t.model` after the fast path; a remaining non-linear grid's cell map is folded after it
     /// (in f64), so the vertex stage maps a vertex into cell coordinates with one matrix.
     fn new(t: &ComposedItem) -> ItemVertex {
         let model = t.model.as_dmat4();
         let normal = DMat3::from_mat4(model).inverse().transpose();
-        let (transform, normal, grid) = match &t.grid {
-            None => (model, normal, [0; 4]),
+        let (mut grid, mut cuboid) = ([0; 4], [[0.0; 4]; 6]);
+        let (transform, normal) = match &t.grid {
+            None => (model, normal),
             Some(g) => {
-                let [x, y, z] = g.cells.map(|n| n as u32);
-                (g.cell_map() * model, DMat3::from_diagonal(g.normal_scale()) * normal, [x, y, z, t.grid_cell])
+                if t.stage() == VertexStage::Grid(g.normals) {
+                    let [x, y, z] = g.cells.map(|n| n as u32);
+                    grid = [x, y, z, t.grid_cell];
+                } else {
+                    let mut rows = Vec::with_capacity(CuboidGrid::ROWS_PER_CELL);
+                    g.append_cells(&mut rows);
+                    cuboid.copy_from_slice(&rows);
+                }
+                (g.cell_map() * model, DMat3::from_diagonal(g.normal_scale()) * normal)
             }
         };
         let normal = normal.as_mat3();
@@ -101,6 +142,7 @@ impl ItemVertex {
             transform: transform.as_mat4().to_cols_array_2d(),
             normal: [normal.x_axis, normal.y_axis, normal.z_axis].map(|c| c.extend(0.0).to_array()),
             grid,
+            cuboid,
         }
     }
 }
@@ -207,8 +249,8 @@ struct Prepared {
     object: wgpu::BindGroup,
     offset: u32,
     warp: Option<(wgpu::BindGroup, wgpu::Buffer)>,
-    /// For items under a non-linear grid, their normal method (which entry point draws them).
-    cuboid: Option<NormalMethod>,
+    /// Which vertex stage draws the draw's items.
+    stage: VertexStage,
     /// Per-pixel PN depth: the mesh's vertex and index buffers (group 2 of gbuffer_pn.wgsl).
     pn: Option<wgpu::BindGroup>,
 }
@@ -250,10 +292,23 @@ struct ComposedItem {
     grid_cell: u32,
 }
 
+/// The vertex stage that draws an item: its transform alone (linear), through a grid's cells
+/// in the cell texture, or through a single cuboid whose coefficients are instance data; the
+/// latter two with one entry point per normal method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum VertexStage {
+    Linear,
+    Grid(NormalMethod),
+    Cuboid(NormalMethod),
+}
+
 impl ComposedItem {
-    /// The normal method of a non-linear grid (which entry point draws the item).
-    fn normals(&self) -> Option<NormalMethod> {
-        self.grid.as_ref().map(|g| g.normals)
+    fn stage(&self) -> VertexStage {
+        match &self.grid {
+            None => VertexStage::Linear,
+            Some(g) if g.cells == [1, 1, 1] => VertexStage::Cuboid(g.normals),
+            Some(g) => VertexStage::Grid(g.normals),
+        }
     }
 }
 
@@ -261,8 +316,8 @@ impl ComposedItem {
 /// cell [`CuboidGrid::ROWS_PER_CELL`] texels.
 const CELLS_PER_ROW: usize = 1024;
 
-/// Whether `b` can join the instanced draw of `a`: both plain or both under non-linear grids
-/// of one normal method, on one mesh with the same maps (one object group).
+/// Whether `b` can join the instanced draw of `a`: one vertex stage, on one mesh with the
+/// same maps (one object group).
 fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bool {
     let alone = |i: &DrawItem| i.attached.is_some() || i.tessellated.is_some() || i.pn_pixels;
     let same_map = |x: &Option<Arc<Image8>>, y: &Option<Arc<Image8>>| match (x, y) {
@@ -276,7 +331,7 @@ fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bo
         && Arc::ptr_eq(&ai.mesh, &bi.mesh)
         && same_map(&ai.material.texture, &bi.material.texture)
         && same_map(&ai.material.gloss_map, &bi.material.gloss_map)
-        && at.normals() == bt.normals()
+        && at.stage() == bt.stage()
 }
 
 impl Composed {
@@ -305,7 +360,7 @@ impl Composed {
             }
             draws.last_mut().expect("pushed above").count += 1;
             let t = &mut transforms[i];
-            if let Some(grid) = &t.grid {
+            if let (VertexStage::Grid(_), Some(grid)) = (t.stage(), &t.grid) {
                 match &last_grid {
                     Some((placed, cell)) if Arc::ptr_eq(placed, grid) => t.grid_cell = *cell,
                     _ => {
@@ -329,9 +384,14 @@ impl Composed {
         Ok(Composed { transforms, draws, rows })
     }
 
-    /// Whether any item still needs the trilinear vertex stage.
-    fn any_nonlinear(&self) -> bool {
+    /// Whether any item is drawn through grid cells (and the pass needs its cell texture).
+    fn any_grid(&self) -> bool {
         !self.rows.is_empty()
+    }
+
+    /// Whether any item is drawn through a single cuboid.
+    fn any_cuboid(&self) -> bool {
+        self.transforms.iter().any(|t| matches!(t.stage(), VertexStage::Cuboid(_)))
     }
 }
 
@@ -500,14 +560,11 @@ impl SceneDrawer {
             ];
             let offset = u32::try_from(draw.first as u64 * OBJECT_SIZE)?;
             let mut layout = layouts.object;
-            let cuboid = match (t.normals(), &cells, layouts.object_cells) {
-                (Some(normals), Some(cells), Some(with_cells)) => {
-                    binds.push(Bind::Texture(cells));
-                    layout = with_cells;
-                    Some(normals)
-                }
-                _ => None,
-            };
+            let stage = t.stage();
+            if let (VertexStage::Grid(_), Some(cells), Some(with_cells)) = (stage, &cells, layouts.object_cells) {
+                binds.push(Bind::Texture(cells));
+                layout = with_cells;
+            }
             let object = self.object_groups[d].bind_group(gpu, layout, &binds);
             let warp = match (&item.attached, layouts.warp) {
                 (Some(a), Some(layout)) => {
@@ -521,7 +578,7 @@ impl SceneDrawer {
             // Per-pixel PN depth reads the mesh as it is: an item under a non-linear grid draws
             // through the grid instead.
             let pn = match layouts.pn {
-                Some(layout) if item.pn_pixels && cuboid.is_none() => {
+                Some(layout) if item.pn_pixels && stage == VertexStage::Linear => {
                     // The mesh's own buffers, as gbuffer_pn.wgsl's group 2 reads them.
                     let mesh = item.mesh.gpu(gpu);
                     let binds = [Bind::Storage(&mesh.vertices), Bind::Storage(&mesh.indices)];
@@ -529,7 +586,7 @@ impl SceneDrawer {
                 }
                 _ => None,
             };
-            prepared.push(Prepared { object, offset, warp, cuboid, pn });
+            prepared.push(Prepared { object, offset, warp, stage, pn });
         }
         Ok((prepared, item_buffer))
     }
@@ -561,7 +618,7 @@ impl SceneDrawer {
             items.iter().any(|i| i.attached.is_some()).then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
         let targets = [formats.hdr, formats.hdr, formats.linear_depth];
         let depth_test = Some((formats.depth, wgpu::CompareFunction::Less));
-        let vertex = [Some(Vertex::layout()), Some(ItemVertex::layout())];
+        let vertex = [Some(Vertex::shading_layout()), Some(ItemVertex::layout())];
         let plain = gpu.render_pipeline(&RenderPipelineDesc {
             depth: depth_test,
             ..RenderPipelineDesc::new("gbuffer.wgsl", &[Some(&frame_layout), Some(&object_layout)], &vertex, &targets)
@@ -582,20 +639,27 @@ impl SceneDrawer {
             None => [None, None],
         };
         let composed = Composed::new(gpu, items)?;
-        let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
-        let trilinear = match &object_cells_layout {
-            Some(layout) => {
+        let object_cells_layout = composed.any_grid().then(|| self.object_layout(gpu, true));
+        let cuboid_vertex = [Some(Vertex::shading_layout()), Some(ItemVertex::cuboid_layout())];
+        let trilinear =
+            |layout: &wgpu::BindGroupLayout, vertex: &[Option<wgpu::VertexBufferLayout<'_>>], entries: [&str; 2]| {
                 let groups = [Some(&frame_layout), Some(layout)];
                 let pipeline = |vertex_entry| {
                     gpu.render_pipeline(&RenderPipelineDesc {
                         vertex_entry,
                         depth: depth_test,
-                        ..RenderPipelineDesc::new("cuboid_gbuffer.wgsl", &groups, &vertex, &targets)
+                        ..RenderPipelineDesc::new("cuboid_gbuffer.wgsl", &groups, vertex, &targets)
                     })
                 };
-                Some([pipeline("vs_tangent_space")?, pipeline("vs_direct")?])
-            }
+                anyhow::Ok([pipeline(entries[0])?, pipeline(entries[1])?])
+            };
+        let grid = match &object_cells_layout {
+            Some(layout) => Some(trilinear(layout, &vertex, ["vs_tangent_space", "vs_direct"])?),
             None => None,
+        };
+        let cuboid = match composed.any_cuboid() {
+            true => Some(trilinear(&object_layout, &cuboid_vertex, ["vs_cuboid_tangent_space", "vs_cuboid_direct"])?),
+            false => None,
         };
         let pn_layout = items.iter().find(|i| i.pn_pixels).map(|item| {
             let mesh = item.mesh.gpu(gpu);
@@ -638,7 +702,8 @@ impl SceneDrawer {
             let pipelines = Pipelines {
                 plain: &plain,
                 attached: [attached[0].as_ref(), attached[1].as_ref()],
-                trilinear: trilinear.as_ref().map(|[tangent, direct]| [tangent, direct]),
+                grid: grid.as_ref().map(|[tangent, direct]| [tangent, direct]),
+                cuboid: cuboid.as_ref().map(|[tangent, direct]| [tangent, direct]),
                 pn: pn.as_ref(),
             };
             draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, &item_buffer, &[]);
@@ -686,7 +751,7 @@ impl SceneDrawer {
         let warp_layout = any_attached.then(|| warp_layout(gpu, wgpu::ShaderStages::VERTEX));
         let index_layout = self.tile_index.layout(gpu, &[Bind::Uniform(&[0u8; 16])]);
         let depth_test = Some((format, wgpu::CompareFunction::Less));
-        let vertex = [Some(Vertex::layout()), Some(ItemVertex::layout())];
+        let vertex = [Some(Vertex::shading_layout()), Some(ItemVertex::layout())];
         // Group 2 is the warp group of attached items; plain ones leave it empty.
         let plain = gpu.render_pipeline(&RenderPipelineDesc {
             vertex_entry: "vs_plain",
@@ -715,18 +780,28 @@ impl SceneDrawer {
             None => [None, None],
         };
         let composed = Composed::new(gpu, items)?;
-        let object_cells_layout = composed.any_nonlinear().then(|| self.object_layout(gpu, true));
-        let trilinear = match &object_cells_layout {
-            Some(layout) => Some(gpu.render_pipeline(&RenderPipelineDesc {
-                depth: depth_test,
-                ..RenderPipelineDesc::new(
-                    "cuboid_depth.wgsl",
-                    &[Some(&tiles_layout), Some(layout), None, Some(&index_layout)],
-                    &vertex,
-                    &[],
-                )
-            })?),
+        let object_cells_layout = composed.any_grid().then(|| self.object_layout(gpu, true));
+        let cuboid_vertex = [Some(Vertex::shading_layout()), Some(ItemVertex::cuboid_layout())];
+        let trilinear =
+            |layout: &wgpu::BindGroupLayout, vertex: &[Option<wgpu::VertexBufferLayout<'_>>], vertex_entry| {
+                gpu.render_pipeline(&RenderPipelineDesc {
+                    vertex_entry,
+                    depth: depth_test,
+                    ..RenderPipelineDesc::new(
+                        "cuboid_depth.wgsl",
+                        &[Some(&tiles_layout), Some(layout), None, Some(&index_layout)],
+                        vertex,
+                        &[],
+                    )
+                })
+            };
+        let grid = match &object_cells_layout {
+            Some(layout) => Some(trilinear(layout, &vertex, "vs_main")?),
             None => None,
+        };
+        let cuboid = match composed.any_cuboid() {
+            true => Some(trilinear(&object_layout, &cuboid_vertex, "vs_cuboid")?),
+            false => None,
         };
         let layouts = ItemLayouts {
             object: &object_layout,
@@ -758,11 +833,11 @@ impl SceneDrawer {
             });
             pass.set_bind_group(0, &tiles_bg, &[]);
             // Depth only: no normals, one pipeline for both methods.
-            let trilinear = trilinear.as_ref().map(|p| [p, p]);
             let pipelines = Pipelines {
                 plain: &plain,
                 attached: [attached[0].as_ref(), attached[1].as_ref()],
-                trilinear,
+                grid: grid.as_ref().map(|p| [p, p]),
+                cuboid: cuboid.as_ref().map(|p| [p, p]),
                 pn: None,
             };
             draw_items(gpu, &mut pass, items, &composed.draws, &prepared, &pipelines, &item_buffer, &index_bgs);
@@ -790,8 +865,10 @@ struct Pipelines<'a> {
     /// Attached items by whether their surface has seams (the variant without seams compiles
     /// the partner reads out).
     attached: [Option<&'a wgpu::RenderPipeline>; 2],
-    /// By normal method: tangent space, direct.
-    trilinear: Option<[&'a wgpu::RenderPipeline; 2]>,
+    /// Items under grids of several cells, by normal method: tangent space, direct.
+    grid: Option<[&'a wgpu::RenderPipeline; 2]>,
+    /// Items under a single cuboid, by normal method.
+    cuboid: Option<[&'a wgpu::RenderPipeline; 2]>,
     /// Per-pixel PN depth (G-buffer only; elsewhere such items draw plainly).
     pn: Option<&'a wgpu::RenderPipeline>,
 }
@@ -823,8 +900,9 @@ fn draw_items(
     for (draw, p) in draws.iter().zip(prepared) {
         let item = &items[draw.first];
         pass.set_bind_group(1, &p.object, &[p.offset]);
-        let trilinear = match (p.cuboid, pipelines.trilinear) {
-            (Some(normals), Some(trilinear)) => Some(trilinear[normals as usize]),
+        let trilinear = match (p.stage, pipelines.grid, pipelines.cuboid) {
+            (VertexStage::Grid(normals), Some(grid), _) => Some(grid[normals as usize]),
+            (VertexStage::Cuboid(normals), _, Some(cuboid)) => Some(cuboid[normals as usize]),
             _ => None,
         };
         let transforms =

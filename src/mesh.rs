@@ -62,6 +62,21 @@ pub struct Vertex {
 impl Vertex {
     pub const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
         wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x2, 4 => Float32x3];
+    /// What the G-buffer and depth passes read (shaders/vertex_in.wgsl `MeshVertexIn`): position,
+    /// normal and UV, leaving locations 2 and 4 to per-item data.
+    pub const SHADING_ATTRIBUTES: [wgpu::VertexAttribute; 3] = [
+        wgpu::VertexAttribute { format: wgpu::VertexFormat::Float32x3, offset: 0, shader_location: 0 },
+        wgpu::VertexAttribute {
+            format: wgpu::VertexFormat::Float32x3,
+            offset: std::mem::offset_of!(Vertex, normal) as u64,
+            shader_location: 1,
+        },
+        wgpu::VertexAttribute {
+            format: wgpu::VertexFormat::Float32x2,
+            offset: std::mem::offset_of!(Vertex, uv) as u64,
+            shader_location: 3,
+        },
+    ];
     /// Floats per vertex, for shaders that read the vertex buffer as storage.
     pub const FLOATS: usize = 14;
     pub fn layout() -> wgpu::VertexBufferLayout<'static> {
@@ -70,6 +85,11 @@ impl Vertex {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &Self::ATTRIBUTES,
         }
+    }
+
+    /// [`Vertex::SHADING_ATTRIBUTES`] of the same buffer.
+    pub fn shading_layout() -> wgpu::VertexBufferLayout<'static> {
+        wgpu::VertexBufferLayout { attributes: &Self::SHADING_ATTRIBUTES, ..Self::layout() }
     }
 }
 

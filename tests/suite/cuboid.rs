@@ -318,9 +318,10 @@ fn bad_cuboid_parameters_are_node_errors() {
     }
 }
 
-/// A tessellated plate under a bend grid: drawn by the trilinear vertex stage, and drawn
-/// again as a mesh deformed on the CPU, must give the same G-buffer depth and normals (and the
-/// same shadow-tile depth).
+/// A tessellated plate under a bend grid, and under a single bent cuboid (whose coefficients
+/// the vertex stage takes as instance data, not from the cell texture): drawn by the trilinear
+/// vertex stage, and drawn again as a mesh deformed on the CPU, must give the same G-buffer
+/// depth and normals (and the same shadow-tile depth).
 #[test]
 fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     let gpu = common::gpu();
@@ -330,9 +331,10 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     let camera = common::camera_toward_origin(Vec3::new(0.3, 2.2, 3.0), 45.0, 20.0);
     let (w, h) = (64u32, 64u32);
     let view = View::new(&camera, w, h);
-    for method in [NormalMethod::TangentSpace, NormalMethod::Direct] {
+    let methods = [NormalMethod::TangentSpace, NormalMethod::Direct];
+    for (cells, method) in [[3, 2, 1], [1, 1, 1]].into_iter().flat_map(|c| methods.map(|m| (c, m))) {
         let grid = Arc::new(
-            CuboidGrid::from_fn(lo, hi, [3, 2, 1], method, |u| {
+            CuboidGrid::from_fn(lo, hi, cells, method, |u| {
                 let b = bend(lo, hi, 100.0)(lo + u * (hi - lo));
                 b + DVec3::new(0.0, 0.15 * (6.0 * u.z).sin() * u.x, 0.0)
             })
@@ -391,15 +393,15 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
                 worst_normal = worst_normal.max(ma.distance(mb));
             }
         }
-        assert!(covered > 800, "{method:?}: the plate covers only {covered} pixels");
-        assert!(mismatched <= 4, "{method:?}: coverage differs in {mismatched} pixels");
-        assert!(worst_depth < 1e-3, "{method:?}: depth differs by {worst_depth} (relative)");
+        assert!(covered > 800, "{cells:?} {method:?}: the plate covers only {covered} pixels");
+        assert!(mismatched <= 4, "{cells:?} {method:?}: coverage differs in {mismatched} pixels");
+        assert!(worst_depth < 1e-3, "{cells:?} {method:?}: depth differs by {worst_depth} (relative)");
         // Normals are interpolated per vertex in both; Rgba16Float stores them to ~1e-3.
-        assert!(worst_normal < 1e-2, "{method:?}: normals differ by {worst_normal}");
+        assert!(worst_normal < 1e-2, "{cells:?} {method:?}: normals differ by {worst_normal}");
         let (ta, tb) = (read_back(gpu, &sa).unwrap().rgba, read_back(gpu, &sb).unwrap().rgba);
         let worst_tile = ta.iter().zip(&tb).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
         let diff = ta.iter().zip(&tb).filter(|(x, y)| (*x - *y).abs() > 1e-4).count();
-        assert!(diff <= 4, "{method:?}: shadow-tile depth differs in {diff} texels (worst {worst_tile})");
+        assert!(diff <= 4, "{cells:?} {method:?}: shadow-tile depth differs in {diff} texels (worst {worst_tile})");
     }
 }
 
