@@ -48,33 +48,27 @@ fn cuboid_deform(t: vec3<f32>, grid: vec4<u32>) -> Deformed {
 }
 
 // Eq. 3.4 at `l`, the point in the cell's unit cube (outside it, the cell's extrapolation),
-// and its Jacobian.
+// and its Jacobian, from the columns of C = [c_xyz c_yz c_xz c_xy | c_z c_y c_x c_1].
 fn cuboid_eval(l: vec3<f32>, c: CellRows) -> Deformed {
-    let x_left = c.x_left;
-    let x_right = c.x_right;
-    let y_left = c.y_left;
-    let y_right = c.y_right;
-    let z_left = c.z_left;
-    let z_right = c.z_right;
+    let c_xyz = vec3<f32>(c.x_left.x, c.y_left.x, c.z_left.x);
+    let c_yz = vec3<f32>(c.x_left.y, c.y_left.y, c.z_left.y);
+    let c_xz = vec3<f32>(c.x_left.z, c.y_left.z, c.z_left.z);
+    let c_xy = vec3<f32>(c.x_left.w, c.y_left.w, c.z_left.w);
+    let c_z = vec3<f32>(c.x_right.x, c.y_right.x, c.z_right.x);
+    let c_y = vec3<f32>(c.x_right.y, c.y_right.y, c.z_right.y);
+    let c_x = vec3<f32>(c.x_right.z, c.y_right.z, c.z_right.z);
+    let c_1 = vec3<f32>(c.x_right.w, c.y_right.w, c.z_right.w);
     let x = l.x;
     let y = l.y;
     let z = l.z;
-    // Eq. 3.4: v' = C v, v = (xyz, yz, xz, xy, z, y, x, 1).
-    let v_left = vec4<f32>(x * y * z, y * z, x * z, x * y);
-    let v_right = vec4<f32>(z, y, x, 1.0);
     var out: Deformed;
-    out.position = vec3<f32>(
-        dot(x_left, v_left) + dot(x_right, v_right),
-        dot(y_left, v_left) + dot(y_right, v_right),
-        dot(z_left, v_left) + dot(z_right, v_right),
-    );
-    // dv/dx, dv/dy, dv/dz of the left half (the right half's derivatives pick c_x, c_y, c_z).
-    let ddx = vec4<f32>(y * z, 0.0, z, y);
-    let ddy = vec4<f32>(x * z, z, 0.0, x);
-    let ddz = vec4<f32>(x * y, y, x, 0.0);
-    let dx = vec3<f32>(dot(x_left, ddx) + x_right.z, dot(y_left, ddx) + y_right.z, dot(z_left, ddx) + z_right.z);
-    let dy = vec3<f32>(dot(x_left, ddy) + x_right.y, dot(y_left, ddy) + y_right.y, dot(z_left, ddy) + z_right.y);
-    let dz = vec3<f32>(dot(x_left, ddz) + x_right.x, dot(y_left, ddz) + y_right.x, dot(z_left, ddz) + z_right.x);
+    // v' = C v, v = (xyz, yz, xz, xy, z, y, x, 1).
+    out.position = c_xyz * (x * y * z) + c_yz * (y * z) + c_xz * (x * z) + c_xy * (x * y) + c_z * z + c_y * y + c_x * x + c_1;
+    // Its derivatives along x, y, z (no products with the zeros of dv/dx, which the shader
+    // compiler may not drop).
+    let dx = c_xyz * (y * z) + c_xz * z + c_xy * y + c_x;
+    let dy = c_xyz * (x * z) + c_yz * z + c_xy * x + c_y;
+    let dz = c_xyz * (x * y) + c_yz * y + c_xz * x + c_z;
     out.jacobian = mat3x3<f32>(dx, dy, dz);
     return out;
 }

@@ -155,7 +155,8 @@ pub fn cofactor(m: DMat3) -> DMat3 {
 }
 
 /// A uniform grid of cuboids over a bounding box: `(n_x+1)(n_y+1)(n_z+1)` corner positions,
-/// trilinear inside each cell. A single cuboid is a grid of one cell.
+/// trilinear inside each cell. A single cuboid is a grid of one cell. A grid is not changed
+/// once built: its fast-path test is made once, on first use ([`CuboidGrid::linear`]).
 pub struct CuboidGrid {
     /// The box of the content, mapped onto the unit cube before the cells apply.
     pub box_min: DVec3,
@@ -166,6 +167,9 @@ pub struct CuboidGrid {
     pub corners: Vec<DVec3>,
     /// How normals are transformed when drawn.
     pub normals: NormalMethod,
+    /// [`CuboidGrid::linear`]'s answer: a composed grid is asked when it is composed and again
+    /// by the drawer, every frame, for each of thousands of objects.
+    linear: std::sync::OnceLock<Option<DMat4>>,
 }
 
 impl Clone for CuboidGrid {
@@ -219,7 +223,7 @@ impl CuboidGrid {
         if let Some(i) = corners.iter().position(|c| !c.is_finite()) {
             return Err(format!("corner {i} of the cuboid grid is not finite"));
         }
-        Ok(CuboidGrid { box_min, box_max, cells, corners, normals })
+        Ok(CuboidGrid { box_min, box_max, cells, corners, normals, linear: Default::default() })
     }
 
     /// A grid whose corner at unit-cube position `u` is `f(u)`.
@@ -303,19 +307,53 @@ impl CuboidGrid {
     pub fn as_affine(&self, tolerance: f64) -> Option<DMat4> {
         let [nx, ny, nz] = self.cells;
         let o = self.corner(0, 0, 0);
-        let unit_to_world = DMat4::from_cols(
-            (self.corner(nx, 0, 0) - o).extend(0.0),
-            (self.corner(0, ny, 0) - o).extend(0.0),
-            (self.corner(0, 0, nz) - o).extend(0.0),
-            o.extend(1.0),
-        );
+        let edges = [self.corner(nx, 0, 0) - o, self.corner(0, ny, 0) - o, self.corner(0, 0, nz) - o];
+        let scale = edges.iter().map(|e| e.length()).fold(f64::MIN_POSITIVE, f64::max);
+        // Squared distances, lattice steps instead of divisions: the drawer asks this of
+        // thousands of composed grids per frame.
+        let limit = (tolerance * scale).powi(2);
+        let step = [edges[0] / nx as f64, edges[1] / ny as f64, edges[2] / nz as f64];
+        let mut corners = self.corners.iter();
+        for z in 0..=nz {
+            for y in 0..=ny {
+                let row = o + step[1] * y as f64 + step[2] * z as f64;
+                for x in 0..=nx {
+                    if corners.next()?.distance_squared(row + step[0] * x as f64) > limit {
+                        return None;
+                    }
+                }
+            }
+        }
+        let unit_to_world =
+            DMat4::from_cols(edges[0].extend(0.0), edges[1].extend(0.0), edges[2].extend(0.0), o.extend(1.0));
         let size = self.box_max - self.box_min;
         let content_to_unit = DMat4::from_scale(1.0 / size) * DMat4::from_translation(-self.box_min);
-        let scale = unit_to_world.x_axis.length().max(unit_to_world.y_axis.length()).max(unit_to_world.z_axis.length());
-        let affine = lattice_points(self.cells)
-            .zip(&self.corners)
-            .all(|(u, c)| unit_to_world.transform_point3(u).distance(*c) <= tolerance * scale.max(f64::MIN_POSITIVE));
-        affine.then(|| unit_to_world * content_to_unit)
+        Some(unit_to_world * content_to_unit)
+    }
+
+    /// The cell that every point of the content-space box `lo..hi` falls in, if it is one:
+    /// the cell the vertex stage picks for each of them (the nearest one outside the grid),
+    /// so an object inside one cell can draw as that cell's single cuboid.
+    pub fn cell_holding(&self, lo: DVec3, hi: DVec3) -> Option<[usize; 3]> {
+        let map = self.cell_map();
+        let cell = |p: DVec3, axis: usize| {
+            // Beyond the grid, the border cell, as in the shader (NaN gives no cell).
+            let t = map.transform_point3(p)[axis].floor();
+            (!t.is_nan()).then(|| t.clamp(0.0, (self.cells[axis] - 1) as f64) as usize)
+        };
+        let mut out = [0; 3];
+        for (axis, o) in out.iter_mut().enumerate() {
+            match (cell(lo, axis), cell(hi, axis)) {
+                (Some(a), Some(b)) if a == b && lo[axis] <= hi[axis] => *o = a,
+                _ => return None,
+            }
+        }
+        Some(out)
+    }
+
+    /// The fast path's answer at [`LINEAR_TOLERANCE`] ([`CuboidGrid::as_affine`]), tested once.
+    pub fn linear(&self) -> Option<DMat4> {
+        *self.linear.get_or_init(|| self.as_affine(LINEAR_TOLERANCE))
     }
 
     /// `m` after this grid: exact, since trilinear interpolation commutes with affine maps.
@@ -350,12 +388,17 @@ impl CuboidGrid {
         for z in 0..self.cells[2] {
             for y in 0..self.cells[1] {
                 for x in 0..self.cells[0] {
-                    let c = self.cell(x, y, z).coefficients().0;
-                    let row = |cols: &[DVec3], r: usize| std::array::from_fn(|k| cols[k][r] as f32);
-                    rows.extend((0..3).flat_map(|r| [row(&c[..4], r), row(&c[4..], r)]));
+                    rows.extend(self.cell_rows(x, y, z));
                 }
             }
         }
+    }
+
+    /// One cell's rows as [`CuboidGrid::append_cells`] lays them out.
+    pub fn cell_rows(&self, x: usize, y: usize, z: usize) -> [[f32; 4]; Self::ROWS_PER_CELL] {
+        let c = self.cell(x, y, z).coefficients().0;
+        let row = |cols: &[DVec3], r: usize| std::array::from_fn(|k| cols[k][r] as f32);
+        std::array::from_fn(|i| row(&c[4 * (i % 2)..][..4], i / 2))
     }
 
     /// Rows [`CuboidGrid::append_cells`] appends per cell.
@@ -468,7 +511,7 @@ pub fn compose(model: Mat4, grid: Option<&Arc<CuboidGrid>>, outer: &Transform) -
 /// model matrix, so the item draws with the ordinary pipeline.
 pub fn fast_path(model: Mat4, grid: Option<Arc<CuboidGrid>>) -> (Mat4, Option<Arc<CuboidGrid>>) {
     match grid {
-        Some(g) => match g.as_affine(LINEAR_TOLERANCE) {
+        Some(g) => match g.linear() {
             Some(a) => (a.as_mat4() * model, None),
             None => (model, Some(g)),
         },
@@ -486,7 +529,7 @@ pub enum Transform {
 impl Transform {
     /// A grid, or its affine map where the fast path applies.
     pub fn from_grid(grid: CuboidGrid) -> Transform {
-        match grid.as_affine(LINEAR_TOLERANCE) {
+        match grid.linear() {
             Some(a) => Transform::Affine(a),
             None => Transform::Grid(Arc::new(grid)),
         }
@@ -709,6 +752,22 @@ pub fn anchor_row(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cell_holding_a_box_is_the_one_the_vertex_stage_picks_for_all_its_points() {
+        let (lo, hi) = (DVec3::new(-1.0, 0.0, 0.0), DVec3::new(2.0, 1.0, 1.0));
+        let grid = CuboidGrid::from_fn(lo, hi, [3, 2, 1], NormalMethod::TangentSpace, |u| lo + u * (hi - lo)).unwrap();
+        let cell = |a: [f64; 3], b: [f64; 3]| grid.cell_holding(DVec3::from(a), DVec3::from(b));
+        assert_eq!(cell([0.1, 0.6, 0.2], [0.9, 0.9, 0.8]), Some([1, 1, 0]));
+        // Across the border x = 1 between cells 1 and 2.
+        assert_eq!(cell([0.5, 0.6, 0.2], [1.5, 0.9, 0.8]), None);
+        // Beyond the grid: the border cells extrapolate.
+        assert_eq!(cell([-3.0, -2.0, -5.0], [-1.5, 0.4, 5.0]), Some([0, 0, 0]));
+        assert_eq!(cell([1.5, 0.5, 0.2], [9.0, 0.9, 0.8]), Some([2, 1, 0]));
+        // An empty box (a mesh without vertices) and NaN have no cell.
+        assert_eq!(cell([0.9, 0.6, 0.2], [0.1, 0.9, 0.8]), None);
+        assert_eq!(cell([f64::NAN, 0.6, 0.2], [0.9, 0.9, 0.8]), None);
+    }
 
     fn twisted() -> Cuboid {
         let mut c = Cuboid::from_affine(DMat4::from_scale_rotation_translation(

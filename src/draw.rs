@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use glam::{DMat3, Mat4, Vec4};
+use glam::{DMat3, DMat4, DVec3, Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
 use crate::gpu::pass::{Bindings, dynamic_storage_entry, texture_entry, uniform_entry};
@@ -126,15 +126,17 @@ impl ItemVertex {
         let (transform, normal) = match &t.grid {
             None => (model, normal),
             Some(g) => {
-                if t.stage() == VertexStage::Grid(g.normals) {
+                let to_cells = if t.stage() == VertexStage::Grid(g.normals) {
                     let [x, y, z] = g.cells.map(|n| n as u32);
                     grid = [x, y, z, t.grid_cell];
+                    g.cell_map()
                 } else {
-                    let mut rows = Vec::with_capacity(CuboidGrid::ROWS_PER_CELL);
-                    g.append_cells(&mut rows);
-                    cuboid.copy_from_slice(&rows);
-                }
-                (g.cell_map() * model, DMat3::from_diagonal(g.normal_scale()) * normal)
+                    // Into the unit cube of the one cell the item lies in.
+                    let [x, y, z] = t.cell.unwrap_or([0; 3]);
+                    cuboid = g.cell_rows(x, y, z);
+                    DMat4::from_translation(-DVec3::new(x as f64, y as f64, z as f64)) * g.cell_map()
+                };
+                (to_cells * model, DMat3::from_diagonal(g.normal_scale()) * normal)
             }
         };
         let normal = normal.as_mat3();
@@ -290,6 +292,9 @@ struct ComposedItem {
     /// The grid that stays non-linear, and its first cell in the pass's cell texture.
     grid: Option<Arc<CuboidGrid>>,
     grid_cell: u32,
+    /// The one cell of a grid of several that all of the item's vertices fall in, if so: the
+    /// item then draws as that cell's single cuboid, with no per-vertex cell loads.
+    cell: Option<[usize; 3]>,
 }
 
 /// The vertex stage that draws an item: its transform alone (linear), through a grid's cells
@@ -306,10 +311,24 @@ impl ComposedItem {
     fn stage(&self) -> VertexStage {
         match &self.grid {
             None => VertexStage::Linear,
-            Some(g) if g.cells == [1, 1, 1] => VertexStage::Cuboid(g.normals),
+            Some(g) if g.cells == [1, 1, 1] || self.cell.is_some() => VertexStage::Cuboid(g.normals),
             Some(g) => VertexStage::Grid(g.normals),
         }
     }
+}
+
+/// The axis-aligned box that holds the box `lo..hi` after `m` (in f64).
+fn box_after(m: Mat4, lo: glam::Vec3, hi: glam::Vec3) -> (DVec3, DVec3) {
+    let m = m.as_dmat4();
+    (0..8).fold((DVec3::MAX, DVec3::MIN), |(a, b), i| {
+        let corner = DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x } as f64,
+            if i & 2 == 0 { lo.y } else { hi.y } as f64,
+            if i & 4 == 0 { lo.z } else { hi.z } as f64,
+        );
+        let p = m.transform_point3(corner);
+        (a.min(p), b.max(p))
+    })
 }
 
 /// Cells per texel row of a pass's cell texture (shaders/cuboid.wgsl `CELLS_PER_ROW`), each
@@ -341,7 +360,17 @@ impl Composed {
             .iter()
             .map(|item| {
                 let (model, grid) = fast_path(item.model, item.cuboid.clone());
-                ComposedItem { model, grid, grid_cell: 0 }
+                // Tessellated vertices leave the coarse mesh's bounds; a grid of one cell is
+                // a single cuboid already.
+                let cell = match &grid {
+                    Some(g) if item.tessellated.is_none() && g.cells != [1, 1, 1] => {
+                        let (lo, hi) = item.mesh.bounds();
+                        let (lo, hi) = box_after(model, lo, hi);
+                        g.cell_holding(lo, hi)
+                    }
+                    _ => None,
+                };
+                ComposedItem { model, grid, grid_cell: 0, cell }
             })
             .collect();
         let mut rows: Vec<[f32; 4]> = Vec::new();

@@ -23,6 +23,8 @@ pub struct Mesh {
     /// Notes about repairs made while building the mesh, shown as node warnings.
     pub repairs: Vec<String>,
     gpu: OnceLock<GpuMesh>,
+    /// [`Mesh::bounds`], computed once like the GPU copy: a mesh is not changed once used.
+    bounds: OnceLock<(Vec3, Vec3)>,
 }
 
 impl Clone for Mesh {
@@ -38,6 +40,7 @@ impl Clone for Mesh {
             seams: self.seams.clone(),
             repairs: self.repairs.clone(),
             gpu: OnceLock::new(),
+            bounds: OnceLock::new(),
         }
     }
 }
@@ -190,6 +193,7 @@ impl Mesh {
             seams: Vec::new(),
             repairs,
             gpu: OnceLock::new(),
+            bounds: OnceLock::new(),
         })
     }
 
@@ -258,13 +262,17 @@ impl Mesh {
             seams: Vec::new(),
             repairs: Vec::new(),
             gpu: OnceLock::new(),
+            bounds: OnceLock::new(),
         })
     }
 
+    /// The axis-aligned bounding box of the positions (computed once).
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.positions
-            .iter()
-            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        *self.bounds.get_or_init(|| {
+            self.positions
+                .iter()
+                .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        })
     }
 
     /// Whether `build` made the UVs up (a planar projection): such a mesh has no pattern

@@ -318,21 +318,26 @@ fn bad_cuboid_parameters_are_node_errors() {
     }
 }
 
-/// A tessellated plate under a bend grid, and under a single bent cuboid (whose coefficients
-/// the vertex stage takes as instance data, not from the cell texture): drawn by the trilinear
-/// vertex stage, and drawn again as a mesh deformed on the CPU, must give the same G-buffer
-/// depth and normals (and the same shadow-tile depth).
+/// A tessellated plate under a bend grid, under a single bent cuboid (whose coefficients the
+/// vertex stage takes as instance data, not from the cell texture), and small inside one cell
+/// of the grid (drawn as that cell's single cuboid): drawn by the trilinear vertex stage, and
+/// drawn again as a mesh deformed on the CPU, must give the same G-buffer depth and normals
+/// (and the same shadow-tile depth).
 #[test]
 fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     let gpu = common::gpu();
     let plate = werkstatt::nodes::geometry::plane(2.0, 24, 24).unwrap();
-    let model = Mat4::from_rotation_x(0.3);
+    let whole = Mat4::from_rotation_x(0.3);
+    // Inside cell (1, 1, 0) of the 3x2x1 grid.
+    let small = Mat4::from_translation(Vec3::new(0.0, 0.3, 0.0)) * whole * Mat4::from_scale(Vec3::splat(0.25));
     let (lo, hi) = (DVec3::new(-1.0, -0.6, -1.0), DVec3::new(1.0, 0.6, 1.0));
     let camera = common::camera_toward_origin(Vec3::new(0.3, 2.2, 3.0), 45.0, 20.0);
     let (w, h) = (64u32, 64u32);
     let view = View::new(&camera, w, h);
     let methods = [NormalMethod::TangentSpace, NormalMethod::Direct];
-    for (cells, method) in [[3, 2, 1], [1, 1, 1]].into_iter().flat_map(|c| methods.map(|m| (c, m))) {
+    // (cells, model, the least pixels the plate covers)
+    let cases = [([3, 2, 1], whole, 800), ([1, 1, 1], whole, 800), ([3, 2, 1], small, 60)];
+    for ((cells, model, least), method) in cases.into_iter().flat_map(|c| methods.map(|m| (c, m))) {
         let grid = Arc::new(
             CuboidGrid::from_fn(lo, hi, cells, method, |u| {
                 let b = bend(lo, hi, 100.0)(lo + u * (hi - lo));
@@ -393,7 +398,7 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
                 worst_normal = worst_normal.max(ma.distance(mb));
             }
         }
-        assert!(covered > 800, "{cells:?} {method:?}: the plate covers only {covered} pixels");
+        assert!(covered > least, "{cells:?} {method:?}: the plate covers only {covered} pixels");
         assert!(mismatched <= 4, "{cells:?} {method:?}: coverage differs in {mismatched} pixels");
         assert!(worst_depth < 1e-3, "{cells:?} {method:?}: depth differs by {worst_depth} (relative)");
         // Normals are interpolated per vertex in both; Rgba16Float stores them to ~1e-3.
@@ -406,38 +411,45 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
 }
 
 /// Items that share a mesh and maps draw as one instanced draw per run of equal pipelines, each
-/// instance with its own transform, grid and colour: the G-buffer and the depth tiles must equal,
-/// to the bit, those of the same items drawn one by one (each with its own copy of the mesh).
+/// instance with its own transform, grid (or single cuboid) and colour: the G-buffer and the
+/// depth tiles must equal, to the bit, those of the same items drawn one by one (each with its
+/// own copy of the mesh).
 #[test]
 fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
     let gpu = common::gpu();
     let ball = Arc::new(werkstatt::nodes::geometry::sphere(0.5, 12, 6).unwrap());
-    let (lo, hi) = (DVec3::splat(-0.5), DVec3::splat(0.5));
-    let grid = |k: usize, method| {
-        let twist = 0.4 + 0.3 * k as f64;
+    // A twisted grid over lo..hi (content space: after the item's model matrix).
+    let grid = |k: usize, cells, (lo, hi): (DVec3, DVec3), method| {
+        let (twist, centre) = (0.4 + 0.3 * k as f64, (lo + hi) / 2.0);
         Arc::new(
-            CuboidGrid::from_fn(lo, hi, [2, 1, 1 + k % 2], method, |u| {
-                let p = lo + u * (hi - lo);
-                DQuat::from_rotation_y(twist * p.y).mul_vec3(p) + DVec3::new(0.1 * p.y * p.y, 0.0, 0.0)
+            CuboidGrid::from_fn(lo, hi, cells, method, |u| {
+                let p = lo + u * (hi - lo) - centre;
+                centre + DQuat::from_rotation_y(twist * p.y).mul_vec3(p) + DVec3::new(0.1 * p.y * p.y, 0.0, 0.0)
             })
             .unwrap(),
         )
     };
-    // Eight items in a row: plain, plain, three under grids (tangent space), one under a grid
-    // with direct normals, plain, plain. Runs of equal pipelines make four draws.
+    let position = |k: usize| Vec3::new(-2.1 + 0.6 * k as f32, 0.2 * (k % 3) as f32, 0.0);
+    let around = |k: usize| (position(k).as_dvec3() - 0.6, position(k).as_dvec3() + 0.6);
+    // Eight items in a row: plain, plain, three across the cells of grids (tangent space), one
+    // beyond its grid, in the extrapolation of one border cell, so drawn as that cell's single
+    // cuboid (direct normals), plain, plain. Runs of equal pipelines make four draws.
     let kinds = [None, None, Some(NormalMethod::TangentSpace), Some(NormalMethod::TangentSpace)];
     let kinds = kinds.iter().chain(&[Some(NormalMethod::TangentSpace), Some(NormalMethod::Direct), None, None]);
-    let shared_grid = grid(3, NormalMethod::TangentSpace);
+    // Items 3 and 4 share one grid (and so its cells).
+    let shared_grid =
+        grid(3, [2, 1, 2], (DVec3::new(-0.9, -0.6, -0.6), DVec3::new(0.9, 0.8, 0.6)), NormalMethod::TangentSpace);
     let shared: Vec<DrawItem> = kinds
         .enumerate()
         .map(|(k, kind)| {
             let material =
                 Material { base_color: Vec3::new(0.1 * k as f32, 0.5, 1.0 - 0.1 * k as f32), ..Default::default() };
-            let x = -2.1 + 0.6 * k as f32;
-            let model =
-                Mat4::from_translation(Vec3::new(x, 0.2 * (k % 3) as f32, 0.0)) * Mat4::from_rotation_z(0.3 * k as f32);
-            // Items 3 and 4 share one grid (and so its rows in the draw).
-            let cuboid = kind.map(|method| if k == 3 || k == 4 { shared_grid.clone() } else { grid(k, method) });
+            let model = Mat4::from_translation(position(k)) * Mat4::from_rotation_z(0.3 * k as f32);
+            let cuboid = kind.map(|method| match k {
+                3 | 4 => shared_grid.clone(),
+                5 => grid(k, [2, 1, 1], (DVec3::new(-3.5, -0.5, -0.5), DVec3::new(-2.5, 0.5, 0.5)), method),
+                _ => grid(k, [2, 1, 2], around(k), method),
+            });
             DrawItem {
                 mesh: ball.clone(),
                 material: Arc::new(material),
@@ -468,7 +480,7 @@ fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
     let (shared_draws, shared_images) = draw(&shared);
     let (separate_draws, separate_images) = draw(&separate);
     assert_eq!(separate_draws, shared.len());
-    assert_eq!(shared_draws, 4, "plain x2, tangent-space grids x3, direct grid, plain x2");
+    assert_eq!(shared_draws, 4, "plain x2, tangent-space grids x3, direct single cuboid, plain x2");
     let covered = shared_images[2].iter().step_by(4).filter(|&&z| z > 0.0).count();
     assert!(covered > 400, "the balls cover only {covered} pixels");
     for (name, (a, b)) in
