@@ -1094,28 +1094,33 @@ pub fn cuboids(
             )
         })
         .collect();
-    let animate = |linear: bool, i: usize| -> Vec<DrawItem> {
-        let angle = 40.0 + 10.0 * (i as f64 * 0.3).sin();
-        let t = if linear {
-            Transform::Affine(DMat4::from_rotation_z(angle.to_radians() * 0.2))
-        } else {
-            let f = bend(lo, hi, angle);
-            Transform::from_grid(
-                CuboidGrid::from_fn(lo, hi, [8, 1, 1], NormalMethod::TangentSpace, |u| f(lo + u * (hi - lo)))
-                    .expect("a valid box"),
-            )
+    // A bend grid of 8 cells holds each sphere inside one cell (each then draws as its cell's
+    // single cuboid); one of 24 cells, narrower than a sphere, makes every sphere cross cells
+    // (the vertex stage looks up each vertex's cell).
+    for (scene, cells) in [("spheres", 8), ("spheres across cells", 24)] {
+        let animate = |linear: bool, i: usize| -> Vec<DrawItem> {
+            let angle = 40.0 + 10.0 * (i as f64 * 0.3).sin();
+            let t = if linear {
+                Transform::Affine(DMat4::from_rotation_z(angle.to_radians() * 0.2))
+            } else {
+                let f = bend(lo, hi, angle);
+                Transform::from_grid(
+                    CuboidGrid::from_fn(lo, hi, [cells, 1, 1], NormalMethod::TangentSpace, |u| f(lo + u * (hi - lo)))
+                        .expect("a valid box"),
+                )
+            };
+            placed
+                .iter()
+                .map(|item| {
+                    let (model, cuboid) = compose(item.model, None, &t);
+                    DrawItem { model, cuboid, ..item.clone() }
+                })
+                .collect()
         };
-        placed
-            .iter()
-            .map(|item| {
-                let (model, cuboid) = compose(item.model, None, &t);
-                DrawItem { model, cuboid, ..item.clone() }
-            })
-            .collect()
-    };
-    let triangles = count * mesh.indices.len() / 3;
-    let (fps_linear, fps_trilinear, ratio, draws) = compare(&animate)?;
-    push(CuboidRow { scene: "spheres", objects: count, triangles, draws, fps_linear, fps_trilinear, ratio });
+        let triangles = count * mesh.indices.len() / 3;
+        let (fps_linear, fps_trilinear, ratio, draws) = compare(&animate)?;
+        push(CuboidRow { scene, objects: count, triangles, draws, fps_linear, fps_trilinear, ratio });
+    }
 
     // Helices: object k sits at parameter s_k; its transform is the helix's frame there
     // (linear) or the cuboid whose corners follow the helix over the object's extent.

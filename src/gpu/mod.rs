@@ -241,6 +241,27 @@ pub fn list_adapters(backend: Backend) -> Vec<String> {
         .collect()
 }
 
+/// Asks glibc to keep freed memory for reuse instead of returning it to the system at once.
+/// Lavapipe allocates and frees per draw and instance; with glibc's defaults the heap's top
+/// was trimmed and grown again all the time, and page faults took up to 40% of a frame of
+/// many instanced objects (`werkstatt bench cuboids`: 7.4 s of system time in an 18 s run,
+/// 0.3 s with these settings; frames up to 1.7x faster). Once per process; a no-op elsewhere.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        static ONCE: std::sync::Once = std::sync::Once::new();
+        ONCE.call_once(|| {
+            // Freed memory above 256 MiB at the heap's top goes back; blocks under 32 MiB come
+            // from the heap, not from fresh mappings. A failed call leaves the defaults.
+            // SAFETY: mallopt only sets allocator parameters; it is thread-safe.
+            unsafe {
+                libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
+                libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+            }
+        });
+    }
+}
+
 impl GpuContext {
     /// Opens a device without a window. Fails with installation advice where no adapter exists.
     pub fn headless(backend: Backend) -> anyhow::Result<GpuContext> {
@@ -292,6 +313,7 @@ impl GpuContext {
     /// render state), so the nodes render into textures the window can show without copies.
     /// Its features and limits are whatever that device was opened with.
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter: &wgpu::Adapter) -> GpuContext {
+        keep_freed_memory();
         let info = adapter.get_info();
         let features = device.features();
         let limits = device.limits();
