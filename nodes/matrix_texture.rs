@@ -142,7 +142,7 @@ impl MatrixTextureNode {
                 Some(t) => {
                     pass.set_vertex_buffer(0, t.vertices.slice(..));
                     pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
-                    pass.draw_indexed_indirect(&t.indirect, TessMesh::indirect_offset(1));
+                    pass.draw_indexed_indirect(&t.indirect, 0);
                 }
                 None => {
                     pass.set_vertex_buffer(0, gpu_mesh.vertices.slice(..));

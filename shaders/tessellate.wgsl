@@ -31,7 +31,6 @@ struct Params {
 // #include "pn.wgsl"
 
 const FLOATS: u32 = 14u;
-const MAX_TILES: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
@@ -42,7 +41,7 @@ const MAX_TILES: u32 = 64u;
 @group(0) @binding(4) var<storage, read_write> counts: array<vec2<u32>>;
 @group(0) @binding(5) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(6) var<storage, read_write> out_indices: array<u32>;
-// MAX_TILES DrawIndexedIndirectArgs: entry k draws k + 1 instances (one per shadow tile).
+// DrawIndexedIndirectArgs of one instance (a depth target draws it once per tile).
 @group(0) @binding(7) var<storage, read_write> indirect: array<u32>;
 
 fn invocation(gid: vec3<u32>) -> u32 {
@@ -283,13 +282,11 @@ fn scan(@builtin(local_invocation_index) li: u32) {
         run += c;
     }
     if li == 255u {
-        for (var k = 0u; k < MAX_TILES; k++) {
-            indirect[k * 5u] = sums[255].y;
-            indirect[k * 5u + 1u] = k + 1u;
-            indirect[k * 5u + 2u] = 0u;
-            indirect[k * 5u + 3u] = 0u;
-            indirect[k * 5u + 4u] = 0u;
-        }
+        indirect[0] = sums[255].y;
+        indirect[1] = 1u;
+        indirect[2] = 0u;
+        indirect[3] = 0u;
+        indirect[4] = 0u;
     }
 }
 

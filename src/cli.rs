@@ -327,8 +327,9 @@ enum BenchWhat {
         /// after one untimed frame; the medians of each path's frames are reported.
         #[arg(long, default_value_t = 5)]
         frames: usize,
-        /// Rounds of blocks A B B A; the ratio is the median of the rounds' ratios.
-        #[arg(long, default_value_t = 3)]
+        /// Rounds of blocks A B B A; the ratio is the median of the rounds' ratios (with 5
+        /// rounds a row moved by up to 8 points between runs on a 2-core machine, with 15 by 3-6).
+        #[arg(long, default_value_t = 15)]
         rounds: usize,
         #[command(flatten)]
         out: GpuBench,

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use glam::{DMat3, DMat4, DVec3, Mat4, Vec4};
 
 use crate::cuboid::{CuboidGrid, NormalMethod, fast_path};
-use crate::gpu::pass::{Bindings, dynamic_storage_entry, texture_entry, uniform_entry};
+use crate::gpu::pass::{Bindings, WriteSlots, dynamic_storage_entry, texture_entry, uniform_entry};
 use crate::gpu::{
     Bind, BufferRing, ComputePass, GpuContext, GpuImage, PooledBuffer, RenderPipelineDesc, SamplerKind, TextureDesc,
 };
@@ -22,7 +22,6 @@ use crate::warp::{AttachedDraw, InstanceData, MatrixTexture};
 
 /// The most tiles one depth draw fills (the size of the views array in shaders/depth.wgsl).
 pub const MAX_TILES: usize = 64;
-const _: () = assert!(crate::tessellation::MAX_INDIRECT_INSTANCES as usize == MAX_TILES);
 
 /// One tile of a depth target: the view drawn into it and where it lies in the texture.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -425,41 +424,33 @@ impl Composed {
 }
 
 /// A pass's cell texture (shaders/cuboid.wgsl `cuboid_cells`: rgba32float, a row of C per
-/// texel, [`CELLS_PER_ROW`] cells per texel row), one per pass until the next submit:
-/// `queue.write_texture` runs before the submit's commands, so one texture written by two
-/// passes would show both the second pass's cells. Lavapipe loads a texel for each vertex
-/// with a few vector instructions; a storage buffer indexed per vertex costs it a loop over
-/// the lanes with a branch per component (a fifth of a helix frame).
+/// texel, [`CELLS_PER_ROW`] cells per texel row), one per pass until the next submit
+/// ([`WriteSlots`]). Lavapipe loads a texel for each vertex with a few vector instructions; a
+/// storage buffer indexed per vertex costs it a loop over the lanes with a branch per
+/// component.
 #[derive(Default)]
 struct CellTextures {
-    slots: Vec<GpuImage>,
-    epoch: u64,
-    used: usize,
+    slots: WriteSlots<GpuImage>,
 }
 
 impl CellTextures {
     fn write(&mut self, gpu: &GpuContext, rows: &[[f32; 4]]) -> &GpuImage {
-        let epoch = gpu.epoch();
-        if epoch != self.epoch {
-            self.epoch = epoch;
-            self.used = 0;
-        }
-        let slot = self.used;
-        self.used += 1;
         let row_texels = CELLS_PER_ROW * CuboidGrid::ROWS_PER_CELL;
         let height = rows.len().div_ceil(row_texels).max(1) as u32;
-        if slot == self.slots.len() || self.slots[slot].height < height {
-            let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-            let desc =
-                TextureDesc::d2(row_texels as u32, height.next_power_of_two(), wgpu::TextureFormat::Rgba32Float, usage);
-            let image = GpuImage::create(gpu, "cuboid grid cells", desc);
-            if slot == self.slots.len() {
-                self.slots.push(image);
-            } else {
-                self.slots[slot] = image;
-            }
-        }
-        let texture = &self.slots[slot].texture;
+        let image = self.slots.next(
+            gpu,
+            |image| image.height >= height,
+            |_| {
+                let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+                let format = wgpu::TextureFormat::Rgba32Float;
+                GpuImage::create(
+                    gpu,
+                    "cuboid grid cells",
+                    TextureDesc::d2(row_texels as u32, height.next_power_of_two(), format, usage),
+                )
+            },
+        );
+        let texture = &image.texture;
         // Whole texel rows, then the last, partial one.
         let (full, rest) = rows.split_at(rows.len() / row_texels * row_texels);
         for (y, part, width) in [(0, full, row_texels), (full.len() / row_texels, rest, rest.len())] {
@@ -478,7 +469,7 @@ impl CellTextures {
                 wgpu::Extent3d { width: width as u32, height: (part.len() / width) as u32, depth_or_array_layers: 1 },
             );
         }
-        &self.slots[slot]
+        image
     }
 }
 
@@ -942,8 +933,7 @@ fn draw_items(
             pass.set_vertex_buffer(1, transforms);
             pass.set_index_buffer(t.indices.slice(..), wgpu::IndexFormat::Uint32);
             bound.pipeline(pass, trilinear.unwrap_or(pipelines.plain));
-            let offset = crate::tessellation::TessMesh::indirect_offset(1);
-            each_tile(pass, &|pass| pass.draw_indexed_indirect(&t.indirect, offset));
+            each_tile(pass, &|pass| pass.draw_indexed_indirect(&t.indirect, 0));
             continue;
         }
         let mesh = item.mesh.gpu(gpu);

@@ -740,13 +740,12 @@ struct Params {
     pad: [u32; 2],
 }
 
-/// The most instances an indirect draw of a [`TessMesh`] can ask for: one per shadow tile
-/// (`draw::MAX_TILES`, asserted equal there; `MAX_TILES` in shaders/tessellate.wgsl).
-pub const MAX_INDIRECT_INSTANCES: u32 = 64;
-const INDIRECT_STRIDE: u64 = 20;
+/// Bytes of one `DrawIndexedIndirectArgs`.
+const INDIRECT_BYTES: u64 = 20;
 
 /// A tessellated mesh that lives on the GPU only: vertex and index buffers written by the
-/// compute pass and indirect draw arguments (entry k draws k + 1 instances).
+/// compute pass and indirect draw arguments (one instance; a depth target draws it once per
+/// tile).
 pub struct TessMesh {
     pub vertices: crate::gpu::PooledBuffer,
     pub indices: crate::gpu::PooledBuffer,
@@ -762,13 +761,6 @@ pub struct TessMesh {
 impl std::fmt::Debug for TessMesh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "TessMesh(capacity {} vertices, {} indices)", self.vertex_capacity, self.index_capacity)
-    }
-}
-
-impl TessMesh {
-    /// The byte offset of the indirect arguments that draw `instances` instances.
-    pub fn indirect_offset(instances: u32) -> u64 {
-        u64::from(instances.clamp(1, MAX_INDIRECT_INSTANCES) - 1) * INDIRECT_STRIDE
     }
 }
 
@@ -869,11 +861,8 @@ impl GpuTessellator {
         let vertices = gpu.scratch_pooled("tessellated vertices", vertex_bytes, U::STORAGE | U::VERTEX | U::COPY_SRC);
         let indices =
             gpu.scratch_pooled("tessellated indices", index_capacity * 4, U::STORAGE | U::INDEX | U::COPY_SRC);
-        let indirect = gpu.scratch_pooled(
-            "tessellation indirect",
-            u64::from(MAX_INDIRECT_INSTANCES) * INDIRECT_STRIDE,
-            U::STORAGE | U::INDIRECT | U::COPY_SRC,
-        );
+        let indirect =
+            gpu.scratch_pooled("tessellation indirect", INDIRECT_BYTES, U::STORAGE | U::INDIRECT | U::COPY_SRC);
         let binds = [
             Bind::Uniform(bytemuck::bytes_of(&params)),
             Bind::Storage(&source.vertices),

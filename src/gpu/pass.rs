@@ -80,21 +80,55 @@ pub fn storage_entry_for(binding: u32, visibility: wgpu::ShaderStages, read_only
     }
 }
 
-/// Buffers written with `queue.write_buffer`, kept across frames. Such a write lands before
-/// every command of the next submit, so a buffer written twice before one submit would show
-/// both readers the second value: each write in one submit epoch takes its own slot, and the
-/// slots are reused once the epoch changes. A pass that runs once per frame keeps one slot.
-pub struct BufferRing {
-    label: &'static str,
-    usage: wgpu::BufferUsages,
-    slots: Vec<wgpu::Buffer>,
+/// Resources written with `queue.write_buffer` or `queue.write_texture`, kept across frames.
+/// Such a write lands before every command of the next submit, so a resource written twice
+/// before one submit would show both readers the second value: each write in one submit
+/// epoch takes its own slot, and the slots are reused once the epoch changes. A pass that
+/// runs once per frame keeps one slot.
+pub struct WriteSlots<T> {
+    slots: Vec<T>,
     epoch: u64,
     used: usize,
 }
 
+impl<T> Default for WriteSlots<T> {
+    fn default() -> Self {
+        WriteSlots { slots: Vec::new(), epoch: 0, used: 0 }
+    }
+}
+
+impl<T> WriteSlots<T> {
+    /// This write's slot: the next one of this epoch, made by `make` where there is none yet
+    /// or where `fits` refuses the one there (`make` sees the one it replaces).
+    pub fn next(&mut self, gpu: &GpuContext, fits: impl Fn(&T) -> bool, make: impl FnOnce(Option<&T>) -> T) -> &T {
+        let epoch = gpu.epoch();
+        if epoch != self.epoch {
+            self.epoch = epoch;
+            self.used = 0;
+        }
+        let slot = self.used;
+        self.used += 1;
+        if slot == self.slots.len() {
+            let made = make(None);
+            self.slots.push(made);
+        } else if !fits(&self.slots[slot]) {
+            let made = make(Some(&self.slots[slot]));
+            self.slots[slot] = made;
+        }
+        &self.slots[slot]
+    }
+}
+
+/// Buffers written with `queue.write_buffer`, kept across frames ([`WriteSlots`]).
+pub struct BufferRing {
+    label: &'static str,
+    usage: wgpu::BufferUsages,
+    slots: WriteSlots<wgpu::Buffer>,
+}
+
 impl BufferRing {
     pub fn new(label: &'static str, usage: wgpu::BufferUsages) -> Self {
-        BufferRing { label, usage: usage | wgpu::BufferUsages::COPY_DST, slots: Vec::new(), epoch: 0, used: 0 }
+        BufferRing { label, usage: usage | wgpu::BufferUsages::COPY_DST, slots: WriteSlots::default() }
     }
 
     pub fn uniform(label: &'static str) -> Self {
@@ -103,21 +137,14 @@ impl BufferRing {
 
     /// A buffer holding `bytes` for commands recorded until the next submit.
     pub fn write(&mut self, gpu: &GpuContext, bytes: &[u8]) -> &wgpu::Buffer {
-        let epoch = gpu.epoch();
-        if epoch != self.epoch {
-            self.epoch = epoch;
-            self.used = 0;
-        }
-        let slot = self.used;
-        self.used += 1;
         // Uniform sizes must be multiples of 16; storage arrays of their element size (4 here).
         let size = (bytes.len() as u64).max(16).next_multiple_of(16);
-        if slot == self.slots.len() {
-            self.slots.push(gpu.create_buffer(self.label, size, self.usage));
-        } else if self.slots[slot].size() < size {
-            self.slots[slot] = gpu.create_buffer(self.label, size.max(self.slots[slot].size() * 2), self.usage);
-        }
-        let buffer = &self.slots[slot];
+        let (label, usage) = (self.label, self.usage);
+        let buffer = self.slots.next(
+            gpu,
+            |b| b.size() >= size,
+            |old| gpu.create_buffer(label, size.max(old.map_or(0, |b| b.size() * 2)), usage),
+        );
         if !bytes.is_empty() {
             gpu.queue.write_buffer(buffer, 0, bytes);
         }

@@ -35,8 +35,7 @@ fn run_gpu(mesh: &Mesh, levels: Option<&[f32]>, s: &Settings) -> (TessMesh, Vec<
     g.submit_checked().unwrap();
     let args: Vec<u32> = read_buffer(g, &out.indirect).unwrap();
     let index_count = args[0] as usize;
-    assert_eq!(args[1], 1, "the first indirect entry draws one instance");
-    assert_eq!((args[5], args[6]), (args[0], 2), "the second draws two");
+    assert_eq!(args[1..5], [1, 0, 0, 0], "the indirect arguments draw one instance from the start");
     let mut indices: Vec<u32> = read_buffer(g, &out.indices).unwrap();
     indices.truncate(index_count);
     let used = indices.iter().copied().max().map_or(0, |m| m as usize + 1);
@@ -227,7 +226,7 @@ fn too_large_a_tessellation_is_refused_with_advice() {
 }
 
 /// A flat tessellation draws, through its indirect arguments, the same depth as the coarse
-/// mesh: in the G-buffer and in two shadow tiles (the second entry of the arguments).
+/// mesh: in the G-buffer and in two shadow tiles (the indirect draw recorded once per tile).
 #[test]
 fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles() {
     use std::sync::Arc;
