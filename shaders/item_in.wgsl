@@ -26,7 +26,8 @@ struct ItemIn {
 // maps into the cuboid's unit cube, and its coefficient matrix C (eq. 3.4, rows as in
 // cuboid.wgsl) comes as six more instance attributes instead of six texel loads per vertex.
 // They take locations 2 and 4 (MeshVertexIn has no tangents) and 12-15: 16 attributes with
-// the vertex's three, WebGPU's limit.
+// the vertex's three, WebGPU's limit. The first seven are ItemIn's (shader inputs cannot nest
+// structs); `cuboid_item` makes an ItemIn of them.
 struct CuboidItemIn {
     @location(5) transform0: vec4<f32>,
     @location(6) transform1: vec4<f32>,
