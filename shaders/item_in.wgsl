@@ -1,8 +1,8 @@
 // An item's vertex-stage transform (src/draw.rs `ItemVertex`): an instance-rate vertex buffer,
 // one entry per item, shared by every pass that draws meshes. Lavapipe fetches an
 // instance-rate attribute once per batch of vertices, where a storage load indexed by the
-// instance is a gather per vertex: with the transforms in the objects' storage buffer, the
-// loads were most of the vertex stage's cost.
+// instance is a loop over the vertices of the batch: with the transforms in the objects'
+// storage buffer, the loads were most of the vertex stage's cost.
 
 struct ItemIn {
     // The point transform's columns: the model matrix, or for an item under a non-linear
@@ -17,8 +17,8 @@ struct ItemIn {
     @location(9) normal0: vec4<f32>,
     @location(10) normal1: vec4<f32>,
     @location(11) normal2: vec4<f32>,
-    // A non-linear grid: cells per axis (xyz), and its first row of cells counted from the
-    // first row its draw binds (w). Zero without a grid.
+    // A grid of several cells: cells per axis (xyz), and its first cell in the pass's cell
+    // texture (w; cuboid.wgsl). Zero otherwise.
     @location(12) grid: vec4<u32>,
 };
 

@@ -399,9 +399,13 @@ impl Composed {
                 }
             }
         }
-        let cells = rows.len() / CuboidGrid::ROWS_PER_CELL;
-        let most = CELLS_PER_ROW * gpu.limits.max_texture_dimension_2d as usize;
-        anyhow::ensure!(cells <= most, "the scene's cuboid grids have {cells} cells; a pass holds at most {most}");
+        let (cells, side) = (rows.len() / CuboidGrid::ROWS_PER_CELL, gpu.limits.max_texture_dimension_2d as usize);
+        let most = if CELLS_PER_ROW * CuboidGrid::ROWS_PER_CELL <= side { CELLS_PER_ROW * side } else { 0 };
+        anyhow::ensure!(
+            cells <= most,
+            "the scene's cuboid grids have {cells} cells; a pass on this device holds at most {most} \
+             (textures of {side} texels a side)"
+        );
         let most = gpu.limits.max_buffer_size.min(u64::from(u32::MAX));
         let bytes = items.len() as u64 * OBJECT_SIZE;
         anyhow::ensure!(
