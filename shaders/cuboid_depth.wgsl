@@ -1,7 +1,6 @@
 // Depth tiles (shaders/depth.wgsl) for items under a non-linear cuboid transform: drawn
 // instanced over the draw's items like plain meshes, the vertex deformed by the grid first.
 
-// #include "object.wgsl"
 // #include "vertex_in.wgsl"
 // #include "item_in.wgsl"
 // #include "cuboid.wgsl"

@@ -2,7 +2,6 @@
 // shadow maps of many lights in one pass. Each draw fills one tile (group 3): plain meshes
 // instanced over the draw's items, attached items over their attachments.
 
-// #include "object.wgsl"
 // #include "vertex_in.wgsl"
 // #include "item_in.wgsl"
 // #include "warp.wgsl"

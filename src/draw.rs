@@ -225,12 +225,14 @@ impl InstanceResolver {
 }
 
 /// `t.model` is the item's own matrix, or the composed one where the linear fast path folded
-/// an affine cuboid grid into it.
+/// an affine cuboid grid into it. Only per-pixel PN depth reads the matrices here (vertex
+/// stages take [`ItemVertex`]), so other items skip the inverse.
 fn gpu_object(item: &DrawItem, t: &ComposedItem) -> GpuObject {
     let (model, m) = (t.model, &item.material);
+    let pn = item.pn_pixels;
     GpuObject {
-        model: model.to_cols_array_2d(),
-        normal_matrix: model.inverse().transpose().to_cols_array_2d(),
+        model: if pn { model } else { Mat4::ZERO }.to_cols_array_2d(),
+        normal_matrix: if pn { model.inverse().transpose() } else { Mat4::ZERO }.to_cols_array_2d(),
         base_color: [m.base_color.x, m.base_color.y, m.base_color.z, m.glossiness],
         params: [
             m.uv_scale,
