@@ -50,11 +50,7 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
     cx.count("instances", instances.len());
     cx.count("triangles", instances.len() * c.mesh.triangle_count());
     let attached = AttachedDraw::new(c.matrix, settings, instances);
-    let item = DrawItem {
-        detail: true,
-        attached: Some(Arc::new(attached)),
-        ..DrawItem::plain(c.mesh, c.material, Mat4::IDENTITY)
-    };
+    let item = DrawItem { detail: true, ..DrawItem::plain(c.mesh, c.material, Mat4::IDENTITY) }.with_kind(attached);
     cx.set("scene", Arc::new(vec![item]));
 }
 

@@ -11,7 +11,7 @@ use crate::scene::{Camera, DrawItem};
 /// attached detail lies on a surface that is itself drawn, so it is left out. None when empty.
 pub fn scene_bounds(items: &[DrawItem]) -> Option<(Vec3, Vec3)> {
     let mut bounds: Option<(Vec3, Vec3)> = None;
-    for item in items.iter().filter(|i| i.attached.is_none()) {
+    for item in items.iter().filter(|i| i.kind.places_mesh()) {
         let (lo, hi) = item.mesh.bounds();
         for i in 0..8 {
             let corner = Vec3::new(

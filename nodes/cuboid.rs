@@ -163,12 +163,12 @@ impl Node for DeformNode {
             .iter()
             .map(|item| {
                 // Deferred-warped attachments place their instances through the matrix texture.
-                if item.attached.is_some() && !transform.is_linear() {
+                if !item.kind.places_mesh() && !transform.is_linear() {
                     skipped += 1;
                     return item.clone();
                 }
                 let mut out = item.clone();
-                if let (Some(_), Transform::Affine(a)) = (&item.attached, &*transform) {
+                if let (false, Transform::Affine(a)) = (item.kind.places_mesh(), &*transform) {
                     out.model = a.as_mat4() * item.model;
                     return out;
                 }

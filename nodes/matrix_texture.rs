@@ -3,12 +3,12 @@
 use std::sync::Arc;
 
 use crate::gpu::texture::copy_bits;
-use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, TextureDesc, read_back};
+use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, TextureDesc};
 use crate::mesh::{Mesh, Vertex};
 use crate::node::prelude::*;
 use crate::scene::DrawItem;
 use crate::tessellation::TessMesh;
-use crate::warp::{MatrixTexels, MatrixTexture, TexelFrame};
+use crate::warp::MatrixTexture;
 
 pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
     kind: "MatrixTexture",
@@ -282,7 +282,7 @@ impl Node for MatrixTextureNode {
             Precision::F32 => wgpu::TextureFormat::Rgba32Float,
         };
         let filter_radius = cx.int("filter_radius") as u32;
-        let m = self.render(gpu, &mesh, resolution, format, filter_radius, refined.as_deref())?;
+        let m = self.render(gpu, &mesh, resolution, format, filter_radius, refined.as_ref().and_then(DrawItem::kind_as::<TessMesh>))?;
         cx.set("normal", Arc::new(m.col_n.share()));
         cx.set("matrix", Arc::new(m));
         cx.set("min_resolution", min_res);
@@ -291,8 +291,8 @@ impl Node for MatrixTextureNode {
 }
 
 /// The GPU mesh a Tessellate node made of `surface`, from its scene on the `refined` input.
-fn refined_mesh(scene: &[DrawItem], surface: &Arc<Mesh>, model: glam::Mat4) -> Result<Arc<TessMesh>, NodeError> {
-    let Some(item) = scene.iter().find(|i| i.tessellated.is_some()) else {
+fn refined_mesh(scene: &[DrawItem], surface: &Arc<Mesh>, model: glam::Mat4) -> Result<DrawItem, NodeError> {
+    let Some(item) = scene.iter().find(|i| i.kind_as::<TessMesh>().is_some()) else {
         return Err(NodeError::msg(
             "refined: the scene holds no GPU-refined mesh (link a Tessellate node's scene; its per_pixel mode does not refine)",
         ));
@@ -315,23 +315,7 @@ fn refined_mesh(scene: &[DrawItem], surface: &Arc<Mesh>, model: glam::Mat4) -> R
             "refined: translate, rotate and scale move the coarse surface only; transform the mesh before the Tessellate node instead",
         ));
     }
-    Ok(item.tessellated.clone().expect("found above"))
-}
-
-/// Copies a matrix texture to the CPU.
-pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<MatrixTexels> {
-    let (u, n, v) = (read_back(gpu, &m.col_u)?, read_back(gpu, &m.col_n)?, read_back(gpu, &m.col_v)?);
-    let v3 = |px: &[f32], i: usize| glam::Vec3::new(px[4 * i], px[4 * i + 1], px[4 * i + 2]);
-    let frames = (0..(m.resolution * m.resolution) as usize)
-        .map(|i| TexelFrame {
-            tu: v3(&u.rgba, i),
-            n: v3(&n.rgba, i),
-            tv: v3(&v.rgba, i),
-            p: glam::Vec3::new(u.rgba[4 * i + 3], n.rgba[4 * i + 3], v.rgba[4 * i + 3]),
-        })
-        .collect();
-    let seams = read_back(gpu, &m.seams)?.rgba.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-    Ok(MatrixTexels { resolution: m.resolution, frames, seams })
+    Ok(item.clone())
 }
 
 fn upload_seam_map(gpu: &GpuContext, mesh: &Mesh, resolution: u32) -> GpuImage {

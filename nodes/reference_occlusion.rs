@@ -61,7 +61,7 @@ pub struct SceneBvh {
 impl SceneBvh {
     pub fn new(items: &[DrawItem]) -> SceneBvh {
         let mut tris = Vec::new();
-        for item in items.iter().filter(|i| i.attached.is_none()) {
+        for item in items.iter().filter(|i| i.kind.places_mesh()) {
             let p: Vec<Vec3A> = item.mesh.positions.iter().map(|&p| item.model.transform_point3(p).into()).collect();
             for t in item.mesh.indices.chunks_exact(3) {
                 tris.push(Triangle { v0: p[t[0] as usize], v1: p[t[1] as usize], v2: p[t[2] as usize] });

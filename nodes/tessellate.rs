@@ -119,7 +119,7 @@ impl Node for TessellateNode {
         };
         let plain = DrawItem::plain(mesh.clone(), material, Mat4::IDENTITY);
         if cx.bool("per_pixel") {
-            let item = DrawItem { pn_pixels: true, ..plain };
+            let item = plain.with_kind(crate::draw::kinds::pn_pixels::PnPixels);
             cx.count("patches", mesh.triangle_count());
             cx.set("scene", Arc::new(vec![item]));
             cx.set("wireframe", Arc::new(Mesh::default()));
@@ -134,7 +134,7 @@ impl Node for TessellateNode {
         let tess = self.gpu.run(gpu, &mesh, fixed_levels.as_deref(), &lod, &settings)?;
         cx.count("patches", mesh.triangle_count());
         cx.count("max_triangles", (tess.index_capacity / 3) as usize);
-        let item = DrawItem { tessellated: Some(Arc::new(tess)), ..plain };
+        let item = plain.with_kind(tess);
         cx.set("scene", Arc::new(vec![item]));
         let (wire, refined) = (cx.output_linked("wireframe"), cx.output_linked("mesh"));
         let cpu = (wire || refined).then(|| {

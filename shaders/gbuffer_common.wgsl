@@ -20,8 +20,8 @@ struct GBufferOut {
 
 fn write_gbuffer(world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front: bool) -> GBufferOut {
     var albedo = object.base_color.rgb;
-    if object.params.y > 0.5 {
-        albedo = albedo * textureSample(base_map, base_sampler, uv * object.params.x).rgb;
+    if object.has_texture > 0.5 {
+        albedo = albedo * textureSample(base_map, base_sampler, uv * object.uv_scale).rgb;
     }
     // Cloth is two-sided: light the back face with the flipped normal.
     var n = normalize(world_normal);
@@ -29,12 +29,12 @@ fn write_gbuffer(world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front:
         n = -n;
     }
     var gloss = object.base_color.a;
-    if object.params.w > 0.5 {
-        gloss = mix(object.extra.x, gloss, textureSample(gloss_map, base_sampler, uv * object.params.x).r);
+    if object.has_gloss_map > 0.5 {
+        gloss = mix(object.gloss_min, gloss, textureSample(gloss_map, base_sampler, uv * object.uv_scale).r);
     }
     var out: GBufferOut;
     out.color = vec4<f32>(albedo, gloss);
-    out.normal = vec4<f32>(n, object.params.z);
+    out.normal = vec4<f32>(n, object.detail);
     out.depth = view_depth;
     return out;
 }

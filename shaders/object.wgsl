@@ -1,6 +1,6 @@
 // A drawn object (group 1): its material, and its model matrix for per-pixel PN depth (whose
 // fragment stage transforms the triangle's corners), shared by every pass that draws the
-// scene (src/draw.rs `GpuObject`). All items' objects lie in one storage buffer; a draw binds
+// scene (src/draw/objects.rs `GpuObject`). All items' objects lie in one storage buffer; a draw binds
 // its own items' range (a dynamic offset), so items that share a mesh and maps draw as one
 // instanced draw, each entry point picking its instance's object with `use_object`. Vertex
 // stages take their transform from the instance-rate `ItemIn` instead (item_in.wgsl).
@@ -11,10 +11,15 @@ struct Object {
     normal_matrix: mat4x4<f32>,
     // rgb: linear base colour, a: glossiness.
     base_color: vec4<f32>,
-    // x: uv scale, y: 1 if a texture is bound, z: detail flag, w: 1 if a gloss map is bound.
-    params: vec4<f32>,
-    // x: glossiness where the gloss map is 0.
-    extra: vec4<f32>,
+    uv_scale: f32,
+    // 1 if a base map is bound.
+    has_texture: f32,
+    // 1 for detail geometry (attachments), 0 for coarse cloth.
+    detail: f32,
+    // 1 if a gloss map is bound.
+    has_gloss_map: f32,
+    // Glossiness where the gloss map is 0.
+    gloss_min: f32,
     // Pads the object to 256 bytes, the largest storage offset alignment an adapter may ask.
     unused: array<vec4<f32>, 5>,
 };

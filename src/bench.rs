@@ -107,7 +107,8 @@ pub fn attachments(
     use crate::draw::{SceneDrawer, render_gbuffer};
     use crate::nodes::attach::point_instance;
     use crate::nodes::geometry;
-    use crate::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
+    use crate::nodes::matrix_texture::MatrixTextureNode;
+    use crate::warp::gpu::read_matrix;
     use crate::scene::{Camera, DrawItem, Material};
     use crate::warp::{AttachedDraw, InstanceData, Placement, WarpMode, WarpSettings, warp_layout_cpu};
 
@@ -193,11 +194,8 @@ pub fn attachments(
                 WarpSettings { mode, gravity: 0.0, min_weight: 0.5 },
                 instances.clone(),
             );
-            let item = DrawItem {
-                detail: true,
-                attached: Some(Arc::new(draw)),
-                ..DrawItem::plain(button.clone(), material.clone(), Mat4::IDENTITY)
-            };
+            let item =
+                DrawItem { detail: true, ..DrawItem::plain(button.clone(), material.clone(), Mat4::IDENTITY) }.with_kind(draw);
             let ms = median_ms(&mut || {
                 render_gbuffer(gpu, &mut drawer, std::slice::from_ref(&item), camera, size.0, size.1)?;
                 gpu.submit_checked()?;
@@ -825,10 +823,7 @@ impl TessTimer {
     ) -> anyhow::Result<f64> {
         let t = Instant::now();
         let out = self.tess.run(gpu, mesh, Some(levels), lod, settings)?;
-        let item = crate::scene::DrawItem {
-            tessellated: Some(std::sync::Arc::new(out)),
-            ..crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY)
-        };
+        let item = crate::scene::DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY).with_kind(out);
         let (w, h) = self.size;
         let camera = tessellation_bench_camera();
         let g = draw.then(|| crate::draw::render_gbuffer(gpu, &mut self.drawer, &[item], camera, w, h)).transpose()?;
@@ -1410,7 +1405,7 @@ pub fn export(
     out: &std::path::Path,
     mut report: impl FnMut(&ExportRow),
 ) -> anyhow::Result<Vec<ExportRow>> {
-    use crate::nodes::export::{GpuWarper, WarpDevice, assemble};
+    use crate::warp::gpu::{GpuWarper, WarpDevice, assemble};
     use crate::port::Value;
 
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
@@ -1441,7 +1436,7 @@ pub fn export(
             anyhow::bail!("the export scene has no attachments");
         };
         let item = &items[0];
-        let draw = item.attached.as_ref().expect("an attachment");
+        let draw = item.kind_as::<crate::warp::AttachedDraw>().ok_or_else(|| anyhow::anyhow!("the export scene's item is not an attachment"))?;
         let mut warper = GpuWarper::default();
         let mut time = |device: WarpDevice| -> anyhow::Result<(f64, f64, crate::mesh::Mesh)> {
             let warp_ms = median_ms(frames, &mut || warper.warp_layout_on(gpu, &item.mesh, draw, device).map(drop))?;

@@ -51,6 +51,13 @@ impl std::fmt::Debug for Mesh {
     }
 }
 
+/// Whether triangle `t` has an area (a collapsed one is left out of exports, as `Mesh::build` does).
+#[inline]
+pub fn has_area(positions: &[Vec3], t: [u32; 3]) -> bool {
+    let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+    (b - a).cross(c - a).length() > f32::MIN_POSITIVE
+}
+
 /// The interleaved vertex layout shared by every mesh shader.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]

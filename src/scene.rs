@@ -4,6 +4,8 @@ use std::sync::{Arc, OnceLock};
 
 use glam::{Mat4, Vec3};
 
+use crate::draw::kind::ItemKind;
+use crate::draw::kinds::mesh::PlainMesh;
 use crate::gpu::{GpuContext, GpuImage};
 use crate::mesh::Mesh;
 
@@ -133,7 +135,9 @@ impl Default for Material {
     }
 }
 
-/// One mesh to draw, with its material and model transform.
+/// One mesh to draw, with its material, model transform and kind: how it is drawn and exported
+/// (a plain mesh, attachments warped through a matrix texture, a GPU tessellation, per-pixel PN
+/// depth; see `crate::draw::kind`).
 #[derive(Clone)]
 pub struct DrawItem {
     pub mesh: Arc<Mesh>,
@@ -141,32 +145,21 @@ pub struct DrawItem {
     pub model: Mat4,
     /// Detail geometry (attachments) versus coarse cloth; written to the G-buffer flag.
     pub detail: bool,
-    /// Set for deferred-warped detail geometry: drawn instanced through the matrix texture.
-    pub attached: Option<Arc<crate::warp::AttachedDraw>>,
     /// A non-linear (cuboid grid) transform applied after `model`: the vertex lands at
     /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
     pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
-    /// A GPU-resident tessellation of `mesh` (the `Tessellate` node): drawn instead of `mesh`
-    /// from its own buffers with an indirect draw.
-    pub tessellated: Option<Arc<crate::tessellation::TessMesh>>,
-    /// Per-pixel PN depth (dissertation 4.1.3): the G-buffer evaluates the PN patch of each
-    /// triangle per fragment (shaders/gbuffer_pn.wgsl); other targets draw the mesh as it is.
-    pub pn_pixels: bool,
+    pub kind: Arc<dyn ItemKind>,
 }
 
 impl DrawItem {
-    /// A coarse (non-detail) item drawn as it is: no attachment, cuboid, tessellation or PN.
+    /// A coarse (non-detail) mesh drawn as it is.
     pub fn plain(mesh: Arc<Mesh>, material: Arc<Material>, model: Mat4) -> DrawItem {
-        DrawItem {
-            mesh,
-            material,
-            model,
-            detail: false,
-            attached: None,
-            cuboid: None,
-            tessellated: None,
-            pn_pixels: false,
-        }
+        DrawItem { mesh, material, model, detail: false, cuboid: None, kind: Arc::new(PlainMesh) }
+    }
+
+    /// This item drawn as `kind`.
+    pub fn with_kind(self, kind: impl ItemKind) -> DrawItem {
+        DrawItem { kind: Arc::new(kind), ..self }
     }
 }
 

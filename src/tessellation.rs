@@ -756,6 +756,11 @@ pub struct TessMesh {
     pub offsets: crate::gpu::PooledBuffer,
     pub vertex_capacity: u64,
     pub index_capacity: u64,
+    /// What it was made with, so the CPU reference can redo it (export on a CPU adapter).
+    pub settings: Settings,
+    pub view: ViewLod,
+    /// Levels given per vertex instead of the view's metric.
+    pub given_levels: Option<Vec<f32>>,
 }
 
 impl std::fmt::Debug for TessMesh {
@@ -884,7 +889,18 @@ impl GpuTessellator {
         self.count.dispatch(gpu, &[&binds], per_triangle)?;
         self.scan.dispatch(gpu, &[&binds], [1, 1, 1])?;
         self.generate.dispatch(gpu, &[&binds], per_triangle)?;
-        Ok(TessMesh { vertices, indices, indirect, levels: level_buffer, offsets, vertex_capacity, index_capacity })
+        Ok(TessMesh {
+            vertices,
+            indices,
+            indirect,
+            levels: level_buffer,
+            offsets,
+            vertex_capacity,
+            index_capacity,
+            settings: *s,
+            view: *view,
+            given_levels: levels.map(<[f32]>::to_vec),
+        })
     }
 }
 

@@ -354,14 +354,8 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
         }
         let material = Arc::new(Material::default());
         let item = |mesh: Mesh, model: Mat4, cuboid| DrawItem {
-            mesh: Arc::new(mesh),
-            material: material.clone(),
-            model,
-            detail: false,
-            attached: None,
             cuboid,
-            tessellated: None,
-            pn_pixels: false,
+            ..DrawItem::plain(Arc::new(mesh), material.clone(), model)
         };
         // Drawn after another non-linear grid (of the other normal method) that puts its copy
         // beyond the far plane: both grids share one corner buffer, so the plate's grid must

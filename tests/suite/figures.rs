@@ -183,7 +183,7 @@ fn cloth_presets_animate_deterministically() {
 #[test]
 fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
     use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
-    use werkstatt::nodes::export::assemble;
+    use werkstatt::warp::gpu::assemble;
     use werkstatt::port::Value;
     let gpu = gpu();
     let text = r#"(version: 1, nodes: {
@@ -210,12 +210,12 @@ fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
         panic!("no export")
     };
     let item = &items[0];
-    let draw = item.attached.as_ref().expect("attached buttons");
-    let texels = werkstatt::nodes::matrix_texture::read_matrix(gpu, &draw.matrix).unwrap();
+    let draw = item.kind_as::<werkstatt::warp::AttachedDraw>().expect("attached buttons");
+    let texels = werkstatt::warp::gpu::read_matrix(gpu, &draw.matrix).unwrap();
     let cpu =
         assemble(&item.mesh, werkstatt::warp::warp_layout_cpu(&texels, &draw.settings, &item.mesh, &draw.instances))
             .unwrap();
-    use werkstatt::nodes::export::WarpDevice;
+    use werkstatt::warp::gpu::WarpDevice;
     assert_eq!((WarpDevice::Gpu.resolve(gpu), WarpDevice::Cpu.resolve(gpu)), (WarpDevice::Gpu, WarpDevice::Cpu));
     let cpu_adapter = gpu.info.device_type == wgpu::DeviceType::Cpu;
     assert_eq!(WarpDevice::Auto.resolve(gpu), if cpu_adapter { WarpDevice::Cpu } else { WarpDevice::Gpu });

@@ -14,6 +14,7 @@ mod editor;
 #[cfg(feature = "editor")]
 mod editor_shaders;
 mod evaluation;
+mod export_kinds;
 mod figures;
 mod gl_backend;
 mod gpu_engine;

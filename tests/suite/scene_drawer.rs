@@ -29,7 +29,7 @@ fn stickers_scene() -> (Arc<Vec<DrawItem>>, Camera) {
     ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(common::gpu()), &resources, &settings);
     let Some(Value::Scene(scene)) = ev.input("gbuffer", "scene").cloned() else { panic!("no scene") };
     let Some(Value::Camera(camera)) = ev.input("gbuffer", "camera").cloned() else { panic!("no camera") };
-    assert!(scene.iter().any(|i| i.attached.is_some()) && scene.iter().any(|i| i.attached.is_none()));
+    assert!(scene.iter().any(|i| !i.kind.places_mesh()) && scene.iter().any(|i| i.kind.places_mesh()));
     (scene, camera)
 }
 

@@ -315,16 +315,7 @@ fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
     let material = Arc::new(Material::default());
     meshes
         .iter()
-        .map(|(m, model)| DrawItem {
-            mesh: m.clone(),
-            material: material.clone(),
-            model: *model,
-            detail: false,
-            attached: None,
-            cuboid: None,
-            tessellated: None,
-            pn_pixels: false,
-        })
+        .map(|(m, model)| DrawItem::plain(m.clone(), material.clone(), *model))
         .collect()
 }
 

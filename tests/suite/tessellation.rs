@@ -5,6 +5,7 @@
 use std::collections::HashMap;
 
 use glam::Vec3;
+use werkstatt::draw::kinds::pn_pixels::PnPixels;
 use werkstatt::gpu::readback::read_buffer;
 use werkstatt::mesh::{Mesh, Vertex};
 use werkstatt::nodes::geometry::icosahedron;
@@ -248,7 +249,7 @@ fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles
     let tess =
         GpuTessellator::default().run(g, &mesh, Some(&levels), &view(), &settings(Mode::PatternWarp, false)).unwrap();
     let coarse = DrawItem::plain(mesh.clone(), Default::default(), glam::Mat4::IDENTITY);
-    let fine = DrawItem { tessellated: Some(Arc::new(tess)), ..coarse.clone() };
+    let fine = coarse.clone().with_kind(tess);
     let (w, h) = (48u32, 40u32);
     let v = View::new(&camera, w, h);
     let tiles =
@@ -296,7 +297,7 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     let item = |mesh: Arc<Mesh>| DrawItem::plain(mesh, Default::default(), glam::Mat4::IDENTITY);
     let flat_plane = Arc::new(plane(2.0, 3, 2).unwrap());
     let a = depth(item(flat_plane.clone()));
-    let b = depth(DrawItem { pn_pixels: true, ..item(flat_plane) });
+    let b = depth(item(flat_plane).with_kind(PnPixels));
     assert!(a.iter().filter(|&&d| d > 0.0).count() > (w * h / 4) as usize);
     for (k, (x, y)) in a.iter().zip(&b).enumerate() {
         assert!((x - y).abs() < 1e-4, "plane texel {k}: {x} flat, {y} per-pixel PN");
@@ -304,11 +305,11 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
 
     let ico = Arc::new(icosahedron(1.0).unwrap());
     let flat = depth(item(ico.clone()));
-    let per_pixel = depth(DrawItem { pn_pixels: true, ..item(ico.clone()) });
+    let per_pixel = depth(item(ico.clone()).with_kind(PnPixels));
     let mut s = settings(Mode::Uniform, true);
     s.max_level = 16;
     let tess = GpuTessellator::default().run(g, &ico, None, &view(), &s).unwrap();
-    let fine = depth(DrawItem { tessellated: Some(Arc::new(tess)), ..item(ico) });
+    let fine = depth(item(ico).with_kind(tess));
     let (mut off_flat, mut off_fine, mut n) = (0.0f64, 0.0f64, 0);
     for k in 0..flat.len() {
         if flat[k] > 0.0 && per_pixel[k] > 0.0 && fine[k] > 0.0 {
@@ -387,7 +388,7 @@ fn fig5_13_difference_is_zero_for_equal_modes_and_not_with_warping() {
 #[test]
 fn a_matrix_texture_of_the_refined_surface_follows_the_smooth_surface() {
     use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-    use werkstatt::nodes::matrix_texture::read_matrix;
+    use werkstatt::warp::gpu::read_matrix;
     use werkstatt::port::Value;
     let path = crate::common::root().join("graphs/tess_matrix_texture.ron");
     let mut graph = werkstatt::graph::Graph::load(&path).unwrap();

@@ -9,9 +9,10 @@ use std::sync::Arc;
 use glam::{Vec2, Vec3};
 use werkstatt::mesh::Mesh;
 use werkstatt::nodes::attach::point_instance;
-use werkstatt::nodes::export::GpuWarper;
+use werkstatt::warp::gpu::GpuWarper;
 use werkstatt::nodes::geometry;
-use werkstatt::nodes::matrix_texture::{MatrixTextureNode, read_matrix};
+use werkstatt::nodes::matrix_texture::MatrixTextureNode;
+use werkstatt::warp::gpu::read_matrix;
 use werkstatt::warp::{
     AttachedDraw, InstanceData, MatrixTexels, Placement, WarpMode, WarpSettings, warp_layout_cpu, warp_vertex_cpu,
 };

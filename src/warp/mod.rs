@@ -2,6 +2,8 @@
 //! curves, per-instance transforms, and a CPU reference of the warp used by the CPU
 //! benchmark path and by tests to cross-check the GPU.
 
+pub mod gpu;
+
 use std::sync::Arc;
 
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
