@@ -6,9 +6,9 @@ use std::sync::Arc;
 
 use glam::{Affine2, Mat4, Quat, Vec2, Vec3};
 
+use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
-use crate::scene::{DrawItem, Material};
+use crate::render::scene::{DrawItem, Material};
 use crate::warp::{ArcTable, AttachedDraw, Curves, InstanceData, MatrixTexture, Placement, WarpMode, WarpSettings};
 
 const MATRIX: PortSpec = PortSpec::required("matrix", PortType::MatrixTexture, "The surface's matrix texture.");

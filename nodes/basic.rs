@@ -1,7 +1,7 @@
 //! Scalars: constants, arithmetic, the frame time, and `Watch`, which reports a number
 //! in `stats.json` so CI can check values, not just pictures.
 
-use crate::node::prelude::*;
+use crate::core::node::prelude::*;
 
 pub static NUMBER: NodeSpec = NodeSpec {
     kind: "Number",

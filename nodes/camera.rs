@@ -4,8 +4,8 @@ use glam::Vec3;
 
 use std::sync::Arc;
 
-use crate::node::prelude::*;
-use crate::scene::{Camera, DrawItem};
+use crate::core::node::prelude::*;
+use crate::render::scene::{Camera, DrawItem};
 
 /// World bounds of a scene's plain items (model matrix applied to their box corners);
 /// attached detail lies on a surface that is itself drawn, so it is left out. None when empty.

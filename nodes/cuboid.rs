@@ -1,14 +1,14 @@
 //! The cuboid scene graph's single cuboid and its grouping node (dissertation section 3.1.1,
-//! src/cuboid.rs): `Cuboid` makes a trilinear transform of 8 corners, `Deform` applies a
+//! src/cuboid/mod.rs): `Cuboid` makes a trilinear transform of 8 corners, `Deform` applies a
 //! cuboid transform or grid to a sub-scene, so transforms nest.
 
 use std::sync::Arc;
 
 use glam::{DVec3, EulerRot, Mat4, Quat};
 
+use crate::core::node::prelude::*;
 use crate::cuboid::{Cuboid, CuboidGrid, NormalMethod, Transform, compose, unit_corner};
-use crate::node::prelude::*;
-use crate::scene::DrawItem;
+use crate::render::scene::DrawItem;
 
 crate::choice!(
     pub enum Normals {

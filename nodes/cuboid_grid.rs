@@ -7,9 +7,9 @@ use std::sync::Arc;
 use glam::{DVec2, DVec3};
 
 use super::cuboid::{BOX_MAX, BOX_MIN, NORMALS, Normals, content_box};
+use crate::core::node::prelude::*;
 use crate::cuboid::{Anchor, CuboidGrid, Lift, Transform, anchor_grid, anchor_row, bend, torus, twist};
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
 
 crate::choice!(
     pub enum Source {

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use glam::Vec2;
 
-use crate::node::prelude::*;
+use crate::core::node::prelude::*;
 use crate::warp::Curves;
 
 pub static SVG_CURVES: NodeSpec = NodeSpec {

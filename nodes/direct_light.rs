@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::GpuImage;
-use crate::node::prelude::*;
-use crate::scene::GBuffer;
+use crate::render::scene::GBuffer;
 
 use crate::gpu::FullscreenPass;
 

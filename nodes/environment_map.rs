@@ -2,10 +2,10 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::ibl::cube::{CubeImage, EquirectImage, cube_from_equirect};
 use crate::ibl::gpu::{CubePasses, EnvMap, Footprint, cube_target};
 use crate::ibl::pem::Kernel;
-use crate::node::prelude::*;
 
 pub static ENVIRONMENT_MAP: NodeSpec = NodeSpec {
     kind: "EnvironmentMap",

@@ -4,11 +4,11 @@
 
 use std::sync::Arc;
 
-use crate::draw::kind::{ExportCx, ExportDevice};
-use crate::geometry_io::GeometryFormat;
+use crate::core::node::prelude::*;
+use crate::io::geometry::GeometryFormat;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
-use crate::scene::DrawItem;
+use crate::render::draw::kind::{ExportCx, ExportDevice};
+use crate::render::scene::DrawItem;
 use crate::warp::gpu::{GpuWarper, WarpDevice};
 
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
@@ -63,7 +63,7 @@ impl Node for ExportNode {
                     _ => ExportDevice::Gpu,
                 };
                 let mut export = ExportCx { gpu, device, warper: &mut self.warper };
-                Arc::new(crate::draw::export::flatten(&mut export, &items)?)
+                Arc::new(crate::render::draw::export::flatten(&mut export, &items)?)
             }
         };
         if export {
@@ -75,4 +75,3 @@ impl Node for ExportNode {
         Ok(())
     }
 }
-

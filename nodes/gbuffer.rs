@@ -1,12 +1,12 @@
 //! The G-buffer pass of the deferred renderer (dissertation section 4.2): plain meshes and
 //! deferred-warped detail geometry (instanced through the matrix texture) into the same
-//! targets, drawn by the engine's scene drawer (`src/draw.rs`).
+//! targets, drawn by the engine's scene drawer (`src/render/draw/`).
 
 use std::sync::Arc;
 
-use crate::draw::SceneDrawer;
-use crate::node::prelude::*;
-use crate::scene::{Camera, DrawItem, View};
+use crate::core::node::prelude::*;
+use crate::render::draw::SceneDrawer;
+use crate::render::scene::{Camera, DrawItem, View};
 
 pub static GBUFFER_PASS: NodeSpec = NodeSpec {
     kind: "GBufferPass",

@@ -5,8 +5,8 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 
+use crate::core::node::prelude::*;
 use crate::mesh::{self, Mesh};
-use crate::node::prelude::*;
 
 pub static PRIMITIVE: NodeSpec = NodeSpec {
     kind: "Primitive",

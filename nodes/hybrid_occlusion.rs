@@ -4,8 +4,8 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage};
-use crate::node::prelude::*;
 
 pub static HYBRID_OCCLUSION: NodeSpec = NodeSpec {
     kind: "HybridOcclusion",

@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
 use crate::ibl::gpu::{PemSet, cube_target};
 use crate::ibl::pem::TABLE;
-use crate::node::prelude::*;
 use crate::nodes::shadow_atlas::ShadowAtlas;
-use crate::scene::GBuffer;
+use crate::render::scene::GBuffer;
 
 crate::choice!(
     /// What IblShading sums.

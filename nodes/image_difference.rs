@@ -3,8 +3,8 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::{FullscreenPass, GpuImage, read_back};
-use crate::node::prelude::*;
 use crate::nodes::tonemap::LDR_FORMAT;
 
 pub static IMAGE_DIFFERENCE: NodeSpec = NodeSpec {

@@ -2,11 +2,11 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::texture::copy_bits;
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, TextureDesc};
 use crate::mesh::{Mesh, Vertex};
-use crate::node::prelude::*;
-use crate::scene::DrawItem;
+use crate::render::scene::DrawItem;
 use crate::tessellation::TessMesh;
 use crate::warp::MatrixTexture;
 
@@ -79,9 +79,9 @@ pub struct MatrixTextureNode {
 pub const SEAM_GUTTER_TEXELS: f32 = 2.0;
 
 fn topology_key(mesh: &Mesh, resolution: u32) -> u64 {
-    let mut h = crate::hash::fnv1a(bytemuck::cast_slice(&mesh.uvs));
-    h ^= crate::hash::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
-    h ^= crate::hash::fnv1a(bytemuck::cast_slice(&mesh.indices)).rotate_left(29);
+    let mut h = crate::core::hash::fnv1a(bytemuck::cast_slice(&mesh.uvs));
+    h ^= crate::core::hash::fnv1a(bytemuck::cast_slice(&mesh.seams)).rotate_left(17);
+    h ^= crate::core::hash::fnv1a(bytemuck::cast_slice(&mesh.indices)).rotate_left(29);
     h ^ (resolution as u64).rotate_left(41)
 }
 
@@ -282,7 +282,14 @@ impl Node for MatrixTextureNode {
             Precision::F32 => wgpu::TextureFormat::Rgba32Float,
         };
         let filter_radius = cx.int("filter_radius") as u32;
-        let m = self.render(gpu, &mesh, resolution, format, filter_radius, refined.as_ref().and_then(DrawItem::kind_as::<TessMesh>))?;
+        let m = self.render(
+            gpu,
+            &mesh,
+            resolution,
+            format,
+            filter_radius,
+            refined.as_ref().and_then(DrawItem::kind_as::<TessMesh>),
+        )?;
         cx.set("normal", Arc::new(m.col_n.share()));
         cx.set("matrix", Arc::new(m));
         cx.set("min_resolution", min_res);

@@ -4,10 +4,10 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::core::node::prelude::*;
 use crate::ibl::cube::{dir_to_face, equirect_dir, equirect_uv};
 use crate::ibl::gpu::{EnvMap, Lights};
 use crate::ibl::median_cut::{Regions, median_cut};
-use crate::node::prelude::*;
 
 pub static MEDIAN_CUT: NodeSpec = NodeSpec {
     kind: "MedianCut",
@@ -50,7 +50,7 @@ impl Node for MedianCutNode {
 
 /// A distinct, stable colour per region id.
 fn region_color(id: u32) -> Vec3 {
-    let h = crate::hash::fnv1a(&id.to_le_bytes());
+    let h = crate::core::hash::fnv1a(&id.to_le_bytes());
     Vec3::new((h & 0xff) as f32, ((h >> 8) & 0xff) as f32, ((h >> 16) & 0xff) as f32) / 255.0 * 0.7 + Vec3::splat(0.3)
 }
 

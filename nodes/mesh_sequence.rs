@@ -14,9 +14,9 @@ use std::sync::Arc;
 use anyhow::{Context as _, bail};
 use glam::{Vec2, Vec3};
 
-use crate::hash::fnv1a;
+use crate::core::hash::fnv1a;
+use crate::core::node::prelude::*;
 use crate::mesh::{self, Mesh};
-use crate::node::prelude::*;
 
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",

@@ -29,7 +29,7 @@ pub mod ssao;
 pub mod tessellate;
 pub mod tonemap;
 
-use crate::node::prelude::*;
+use crate::core::node::prelude::*;
 
 /// Every node kind, in the order `werkstatt nodes` and the docs list them.
 pub static ALL: &[&NodeSpec] = &[

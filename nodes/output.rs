@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::GpuImage;
-use crate::image_io::ImageFormat;
-use crate::node::prelude::*;
+use crate::io::image::ImageFormat;
 
 pub static IMAGE_WRITE: NodeSpec = NodeSpec {
     kind: "ImageWrite",

@@ -2,10 +2,10 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::GpuImage;
 use crate::ibl::gpu::{CubePasses, EnvMap, Footprint, Lights, PemSet, cube_target};
 use crate::ibl::pem::{Kernel, calibration};
-use crate::node::prelude::*;
 
 pub static PEMS: NodeSpec = NodeSpec {
     kind: "Pems",

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use anyhow::{Context as _, bail};
 use glam::Vec2;
 
+use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
 use crate::warp::{ArcTable, Curves, Placement, bezier, curve_direction};
 
 const REGION: [ParamSpec; 4] = [
@@ -155,7 +155,7 @@ impl Node for ScatterNode {
         let count = cx.int("count") as usize;
         let spacing = cx.f32("min_spacing");
         let (smin, smax) = (cx.f32("scale_min"), cx.f32("scale_max").max(cx.f32("scale_min")));
-        let mut rng = crate::rng::SplitMix64::new(cx.int("seed") as u64);
+        let mut rng = crate::core::rng::SplitMix64::new(cx.int("seed") as u64);
         // Spatial hash of accepted points for the spacing test.
         let cell = spacing.max(1e-6);
         let mut grid: std::collections::BTreeMap<(i32, i32), Vec<Vec2>> = Default::default();

@@ -13,10 +13,10 @@ use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::ray::Ray;
 use obvhs::triangle::Triangle;
 
+use crate::core::node::prelude::*;
+use crate::core::rng::SplitMix64;
 use crate::gpu::{GpuImage, read_back};
-use crate::node::prelude::*;
-use crate::rng::SplitMix64;
-use crate::scene::{DrawItem, GBuffer, View};
+use crate::render::scene::{DrawItem, GBuffer, View};
 
 /// Ray origins are moved this far (world units) along the normal, off the surface they start on.
 pub const ORIGIN_OFFSET: f32 = 1e-3;

@@ -4,9 +4,9 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
-use crate::scene::{DrawItem, Image8, Material};
+use crate::render::scene::{DrawItem, Image8, Material};
 
 pub static MATERIAL: NodeSpec = NodeSpec {
     kind: "Material",

@@ -30,11 +30,11 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec3, Vec4};
 
-use crate::draw::{MAX_TILES, SceneDrawer, Tile};
+use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
 use crate::ibl::gpu::Lights;
-use crate::node::prelude::*;
-use crate::scene::DrawItem;
+use crate::render::draw::{MAX_TILES, SceneDrawer, Tile};
+use crate::render::scene::DrawItem;
 
 /// The reference occluder-receiver distance of the blur rule, as a fraction of the scene's
 /// bounding radius.

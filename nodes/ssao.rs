@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage};
-use crate::node::prelude::*;
-use crate::scene::GBuffer;
+use crate::render::scene::GBuffer;
 
 crate::choice!(
     /// How the occlusion is estimated.

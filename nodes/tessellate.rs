@@ -1,14 +1,14 @@
 //! `Tessellate`: adaptive refinement of a mesh in compute (dissertation 3.1.3, 4.1.3, 5.1.3;
-//! src/tessellation.rs and shaders/tessellate.wgsl). The output stays on the GPU and is drawn
+//! src/tessellation/mod.rs and shaders/tessellate.wgsl). The output stays on the GPU and is drawn
 //! with indirect arguments by every pass that draws a scene (G-buffer, shadow atlas).
 
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
 
+use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
-use crate::scene::{Camera, DrawItem, Material, View};
+use crate::render::scene::{Camera, DrawItem, Material, View};
 use crate::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod};
 
 pub static TESSELLATE: NodeSpec = NodeSpec {
@@ -119,7 +119,7 @@ impl Node for TessellateNode {
         };
         let plain = DrawItem::plain(mesh.clone(), material, Mat4::IDENTITY);
         if cx.bool("per_pixel") {
-            let item = plain.with_kind(crate::draw::kinds::pn_pixels::PnPixels);
+            let item = plain.with_kind(crate::render::draw::kinds::pn_pixels::PnPixels);
             cx.count("patches", mesh.triangle_count());
             cx.set("scene", Arc::new(vec![item]));
             cx.set("wireframe", Arc::new(Mesh::default()));

@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
+use crate::core::node::prelude::*;
 use crate::gpu::GpuImage;
-use crate::node::prelude::*;
 
 use crate::gpu::FullscreenPass;
 

@@ -1,14 +1,14 @@
-// The trilinear (cuboid grid) transform of a draw item (src/cuboid.rs, dissertation eq. 3.4):
+// The trilinear (cuboid grid) transform of a draw item (src/cuboid/mod.rs, dissertation eq. 3.4):
 // the item's transform (item_in.wgsl) takes a vertex into the grid's cell coordinates; its
 // cells' coefficient matrices C (3x8, six texels per cell: per coordinate the left and the
 // right half, cells x fastest, then y, then z; CuboidGrid::append_cells) lie in one texture
 // shared by every grid of the pass (binding 4 of the object group; the item's `grid.w` is
-// its grid's first cell there; src/draw.rs `CellTextures`): six loads per vertex instead of
+// its grid's first cell there; src/render/draw/compose.rs `CellTextures`): six loads per vertex instead of
 // the cell's eight corners, and C is formed once per cell on the CPU, not once per vertex.
 
 @group(1) @binding(4) var cuboid_cells: texture_2d<f32>;
 
-// Cells per texel row of `cuboid_cells` (src/draw.rs `CELLS_PER_ROW`).
+// Cells per texel row of `cuboid_cells` (src/render/draw/compose.rs `CELLS_PER_ROW`).
 const CELLS_PER_ROW: u32 = 1024u;
 
 // A cell's coefficient matrix C by rows: left half (c_xyz, c_yz, c_xz, c_xy) and right half

@@ -1,4 +1,4 @@
-// G-buffer pass for items under a non-linear cuboid transform (src/draw.rs): the vertex lands
+// G-buffer pass for items under a non-linear cuboid transform (src/render/draw/): the vertex lands
 // at cuboid(cell map * model * p); the fragment stage is the plain G-buffer's.
 
 // #include "gbuffer_common.wgsl"
@@ -38,7 +38,7 @@ fn single_cuboid_vertex(v: MeshVertexIn, c: CuboidItemIn, index: u32, direct_nor
     return deformed_vertex(v, item, d, index, direct_normals);
 }
 
-// One entry point per normal method (NormalMethod in src/cuboid.rs), for grids and for
+// One entry point per normal method (NormalMethod in src/cuboid/mod.rs), for grids and for
 // single cuboids.
 @vertex
 fn vs_tangent_space(v: MeshVertexIn, item: ItemIn, @builtin(instance_index) index: u32) -> VertexOut {

@@ -1,4 +1,4 @@
-// Depth only, into tiles of one texture, one view per tile (src/draw.rs `depth_tiles`):
+// Depth only, into tiles of one texture, one view per tile (src/render/draw/ `depth_tiles`):
 // shadow maps of many lights in one pass. Each draw fills one tile (group 3): plain meshes
 // instanced over the draw's items, attached items over their attachments.
 

@@ -1,4 +1,4 @@
-// The views of a depth-tiles pass (src/draw.rs `TileUniform`), shared by depth.wgsl and
+// The views of a depth-tiles pass (src/render/draw/target.rs `TileUniform`), shared by depth.wgsl and
 // cuboid_depth.wgsl.
 
 struct TileView {

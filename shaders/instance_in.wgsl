@@ -1,4 +1,4 @@
-// The per-instance vertex layout of attached items (src/warp.rs `InstanceData`), shared by
+// The per-instance vertex layout of attached items (src/warp/mod.rs `InstanceData`), shared by
 // every pass that draws attachments.
 
 struct InstanceIn {

@@ -1,4 +1,4 @@
-// An item's vertex-stage transform (src/draw.rs `ItemVertex`): an instance-rate vertex buffer,
+// An item's vertex-stage transform (src/render/draw/compose.rs `ItemVertex`): an instance-rate vertex buffer,
 // one entry per item, shared by every pass that draws meshes. Lavapipe fetches an
 // instance-rate attribute once per batch of vertices, where a storage load indexed by the
 // instance is a loop over the vertices of the batch: with the transforms in the objects'
@@ -13,7 +13,7 @@ struct ItemIn {
     @location(7) transform2: vec4<f32>,
     @location(8) transform3: vec4<f32>,
     // The normal transform's columns (xyz): the model's inverse transpose, under a grid
-    // folded with the cell map's scale as its normal method needs (src/draw.rs).
+    // folded with the cell map's scale as its normal method needs (src/render/draw/).
     @location(9) normal0: vec4<f32>,
     @location(10) normal1: vec4<f32>,
     @location(11) normal2: vec4<f32>,
@@ -22,7 +22,7 @@ struct ItemIn {
     @location(12) grid: vec4<u32>,
 };
 
-// An item under a single cuboid, a grid of one cell (src/draw.rs `ItemVertex`): its transform
+// An item under a single cuboid, a grid of one cell (src/render/draw/compose.rs `ItemVertex`): its transform
 // maps into the cuboid's unit cube, and its coefficient matrix C (eq. 3.4, rows as in
 // cuboid.wgsl) comes as six more instance attributes instead of six texel loads per vertex.
 // They take locations 2 and 4 (MeshVertexIn has no tangents) and 12-15: 16 attributes with

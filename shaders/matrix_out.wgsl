@@ -1,4 +1,4 @@
-// The matrix texture's render targets (src/warp.rs `MatrixTexture`), shared by the pass that
+// The matrix texture's render targets (src/warp/mod.rs `MatrixTexture`), shared by the pass that
 // rasterizes it and the filter: the three columns of eq. (3), each with one position
 // component in w; or, where 32-bit float targets cannot be rendered (llvmpipe's OpenGL), the
 // same values as their bits into Rgba32Uint targets, which the node copies into the float

@@ -1,6 +1,6 @@
 // A drawn object (group 1): its material, and its model matrix for per-pixel PN depth (whose
 // fragment stage transforms the triangle's corners), shared by every pass that draws the
-// scene (src/draw/objects.rs `GpuObject`). All items' objects lie in one storage buffer; a draw binds
+// scene (src/render/draw/objects.rs `GpuObject`). All items' objects lie in one storage buffer; a draw binds
 // its own items' range (a dynamic offset), so items that share a mesh and maps draw as one
 // instanced draw, each entry point picking its instance's object with `use_object`. Vertex
 // stages take their transform from the instance-rate `ItemIn` instead (item_in.wgsl).

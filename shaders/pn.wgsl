@@ -1,4 +1,4 @@
-// PN triangles [VPBM01] (src/tessellation.rs pn_edge, pn_normal, interior_vertex): the cubic
+// PN triangles [VPBM01] (src/tessellation/mod.rs pn_edge, pn_normal, interior_vertex): the cubic
 // position and quadratic normal of the patch over corners (p0, n0), (p1, n1), (p2, n2) at
 // barycentrics w. Shared by the tessellation (shaders/tessellate.wgsl) and the per-pixel PN
 // depth of the G-buffer (shaders/gbuffer_pn.wgsl).

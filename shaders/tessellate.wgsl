@@ -1,5 +1,5 @@
 // Adaptive tessellation in compute (dissertation 3.1.3; docs/tessellation.md). The twin of
-// src/tessellation.rs: every function here has the same name and the same arithmetic there.
+// src/tessellation/mod.rs: every function here has the same name and the same arithmetic there.
 // Five entry points, dispatched in order into one mesh's output:
 //   vertex_levels (per vertex)   the level each vertex asks for (distance and silhouette);
 //   edge_lengths  (per triangle) edge-length metric: the largest screen length / max per vertex;
@@ -57,7 +57,7 @@ fn level_of(v: u32) -> f32 {
     return bitcast<f32>(atomicLoad(&levels[v]));
 }
 
-// ---- levels (src/tessellation.rs vertex_level, edge_level) ----
+// ---- levels (src/tessellation/mod.rs vertex_level, edge_level) ----
 
 fn vertex_level(p: vec3<f32>, n: vec3<f32>) -> f32 {
     let to = p - params.eye.xyz;
@@ -113,7 +113,7 @@ fn edge_lengths(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// ---- refinement (src/tessellation.rs split, refine, counts) ----
+// ---- refinement (src/tessellation/mod.rs split, refine, counts) ----
 
 fn dyadic(n: u32) -> u32 {
     var m = 1u;
@@ -290,7 +290,7 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     }
 }
 
-// ---- evaluation (src/tessellation.rs warp, warp_edge, edge_vertex, interior_vertex, eval_point) ----
+// ---- evaluation (src/tessellation/mod.rs warp, warp_edge, edge_vertex, interior_vertex, eval_point) ----
 
 fn warp(b: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let u = b.x;

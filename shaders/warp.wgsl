@@ -18,7 +18,7 @@ struct Warp {
 @group(2) @binding(3) var<uniform> warp: Warp;
 // Seam map: for gutter texels beside a sewn edge, the partner piece's UV (xy), the angle of
 // the map from this piece's UV directions to the partner's (z) and +1/-1 for a rotation or a
-// reflection (w); zero elsewhere (src/warp.rs `seam_map`).
+// reflection (w); zero elsewhere (src/warp/mod.rs `seam_map`).
 @group(2) @binding(4) var seam_map: texture_2d<f32>;
 
 // Per-instance placement: M_tex (2x3, rows), M_tan (4x4, columns), a cubic Bezier in UV space
@@ -64,7 +64,7 @@ fn load_texel(q: vec2<i32>) -> Texel {
     return Texel(cu.xyz, cn.xyz, cv.xyz, vec3<f32>(cu.w, cn.w, cv.w), dot(cn.xyz, cn.xyz) >= 0.25);
 }
 
-// Whether the partner reads are compiled in (src/draw.rs builds a variant without them for
+// Whether the partner reads are compiled in (src/render/draw/ builds a variant without them for
 // surfaces without seams: lavapipe runs the masked branch below for every footprint texel,
 // which doubled the cost of area and curve attachments).
 override SEAMS: bool = true;

@@ -1,40 +1,32 @@
 //! werkstatt: a real-time garment renderer as a node graph.
 //!
-//! A graph (`.ron`, see [`graph`]) names nodes from the registry ([`spec`], [`nodes`]);
-//! [`eval::Evaluator`] runs the nodes that feed an output, skipping those whose inputs,
-//! parameters, resources and time are unchanged. [`render`] is the headless batch runner.
+//! The crate is layered, and no module imports one that imports it back (`src/layering.rs`
+//! checks it):
+//!
+//! - [`core`]: the graph model ([`core::graph`]), nodes, ports, parameters, resources and the
+//!   evaluator ([`core::eval::Evaluator`] runs the nodes that feed an output, skipping those whose
+//!   inputs, parameters, resources and time are unchanged);
+//! - [`gpu`]: the wgpu toolkit (pooled textures and buffers, passes, the pipeline cache, shaders);
+//! - [`mesh`] and [`color`]: the geometry and colour encodings every layer shares;
+//! - [`render`]: the scene that flows between render nodes, and the scene drawer with its item
+//!   kinds ([`render::draw`]);
+//! - one module per technique: [`warp`] (deferred warping), [`cuboid`] (the cuboid scene graph),
+//!   [`tessellation`], [`ibl`] (image-based lighting, shadows);
+//! - [`io`]: writing images and geometry;
+//! - [`nodes`]: the node library, one file per node family, and its registry;
+//! - [`app`]: the command line, the batch renderer, image regression, the editor, the benches.
 
-pub mod atomic;
-pub mod bench;
-pub mod cli;
+pub mod app;
 pub mod color;
-pub mod compare;
+pub mod core;
 pub mod cuboid;
-pub mod docs;
-pub mod draw;
-#[cfg(feature = "editor")]
-pub mod editor;
-pub mod eval;
-pub mod geometry_io;
 pub mod gpu;
-pub mod graph;
-pub mod hash;
 pub mod ibl;
-pub mod image_io;
+pub mod io;
 #[cfg(test)]
 mod layering;
 pub mod mesh;
-pub mod node;
-pub mod param;
-pub mod port;
-pub mod regress;
 pub mod render;
-pub mod resources;
-pub mod rng;
-pub mod scene;
-pub mod shaders;
-pub mod signal;
-pub mod spec;
 pub mod tessellation;
 pub mod warp;
 

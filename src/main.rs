@@ -1,3 +1,3 @@
 fn main() -> std::process::ExitCode {
-    werkstatt::cli::main()
+    werkstatt::app::cli::main()
 }

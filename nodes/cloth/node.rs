@@ -4,10 +4,10 @@ use std::sync::Arc;
 
 use glam::{Mat4, Quat, Vec2, Vec3};
 
+use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::node::prelude::*;
 use crate::nodes::geometry;
-use crate::scene::{DrawItem, Material};
+use crate::render::scene::{DrawItem, Material};
 
 use super::{Cloth, Collider, FRAME_DT, FlagParams, Preset, SkirtParams, TableclothParams};
 

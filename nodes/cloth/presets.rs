@@ -5,10 +5,10 @@ use std::f32::consts::TAU;
 
 use glam::{Quat, Vec2, Vec3};
 
+use crate::core::rng::SplitMix64;
 use crate::nodes::cloth::collider::Collider;
 use crate::nodes::cloth::pattern::{EdgeRef, PatternMesh, Piece, Seam, rectangle_outline, trapezoid_outline};
 use crate::nodes::cloth::sim::{CM, Cloth, SimParams, Wind};
-use crate::rng::SplitMix64;
 
 /// Square tablecloth dropped onto a torus (the draping scene of the
 /// garment-visualisation dissertation's Fig. 5.14).

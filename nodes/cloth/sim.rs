@@ -60,7 +60,7 @@ impl Wind {
     }
 
     fn phases(&self) -> [f32; 4] {
-        let mut rng = crate::rng::SplitMix64::new(self.seed);
+        let mut rng = crate::core::rng::SplitMix64::new(self.seed);
         [0; 4].map(|_| rng.next_f32() * std::f32::consts::TAU)
     }
 

@@ -22,6 +22,7 @@ pub mod pass;
 pub mod pipelines;
 pub mod pool;
 pub mod readback;
+pub mod shaders;
 pub mod texture;
 
 use std::collections::HashMap;
@@ -38,7 +39,7 @@ pub use pool::PooledBuffer;
 pub use readback::{Pixels, read_back, read_buffer};
 pub use texture::{GpuImage, SamplerKind, TextureDesc, TextureKind};
 
-use crate::signal::ChangeSignal;
+use crate::core::signal::ChangeSignal;
 
 /// Which wgpu backend to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Default)]
@@ -342,7 +343,7 @@ impl GpuContext {
             current: Mutex::default(),
             pool: pool::TexturePool::default(),
             buffer_pool: pool::BufferPool::default(),
-            pipelines: pipelines::PipelineCache::new(crate::shaders::shader_dir()),
+            pipelines: pipelines::PipelineCache::new(crate::gpu::shaders::shader_dir()),
             samplers: Mutex::default(),
             staging: Mutex::default(),
         };

@@ -16,7 +16,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 use super::{GpuContext, lock};
-use crate::signal::ChangeSignal;
+use crate::core::signal::ChangeSignal;
 
 /// A shader file that does not compile, or a pipeline that cannot be built from it.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -165,7 +165,7 @@ impl PipelineCache {
 
     fn read(&self, name: &str) -> Result<String, String> {
         let dir = lock(&self.dir).clone();
-        crate::shaders::read(dir.as_deref(), name).map_err(|e| format!("{e:#}"))
+        crate::gpu::shaders::read(dir.as_deref(), name).map_err(|e| format!("{e:#}"))
     }
 
     /// The text and version of a file, read on first use.
@@ -216,7 +216,7 @@ impl PipelineCache {
             return (deps.clone(), Ok(m.clone()));
         }
         let mut deps = Deps::new();
-        let expanded = crate::shaders::expand(shader, &mut |name| {
+        let expanded = crate::gpu::shaders::expand(shader, &mut |name| {
             let (text, version) = self.text(name);
             deps.push((name.to_string(), version));
             text.map_err(anyhow::Error::msg)

@@ -47,7 +47,12 @@ impl Default for InstanceResolver {
 
 impl InstanceResolver {
     /// A new instance buffer with each instance's frame filled in.
-    pub fn resolve(&mut self, gpu: &GpuContext, raw: &wgpu::Buffer, draw: &AttachedDraw) -> anyhow::Result<PooledBuffer> {
+    pub fn resolve(
+        &mut self,
+        gpu: &GpuContext,
+        raw: &wgpu::Buffer,
+        draw: &AttachedDraw,
+    ) -> anyhow::Result<PooledBuffer> {
         let out = gpu.scratch_pooled(
             "resolved instances",
             raw.size(),
@@ -261,7 +266,6 @@ impl GpuWarper {
     }
 }
 
-
 /// Copies a matrix texture to the CPU.
 pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<MatrixTexels> {
     let (u, n, v) = (read_back(gpu, &m.col_u)?, read_back(gpu, &m.col_n)?, read_back(gpu, &m.col_v)?);
@@ -277,7 +281,6 @@ pub fn read_matrix(gpu: &GpuContext, m: &MatrixTexture) -> anyhow::Result<Matrix
     let seams = read_back(gpu, &m.seams)?.rgba.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
     Ok(MatrixTexels { resolution: m.resolution, frames, seams })
 }
-
 
 #[cfg(test)]
 mod tests {

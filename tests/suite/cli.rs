@@ -17,7 +17,7 @@ fn werkstatt(args: &[&str]) -> (i32, String, String) {
 
 #[test]
 fn docs_node_reference_is_up_to_date() {
-    let expected = werkstatt::docs::markdown();
+    let expected = werkstatt::app::docs::markdown();
     let actual = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/nodes.md")).unwrap_or_default();
     assert!(actual == expected, "docs/nodes.md is out of date: run `cargo run -- nodes --markdown > docs/nodes.md`");
 }
@@ -45,7 +45,7 @@ fn nodes_json_lists_every_kind_with_its_parameters() {
     let (code, out, err) = werkstatt(&["nodes", "--json"]);
     assert_eq!(code, 0, "{err}");
     let all: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(all.as_array().unwrap().len(), werkstatt::spec::all().len());
+    assert_eq!(all.as_array().unwrap().len(), werkstatt::core::spec::all().len());
     let material = all.as_array().unwrap().iter().find(|n| n["kind"] == "Material").unwrap();
     let gloss = material["params"].as_array().unwrap().iter().find(|p| p["name"] == "glossiness").unwrap();
     assert_eq!(
@@ -59,13 +59,13 @@ fn nodes_json_lists_every_kind_with_its_parameters() {
 #[test]
 fn nodes_markdown_prints_or_writes_the_reference() {
     let (code, out, _) = werkstatt(&["nodes", "--markdown"]);
-    assert_eq!((code, out == werkstatt::docs::markdown()), (0, true));
+    assert_eq!((code, out == werkstatt::app::docs::markdown()), (0, true));
     let dir = temp("nodes-markdown");
     let file = dir.join("nodes.md");
     let (code, out, err) = werkstatt(&["nodes", "--markdown", "--out", file.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(out.is_empty());
-    assert_eq!(std::fs::read_to_string(&file).unwrap(), werkstatt::docs::markdown());
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), werkstatt::app::docs::markdown());
     std::fs::remove_dir_all(dir).unwrap();
 }
 
@@ -88,7 +88,7 @@ fn every_node_kind_is_documented_and_used_by_a_graph() {
         .map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap())
         .collect();
     let mut kinds = std::collections::BTreeSet::new();
-    for spec in werkstatt::spec::all() {
+    for spec in werkstatt::core::spec::all() {
         assert!(kinds.insert(spec.kind), "kind {} registered twice", spec.kind);
         assert!(!spec.doc.is_empty(), "{} has no doc", spec.kind);
         for p in spec.params {
@@ -184,10 +184,12 @@ fn render_writes_frames_and_stats() {
     let mut files: Vec<&str> = stats["files"].as_array().expect("files").iter().map(|f| f.as_str().unwrap()).collect();
     files.sort();
     assert_eq!(files, images);
-    let graph =
-        werkstatt::graph::Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron")))
-            .unwrap();
-    let hash = format!("{:016x}", werkstatt::hash::fnv1a(graph.to_ron().as_bytes()));
+    let graph = werkstatt::core::graph::Graph::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/graphs/default.ron"
+    )))
+    .unwrap();
+    let hash = format!("{:016x}", werkstatt::core::hash::fnv1a(graph.to_ron().as_bytes()));
     assert_eq!(stats["graph_hash"].as_str(), Some(hash.as_str()));
     let adapter = stats["adapter"].as_str().expect("adapter");
     assert!(!adapter.is_empty());
@@ -374,9 +376,9 @@ fn every_shader_file_is_embedded() {
         .filter(|n| n.ends_with(".wgsl"))
         .collect();
     files.sort();
-    let mut embedded: Vec<String> = werkstatt::shaders::names().map(str::to_string).collect();
+    let mut embedded: Vec<String> = werkstatt::gpu::shaders::names().map(str::to_string).collect();
     embedded.sort();
-    assert_eq!(files, embedded, "shaders/ and the embedded list in src/shaders.rs differ");
+    assert_eq!(files, embedded, "shaders/ and the embedded list in src/gpu/shaders.rs differ");
 }
 
 /// Writes `text` as g.ron in a fresh folder named after the test.

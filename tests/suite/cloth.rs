@@ -478,21 +478,21 @@ fn cloth_rests_on_box_sphere_and_capsule() {
 }
 
 /// The ClothSim node in an evaluator (its surface as an extra root), at `triangles`.
-fn cloth_node(seed: i64) -> werkstatt::eval::Evaluator {
+fn cloth_node(seed: i64) -> werkstatt::core::eval::Evaluator {
     let text = format!(
         r#"(version: 1, nodes: {{"cloth": (kind: "ClothSim", params: {{"preset": "flag", "triangles": 300, "warmup": 0.0, "seed": {seed}}})}}, links: [])"#
     );
-    let g = werkstatt::graph::Graph::load_str(&text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
-    werkstatt::eval::Evaluator::new(&g, &["cloth".to_string()]).unwrap()
+    let g = werkstatt::core::graph::Graph::load_str(&text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"));
+    werkstatt::core::eval::Evaluator::new(&g, &["cloth".to_string()]).unwrap()
 }
 
 /// The node's surface positions at `frame` (30 fps).
-fn positions_at(ev: &mut werkstatt::eval::Evaluator, frame: i64) -> Vec<Vec3> {
-    let res = werkstatt::resources::Resources::new(false);
-    let time = werkstatt::eval::FrameTime { frame, fps: 30.0 };
-    ev.evaluate(time, None, &res, &werkstatt::eval::FrameSettings::default());
+fn positions_at(ev: &mut werkstatt::core::eval::Evaluator, frame: i64) -> Vec<Vec3> {
+    let res = werkstatt::core::resources::Resources::new(false);
+    let time = werkstatt::core::eval::FrameTime { frame, fps: 30.0 };
+    ev.evaluate(time, None, &res, &werkstatt::core::eval::FrameSettings::default());
     match ev.output("cloth", "surface") {
-        Some(werkstatt::port::Value::Surface(m)) => m.positions.clone(),
+        Some(werkstatt::core::port::Value::Surface(m)) => m.positions.clone(),
         _ => panic!("no surface at frame {frame}: {:?}", ev.report("cloth").map(|r| r.status.clone())),
     }
 }
@@ -515,7 +515,7 @@ fn scrubbing_backwards_equals_a_fresh_run() {
 fn a_new_seed_rebuilds_the_simulation() {
     let mut ev = cloth_node(1);
     let seed_1 = positions_at(&mut ev, 10);
-    let mut g = werkstatt::graph::Graph::load_str(
+    let mut g = werkstatt::core::graph::Graph::load_str(
         r#"(version: 1, nodes: {"cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 300, "warmup": 0.0, "seed": 2})}, links: [])"#,
         "test.ron".as_ref(),
     )

@@ -5,9 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
-use werkstatt::compare::ImageTolerance;
+use werkstatt::app::compare::ImageTolerance;
+use werkstatt::app::render::{RenderOptions, Stats, render};
 use werkstatt::gpu::{Backend, GpuContext, Pixels};
-use werkstatt::render::{RenderOptions, Stats, render};
 
 /// One GPU context per test thread: a context serves one evaluator at a time (validation
 /// errors and pass timings are collected per device), and tests run in parallel threads.
@@ -54,7 +54,7 @@ pub fn skip_driver_teardown_at_exit() {
 pub const LOAD_WAIT: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// `Resources::wait_idle` with a deadline and a clear failure.
-pub fn wait_idle(res: &werkstatt::resources::Resources) {
+pub fn wait_idle(res: &werkstatt::core::resources::Resources) {
     assert!(res.wait_idle_timeout(LOAD_WAIT), "{} resource loads still in flight after {LOAD_WAIT:?}", res.in_flight());
 }
 
@@ -90,7 +90,7 @@ pub fn render_graph(
         ssaa: 1,
         progress: false,
         command: Vec::new(),
-        pending_timeout: werkstatt::render::PENDING_LIMIT,
+        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
     };
     render(&opts, gpu())
 }
@@ -146,7 +146,7 @@ pub fn encode(px: &Pixels, enc: Encoding) -> image::RgbaImage {
 /// the diff image before re-blessing.
 pub const STRICT: ImageTolerance = ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0 };
 
-/// Compares `actual` with `tests/golden/NAME.png` (`werkstatt::compare`, as `werkstatt test`
+/// Compares `actual` with `tests/golden/NAME.png` (`werkstatt::app::compare`, as `werkstatt test`
 /// does). With `WERKSTATT_BLESS=1` the reference is (re)written instead. On failure a diff
 /// image (differences x8) is written beside the output.
 pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: ImageTolerance) {
@@ -164,7 +164,7 @@ pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: ImageTolerance)
     );
     let expected = read_png(&golden);
     assert_eq!(expected.dimensions(), actual.dimensions(), "{name}: size differs from the reference");
-    let diff = werkstatt::compare::compare_rgba8(&expected, actual, tol.threshold);
+    let diff = werkstatt::app::compare::compare_rgba8(&expected, actual, tol.threshold);
     if let Some(why) = diff.verdict(&tol) {
         let dir = root().join("target/golden-diff");
         std::fs::create_dir_all(&dir).unwrap();
@@ -179,10 +179,10 @@ pub fn assert_golden(name: &str, actual: &image::RgbaImage, tol: ImageTolerance)
 
 /// Evaluates frame 0 of `graph` on the test GPU until nothing is pending (deadline 300 s) and
 /// checks that every node ran fine (NotRun: a node no output pulls from).
-pub fn run_graph(graph: &werkstatt::graph::Graph, width: u32, height: u32) -> werkstatt::eval::Evaluator {
-    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+pub fn run_graph(graph: &werkstatt::core::graph::Graph, width: u32, height: u32) -> werkstatt::core::eval::Evaluator {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
     let mut ev = Evaluator::new(graph, &[]).unwrap();
-    let res = werkstatt::resources::Resources::new(false);
+    let res = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { width, height, base_dir: root(), frames: None };
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
     loop {
@@ -202,16 +202,16 @@ pub fn run_graph(graph: &werkstatt::graph::Graph, width: u32, height: u32) -> we
 }
 
 /// Channel 0 of the texture on `node.port`, row-major.
-pub fn channel0(ev: &werkstatt::eval::Evaluator, node: &str, port: &str) -> Vec<f32> {
-    let value = ev.output(node, port).and_then(werkstatt::port::Value::as_texture).expect("a texture");
+pub fn channel0(ev: &werkstatt::core::eval::Evaluator, node: &str, port: &str) -> Vec<f32> {
+    let value = ev.output(node, port).and_then(werkstatt::core::port::Value::as_texture).expect("a texture");
     werkstatt::gpu::read_back(gpu(), value).unwrap().rgba.chunks_exact(4).map(|c| c[0]).collect()
 }
 
 /// Per pixel of the G-buffer of node "gbuffer", the world position: None where nothing was
 /// drawn, or within `margin_percent` of the image size from a border.
-pub fn world_positions(ev: &werkstatt::eval::Evaluator, margin_percent: u32) -> Vec<Option<glam::Vec3>> {
+pub fn world_positions(ev: &werkstatt::core::eval::Evaluator, margin_percent: u32) -> Vec<Option<glam::Vec3>> {
     let g = match ev.output("gbuffer", "gbuffer") {
-        Some(werkstatt::port::Value::GBuffer(g)) => g.clone(),
+        Some(werkstatt::core::port::Value::GBuffer(g)) => g.clone(),
         _ => panic!("no G-buffer"),
     };
     let depth = werkstatt::gpu::read_back(gpu(), &g.depth).unwrap();
@@ -229,6 +229,6 @@ pub fn world_positions(ev: &werkstatt::eval::Evaluator, margin_percent: u32) -> 
 }
 
 /// A camera at `eye` looking at the origin, y up, near plane 0.1.
-pub fn camera_toward_origin(eye: glam::Vec3, fov_y_degrees: f32, far: f32) -> werkstatt::scene::Camera {
-    werkstatt::scene::Camera { eye, target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_degrees, near: 0.1, far }
+pub fn camera_toward_origin(eye: glam::Vec3, fov_y_degrees: f32, far: f32) -> werkstatt::render::scene::Camera {
+    werkstatt::render::scene::Camera { eye, target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_degrees, near: 0.1, far }
 }

@@ -1,4 +1,4 @@
-//! The cuboid scene graph (dissertation section 3.1.1, src/cuboid.rs): eq. 3.1 against eq.
+//! The cuboid scene graph (dissertation section 3.1.1, src/cuboid/mod.rs): eq. 3.1 against eq.
 //! 3.4, the linear fast path, C0 grids, composition against an analytic bend, anchors under a
 //! rigid motion, the nodes, and the trilinear vertex stage against the CPU transform.
 
@@ -8,16 +8,16 @@ use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec2, DVec3, Mat4, Vec3};
 use proptest::prelude::*;
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
 use werkstatt::cuboid::{
     Anchor, Cuboid, CuboidGrid, LINEAR_TOLERANCE, Lift, NormalMethod, Transform, anchor_grid, anchor_row, bend,
     compose, unit_corner,
 };
-use werkstatt::draw::SceneDrawer;
 use werkstatt::gpu::read_back;
-use werkstatt::graph::Graph;
 use werkstatt::mesh::Mesh;
-use werkstatt::port::Value;
-use werkstatt::scene::{DrawItem, Material, View};
+use werkstatt::render::draw::SceneDrawer;
+use werkstatt::render::scene::{DrawItem, Material, View};
 
 fn vec3() -> impl Strategy<Value = DVec3> {
     (-10.0..10.0f64, -10.0..10.0f64, -10.0..10.0f64).prop_map(|(x, y, z)| DVec3::new(x, y, z))
@@ -267,12 +267,12 @@ fn graph(text: &str) -> Graph {
 }
 
 /// Evaluates frame 0 of `text`, pulling from `targets`.
-fn evaluate(text: &str, targets: &[&str]) -> werkstatt::eval::Evaluator {
+fn evaluate(text: &str, targets: &[&str]) -> werkstatt::core::eval::Evaluator {
     let targets: Vec<String> = targets.iter().map(|t| t.to_string()).collect();
-    let mut ev = werkstatt::eval::Evaluator::new(&graph(text), &targets).unwrap();
-    let res = werkstatt::resources::Resources::new(false);
-    let settings = werkstatt::eval::FrameSettings { width: 8, height: 8, base_dir: common::root(), frames: None };
-    ev.evaluate(werkstatt::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings);
+    let mut ev = werkstatt::core::eval::Evaluator::new(&graph(text), &targets).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = werkstatt::core::eval::FrameSettings { width: 8, height: 8, base_dir: common::root(), frames: None };
+    ev.evaluate(werkstatt::core::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings);
     ev
 }
 
@@ -372,7 +372,7 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
         let mut drawer = SceneDrawer::default();
         let a = drawer.gbuffer(gpu, &on_gpu, camera, view).unwrap();
         let b = drawer.gbuffer(gpu, &on_cpu, camera, view).unwrap();
-        let tile = [werkstatt::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w, h] }];
+        let tile = [werkstatt::render::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w, h] }];
         let sa = drawer.depth_tiles(gpu, &on_gpu, &tile, w, h).unwrap();
         let sb = drawer.depth_tiles(gpu, &on_cpu, &tile, w, h).unwrap();
         gpu.submit_checked().unwrap();
@@ -458,8 +458,11 @@ fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
     let (w, h) = (96u32, 48u32);
     let view = View::new(&camera, w, h);
     let tiles = [
-        werkstatt::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w / 2, h] },
-        werkstatt::draw::Tile { view_proj: Mat4::from_rotation_y(0.4) * view.view_proj, rect: [w / 2, 0, w / 2, h] },
+        werkstatt::render::draw::Tile { view_proj: view.view_proj, rect: [0, 0, w / 2, h] },
+        werkstatt::render::draw::Tile {
+            view_proj: Mat4::from_rotation_y(0.4) * view.view_proj,
+            rect: [w / 2, 0, w / 2, h],
+        },
     ];
     let mut drawer = SceneDrawer::default();
     let mut draw = |items: &[DrawItem]| {
@@ -575,7 +578,7 @@ fn deform_surface_bends_a_surface_that_a_matrix_texture_and_anchors_can_use() {
     let moved = body.positions.iter().zip(&bent.positions).map(|(p, q)| p.distance(*q)).fold(0.0, f32::max);
     assert!(moved > 0.05, "the cylinder is bent (its vertices moved at most {moved})");
     assert!(
-        matches!(ev.report("matrix").map(|r| r.status.clone()), Some(werkstatt::eval::NodeStatus::NotRun)),
+        matches!(ev.report("matrix").map(|r| r.status.clone()), Some(werkstatt::core::eval::NodeStatus::NotRun)),
         "the matrix texture only needs a GPU; the link type-checks"
     );
 }

@@ -9,8 +9,8 @@ use egui::accesskit::Role;
 use egui::{Modifiers, Pos2, Vec2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
-use werkstatt::editor::{EditorApp, Options};
-use werkstatt::graph::{Graph, PortRef};
+use werkstatt::app::editor::{EditorApp, Options};
+use werkstatt::core::graph::{Graph, PortRef};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -183,7 +183,7 @@ fn add_connect_edit_undo_redo_and_save() {
     assert_eq!(runs(&h, "gbuffer"), gbuffer_runs, "nodes upstream of the change are not re-run");
     assert_eq!(runs(&h, "tonemap"), tonemap_runs + 1, "the changed node re-ran once");
     let op = |h: &Harness<'_, EditorApp>| h.state().state.graph.nodes["tonemap"].params.get("operator").cloned();
-    assert_eq!(op(&h), Some(werkstatt::param::ParamValue::Str("reinhard".into())));
+    assert_eq!(op(&h), Some(werkstatt::core::param::ParamValue::Str("reinhard".into())));
 
     // Undo the parameter, then redo it (keyboard and buttons).
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
@@ -192,7 +192,7 @@ fn add_connect_edit_undo_redo_and_save() {
     assert!(h.state().state.graph.links.iter().any(|l| l.to == p("preview.image")), "only one step was undone");
     h.get_by_role_and_label(Role::Button, "Redo").click();
     settle(&mut h);
-    assert_eq!(op(&h), Some(werkstatt::param::ParamValue::Str("reinhard".into())));
+    assert_eq!(op(&h), Some(werkstatt::core::param::ParamValue::Str("reinhard".into())));
 
     // Save with Ctrl+S and compare with the expected canonical file.
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::S);
@@ -274,7 +274,7 @@ fn a_failing_node_shows_its_error_on_the_node() {
     // Fixing the parameter clears the error.
     let header = h.state().canvas.node_screen_rect("divide").unwrap();
     click_at(&mut h, header.left_top() + Vec2::new(30.0, 12.0));
-    h.state_mut().state.set_param("divide", "b", werkstatt::param::ParamValue::Float(4.0)).unwrap();
+    h.state_mut().state.set_param("divide", "b", werkstatt::core::param::ParamValue::Float(4.0)).unwrap();
     settle(&mut h);
     assert!(h.query_by_label("error: division by zero (input b is 0)").is_none());
     assert_eq!(h.state().live.output(&p("divide.result")).map(|v| v.summary()), Some("0.25".into()));
@@ -288,7 +288,7 @@ fn a_200_node_graph_stays_responsive() {
     let dir = temp_dir("big");
     let path = dir.join("chain.ron");
     // The benchmark chain, laid out as a user would: rows of 20 nodes.
-    let mut chain = werkstatt::bench::chain_graph(200);
+    let mut chain = werkstatt::app::bench::chain_graph(200);
     for (i, node) in chain.nodes.values_mut().enumerate() {
         node.pos = [(i % 20) as f32 * 180.0, (i / 20) as f32 * 110.0];
     }
@@ -313,7 +313,7 @@ fn a_200_node_graph_stays_responsive() {
     measure(&mut h, "idle", &mut |_, _| {});
     assert_eq!(last_runs(&h), before, "idle frames must re-run nothing");
     measure(&mut h, "changing a parameter every frame", &mut |h, i| {
-        h.state_mut().state.set_param("m0000", "b", werkstatt::param::ParamValue::Float(i as f64)).unwrap();
+        h.state_mut().state.set_param("m0000", "b", werkstatt::core::param::ParamValue::Float(i as f64)).unwrap();
     });
     assert_eq!(last_runs(&h), (before.0 + 30, before.1 + 30), "each change re-runs the chain once");
     let pos_before = h.state().state.graph.nodes["m0100"].pos;
@@ -642,7 +642,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     let path = copy_default(&dir);
     // A session that ended without saving left an autosave with one more node.
     let mut crashed = Graph::load(&path).unwrap();
-    werkstatt::editor::document::add_node(&mut crashed, "Number", [0.0, 960.0]).unwrap();
+    werkstatt::app::editor::document::add_node(&mut crashed, "Number", [0.0, 960.0]).unwrap();
     std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
 
     let opts = Options { watch_files: true, ..options() };
@@ -665,8 +665,13 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
 
     // Another program rewrites the file: the editor offers to reload it (one undo step).
     let mut other = Graph::load(&path).unwrap();
-    werkstatt::editor::document::set_param(&mut other, "tonemap", "exposure", werkstatt::param::ParamValue::Float(1.5))
-        .unwrap();
+    werkstatt::app::editor::document::set_param(
+        &mut other,
+        "tonemap",
+        "exposure",
+        werkstatt::core::param::ParamValue::Float(1.5),
+    )
+    .unwrap();
     other.save(&path).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1100));
     settle(&mut h);

@@ -7,10 +7,10 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use werkstatt::editor::live::{Live, NodeState};
+use werkstatt::app::editor::live::{Live, NodeState};
+use werkstatt::core::graph::{Graph, PortRef};
+use werkstatt::core::param::ParamValue;
 use werkstatt::gpu::{Backend, GpuContext, read_back};
-use werkstatt::graph::{Graph, PortRef};
-use werkstatt::param::ParamValue;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -65,10 +65,10 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
         );
         return;
     }
-    assert_eq!(werkstatt::shaders::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
+    assert_eq!(werkstatt::gpu::shaders::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    for name in werkstatt::shaders::names() {
+    for name in werkstatt::gpu::shaders::names() {
         std::fs::copy(root().join("shaders").join(name), dir.join(name)).unwrap();
     }
     let gpu = GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)");
@@ -80,7 +80,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let original = std::fs::read_to_string(dir.join("tonemap.wgsl")).unwrap();
     let exposure = |graph: &mut Graph, live: &mut Live, value: f64, generation: u64| {
-        werkstatt::editor::document::set_param(graph, "tonemap", "exposure", ParamValue::Float(value)).unwrap();
+        werkstatt::app::editor::document::set_param(graph, "tonemap", "exposure", ParamValue::Float(value)).unwrap();
         live.sync(graph, generation, None);
         settle(live, &gpu);
     };

@@ -2,9 +2,9 @@
 
 use std::time::{Duration, Instant};
 
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-use werkstatt::graph::Graph;
-use werkstatt::resources::Resources;
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::resources::Resources;
 
 use crate::common::wait_idle;
 
@@ -46,7 +46,7 @@ const DIAMOND: &str = r#"(
 
 fn scalar(ev: &Evaluator, id: &str) -> f64 {
     match ev.output(id, "value") {
-        Some(werkstatt::port::Value::Scalar(v)) => *v,
+        Some(werkstatt::core::port::Value::Scalar(v)) => *v,
         _ => panic!("{id} has no scalar"),
     }
 }
@@ -111,9 +111,9 @@ fn rewiring_reruns_the_consumer() {
     ev.evaluate(frame(0), None, &res, &s);
     // Feed sum.b from x instead of y.
     g.links.retain(|l| l.to.to_string() != "sum.b");
-    g.links.push(werkstatt::graph::Link {
-        from: werkstatt::graph::PortRef::parse("x.value").unwrap(),
-        to: werkstatt::graph::PortRef::parse("sum.b").unwrap(),
+    g.links.push(werkstatt::core::graph::Link {
+        from: werkstatt::core::graph::PortRef::parse("x.value").unwrap(),
+        to: werkstatt::core::graph::PortRef::parse("sum.b").unwrap(),
     });
     ev.update(&g, &[]).unwrap();
     ev.evaluate(frame(0), None, &res, &s);
@@ -206,7 +206,7 @@ fn mesh_graph(path: &std::path::Path) -> Graph {
 
 fn triangles(ev: &Evaluator) -> usize {
     match ev.output("mesh", "mesh") {
-        Some(werkstatt::port::Value::Mesh(m)) => m.triangle_count(),
+        Some(werkstatt::core::port::Value::Mesh(m)) => m.triangle_count(),
         _ => 0,
     }
 }
@@ -319,7 +319,7 @@ fn an_older_load_finishing_last_keeps_the_newer_value() {
 
 #[test]
 fn idle_frames_of_a_large_graph_run_nothing() {
-    let g = werkstatt::bench::chain_graph(200);
+    let g = werkstatt::app::bench::chain_graph(200);
     let mut ev = Evaluator::new(&g, &[]).unwrap();
     let res = Resources::new(false);
     let s = FrameSettings::default();
@@ -429,9 +429,9 @@ fn unlinking_an_optional_input_falls_back_to_the_parameter() {
     assert_eq!(runs(&ev, "sum"), sum_runs + 1);
     // Linked again: the input wins over the parameter.
     g.set_from_cli("sum.b=100").unwrap();
-    g.links.push(werkstatt::graph::Link {
-        from: werkstatt::graph::PortRef::parse("y.value").unwrap(),
-        to: werkstatt::graph::PortRef::parse("sum.b").unwrap(),
+    g.links.push(werkstatt::core::graph::Link {
+        from: werkstatt::core::graph::PortRef::parse("y.value").unwrap(),
+        to: werkstatt::core::graph::PortRef::parse("sum.b").unwrap(),
     });
     ev.update(&g, &[]).unwrap();
     ev.evaluate(frame(0), None, &res, &s);
@@ -450,7 +450,7 @@ fn a_loader_that_panics_fails_its_file_with_a_message() {
     let _ = res.request(&path, crashing);
     wait_idle(&res);
     match res.request(&path, crashing).1 {
-        Err(werkstatt::resources::LoadError::Failed(m)) => {
+        Err(werkstatt::core::resources::LoadError::Failed(m)) => {
             assert!(m.contains("any.bin") && m.contains("the loader crashed"), "{m}")
         }
         other => panic!("expected a failed load, got {other:?}"),
@@ -558,7 +558,7 @@ fn turntable_eye(range: (i64, i64), frame_no: i64) -> glam::Vec3 {
     let settings = FrameSettings { frames: Some(range), ..FrameSettings::default() };
     ev.evaluate(frame(frame_no), None, &Resources::new(false), &settings);
     match ev.output("cam", "camera") {
-        Some(werkstatt::port::Value::Camera(c)) => c.eye,
+        Some(werkstatt::core::port::Value::Camera(c)) => c.eye,
         _ => panic!("no camera output"),
     }
 }
@@ -586,7 +586,7 @@ fn a_grid_over_the_whole_uv_square_reports_what_fell_off_the_flag() {
     let mut ev = Evaluator::new(&g, &[]).unwrap();
     ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
     let count = match ev.output("grid", "count") {
-        Some(werkstatt::port::Value::Scalar(n)) => *n,
+        Some(werkstatt::core::port::Value::Scalar(n)) => *n,
         _ => panic!("no count output"),
     };
     let report = ev.report("grid").unwrap();
@@ -624,7 +624,7 @@ fn grid_on_mesh_file(obj: &str, name: &str) -> Result<(f64, Vec<String>), String
         return Err(m.clone());
     }
     match ev.output("grid", "count") {
-        Some(werkstatt::port::Value::Scalar(n)) => Ok((*n, ev.report("grid").unwrap().warnings.to_vec())),
+        Some(werkstatt::core::port::Value::Scalar(n)) => Ok((*n, ev.report("grid").unwrap().warnings.to_vec())),
         _ => panic!("no count output"),
     }
 }
@@ -656,7 +656,7 @@ fn an_orbit_camera_with_fit_frames_the_scene_bounds() {
     );
     let mut ev = Evaluator::new(&g, &["cam".to_string()]).unwrap();
     ev.evaluate(frame(0), None, &Resources::new(false), &FrameSettings::default());
-    let Some(werkstatt::port::Value::Camera(c)) = ev.output("cam", "camera") else { panic!("no camera output") };
+    let Some(werkstatt::core::port::Value::Camera(c)) = ev.output("cam", "camera") else { panic!("no camera output") };
     // A 2 m cube at (5, 1, 0): bounding sphere radius sqrt(3), seen at 60 degrees from 2 sqrt(3).
     assert!(c.target.distance(glam::Vec3::new(5.0, 1.0, 0.0)) < 1e-4, "{:?}", c.target);
     assert!((c.eye.distance(c.target) - 2.0 * 3f32.sqrt()).abs() < 1e-3, "{:?}", c.eye);
@@ -666,7 +666,7 @@ fn an_orbit_camera_with_fit_frames_the_scene_bounds() {
 /// frame-0 export while the cloth moves on.
 #[test]
 fn a_fixed_frame_export_skips_its_work_on_other_frames() {
-    use werkstatt::port::Value;
+    use werkstatt::core::port::Value;
     let g = graph(
         r#"(version: 1, nodes: {
             "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 100}),

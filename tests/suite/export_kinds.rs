@@ -7,18 +7,18 @@ use std::sync::Arc;
 
 use glam::{DVec3, Mat4, Vec3};
 use werkstatt::cuboid::{CuboidGrid, NormalMethod, bend, unit_corner};
-use werkstatt::draw::SceneDrawer;
-use werkstatt::draw::compose::VertexStage;
-use werkstatt::draw::export::flatten;
-use werkstatt::draw::kind::{ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx};
-use werkstatt::draw::kinds::mesh::mesh_draw;
-use werkstatt::draw::kinds::pn_pixels::PnPixels;
 use werkstatt::gpu::read_back;
 use werkstatt::mesh::Mesh;
-use werkstatt::warp::gpu::GpuWarper;
 use werkstatt::nodes::geometry::{icosahedron, plane};
-use werkstatt::scene::{DrawItem, Material};
+use werkstatt::render::draw::SceneDrawer;
+use werkstatt::render::draw::compose::VertexStage;
+use werkstatt::render::draw::export::flatten;
+use werkstatt::render::draw::kind::{ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx};
+use werkstatt::render::draw::kinds::mesh::mesh_draw;
+use werkstatt::render::draw::kinds::pn_pixels::PnPixels;
+use werkstatt::render::scene::{DrawItem, Material};
 use werkstatt::tessellation::{GpuTessellator, Lod, Metric, Mode, Settings, ViewLod};
+use werkstatt::warp::gpu::GpuWarper;
 
 use crate::common::{self, gpu};
 
@@ -74,7 +74,8 @@ fn a_tessellated_item_exports_its_refined_triangles_alike_on_gpu_and_cpu() {
                 .map(|t| {
                     let [a, b, c] = [t[0], t[1], t[2]].map(|i| ico.positions[i as usize] + Vec3::X);
                     let normal = (b - a).cross(c - a).normalize();
-                    let inside = [(a, b), (b, c), (c, a)].iter().all(|(u, v)| (*v - *u).cross(p - *u).dot(normal) > -1e-4);
+                    let inside =
+                        [(a, b), (b, c), (c, a)].iter().all(|(u, v)| (*v - *u).cross(p - *u).dot(normal) > -1e-4);
                     if inside { (p - a).dot(normal).abs() } else { f32::INFINITY }
                 })
                 .fold(f32::INFINITY, f32::min)
@@ -156,7 +157,12 @@ impl ItemKind for Lifted {
     fn name(&self) -> &'static str {
         "lifted"
     }
-    fn prepare(&self, cx: &mut PrepareCx<'_, '_>, _: &DrawItem, stage: VertexStage) -> anyhow::Result<Option<KindDraw>> {
+    fn prepare(
+        &self,
+        cx: &mut PrepareCx<'_, '_>,
+        _: &DrawItem,
+        stage: VertexStage,
+    ) -> anyhow::Result<Option<KindDraw>> {
         mesh_draw(cx, &self.0, stage).map(Some)
     }
     fn export(&self, _: &mut ExportCx<'_>, _: &DrawItem) -> anyhow::Result<Exported> {
@@ -172,13 +178,14 @@ fn a_kind_defined_outside_the_crate_draws_and_exports_through_the_trait() {
     let ball = icosahedron(0.8).unwrap();
     let mut lifted = ball.clone();
     lifted.positions.iter_mut().for_each(|p| p.y += 0.5);
-    let lifted = Arc::new(Mesh::build(lifted.positions, Some(lifted.uvs), Some(lifted.normals), lifted.indices).unwrap());
+    let lifted =
+        Arc::new(Mesh::build(lifted.positions, Some(lifted.uvs), Some(lifted.normals), lifted.indices).unwrap());
     let custom = plain(ball, Mat4::IDENTITY).with_kind(Lifted(lifted.clone()));
     let reference = DrawItem::plain(lifted.clone(), Arc::new(Material::default()), Mat4::IDENTITY);
     let camera = common::camera_toward_origin(Vec3::new(0.0, 0.5, 4.0), 45.0, 20.0);
     let mut drawer = SceneDrawer::default();
     let mut depth = |item: DrawItem| {
-        let gb = werkstatt::draw::render_gbuffer(gpu(), &mut drawer, &[item], camera, 48, 40).unwrap();
+        let gb = werkstatt::render::draw::render_gbuffer(gpu(), &mut drawer, &[item], camera, 48, 40).unwrap();
         gpu().submit_checked().unwrap();
         read_back(gpu(), &gb.depth).unwrap().rgba
     };

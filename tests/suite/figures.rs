@@ -11,7 +11,7 @@ const FIGURES: [&str; 6] =
 /// The figure's graph with only the cloth in its scene: the merge node ("scene" in every
 /// figure) gets the drawn cloth alone (Fig. 1d draws none, so a plain Draw is added).
 fn cloth_only_graph(name: &str, out: &std::path::Path) -> std::path::PathBuf {
-    use werkstatt::graph::{Graph, Link, NodeDoc, PortRef};
+    use werkstatt::core::graph::{Graph, Link, NodeDoc, PortRef};
     let mut g = Graph::load(&root().join(format!("graphs/{name}.ron"))).unwrap();
     let port = |s: &str| PortRef::parse(s).unwrap();
     g.links.retain(|l| l.to.node != "scene");
@@ -177,14 +177,14 @@ fn cloth_presets_animate_deterministically() {
 }
 
 /// What ExportGeometry writes from the GPU's warp is the CPU twin's warp of the same
-/// attachments (src/warp.rs, threaded, no GPU): the same triangles kept, every vertex where the
+/// attachments (src/warp/mod.rs, threaded, no GPU): the same triangles kept, every vertex where the
 /// CPU puts it; with `warp: cpu` it is the twin's exactly. An export that dropped, shifted or
 /// mis-ordered instances, or kept outliers, fails here.
 #[test]
 fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
-    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+    use werkstatt::core::port::Value;
     use werkstatt::warp::gpu::assemble;
-    use werkstatt::port::Value;
     let gpu = gpu();
     let text = r#"(version: 1, nodes: {
         "cloth": (kind: "ClothSim", params: {"triangles": 400}),
@@ -198,9 +198,9 @@ fn exported_vertices_match_the_cpu_warp_of_the_same_attachments() {
         ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"),
         ("grid.placements", "buttons.placements"), ("buttons.scene", "out.scene"),
         ("buttons.scene", "out_cpu.scene")])"#;
-    let graph = werkstatt::graph::Graph::load_str(text, "export.ron".as_ref()).unwrap();
+    let graph = werkstatt::core::graph::Graph::load_str(text, "export.ron".as_ref()).unwrap();
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
-    let resources = werkstatt::resources::Resources::new(false);
+    let resources = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { width: 64, height: 64, base_dir: root(), frames: None };
     let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu), &resources, &settings);
     assert_eq!((summary.failed, summary.pending), (0, 0), "{:?}", ev.report("out").map(|r| r.status.clone()));

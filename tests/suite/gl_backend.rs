@@ -10,13 +10,13 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::app::render::{RenderOptions, render};
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::param::ParamValue;
+use werkstatt::core::resources::Resources;
 use werkstatt::gpu::{Backend, GpuContext, read_back};
-use werkstatt::graph::Graph;
 use werkstatt::nodes::live_link::{encode_frame, encode_topology};
-use werkstatt::param::ParamValue;
-use werkstatt::render::{RenderOptions, render};
-use werkstatt::resources::Resources;
 
 /// The GL context, or `None` (test skipped) where the machine has no EGL library.
 fn gl() -> Option<GpuContext> {
@@ -61,7 +61,7 @@ fn render_on(
         ssaa: 1,
         progress: false,
         command: Vec::new(),
-        pending_timeout: werkstatt::render::PENDING_LIMIT,
+        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
     };
     render(&opts, gpu).map(|_| ())
 }

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::app::render::{RenderOptions, render};
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::resources::Resources;
 use werkstatt::gpu::{Backend, GpuContext, read_back};
-use werkstatt::graph::Graph;
-use werkstatt::render::{RenderOptions, render};
-use werkstatt::resources::Resources;
 
 fn fresh_gpu() -> GpuContext {
     GpuContext::headless(Backend::from_env().unwrap())
@@ -47,7 +47,7 @@ fn ran(ev: &Evaluator) -> Vec<String> {
 fn shader_copy(gpu: &GpuContext, name: &str) -> PathBuf {
     let dir = out_dir(name).join("shaders");
     std::fs::create_dir_all(&dir).unwrap();
-    for s in werkstatt::shaders::names() {
+    for s in werkstatt::gpu::shaders::names() {
         std::fs::copy(root().join("shaders").join(s), dir.join(s)).unwrap();
     }
     gpu.set_shader_dir(Some(dir.clone()));
@@ -86,7 +86,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
         ssaa: 1,
         progress: false,
         command: Vec::new(),
-        pending_timeout: werkstatt::render::PENDING_LIMIT,
+        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
     };
     render(&opts, &gpu).unwrap();
     let json: serde_json::Value =
@@ -129,7 +129,7 @@ fn an_animated_cloth_reuses_its_buffers_without_changing_the_picture() {
             ssaa: 1,
             progress: false,
             command: Vec::new(),
-            pending_timeout: werkstatt::render::PENDING_LIMIT,
+            pending_timeout: werkstatt::app::render::PENDING_LIMIT,
         };
         render(&opts, &gpu).unwrap()
     };

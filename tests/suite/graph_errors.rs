@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use werkstatt::graph::{Diagnostic, Graph, ProblemKind};
+use werkstatt::core::graph::{Diagnostic, Graph, ProblemKind};
 
 fn errors(name: &str) -> Vec<Diagnostic> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/bad").join(name);
@@ -174,7 +174,7 @@ fn cli_set_errors_name_node_and_param() {
     let e = g.set_from_cli("nobody.x=1").unwrap_err();
     assert!(e.contains("no node \"nobody\""), "{e}");
     g.set_from_cli("camera.distance=5").unwrap();
-    assert_eq!(g.param("camera", "distance"), Some(werkstatt::param::ParamValue::Float(5.0)));
+    assert_eq!(g.param("camera", "distance"), Some(werkstatt::core::param::ParamValue::Float(5.0)));
 }
 
 #[test]

@@ -12,10 +12,10 @@ use std::sync::OnceLock;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
-use werkstatt::graph::{Graph, Link, NodeDoc, Place, PortRef, Problem, ProblemKind};
-use werkstatt::node::NodeSpec;
-use werkstatt::param::{ParamKind, ParamValue};
-use werkstatt::spec;
+use werkstatt::core::graph::{Graph, Link, NodeDoc, Place, PortRef, Problem, ProblemKind};
+use werkstatt::core::node::NodeSpec;
+use werkstatt::core::param::{ParamKind, ParamValue};
+use werkstatt::core::spec;
 
 use crate::common;
 

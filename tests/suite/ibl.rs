@@ -11,14 +11,14 @@ use std::time::{Duration, Instant};
 use glam::{Vec3, Vec4};
 
 use crate::common::*;
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
+use werkstatt::core::resources::Resources;
 use werkstatt::gpu::readback::read_back_layer;
 use werkstatt::gpu::{GpuContext, GpuImage, read_back};
-use werkstatt::graph::Graph;
 use werkstatt::ibl::cube::{CubeImage, EquirectImage, cube_from_equirect};
 use werkstatt::ibl::gpu::{EnvMap, PemSet};
-use werkstatt::port::Value;
-use werkstatt::resources::Resources;
 
 /// Writes an equirectangular .hdr of `width` x `height` whose pixel (x, y) is `f(x, y)`.
 fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> Vec3) {
@@ -120,8 +120,8 @@ fn the_probe_becomes_the_cube_map_its_cpu_twin_computes() {
     });
     let mut graph = sphere_graph(&probe, 16, 3, &[0.5], 1.0, "", "");
     let env_node = graph.nodes.get_mut("env").unwrap();
-    env_node.params.insert("rotation".into(), werkstatt::param::ParamValue::Float(30.0));
-    env_node.params.insert("intensity".into(), werkstatt::param::ParamValue::Float(2.0));
+    env_node.params.insert("rotation".into(), werkstatt::core::param::ParamValue::Float(30.0));
+    env_node.params.insert("intensity".into(), werkstatt::core::param::ParamValue::Float(2.0));
     let ev = run_graph(&graph, 32, 32);
     let env = env_of(&ev);
     let cpu = cube_from_equirect(&EquirectImage::load(&probe).unwrap(), 16, 30.0, 2.0);
@@ -224,7 +224,7 @@ fn a_white_furnace_stays_white_at_every_glossiness_and_level() {
     }
 }
 
-fn gbuffer_of(ev: &Evaluator) -> Arc<werkstatt::scene::GBuffer> {
+fn gbuffer_of(ev: &Evaluator) -> Arc<werkstatt::render::scene::GBuffer> {
     match ev.output("gbuffer", "gbuffer") {
         Some(Value::GBuffer(g)) => g.clone(),
         _ => panic!("no G-buffer"),
@@ -344,7 +344,7 @@ fn ibl_nodes_report_bad_parameters_and_files_by_name() {
             .join("\n");
         assert!(msg.contains(needle), "expected {needle:?} among the statuses:\n{msg}");
     };
-    use werkstatt::param::ParamValue;
+    use werkstatt::core::param::ParamValue;
     bad(
         &|g| drop(g.nodes.get_mut("env").unwrap().params.insert("size".into(), ParamValue::Int(24))),
         "not a power of two",
@@ -435,8 +435,8 @@ fn shaded_spheres_match_the_monte_carlo_reference_of_eq_3_42() {
 /// for a 5x5 kernel and the Phong prefilter.
 #[test]
 fn the_gpu_filters_match_their_cpu_twins() {
+    use werkstatt::core::param::Choice;
     use werkstatt::ibl::pem::{Kernel, filter_chain};
-    use werkstatt::param::Choice;
     for kernel in [Kernel::SqrtCosine, Kernel::Phong] {
         let graph = sphere_graph(&forest(), 32, 3, &[0.5], 1.0, "", &format!(r#""kernel": "{}""#, kernel.name()));
         let ev = run_graph(&graph, 16, 16);

@@ -7,14 +7,14 @@ use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-use werkstatt::graph::Graph;
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
+use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
 use werkstatt::nodes::live_link::{
     HEADER_BYTES, Header, MAX_VERTICES, MSG_FRAME, MSG_TOPOLOGY, VERSION, encode_frame, encode_topology,
 };
-use werkstatt::port::Value;
-use werkstatt::resources::Resources;
 
 const WAIT: Duration = Duration::from_secs(10);
 

@@ -110,17 +110,17 @@ fn mesh_file_errors_name_the_file() {
 
 #[test]
 fn a_relative_mesh_path_is_resolved_against_the_graph_folder() {
-    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
     let dir = out_dir("loaders-relative");
     std::fs::create_dir_all(dir.join("meshes")).unwrap();
     std::fs::write(dir.join("meshes/tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
-    let g = werkstatt::graph::Graph::load_str(
+    let g = werkstatt::core::graph::Graph::load_str(
         r#"(version: 1, nodes: {"mesh": (kind: "MeshFile", params: {"path": "meshes/tri.obj", "normalize": false})}, links: [])"#,
         "test.ron".as_ref(),
     )
     .unwrap();
     let mut ev = Evaluator::new(&g, &["mesh".to_string()]).unwrap();
-    let res = werkstatt::resources::Resources::new(false);
+    let res = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { base_dir: dir.clone(), ..FrameSettings::default() };
     for _ in 0..3 {
         ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings);
@@ -128,7 +128,7 @@ fn a_relative_mesh_path_is_resolved_against_the_graph_folder() {
     }
     assert_eq!(ev.report("mesh").unwrap().status, &NodeStatus::Ok);
     match ev.output("mesh", "mesh") {
-        Some(werkstatt::port::Value::Mesh(m)) => assert_eq!(m.positions[1], glam::Vec3::X),
+        Some(werkstatt::core::port::Value::Mesh(m)) => assert_eq!(m.positions[1], glam::Vec3::X),
         _ => panic!("no mesh"),
     }
 }

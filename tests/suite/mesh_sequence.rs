@@ -4,12 +4,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-use werkstatt::graph::Graph;
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
+use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
 use werkstatt::nodes::mesh_sequence::{Mode, bracket, load_frame, parse_obj};
-use werkstatt::port::Value;
-use werkstatt::resources::Resources;
 
 use crate::common;
 

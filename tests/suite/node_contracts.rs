@@ -1,19 +1,19 @@
 //! Every registered node honours its spec: run with all inputs connected, with default
 //! parameters and with each option of each choice parameter, no node reads or writes a port
 //! or parameter its spec does not declare, reads one as the wrong type, or leaves an output
-//! unset (the evaluator reports those as internal errors; see `werkstatt::node::INTERNAL_ERROR`).
+//! unset (the evaluator reports those as internal errors; see `werkstatt::core::node::INTERNAL_ERROR`).
 
 use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-use werkstatt::graph::{Graph, Link, NodeDoc, PortRef};
-use werkstatt::node::{INTERNAL_ERROR, NodeSpec};
-use werkstatt::param::{ParamKind, ParamValue};
-use werkstatt::port::PortType;
-use werkstatt::resources::Resources;
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use werkstatt::core::graph::{Graph, Link, NodeDoc, PortRef};
+use werkstatt::core::node::{INTERNAL_ERROR, NodeSpec};
+use werkstatt::core::param::{ParamKind, ParamValue};
+use werkstatt::core::port::PortType;
+use werkstatt::core::resources::Resources;
 
 type Params = Vec<(&'static str, ParamValue)>;
 
@@ -76,7 +76,7 @@ struct Builder {
 impl Builder {
     /// Adds a node of `kind` with every input connected to a producer; returns its id.
     fn add(&mut self, kind: &str, params: Params) -> String {
-        let spec = werkstatt::spec::find(kind).unwrap_or_else(|| panic!("no kind {kind}"));
+        let spec = werkstatt::core::spec::find(kind).unwrap_or_else(|| panic!("no kind {kind}"));
         let id = format!("n{}_{}", self.next, kind.to_lowercase());
         self.next += 1;
         let mut doc_params: BTreeMap<String, ParamValue> =
@@ -142,7 +142,7 @@ fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
 #[test]
 fn every_node_reads_and_writes_only_what_its_spec_declares() {
     let mut problems = Vec::new();
-    for spec in werkstatt::spec::all() {
+    for spec in werkstatt::core::spec::all() {
         if let Err(e) = run(spec, vec![]) {
             problems.push(format!("{} (defaults): {e}", spec.kind));
         }
@@ -161,7 +161,7 @@ fn every_node_reads_and_writes_only_what_its_spec_declares() {
 
 #[test]
 fn every_input_type_has_a_producer_in_this_test() {
-    for spec in werkstatt::spec::all() {
+    for spec in werkstatt::core::spec::all() {
         for input in spec.inputs {
             assert!(producer(input.ty).is_some(), "add a producer of {} for {}.{}", input.ty, spec.kind, input.name);
         }

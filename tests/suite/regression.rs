@@ -1,4 +1,4 @@
-//! `werkstatt test` (werkstatt::regress): every graph in graphs/ against its references in
+//! `werkstatt test` (werkstatt::app::regress): every graph in graphs/ against its references in
 //! tests/references (the project's own image regression, run by `cargo test`), and the
 //! command's behaviour on small graphs: a changed parameter fails with a diff image and a
 //! JUnit failure, `--bless` accepts it, shards merge to the unsharded run, a missing reference
@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use werkstatt::regress::{self, Status, TestOptions, TestRun};
+use werkstatt::app::regress::{self, Status, TestOptions, TestRun};
 
 use crate::common::*;
 

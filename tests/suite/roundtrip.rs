@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use werkstatt::graph::{Graph, Migration, migrate};
+use werkstatt::core::graph::{Graph, Migration, migrate};
 
 fn graph_files() -> Vec<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("graphs");
@@ -57,8 +57,8 @@ fn canonical_form_is_independent_of_input_order_and_layout() {
 fn strings_with_quotes_and_unicode_round_trip() {
     let mut g = Graph::new();
     let mut params = std::collections::BTreeMap::new();
-    params.insert("path".to_string(), werkstatt::param::ParamValue::Str("dir \"x\"\\ü\n.obj".into()));
-    g.nodes.insert("m".into(), werkstatt::graph::NodeDoc { kind: "MeshFile".into(), pos: [0.0, 0.0], params });
+    params.insert("path".to_string(), werkstatt::core::param::ParamValue::Str("dir \"x\"\\ü\n.obj".into()));
+    g.nodes.insert("m".into(), werkstatt::core::graph::NodeDoc { kind: "MeshFile".into(), pos: [0.0, 0.0], params });
     let text = g.to_ron();
     let back = Graph::load_str(&text, "x.ron".as_ref()).unwrap();
     assert_eq!(back, g);
@@ -85,7 +85,7 @@ fn migrations_upgrade_old_versions_in_order() {
     let mut g = Graph::new();
     g.nodes.insert(
         "c".into(),
-        werkstatt::graph::NodeDoc { kind: "Constant".into(), pos: [1.0, 2.0], params: Default::default() },
+        werkstatt::core::graph::NodeDoc { kind: "Constant".into(), pos: [1.0, 2.0], params: Default::default() },
     );
     let notes = migrate(&mut g, 3, &table).unwrap();
     assert_eq!(notes, ["Constant is now Number", "canvas units halved"]);
@@ -100,7 +100,7 @@ fn atomic_save_replaces_the_file() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("g.ron");
     std::fs::write(&path, "old").unwrap();
-    let g = werkstatt::bench::chain_graph(3);
+    let g = werkstatt::app::bench::chain_graph(3);
     g.save(&path).unwrap();
     assert_eq!(std::fs::read_to_string(&path).unwrap(), g.to_ron());
     let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();

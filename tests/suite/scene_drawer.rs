@@ -9,13 +9,13 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::Vec3;
-use werkstatt::draw::{SceneDrawer, Tile};
-use werkstatt::eval::{Evaluator, FrameSettings, FrameTime};
+use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
+use werkstatt::core::resources::Resources;
 use werkstatt::gpu::read_back;
-use werkstatt::graph::Graph;
-use werkstatt::port::Value;
-use werkstatt::resources::Resources;
-use werkstatt::scene::{Camera, DrawItem, View};
+use werkstatt::render::draw::{SceneDrawer, Tile};
+use werkstatt::render::scene::{Camera, DrawItem, View};
 
 /// The scene and camera feeding `gbuffer` in the stickers figure: a flag (plain mesh) with two
 /// decals (area attachments, warped through the matrix texture).

@@ -18,14 +18,14 @@ use std::time::Instant;
 use glam::{Mat4, Vec3};
 
 use crate::common::*;
-use werkstatt::eval::Evaluator;
+use werkstatt::core::eval::Evaluator;
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
 use werkstatt::gpu::{GpuImage, read_back};
-use werkstatt::graph::Graph;
 use werkstatt::ibl::gpu::Lights;
 use werkstatt::ibl::median_cut::RegionLight;
 use werkstatt::nodes::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
-use werkstatt::port::Value;
-use werkstatt::scene::{DrawItem, Material};
+use werkstatt::render::scene::{DrawItem, Material};
 
 /// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
 fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> f32) {
@@ -313,10 +313,7 @@ fn the_jittered_lookup_is_deterministic_and_moves_each_pixel_at_most_its_radius(
 
 fn white_items(meshes: &[(Arc<werkstatt::mesh::Mesh>, Mat4)]) -> Vec<DrawItem> {
     let material = Arc::new(Material::default());
-    meshes
-        .iter()
-        .map(|(m, model)| DrawItem::plain(m.clone(), material.clone(), *model))
-        .collect()
+    meshes.iter().map(|(m, model)| DrawItem::plain(m.clone(), material.clone(), *model)).collect()
 }
 
 fn light(direction: Vec3) -> RegionLight {

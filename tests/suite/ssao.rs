@@ -10,10 +10,10 @@
 use glam::Vec3;
 
 use crate::common::*;
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
 use werkstatt::gpu::read_back;
-use werkstatt::graph::Graph;
 use werkstatt::nodes::reference_occlusion::SceneBvh;
-use werkstatt::port::Value;
 
 /// A plane's (translate, rotate) for Draw.
 type Plane = ([f32; 3], [f32; 3]);
@@ -224,9 +224,9 @@ fn ssao_is_deterministic_and_multiplies_an_image() {
     assert_eq!(a, b);
     // The G-buffer's colour times the factor.
     let mut g = g;
-    g.links.push(werkstatt::graph::Link {
-        from: werkstatt::graph::PortRef { node: "gbuffer".into(), port: "color".into() },
-        to: werkstatt::graph::PortRef { node: "ssao".into(), port: "image".into() },
+    g.links.push(werkstatt::core::graph::Link {
+        from: werkstatt::core::graph::PortRef { node: "gbuffer".into(), port: "color".into() },
+        to: werkstatt::core::graph::PortRef { node: "ssao".into(), port: "image".into() },
     });
     let ev = run_graph(&g, SIZE.0, SIZE.1);
     let color = read_back(gpu(), ev.output("gbuffer", "color").and_then(Value::as_texture).unwrap()).unwrap();
@@ -299,7 +299,7 @@ fn reference_occlusion_is_deterministic() {
     assert_eq!(a, b, "the same input gave different values");
     assert!(a.iter().any(|&v| v < 0.5), "the corner is not occluded");
     let mut g = g;
-    g.nodes.get_mut("reference").unwrap().params.insert("seed".into(), werkstatt::param::ParamValue::Int(8));
+    g.nodes.get_mut("reference").unwrap().params.insert("seed".into(), werkstatt::core::param::ParamValue::Int(8));
     let c = channel0(&run_graph(&g, 64, 48), "reference", "occlusion");
     assert_ne!(a, c, "the seed changes nothing");
 }

@@ -1,15 +1,15 @@
 //! Adaptive tessellation on the GPU (shaders/tessellate.wgsl) against its CPU reference
-//! (src/tessellation.rs), and the properties the dissertation states: crack-free output,
+//! (src/tessellation/mod.rs), and the properties the dissertation states: crack-free output,
 //! bit-identical shared edges, equal levels leaving the mesh unchanged, drawn without read-back.
 
 use std::collections::HashMap;
 
 use glam::Vec3;
-use werkstatt::draw::kinds::pn_pixels::PnPixels;
+use werkstatt::core::rng::SplitMix64;
 use werkstatt::gpu::readback::read_buffer;
 use werkstatt::mesh::{Mesh, Vertex};
 use werkstatt::nodes::geometry::icosahedron;
-use werkstatt::rng::SplitMix64;
+use werkstatt::render::draw::kinds::pn_pixels::PnPixels;
 use werkstatt::tessellation::{
     self, GpuTessellator, Lod, Metric, Mode, PatchPoint, Settings, TessMesh, ViewLod, refine, triangle_edge_levels,
 };
@@ -192,8 +192,8 @@ fn both_metrics_match_the_cpu_vertex_levels() {
         let mut v = view();
         v.lod.silhouette = 1.0;
         v.metric = metric;
-        v.view_proj = werkstatt::scene::View::new(
-            &werkstatt::scene::Camera {
+        v.view_proj = werkstatt::render::scene::View::new(
+            &werkstatt::render::scene::Camera {
                 eye: v.eye,
                 target: Vec3::ZERO,
                 up: Vec3::Y,
@@ -231,9 +231,9 @@ fn too_large_a_tessellation_is_refused_with_advice() {
 #[test]
 fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles() {
     use std::sync::Arc;
-    use werkstatt::draw::{SceneDrawer, Tile};
     use werkstatt::gpu::read_back;
-    use werkstatt::scene::{Camera, DrawItem, View};
+    use werkstatt::render::draw::{SceneDrawer, Tile};
+    use werkstatt::render::scene::{Camera, DrawItem, View};
 
     let g = gpu();
     let mesh = Arc::new(icosahedron(1.0).unwrap());
@@ -279,10 +279,10 @@ fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles
 #[test]
 fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     use std::sync::Arc;
-    use werkstatt::draw::SceneDrawer;
     use werkstatt::gpu::read_back;
     use werkstatt::nodes::geometry::plane;
-    use werkstatt::scene::{DrawItem, View};
+    use werkstatt::render::draw::SceneDrawer;
+    use werkstatt::render::scene::{DrawItem, View};
 
     let g = gpu();
     let camera = crate::common::camera_toward_origin(Vec3::new(0.4, 1.2, 2.6), 45.0, 10.0);
@@ -363,20 +363,20 @@ fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
 /// branches use the same mode.
 #[test]
 fn fig5_13_difference_is_zero_for_equal_modes_and_not_with_warping() {
-    use werkstatt::port::Value;
+    use werkstatt::core::port::Value;
     let path = crate::common::root().join("graphs/fig5_13_tess_icosahedron.ron");
-    let mut graph = werkstatt::graph::Graph::load(&path).unwrap();
-    let scalar = |ev: &werkstatt::eval::Evaluator, port: &str| match ev.output("difference", port) {
+    let mut graph = werkstatt::core::graph::Graph::load(&path).unwrap();
+    let scalar = |ev: &werkstatt::core::eval::Evaluator, port: &str| match ev.output("difference", port) {
         Some(Value::Scalar(v)) => *v,
         other => panic!("difference.{port}: {:?}", other.map(Value::port_type)),
     };
     let ev = crate::common::run_graph(&graph, 96, 72);
     let (max, mean) = (scalar(&ev, "max"), scalar(&ev, "mean"));
     assert!(max > 0.5 && mean > 0.01, "warping should move wireframe lines: max {max}, mean {mean}");
-    let mode = werkstatt::param::ParamValue::Str("pattern".into());
+    let mode = werkstatt::core::param::ParamValue::Str("pattern".into());
     graph.nodes.get_mut("tess_warp").unwrap().params.insert("mode".into(), mode);
     // The Watch guards exactly this in the graph; without it the equal images can be checked.
-    graph.nodes.get_mut("changed").unwrap().params.insert("min".into(), werkstatt::param::ParamValue::Float(0.0));
+    graph.nodes.get_mut("changed").unwrap().params.insert("min".into(), werkstatt::core::param::ParamValue::Float(0.0));
     let ev = crate::common::run_graph(&graph, 96, 72);
     assert_eq!((scalar(&ev, "max"), scalar(&ev, "mean")), (0.0, 0.0));
 }
@@ -387,11 +387,11 @@ fn fig5_13_difference_is_zero_for_equal_modes_and_not_with_warping() {
 /// the same UV footprint; a model transform with `refined` linked is a node error.
 #[test]
 fn a_matrix_texture_of_the_refined_surface_follows_the_smooth_surface() {
-    use werkstatt::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::core::port::Value;
     use werkstatt::warp::gpu::read_matrix;
-    use werkstatt::port::Value;
     let path = crate::common::root().join("graphs/tess_matrix_texture.ron");
-    let mut graph = werkstatt::graph::Graph::load(&path).unwrap();
+    let mut graph = werkstatt::core::graph::Graph::load(&path).unwrap();
     let ev = crate::common::run_graph(&graph, 96, 72);
     // Mean radial error and covered texels of a matrix texture of the sphere about `centre`.
     let radial = |node: &str, centre: Vec3| {
@@ -415,10 +415,10 @@ fn a_matrix_texture_of_the_refined_surface_follows_the_smooth_surface() {
     let footprint = refined_texels as f64 / coarse_texels as f64;
     assert!((footprint - 1.0).abs() < 0.02, "covered texels: refined {refined_texels}, coarse {coarse_texels}");
 
-    let translate = werkstatt::param::ParamValue::Vec(vec![0.5, 0.0, 0.0]);
+    let translate = werkstatt::core::param::ParamValue::Vec(vec![0.5, 0.0, 0.0]);
     graph.nodes.get_mut("matrix_refined").unwrap().params.insert("translate".into(), translate);
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
-    let resources = werkstatt::resources::Resources::new(false);
+    let resources = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { width: 96, height: 72, base_dir: crate::common::root(), frames: None };
     let summary = ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &resources, &settings);
     assert_eq!(summary.pending, 0, "nothing in this graph loads files");

@@ -9,9 +9,9 @@ use std::sync::Arc;
 use glam::{Vec2, Vec3};
 use werkstatt::mesh::Mesh;
 use werkstatt::nodes::attach::point_instance;
-use werkstatt::warp::gpu::GpuWarper;
 use werkstatt::nodes::geometry;
 use werkstatt::nodes::matrix_texture::MatrixTextureNode;
+use werkstatt::warp::gpu::GpuWarper;
 use werkstatt::warp::gpu::read_matrix;
 use werkstatt::warp::{
     AttachedDraw, InstanceData, MatrixTexels, Placement, WarpMode, WarpSettings, warp_layout_cpu, warp_vertex_cpu,
@@ -731,13 +731,13 @@ fn the_orientation_filter_leaves_other_pieces_untouched() {
     assert!(checked > 1000, "{checked}");
 }
 
-fn graph(text: &str) -> werkstatt::graph::Graph {
-    werkstatt::graph::Graph::load_str(text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"))
+fn graph(text: &str) -> werkstatt::core::graph::Graph {
+    werkstatt::core::graph::Graph::load_str(text, "test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn matrix_output(ev: &werkstatt::eval::Evaluator, node: &str) -> Arc<werkstatt::warp::MatrixTexture> {
+fn matrix_output(ev: &werkstatt::core::eval::Evaluator, node: &str) -> Arc<werkstatt::warp::MatrixTexture> {
     match ev.output(node, "matrix") {
-        Some(werkstatt::port::Value::MatrixTexture(m)) => m.clone(),
+        Some(werkstatt::core::port::Value::MatrixTexture(m)) => m.clone(),
         _ => panic!("no matrix texture on {node}"),
     }
 }
@@ -819,7 +819,7 @@ fn placement_files_honour_the_piece_column() {
         let ev = common::run_graph(&g, 8, 8);
         let warnings = ev.report("pf").unwrap().warnings.to_vec();
         match ev.output("pf", "placements") {
-            Some(werkstatt::port::Value::Instances(p)) => ((**p).clone(), warnings),
+            Some(werkstatt::core::port::Value::Instances(p)) => ((**p).clone(), warnings),
             _ => panic!("no placements"),
         }
     };

@@ -1,0 +1,815 @@
+//! The command line: render, test, report, edit, check, fmt, nodes, info, bench.
+
+use std::io::IsTerminal as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::core::graph::Graph;
+use crate::gpu::{Backend, GpuContext};
+
+#[derive(Parser)]
+#[command(
+    name = "werkstatt",
+    version,
+    about = "A real-time garment renderer as a node graph: render, edit, check and format .ron graphs"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a graph headless: one image per output node per frame, plus stats.json.
+    Render {
+        /// The graph file (.ron).
+        graph: PathBuf,
+        /// Frames to render: N, or A..B (inclusive).
+        #[arg(long, default_value = "0")]
+        frames: String,
+        /// Frames per second of the animation time.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Image size WxH.
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Anti-aliasing by supersampling: render every pass at N x the size (N^2 the pixels)
+        /// and box-filter the written images down to it.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+        ssaa: u32,
+        /// Override a parameter: node.param=value (repeatable).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        sets: Vec<String>,
+        /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
+        #[arg(long = "dump", value_name = "NODE.PORT")]
+        dumps: Vec<String>,
+        /// File format of --dump: png (8-bit; float textures tone mapped with x/(1+x), then sRGB)
+        /// or exr (values as they are). Default: png for 8-bit textures, exr for float ones.
+        #[arg(long, value_parser = ["png", "exr"])]
+        dump_format: Option<String>,
+        /// Seconds one frame may wait for loads and external sources before the render fails.
+        #[arg(long, default_value_t = crate::app::render::PENDING_LIMIT.as_secs_f64())]
+        pending_timeout: f64,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Open the node editor on a graph (created on save if it does not exist yet).
+    #[cfg(feature = "editor")]
+    Edit {
+        /// The graph file (.ron); without it the editor starts with a new graph.
+        graph: Option<PathBuf>,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Validate graphs without a GPU; reports every problem with file, line and node.
+    Check {
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+        /// human: one line per problem with a hint; json: one JSON object per problem on
+        /// stdout (file, line, column, node, port, message, help), for CI annotations.
+        #[arg(long, value_parser = ["human", "json"], default_value = "human")]
+        message_format: String,
+    },
+    /// Render graphs and compare every output with stored references (image regression).
+    Test {
+        /// Graph files, folders of graphs, or one manifest (manifest.ron or *.manifest.ron).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The references of graphs given directly, one folder per case; a manifest.ron there
+        /// sets sizes and tolerances. A manifest's references sit beside it.
+        #[arg(long, default_value = "tests/references")]
+        references: PathBuf,
+        /// Output folder: a folder per case, results.json, junit.xml, report.html.
+        #[arg(long, default_value = "test-out")]
+        out: PathBuf,
+        /// Accept the current outputs as the references.
+        #[arg(long)]
+        bless: bool,
+        /// node.param=value overrides, or node.param=a,b,c to sweep (repeatable: every
+        /// combination is a case; vectors in brackets: [0,0,1],[1,0,0]).
+        #[arg(long = "set", value_name = "NODE.PARAM=A,B,...")]
+        sets: Vec<String>,
+        /// A RON list of sweep axes: ["node.param=a,b", ...].
+        #[arg(long)]
+        sweep: Option<PathBuf>,
+        /// Run shard I of N (0-based). Default: from SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT,
+        /// or JOB_COMPLETION_INDEX/WERKSTATT_SHARD_COUNT, else everything.
+        #[arg(long, value_name = "I/N")]
+        shard: Option<String>,
+        /// Fail cases slower than their reference time by more than the manifest's `slowdown`
+        /// factor (without it they are only flagged).
+        #[arg(long)]
+        fail_on_slowdown: bool,
+        /// GPU backend (or WERKSTATT_BACKEND).
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Work with the results of `werkstatt test`.
+    Report {
+        #[command(subcommand)]
+        what: ReportWhat,
+    },
+    /// Rewrite graphs in canonical form, or with --check list those that are not.
+    Fmt {
+        #[arg(long)]
+        check: bool,
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+    },
+    /// List node kinds, or describe one in full (ports, parameters with defaults and ranges).
+    Nodes {
+        /// One node kind to describe, e.g. Material.
+        kind: Option<String>,
+        /// Print as JSON (all kinds, or KIND), for tools.
+        #[arg(long, conflicts_with = "markdown")]
+        json: bool,
+        /// Print the Markdown node reference (the text of docs/nodes.md) to stdout, or to --out.
+        #[arg(long, conflicts_with = "kind")]
+        markdown: bool,
+        /// Print the ClothSim presets' bounds and pattern pieces' UV rectangles (docs/presets.md).
+        #[arg(long, conflicts_with_all = ["kind", "json", "markdown"])]
+        presets: bool,
+        /// Write the output to this file instead of stdout.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Print the GPU adapters wgpu finds.
+    Info {
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Measure the framework itself.
+    Bench {
+        #[command(subcommand)]
+        what: BenchWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum ReportWhat {
+    /// Combine the output folders of the shards of one `werkstatt test` run into one.
+    Merge {
+        /// The shards' output folders.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Where the merged run goes (the same files an unsharded run writes).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// What every GPU bench takes: the frame size, the adapter, and where to write the rows.
+#[derive(clap::Args)]
+struct GpuBench {
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// Also write the rows as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
+}
+
+impl GpuBench {
+    /// The headless adapter and the parsed size.
+    fn open(&self) -> anyhow::Result<(GpuContext, (u32, u32))> {
+        let size = parse_size(&self.size)?;
+        Ok((GpuContext::headless(pick_backend(self.backend)?)?, size))
+    }
+
+    /// Writes `rows` to `--json` when given.
+    fn write_json(&self, rows: &impl serde::Serialize) -> anyhow::Result<()> {
+        if let Some(path) = &self.json {
+            crate::io::atomic::write_atomic(path, serde_json::to_string_pretty(rows)?.as_bytes())?;
+        }
+        Ok(())
+    }
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// Evaluator overhead per idle frame (nothing changed) for a graph of cheap nodes.
+    Graph {
+        #[arg(long, default_value_t = 200)]
+        nodes: usize,
+        #[arg(long, default_value_t = 20000)]
+        frames: usize,
+    },
+    /// Cloth simulation time per frame against triangle count (tablecloth over a torus).
+    Cloth {
+        #[arg(long, default_value = "2000,5000,10000,20000,50000", value_delimiter = ',')]
+        triangles: Vec<usize>,
+        #[arg(long, default_value_t = 30)]
+        warmup: usize,
+        #[arg(long, default_value_t = 60)]
+        frames: usize,
+    },
+    /// Image-based lighting (graphs/fig3_13_glossiness.ron) against the number of median-cut
+    /// regions: PEM rebuild time, frame time (G-buffer + shading), PEM memory. Region count
+    /// 0 is one lookup into the filtered full map.
+    Ibl {
+        #[arg(long, default_value = "0,1,4,16,64,256", value_delimiter = ',')]
+        regions: Vec<usize>,
+        /// Timed frames per count (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// Adaptive tessellation (Fig. 5.11): for each mode and level, generated triangles, the
+    /// compute pass's time and triangles per second, and the frame time (tessellation + G-buffer)
+    /// on a 1024-triangle sphere; vertex levels all at the level ("equal") or random in
+    /// [1, level] ("random").
+    Tessellation {
+        /// Levels, comma-separated.
+        #[arg(long, default_value = "1,2,3,4,6,8,12,16", value_delimiter = ',')]
+        levels: Vec<u32>,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
+    /// ms per frame of the Ssao passes for each mode at full and half resolution.
+    Ssao {
+        /// Depth taps per pixel.
+        #[arg(long, default_value_t = 16)]
+        samples: u32,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 10)]
+        frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// Global occlusion (graphs/fig5_24_shadows.ron without its unshadowed pass): frame time
+    /// (G-buffer, shadow atlas, shadowed IBL, SSAO, hybrid, tone mapping; a sphere moves every
+    /// frame so the atlas is redrawn) against the number of lights and the atlas tile size,
+    /// and the atlas memory.
+    Shadows {
+        /// Light counts, comma-separated.
+        #[arg(long, default_value = "16,64,128,256,512", value_delimiter = ',')]
+        lights: Vec<usize>,
+        /// Tile sizes (texels, guard band included), comma-separated.
+        #[arg(long, default_value = "64,128,256,512", value_delimiter = ',')]
+        tiles: Vec<u32>,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The deferred-warping paper's Fig. 10: a 928-triangle button attached N times (point,
+    /// area, curve) against plain instancing and a CPU warp path; million triangles per second.
+    Attachments {
+        /// Instance counts, comma-separated.
+        #[arg(long, default_value = "1000,2000,4000,8000,16000,32000,65000", value_delimiter = ',')]
+        counts: Vec<usize>,
+        /// Timed frames per measurement (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Skip the CPU warp path.
+        #[arg(long)]
+        no_cpu: bool,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The paper's Table 1: the Fig. 1 graphs scaled to the paper's triangle counts (25M fur,
+    /// 10M embroidery, 6M buttons and seams, 48M knit, 650k stickers), triangles and ms per
+    /// frame (matrix texture + G-buffer) beside the paper's GTX 580 times.
+    Table1 {
+        /// Timed frames per figure (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Fraction of the paper's triangle counts (1 = the paper's; smaller for a quick look).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Only these figures (graph name prefixes, e.g. fig1c), comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The export path of Fig. 10's data: N point-attached 928-triangle buttons on the
+    /// tablecloth sequence; producing the warped geometry in memory (GPU, and the threaded CPU
+    /// twin) apart from writing it as binary PLY.
+    Export {
+        /// Button counts, comma-separated.
+        #[arg(long, default_value = "1000,10000,65000", value_delimiter = ',')]
+        counts: Vec<usize>,
+        /// Timed runs per measurement (median reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Folder the PLY files are written to (and removed from); a RAM disk measures the copy.
+        #[arg(long, default_value = "out")]
+        dir: PathBuf,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The dissertation's cuboid table (section 5.1.1): frames per second with linear and with
+    /// trilinear transforms (CPU composition + G-buffer per frame) for spheres on an animated
+    /// object and helices of small objects, and their ratio.
+    Cuboids {
+        /// Spheres on the animated object: count x triangles per sphere.
+        #[arg(long, default_value = "185x2000")]
+        spheres: String,
+        /// Helices: count x triangles per object, comma-separated.
+        #[arg(long, default_value = "4617x36,2566x256", value_delimiter = ',')]
+        helices: Vec<String>,
+        /// Timed frames per block: each round runs each path in two blocks (A B B A), each
+        /// after one untimed frame; the medians of each path's frames are reported.
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        /// Rounds of blocks A B B A; the ratio is the median of the rounds' ratios (with 5
+        /// rounds a row moved by up to 8 points between runs on a 2-core machine, with 15 by 3-6).
+        #[arg(long, default_value_t = 15)]
+        rounds: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// The dissertation's Figs. 5.19/5.20 on the CPU: for each PEM filter kernel and Phong
+    /// exponent, the volume-matched mip level and the lobe's shape error; also the default
+    /// kernel's calibration table and the PEM memory table.
+    PemLobes {
+        /// Cube map face size (a power of two).
+        #[arg(long, default_value_t = 128)]
+        size: usize,
+        /// Also write the plot (shape error against s) as SVG.
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli.command) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `werkstatt check`: validates each graph; with `json`, one JSON object per problem on
+/// stdout (file, line, column, node, port, message, help; warnings with "level": "warning").
+fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
+    let mut failed = 0;
+    let print_json = |file: &std::path::Path, line: usize, col: usize, level: &str, problem: serde_json::Value| {
+        let mut v =
+            serde_json::json!({ "file": file.display().to_string(), "line": line, "column": col, "level": level });
+        if let (Some(o), serde_json::Value::Object(p)) = (v.as_object_mut(), problem) {
+            o.extend(p);
+        }
+        println!("{v}");
+    };
+    for path in graphs {
+        match Graph::load(path) {
+            Ok(g) => {
+                if !json {
+                    println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
+                }
+                let base = path.parent().unwrap_or(std::path::Path::new(""));
+                for w in g.warnings(base) {
+                    if json {
+                        let (line, col) = std::fs::read_to_string(path).map(|s| w.line_col(&s)).unwrap_or((1, 1));
+                        let problem =
+                            serde_json::json!({ "node": w.node, "port": null, "message": w.message, "help": w.help });
+                        print_json(path, line, col, "warning", problem);
+                    } else {
+                        eprintln!("{}: warning: {w}", path.display());
+                    }
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                if !json {
+                    eprintln!("{e}");
+                    continue;
+                }
+                for d in &e.diagnostics {
+                    let p = &d.problem;
+                    let problem =
+                        serde_json::json!({ "node": p.node, "port": p.port, "message": p.message, "help": p.help });
+                    print_json(&d.file, d.line, d.col, "error", problem);
+                }
+            }
+        }
+    }
+    if failed > 0 {
+        eprintln!("{failed} of {} graph(s) have errors", graphs.len());
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
+}
+
+fn pick_backend(flag: Option<Backend>) -> anyhow::Result<Backend> {
+    match flag {
+        Some(b) => Ok(b),
+        None => Backend::from_env().map_err(anyhow::Error::msg),
+    }
+}
+
+fn parse_frames(text: &str) -> anyhow::Result<(i64, i64)> {
+    let bad = || anyhow::anyhow!("--frames \"{text}\": expected N or A..B with A <= B");
+    let (a, b) = match text.split_once("..") {
+        Some((a, b)) => (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?),
+        None => {
+            let n: i64 = text.trim().parse().map_err(|_| bad())?;
+            (n, n)
+        }
+    };
+    if a > b || b.checked_sub(a).is_none_or(|n| n >= 10_000_000) {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
+    let bad = || anyhow::anyhow!("--size \"{text}\": expected WxH, e.g. 640x480, each 1..=8192");
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn run(command: Command) -> anyhow::Result<ExitCode> {
+    match command {
+        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, pending_timeout, backend } => {
+            use crate::core::param::Choice as _;
+            let dump_format = dump_format.map(|name| {
+                let i =
+                    crate::io::image::ImageFormat::OPTIONS.iter().position(|o| *o == name).expect("clap checked it");
+                crate::io::image::ImageFormat::from_index(i).expect("an index of OPTIONS")
+            });
+            let frames = parse_frames(&frames)?;
+            let (width, height) = parse_size(&size)?;
+            if width.max(height) * ssaa > 8192 {
+                anyhow::bail!(
+                    "--size {size} with --ssaa {ssaa} renders {}x{}, over the limit of 8192",
+                    width * ssaa,
+                    height * ssaa
+                );
+            }
+            if !(fps > 0.0 && fps.is_finite()) {
+                anyhow::bail!("--fps must be a positive number");
+            }
+            let pending_timeout = std::time::Duration::try_from_secs_f64(pending_timeout)
+                .map_err(|_| anyhow::anyhow!("--pending-timeout must be a number of seconds, not {pending_timeout}"))?;
+            let progress = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+            let opts = crate::app::render::RenderOptions {
+                graph_path: graph,
+                frames,
+                fps,
+                width,
+                height,
+                out_dir: out.clone(),
+                sets,
+                dumps,
+                dump_format,
+                ssaa,
+                progress,
+                command: std::env::args().collect(),
+                pending_timeout,
+            };
+            // Validate before touching the GPU, so a bad graph fails fast and clearly.
+            let prepared = crate::app::render::load_with_overrides(&opts.graph_path, &opts.sets)
+                .and_then(|g| Ok((g, GpuContext::headless(pick_backend(backend)?)?)));
+            let (loaded, gpu) = prepared.inspect_err(|e| crate::app::render::record_failure(&opts, e))?;
+            let stats = crate::app::render::render_graph(&opts, &loaded, &gpu)?;
+            eprintln!(
+                "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
+                stats.frames.len(),
+                stats.adapter,
+                stats.files.len(),
+                out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        #[cfg(feature = "editor")]
+        Command::Edit { graph, backend } => {
+            crate::app::editor::run(graph, pick_backend(backend)?)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Check { graphs, message_format } => Ok(check(&graphs, message_format == "json")),
+        Command::Test { inputs, references, out, bless, sets, sweep, shard, fail_on_slowdown, backend } => {
+            let shard = crate::app::regress::shard_from(shard.as_deref(), |k| std::env::var(k).ok())?;
+            let opts = crate::app::regress::TestOptions {
+                inputs,
+                references,
+                out_dir: out.clone(),
+                bless,
+                sets,
+                sweep_file: sweep,
+                shard,
+                fail_on_slowdown,
+            };
+            // Plan first, so a bad manifest or --set fails before the GPU starts.
+            crate::app::regress::plan(&opts)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            let run = crate::app::regress::run(&opts, &gpu, |c| {
+                let first = c.message.as_deref().and_then(|m| m.lines().next()).unwrap_or("");
+                let slow = if c.slow { " (slower than its reference)" } else { "" };
+                eprintln!("{:?}: {} {:.0} ms{slow} {first}", c.status, c.name, c.render_ms);
+            })?;
+            eprintln!("{}\nreports: {}/junit.xml, {}/report.html", run.summary(), out.display(), out.display());
+            Ok(if run.regressed() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Report { what: ReportWhat::Merge { shards, out } } => {
+            let run = crate::app::regress::merge(&shards, &out)?;
+            eprintln!("{}\nreports: {}/junit.xml, {}/report.html", run.summary(), out.display(), out.display());
+            Ok(if run.regressed() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Fmt { check, graphs } => {
+            let mut bad = 0;
+            for path in &graphs {
+                let g = match Graph::load(path) {
+                    Ok(g) => g,
+                    Err(e) => {
+                        bad += 1;
+                        eprintln!("{e}");
+                        continue;
+                    }
+                };
+                let text = std::fs::read_to_string(path)?;
+                let canonical = g.to_ron();
+                if text != canonical {
+                    if check {
+                        bad += 1;
+                        println!("not canonical: {}", path.display());
+                    } else {
+                        g.save(path)?;
+                        println!("formatted: {}", path.display());
+                    }
+                }
+            }
+            Ok(if bad > 0 { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
+        Command::Nodes { kind, json, markdown, presets, out } => {
+            let spec = kind.as_deref().map(crate::app::docs::find).transpose().map_err(anyhow::Error::msg)?;
+            let text = match (spec, json) {
+                (Some(s), true) => serde_json::to_string_pretty(&crate::app::docs::node_json(s))? + "\n",
+                (None, true) => serde_json::to_string_pretty(&crate::app::docs::json())? + "\n",
+                (Some(s), false) => crate::app::docs::describe(s),
+                (None, false) if markdown => crate::app::docs::markdown(),
+                (None, false) if presets => crate::nodes::cloth::node::presets_markdown()?,
+                (None, false) => crate::app::docs::listing(),
+            };
+            match out {
+                Some(path) => crate::io::atomic::write_atomic(&path, text.as_bytes())?,
+                None => print!("{text}"),
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Info { backend } => {
+            let backend = pick_backend(backend)?;
+            let adapters = crate::gpu::list_adapters(backend);
+            if adapters.is_empty() {
+                eprintln!("no GPU adapter found for backend {backend:?}\n  help: {}", crate::gpu::NO_ADAPTER_HELP);
+                return Ok(ExitCode::FAILURE);
+            }
+            for a in adapters {
+                println!("{a}");
+            }
+            // What the nodes render into on the adapter `render` would pick.
+            if let Ok(gpu) = GpuContext::headless(backend) {
+                let f = gpu.formats();
+                println!(
+                    "formats on {}: linear depth {:?}, HDR {:?}, half matrix {:?}, depth {:?}, float32 renderable: {}, float32 filterable: {}",
+                    gpu.adapter_name(),
+                    f.linear_depth,
+                    f.hdr,
+                    f.matrix_f16,
+                    f.depth,
+                    f.float32_renderable,
+                    f.float32_filterable
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Attachments { counts, frames, no_cpu, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!("{:>18} {:>9} {:>12} {:>10} {:>9}", "path", "instances", "triangles", "ms/frame", "MTri/s");
+            let rows = crate::app::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| {
+                println!(
+                    "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
+                    r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Export { counts, frames, dir, out } } => {
+            let (gpu, _) = out.open()?;
+            println!("adapter: {}, median of {frames} run(s), PLY into {}", gpu.adapter_name(), dir.display());
+            println!(
+                "| buttons | triangles | GPU warp + read-back ms | GPU produce ms | CPU warp ms | CPU produce ms | auto | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---|---:|---:|"
+            );
+            let rows = crate::app::bench::export(&gpu, &counts, frames, &dir, |r| {
+                println!(
+                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {:.1} |",
+                    r.buttons,
+                    r.triangles,
+                    r.gpu_warp_ms,
+                    r.gpu_produce_ms,
+                    r.cpu_warp_ms,
+                    r.cpu_produce_ms,
+                    r.auto,
+                    r.write_ms,
+                    r.megabytes
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Table1 { frames, scale, only, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|"
+            );
+            let rows = crate::app::bench::table1(&gpu, frames, size, scale, &only, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+                    r.figure,
+                    r.types,
+                    r.paper_triangles,
+                    r.paper_ms,
+                    r.triangles,
+                    r.matrix_ms,
+                    r.gbuffer_ms,
+                    r.ms_per_frame,
+                    r.settings.join(" ")
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Ibl { regions, frames, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| regions | rebuild ms (cut + PEMs + frame) | ms/frame (G-buffer + IBL) | PEM MiB |\n|---:|---:|---:|---:|"
+            );
+            let rows = crate::app::bench::ibl(&gpu, &regions, frames, size, |r| {
+                let n = if r.regions == 0 { "full map".to_string() } else { r.regions.to_string() };
+                println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Tessellation { levels, frames, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| levels | mode | level | triangles | compute ms | Mtri/s (compute) | frame ms |\n|---|---|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::app::bench::tessellation(&gpu, &levels, frames, size, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {:.2} | {:.1} | {:.2} |",
+                    r.levels, r.mode, r.level, r.triangles, r.compute_ms, r.mtri_per_s, r.frame_ms
+                );
+            })?;
+            let pairs = 4 * frames.max(1);
+            println!(
+                "\nwarping's cost, random levels, median of {pairs} interleaved pairs (compute alone; whole frames with the G-buffer draw):\n| level | pattern ms | pattern_warp ms | compute cost | frame ms | frame ms (warp) | frame-rate loss |\n|---:|---:|---:|---:|---:|---:|---:|"
+            );
+            let costs = crate::app::bench::tessellation_warp_cost(&gpu, &levels, pairs, size, |r| {
+                println!(
+                    "| {} | {:.2} | {:.2} | {:+.1}% | {:.2} | {:.2} | {:+.1}% |",
+                    r.level,
+                    r.pattern_ms,
+                    r.pattern_warp_ms,
+                    100.0 * r.cost,
+                    r.frame_pattern_ms,
+                    r.frame_pattern_warp_ms,
+                    100.0 * r.frame_rate_loss
+                );
+            })?;
+            out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Ssao { samples, frames, out } } => {
+            let (gpu, size) = out.open()?;
+            println!(
+                "adapter: {}, {}x{}, {samples} samples, median of {frames} frame(s)",
+                gpu.adapter_name(),
+                size.0,
+                size.1
+            );
+            println!("| mode | resolution | ms/frame (Ssao passes) |\n|---|---|---:|");
+            let rows = crate::app::bench::ssao(&gpu, samples, frames, size, |r| {
+                let res = if r.half_resolution { "half" } else { "full" };
+                println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Cuboids { spheres, helices, frames, rounds, out } } => {
+            let (gpu, size) = out.open()?;
+            let pair = |s: &str| -> anyhow::Result<(usize, usize)> {
+                let bad = || anyhow::anyhow!("expected COUNTxTRIANGLES such as 185x2000, not {s:?}");
+                let (a, b) = s.split_once('x').ok_or_else(bad)?;
+                let (a, b): (usize, usize) =
+                    (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+                if a == 0 || b == 0 {
+                    return Err(bad());
+                }
+                Ok((a, b))
+            };
+            let spheres = pair(&spheres)?;
+            let helices = helices.iter().map(|h| pair(h)).collect::<anyhow::Result<Vec<_>>>()?;
+            println!(
+                "adapter: {}, {}x{}, {rounds} round(s) of blocks A B B A of {frames} frame(s)",
+                gpu.adapter_name(),
+                size.0,
+                size.1
+            );
+            println!(
+                "| scene | objects | triangles | draws | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::app::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| {
+                println!(
+                    "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
+                    r.scene,
+                    r.objects,
+                    r.triangles,
+                    r.draws,
+                    r.fps_linear,
+                    r.fps_trilinear,
+                    100.0 * r.ratio
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Shadows { lights, tiles, frames, out } } => {
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!(
+                "| lights | tile | atlas | atlas MiB | N x tile^2 x 4 B (Table 5.1) MiB | ms/frame |\n|---:|---:|---:|---:|---:|---:|"
+            );
+            let rows = crate::app::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| {
+                let ms = r.ms_per_frame.map_or_else(|| format!("skipped ({})", r.note), |ms| format!("{ms:.1}"));
+                println!(
+                    "| {} | {} | {}x{} | {:.1} | {:.1} | {ms} |",
+                    r.lights, r.tile, r.atlas_width, r.atlas_height, r.atlas_mib, r.table_mib
+                );
+            })?;
+            out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Cloth { triangles, warmup, frames } } => {
+            println!("tablecloth over torus, frame = 1/60 s, {warmup} warm-up + {frames} timed frames");
+            println!(
+                "| triangles | mean ms/frame | median | worst | CPU ms/frame | max strain |\n|---:|---:|---:|---:|---:|---:|"
+            );
+            for r in crate::app::bench::cloth(&triangles, warmup, frames) {
+                let cpu = r.cpu_ms.map_or("n/a".to_string(), |c| format!("{c:.2}"));
+                println!(
+                    "| {} | {:.2} | {:.2} | {:.2} | {cpu} | {:.3} |",
+                    r.triangles, r.mean_ms, r.median_ms, r.worst_ms, r.max_strain
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::PemLobes { size, svg, json } } => {
+            let rows = crate::app::bench::pem_lobes(size)?;
+            println!("Lobe shape error at equal volume, face size {size}:\n");
+            print!("{}", crate::app::bench::pem_lobes_markdown(&rows));
+            println!("\nCalibration, default kernel, face size {size}:\n");
+            print!("{}", crate::app::bench::pem_calibration_markdown(size));
+            println!("\nPEM memory (MiB):\n");
+            print!("{}", crate::app::bench::pem_memory_markdown());
+            if let Some(path) = svg {
+                let title = format!("PEM lobe shape error at equal volume, {size}^2 faces");
+                crate::io::atomic::write_atomic(&path, crate::app::bench::pem_lobes_svg(&rows, &title).as_bytes())?;
+            }
+            if let Some(path) = json {
+                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Graph { nodes, frames } } => {
+            let r = crate::app::bench::idle_overhead(nodes, frames)?;
+            println!(
+                "evaluator overhead, {} nodes, nothing changed: {:.2} us/frame (median of {} batches of {} frames); first frame (all run): {:.1} us",
+                nodes, r.median_us, r.batches, r.frames_per_batch, r.first_frame_us
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}

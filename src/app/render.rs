@@ -1,0 +1,403 @@
+//! The headless batch runner behind `werkstatt render`: evaluates frames, waits for every
+//! resource (so output is deterministic), writes the output nodes' images and `stats.json`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use serde::Serialize;
+
+use crate::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+use crate::core::graph::{Graph, PortRef};
+use crate::core::node::Product;
+use crate::core::param::Choice as _;
+use crate::core::port::Value;
+use crate::core::resources::Resources;
+use crate::gpu::{self, GpuContext};
+use crate::io::image::ImageFormat;
+
+pub struct RenderOptions {
+    pub graph_path: PathBuf,
+    /// Inclusive frame range.
+    pub frames: (i64, i64),
+    pub fps: f64,
+    pub width: u32,
+    pub height: u32,
+    pub out_dir: PathBuf,
+    /// `node.param=value` overrides.
+    pub sets: Vec<String>,
+    /// `node.port` texture outputs to write besides the output nodes.
+    pub dumps: Vec<String>,
+    /// Supersampling: passes render at `ssaa` x the size and written images are box-filtered
+    /// down to it (1: off).
+    pub ssaa: u32,
+    /// The format of `dumps`; `None`: PNG for 8-bit textures, EXR for float ones.
+    pub dump_format: Option<ImageFormat>,
+    pub progress: bool,
+    /// The command line that asked for the run, recorded in `stats.json` (empty from code).
+    pub command: Vec<String>,
+    /// How long one frame may wait for pending nodes (loads, external sources) before it fails.
+    pub pending_timeout: std::time::Duration,
+}
+
+#[derive(Serialize, Debug)]
+pub struct NodeTiming {
+    pub cpu_ms: f64,
+    /// Time of the node's GPU passes, where the adapter has timestamp queries.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_ms: Option<f64>,
+    pub ran: bool,
+    /// What the node counted in its last run (placements, instances, triangles).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub counts: BTreeMap<&'static str, u64>,
+}
+
+#[derive(Serialize, Debug)]
+pub struct FrameStats {
+    pub frame: i64,
+    pub wall_ms: f64,
+    pub nodes: BTreeMap<String, NodeTiming>,
+    /// GPU textures and buffers created during the frame (evaluation and writing outputs);
+    /// a steady animation creates none after its first frame.
+    pub gpu_created: gpu::Created,
+}
+
+#[derive(Serialize, Debug)]
+pub struct Stats {
+    /// The command line of the run, so that stats.json alone says how to repeat it.
+    pub command: Vec<String>,
+    pub version: &'static str,
+    /// The commit the binary was built from, when it was built in a git checkout.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub git_commit: Option<&'static str>,
+    pub graph: String,
+    /// FNV-1a 64 of the graph's canonical text (after --set), hex; absent when it did not load.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub graph_hash: Option<String>,
+    /// The `--set` overrides, as given.
+    pub sets: Vec<String>,
+    /// The inclusive frame range asked for.
+    pub frame_range: [i64; 2],
+    pub fps: f64,
+    pub adapter: String,
+    pub width: u32,
+    pub height: u32,
+    /// Supersampling factor per axis (1: none).
+    pub ssaa: u32,
+    pub frames: Vec<FrameStats>,
+    /// Values reported by Watch nodes, one per frame.
+    pub values: BTreeMap<String, Vec<f64>>,
+    /// Files written, relative to the output folder.
+    pub files: Vec<String>,
+    /// Warnings about the run as a whole (first frame's node warnings included).
+    pub warnings: Vec<String>,
+    /// Why the run failed; absent when it succeeded.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl Stats {
+    /// The record of a run before anything rendered: what was asked for.
+    pub fn new(opts: &RenderOptions) -> Stats {
+        Stats {
+            command: opts.command.clone(),
+            version: env!("CARGO_PKG_VERSION"),
+            git_commit: option_env!("WERKSTATT_GIT_COMMIT"),
+            graph: opts.graph_path.display().to_string(),
+            graph_hash: None,
+            sets: opts.sets.clone(),
+            frame_range: [opts.frames.0, opts.frames.1],
+            fps: opts.fps,
+            adapter: String::new(),
+            width: opts.width,
+            height: opts.height,
+            ssaa: opts.ssaa,
+            frames: Vec::new(),
+            values: BTreeMap::new(),
+            files: Vec::new(),
+            warnings: Vec::new(),
+            error: None,
+        }
+    }
+}
+
+/// Writes a stats.json that records a run which failed before rendering (the graph did not
+/// load, no GPU), so CI finds the reason where it looks for results. Best effort: the
+/// original error is what the caller reports.
+pub fn record_failure(opts: &RenderOptions, error: &anyhow::Error) {
+    let mut stats = Stats::new(opts);
+    stats.error = Some(format!("{error:#}"));
+    if std::fs::create_dir_all(&opts.out_dir).is_ok() {
+        let _ = write_stats(&opts.out_dir, &stats);
+    }
+}
+
+/// How long batch rendering waits for one frame's pending nodes before failing, by default.
+pub const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// Loads the graph and applies `--set` overrides, re-validating afterwards.
+pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
+    let mut graph = Graph::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    for s in sets {
+        graph.set_from_cli(s).map_err(anyhow::Error::msg)?;
+    }
+    Ok(graph)
+}
+
+/// Loads the graph (with `--set` overrides) and renders the frames; returns the statistics
+/// (also written to `stats.json`, with an `error` when the run fails).
+pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
+    let graph = load_with_overrides(&opts.graph_path, &opts.sets).inspect_err(|e| record_failure(opts, e))?;
+    render_graph(opts, &graph, gpu)
+}
+
+/// Renders the frames of a loaded graph (`opts.sets` already applied). On failure stats.json
+/// keeps the frames that rendered and says why the run stopped.
+pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> anyhow::Result<Stats> {
+    let mut stats = Stats::new(opts);
+    stats.graph_hash = Some(format!("{:016x}", crate::core::hash::fnv1a(graph.to_ron().as_bytes())));
+    stats.adapter = gpu.adapter_name();
+    match render_frames(opts, graph, gpu, &mut stats) {
+        Ok(()) => {
+            write_stats(&opts.out_dir, &stats)?;
+            Ok(stats)
+        }
+        Err(e) => {
+            stats.error = Some(format!("{e:#}"));
+            if std::fs::create_dir_all(&opts.out_dir).is_ok() {
+                let _ = write_stats(&opts.out_dir, &stats);
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Frames of an output node with a fixed `frame` parameter (ExportGeometry's `frame: 24`)
+/// that the range never reaches: the node would write nothing, which must not pass silently.
+fn fixed_frame_warnings(graph: &Graph, (first, last): (i64, i64)) -> Vec<String> {
+    let mut out = Vec::new();
+    for (id, node) in &graph.nodes {
+        let Some(spec) = crate::core::spec::find(&node.kind).filter(|s| s.is_output) else { continue };
+        let Some((_, p)) = spec.param("frame") else { continue };
+        let frame = node.params.get("frame").and_then(crate::core::param::ParamValue::as_f64).unwrap_or(match p.kind {
+            crate::core::param::ParamKind::Int { default, .. } => default as f64,
+            _ => -1.0,
+        }) as i64;
+        if frame >= 0 && !(first..=last).contains(&frame) {
+            out.push(format!(
+                "node \"{id}\" ({}) writes only frame {frame}, outside the rendered frames {first}..{last}: it writes nothing",
+                spec.kind
+            ));
+        }
+    }
+    out
+}
+
+fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &mut Stats) -> anyhow::Result<()> {
+    let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(graph, d)).collect::<anyhow::Result<_>>()?;
+    let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
+    let mut evaluator = Evaluator::new(graph, &extra_roots).map_err(anyhow::Error::msg)?;
+    if evaluator.roots().next().is_none() {
+        bail!(
+            "{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render",
+            opts.graph_path.display()
+        );
+    }
+    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("cannot create {}", opts.out_dir.display()))?;
+    let resources = Resources::new(false);
+    let settings = FrameSettings {
+        width: opts.width * opts.ssaa.max(1),
+        height: opts.height * opts.ssaa.max(1),
+        frames: Some(opts.frames),
+        base_dir: opts.graph_path.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let (first, last) = opts.frames;
+    for w in fixed_frame_warnings(graph, opts.frames) {
+        eprintln!("warning: {w}");
+        stats.warnings.push(w);
+    }
+    let bar = opts.progress.then(|| {
+        let bar = indicatif::ProgressBar::new(last.saturating_sub(first).saturating_add(1) as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {elapsed} (eta {eta})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    for frame in first..=last {
+        let time = FrameTime { frame, fps: opts.fps };
+        let start = Instant::now();
+        let created_before = gpu.created();
+        let mut nodes = BTreeMap::new();
+        // Batch mode waits for loads: evaluate, wait for resources, repeat until settled.
+        loop {
+            let summary = evaluator.evaluate(time, Some(gpu), &resources, &settings);
+            for r in evaluator.reports() {
+                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming {
+                    cpu_ms: 0.0,
+                    gpu_ms: None,
+                    ran: false,
+                    counts: BTreeMap::new(),
+                });
+                t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
+                t.ran |= r.ran;
+                t.counts = r.counts.iter().copied().collect();
+            }
+            if summary.pending == 0 {
+                break;
+            }
+            if resources.in_flight() == 0 && summary.ran == 0 {
+                bail!("frame {frame}: {}", nothing_will_arrive(&evaluator));
+            }
+            // A node waiting on an external source (a live link with no sender) never settles.
+            if start.elapsed() > opts.pending_timeout {
+                bail!(
+                    "frame {frame}: still pending after {:.1} s (--pending-timeout): {}",
+                    opts.pending_timeout.as_secs_f64(),
+                    failures(&evaluator).join("; ")
+                );
+            }
+            // Bounded too: a loader that never returns fails the frame above instead of hanging.
+            resources.wait_idle_timeout(opts.pending_timeout.saturating_sub(start.elapsed()));
+            if resources.in_flight() == 0 {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        }
+        for (node, ms) in gpu.collect_timings() {
+            if let Some(t) = nodes.get_mut(&*node) {
+                *t.gpu_ms.get_or_insert(0.0) += ms;
+            }
+        }
+        let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let failures = failures(&evaluator);
+        if !failures.is_empty() {
+            if let Some(b) = &bar {
+                b.abandon();
+            }
+            // Keep the statistics of the frames that worked: CI wants them most when a frame fails.
+            let gpu_created = gpu.created().since(created_before);
+            stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
+            bail!("frame {frame}: {}", failures.join("\n  "));
+        }
+        for r in evaluator.reports() {
+            for w in r.warnings {
+                if frame == first {
+                    let w = format!("node \"{}\" ({}): {w}", r.id, r.kind);
+                    eprintln!("warning: {w}");
+                    stats.warnings.push(w);
+                }
+            }
+        }
+        let roots: Vec<String> = evaluator.roots().map(str::to_string).collect();
+        for id in &roots {
+            for product in evaluator.products(id) {
+                let name = |ext: &str| format!("{id}_{frame:04}.{ext}");
+                match product {
+                    Product::Image { image, format } => {
+                        let name = name(format.name());
+                        let px = resolve(gpu, image, opts)?;
+                        crate::io::image::write_image(&opts.out_dir.join(&name), &px, *format)?;
+                        stats.files.push(name);
+                    }
+                    Product::Geometry { mesh, format } => {
+                        let name = name(format.name());
+                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, *format)?;
+                        stats.files.push(name);
+                    }
+                    Product::Value(v) => stats.values.entry(id.clone()).or_default().push(*v),
+                }
+            }
+        }
+        for d in &dumps {
+            let value = evaluator.output(&d.node, &d.port);
+            let Some(img) = value.and_then(Value::as_texture) else {
+                bail!("--dump {d}: the port holds no texture this frame");
+            };
+            let format = opts.dump_format.unwrap_or(match img.format {
+                wgpu::TextureFormat::Rgba8UnormSrgb | wgpu::TextureFormat::Rgba8Unorm => ImageFormat::Png,
+                _ => ImageFormat::Exr,
+            });
+            let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
+            let mut px = resolve(gpu, img, opts)?;
+            if format == ImageFormat::Png {
+                crate::io::image::tonemap_for_png(&mut px);
+            }
+            crate::io::image::write_image(&opts.out_dir.join(&name), &px, format)?;
+            stats.files.push(name);
+        }
+        let gpu_created = gpu.created().since(created_before);
+        stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    Ok(())
+}
+
+/// Reads an image back at the output size: a supersampled frame-sized image is box-filtered
+/// down; other sizes (a matrix texture, a shadow atlas) do not scale with the frame and are
+/// written as they are.
+fn resolve(gpu: &GpuContext, image: &gpu::GpuImage, opts: &RenderOptions) -> anyhow::Result<gpu::Pixels> {
+    let px = gpu::read_back(gpu, image)?;
+    let n = opts.ssaa.max(1);
+    Ok(if n > 1 && (px.width, px.height) == (opts.width * n, opts.height * n) {
+        crate::io::image::downsample_box(&px, n)
+    } else {
+        px
+    })
+}
+
+fn write_stats(dir: &Path, stats: &Stats) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(stats)?;
+    crate::io::atomic::write_atomic(&dir.join("stats.json"), json.as_bytes())
+        .with_context(|| format!("cannot write {}/stats.json", dir.display()))
+}
+
+fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
+    let r = PortRef::parse(text).with_context(|| format!("--dump \"{text}\": expected node.port"))?;
+    let node = graph.nodes.get(&r.node).with_context(|| format!("--dump {text}: there is no node \"{}\"", r.node))?;
+    let spec = crate::core::spec::find(&node.kind).context("unknown kind")?;
+    let Some((_, port)) = spec.output(&r.port) else {
+        bail!(
+            "--dump {text}: {} has no output \"{}\"; its outputs are: {}",
+            spec.kind,
+            r.port,
+            spec.outputs.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+        );
+    };
+    if !port.ty.viewable() {
+        bail!("--dump {text}: the port is a {}, not a texture", port.ty);
+    }
+    Ok(r)
+}
+
+/// Why a batch render cannot settle: the pending nodes wait for something that no file load
+/// will bring (a `LiveLink` waits for a simulator to connect), with what to do instead.
+fn nothing_will_arrive(ev: &Evaluator) -> String {
+    let waiting = failures(ev);
+    let live = ev
+        .reports()
+        .any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::live_link::LIVE_LINK.kind);
+    let mut msg = format!("nothing will arrive in a batch render: {}", waiting.join("; "));
+    if live {
+        msg.push_str(&format!("\n  help: {}", crate::nodes::live_link::RECORD_HELP));
+    }
+    msg
+}
+
+/// Messages for every failed node, naming node and kind.
+pub fn failures(ev: &Evaluator) -> Vec<String> {
+    ev.reports()
+        .filter_map(|r| match r.status {
+            NodeStatus::Failed(m) => Some(format!("node \"{}\" ({}) failed: {m}", r.id, r.kind)),
+            NodeStatus::Pending(p) => {
+                Some(format!("node \"{}\" ({}) is still waiting for {}", r.id, r.kind, p.display()))
+            }
+            _ => None,
+        })
+        .collect()
+}

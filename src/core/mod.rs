@@ -1,0 +1,12 @@
+//! The engine's core: the graph model, node API, ports, parameters, resources and evaluation.
+
+pub mod eval;
+pub mod graph;
+pub mod hash;
+pub mod node;
+pub mod param;
+pub mod port;
+pub mod resources;
+pub mod rng;
+pub mod signal;
+pub mod spec;

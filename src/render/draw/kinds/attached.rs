@@ -1,0 +1,75 @@
+//! Deferred-warped detail geometry (Knuth et al., "Deferred Warping"): instances of a detail
+//! mesh warped through the matrix texture in the vertex stage (shaders/attach.wgsl, or
+//! shaders/depth.wgsl `vs_attached`), and exported through the same warp run as a compute pass
+//! or its CPU twin.
+
+use std::any::Any;
+
+use crate::mesh::Vertex;
+use crate::render::draw::compose::VertexStage;
+use crate::render::draw::kind::{
+    DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PipelineKey, PrepareCx, TargetKind,
+};
+use crate::render::scene::DrawItem;
+use crate::warp::gpu::{WarpDevice, assemble, warp_binds, warp_layout};
+use crate::warp::{AttachedDraw, InstanceData};
+
+impl ItemKind for AttachedDraw {
+    fn name(&self) -> &'static str {
+        "attached"
+    }
+
+    fn places_mesh(&self) -> bool {
+        false
+    }
+
+    fn prepare(
+        &self,
+        cx: &mut PrepareCx<'_, '_>,
+        item: &DrawItem,
+        stage: VertexStage,
+    ) -> anyhow::Result<Option<KindDraw>> {
+        anyhow::ensure!(
+            stage == VertexStage::Linear,
+            "attachments follow their surface through the matrix texture and cannot be drawn under a non-linear grid"
+        );
+        if self.instances.is_empty() {
+            return Ok(None);
+        }
+        let gpu = cx.pass.gpu;
+        let resolver = &mut *cx.resolver;
+        let instances = self.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, self))?.clone();
+        let layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
+        let uniform = self.settings.uniform(self.per_instance_frames());
+        let group = cx.group2.bind_group(gpu, &layout, &warp_binds(&self.matrix, &uniform));
+        let (shader, entry) = match cx.pass.target {
+            TargetKind::GBuffer => ("attach.wgsl", "vs_main"),
+            TargetKind::DepthTiles => ("depth.wgsl", "vs_attached"),
+        };
+        // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp.wgsl).
+        let constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
+        let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants };
+        let vertex = [Some(Vertex::layout()), Some(InstanceData::layout())];
+        let mesh = item.mesh.gpu(gpu);
+        Ok(Some(KindDraw {
+            pipeline: cx.pass.pipeline(key, Some(&layout), &vertex)?,
+            group2: Some(group),
+            mesh: Some(((*mesh.vertices).clone(), (*mesh.indices).clone())),
+            instances: Some((instances, self.instances.len() as u32)),
+            call: DrawCall::Indexed { indices: mesh.index_count },
+        }))
+    }
+
+    fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
+        let device = match cx.device {
+            ExportDevice::Gpu => WarpDevice::Gpu,
+            ExportDevice::Cpu => WarpDevice::Cpu,
+        };
+        let warped = cx.warper.warp_layout_on(cx.gpu, &item.mesh, self, device)?;
+        Ok(Exported::World(assemble(&item.mesh, warped)?))
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

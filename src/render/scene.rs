@@ -1,0 +1,213 @@
+//! Scene data that flows between render nodes: cameras, materials, drawable items, G-buffers.
+
+use std::sync::{Arc, OnceLock};
+
+use glam::{Mat4, Vec3};
+
+use crate::gpu::{GpuContext, GpuImage};
+use crate::mesh::Mesh;
+use crate::render::draw::kind::ItemKind;
+use crate::render::draw::kinds::mesh::PlainMesh;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    pub fov_y_degrees: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Camera {
+    pub fn view(&self) -> Mat4 {
+        Mat4::look_at_rh(self.eye, self.target, self.up)
+    }
+    /// A right-handed perspective projection with depth in [0, 1] (wgpu's convention).
+    pub fn projection(&self, aspect: f32) -> Mat4 {
+        Mat4::perspective_rh(self.fov_y_degrees.to_radians(), aspect, self.near, self.far)
+    }
+}
+
+/// A camera's matrices for one target size: made once per camera where the scene is drawn
+/// (the G-buffer carries it) and shared by every screen-space pass, which reads positions back
+/// from depth with `inv_view_proj` instead of rebuilding the projection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub view: Mat4,
+    pub proj: Mat4,
+    pub view_proj: Mat4,
+    pub inv_view: Mat4,
+    pub inv_proj: Mat4,
+    pub inv_view_proj: Mat4,
+    pub eye: Vec3,
+    pub near: f32,
+    pub far: f32,
+    /// Target size in pixels.
+    pub width: u32,
+    pub height: u32,
+    /// Sub-pixel offset of the projection in pixels (for temporal accumulation); zero here.
+    pub jitter: glam::Vec2,
+}
+
+impl View {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> View {
+        View::jittered(camera, width, height, glam::Vec2::ZERO)
+    }
+
+    /// A view whose projection is shifted by `jitter` pixels.
+    pub fn jittered(camera: &Camera, width: u32, height: u32, jitter: glam::Vec2) -> View {
+        let (w, h) = (width.max(1) as f32, height.max(1) as f32);
+        let shift = Mat4::from_translation(Vec3::new(2.0 * jitter.x / w, -2.0 * jitter.y / h, 0.0));
+        let view = camera.view();
+        let proj = shift * camera.projection(w / h);
+        let view_proj = proj * view;
+        View {
+            view,
+            proj,
+            view_proj,
+            inv_view: view.inverse(),
+            inv_proj: proj.inverse(),
+            inv_view_proj: view_proj.inverse(),
+            eye: camera.eye,
+            near: camera.near,
+            far: camera.far,
+            width,
+            height,
+            jitter,
+        }
+    }
+}
+
+/// An RGBA8 (sRGB-encoded) image on the CPU, e.g. a material's base-colour map.
+pub struct Image8 {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+    /// Colour (sRGB-encoded, decoded when sampled) or data such as a parameter map (as stored).
+    pub srgb: bool,
+    gpu: OnceLock<GpuImage>,
+}
+
+impl Image8 {
+    /// A colour image, sRGB-encoded.
+    pub fn new(width: u32, height: u32, rgba: Vec<u8>) -> Image8 {
+        Image8 { width, height, rgba, srgb: true, gpu: OnceLock::new() }
+    }
+
+    /// A data image (a parameter map): shaders see the stored values.
+    pub fn new_linear(width: u32, height: u32, rgba: Vec<u8>) -> Image8 {
+        Image8 { width, height, rgba, srgb: false, gpu: OnceLock::new() }
+    }
+
+    /// Uploads on first use; colour images are sampled as sRGB so shaders see linear values.
+    pub fn gpu(&self, gpu: &GpuContext) -> &GpuImage {
+        self.gpu.get_or_init(|| {
+            let format = if self.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm };
+            GpuImage::upload(gpu, "image", self.width, self.height, format, 4, &self.rgba)
+        })
+    }
+}
+
+pub struct Material {
+    /// Linear RGB.
+    pub base_color: Vec3,
+    /// 0 = rough, 1 = mirror-like; stored in the G-buffer's colour alpha.
+    pub glossiness: f32,
+    pub texture: Option<Arc<Image8>>,
+    pub uv_scale: f32,
+    /// A parameter map (dissertation Fig. 5.23): its red channel blends glossiness from
+    /// `gloss_min` (0) to `glossiness` (1) within one material.
+    pub gloss_map: Option<Arc<Image8>>,
+    pub gloss_min: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            base_color: Vec3::splat(0.8),
+            glossiness: 0.2,
+            texture: None,
+            uv_scale: 1.0,
+            gloss_map: None,
+            gloss_min: 0.0,
+        }
+    }
+}
+
+/// One mesh to draw, with its material, model transform and kind: how it is drawn and exported
+/// (a plain mesh, attachments warped through a matrix texture, a GPU tessellation, per-pixel PN
+/// depth; see `crate::render::draw::kind`).
+#[derive(Clone)]
+pub struct DrawItem {
+    pub mesh: Arc<Mesh>,
+    pub material: Arc<Material>,
+    pub model: Mat4,
+    /// Detail geometry (attachments) versus coarse cloth; written to the G-buffer flag.
+    pub detail: bool,
+    /// A non-linear (cuboid grid) transform applied after `model`: the vertex lands at
+    /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
+    pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
+    pub kind: Arc<dyn ItemKind>,
+}
+
+impl DrawItem {
+    /// A coarse (non-detail) mesh drawn as it is.
+    pub fn plain(mesh: Arc<Mesh>, material: Arc<Material>, model: Mat4) -> DrawItem {
+        DrawItem { mesh, material, model, detail: false, cuboid: None, kind: Arc::new(PlainMesh) }
+    }
+
+    /// This item drawn as `kind`.
+    pub fn with_kind(self, kind: impl ItemKind) -> DrawItem {
+        DrawItem { kind: Arc::new(kind), ..self }
+    }
+}
+
+/// The deferred renderer's multiple render targets.
+pub struct GBuffer {
+    /// Linear base colour (rgb) and glossiness (a), Rgba16Float.
+    pub color: GpuImage,
+    /// World-space normal (rgb) and the detail flag (a: 0 coarse, 1 detail), Rgba16Float.
+    pub normal: GpuImage,
+    /// Linear view-space depth, R32Float; 0 where nothing was drawn.
+    pub depth: GpuImage,
+    /// The hardware depth buffer, Depth32Float.
+    pub depth_buffer: GpuImage,
+    pub camera: Camera,
+    /// The view the G-buffer was drawn with, for every pass that reads it.
+    pub view: View,
+}
+
+impl GBuffer {
+    pub fn width(&self) -> u32 {
+        self.color.width
+    }
+    pub fn height(&self) -> u32 {
+        self.color.height
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_view_inverts_its_own_matrices_and_jitter_shifts_by_pixels() {
+        let camera = Camera {
+            eye: Vec3::new(1.0, 2.0, 3.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            fov_y_degrees: 45.0,
+            near: 0.1,
+            far: 50.0,
+        };
+        let v = View::new(&camera, 64, 32);
+        assert!((v.view_proj * v.inv_view_proj).abs_diff_eq(Mat4::IDENTITY, 1e-4));
+        assert!(v.inv_view.transform_point3(Vec3::ZERO).abs_diff_eq(camera.eye, 1e-5));
+        // The target lands in the centre; a one-pixel jitter moves it by 2/width in NDC.
+        let centre = v.view_proj.project_point3(Vec3::ZERO);
+        assert!(centre.truncate().abs_diff_eq(glam::Vec2::ZERO, 1e-5));
+        let shifted = View::jittered(&camera, 64, 32, glam::Vec2::new(1.0, 0.0)).view_proj.project_point3(Vec3::ZERO);
+        assert!((shifted.x - 2.0 / 64.0).abs() < 1e-5 && shifted.y.abs() < 1e-5);
+    }
+}
