@@ -2,7 +2,6 @@
 //! against an independent computation per kind; a kind that cannot export says so. A kind
 //! defined outside the crate draws and exports through the same trait.
 
-use std::any::Any;
 use std::sync::Arc;
 
 use glam::{DVec3, Mat4, Vec3};
@@ -167,9 +166,6 @@ impl ItemKind for Lifted {
     }
     fn export(&self, _: &mut ExportCx<'_>, _: &DrawItem) -> anyhow::Result<Exported> {
         Ok(Exported::Local((*self.0).clone()))
-    }
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 

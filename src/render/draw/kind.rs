@@ -64,8 +64,6 @@ pub trait ItemKind: Any + Send + Sync {
     /// model matrix and grid, as the vertex stage places it) or in world space. A kind that
     /// cannot export returns an error saying why; it never exports something else.
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported>;
-
-    fn as_any(&self) -> &dyn Any;
 }
 
 /// What a kind's export produced.
@@ -223,6 +221,6 @@ pub struct PrepareCx<'a, 'p> {
 impl DrawItem {
     /// The item's kind as `K`, if it is one.
     pub fn kind_as<K: ItemKind>(&self) -> Option<&K> {
-        self.kind.as_any().downcast_ref::<K>()
+        (&*self.kind as &dyn Any).downcast_ref::<K>()
     }
 }

@@ -3,8 +3,6 @@
 //! shaders/depth.wgsl `vs_attached`), and exported through the same warp run as a compute pass
 //! or its CPU twin.
 
-use std::any::Any;
-
 use crate::mesh::Vertex;
 use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{
@@ -67,9 +65,5 @@ impl ItemKind for AttachedDraw {
         };
         let warped = cx.warper.warp_layout_on(cx.gpu, &item.mesh, self, device)?;
         Ok(Exported::World(assemble(&item.mesh, warped)?))
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }

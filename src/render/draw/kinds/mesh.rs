@@ -1,8 +1,6 @@
 //! A plain mesh: its own vertex and index buffers, placed by each item's transform (model
 //! matrix, grid or single cuboid). Items that share a mesh and maps draw as one instanced draw.
 
-use std::any::Any;
-
 use crate::mesh::Mesh;
 use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{DrawCall, ExportCx, Exported, ItemKind, KindDraw, PrepareCx};
@@ -31,10 +29,6 @@ impl ItemKind for PlainMesh {
 
     fn export(&self, _: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
         Ok(Exported::Local(local_copy(&item.mesh)))
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 

@@ -3,8 +3,6 @@
 //! mesh's storage buffers; other targets, and items under a non-linear grid, draw the mesh as
 //! it is.
 
-use std::any::Any;
-
 use crate::gpu::Bind;
 use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{DrawCall, ExportCx, Exported, ItemKind, KindDraw, PipelineKey, PrepareCx, TargetKind};
@@ -58,9 +56,5 @@ impl ItemKind for PnPixels {
             "an item drawn with per-pixel PN depth has no mesh to export (its surface exists per pixel only); \
              export a `Tessellate` node with `per_pixel` off and `pn` on for the PN surface as triangles"
         )
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }

@@ -2,8 +2,6 @@
 //! index buffers written by the compute pass, drawn with indirect arguments through the same
 //! vertex stages as plain meshes, and exported by reading them back or by the CPU reference.
 
-use std::any::Any;
-
 use crate::gpu::readback::read_buffer_range;
 use crate::gpu::{GpuContext, read_buffer};
 use crate::mesh::{Mesh, Vertex};
@@ -43,10 +41,6 @@ impl ItemKind for TessMesh {
             ExportDevice::Cpu => self.cpu_reference(&item.mesh),
         };
         Ok(Exported::Local(welded_mesh(&vertices, &indices)?))
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }
 
