@@ -217,13 +217,9 @@ impl Default for AtlasBuilder {
     }
 }
 
-/// The moments format: Rg16Float (Table 5.1's RG16F), else the HDR format.
+/// The moments format: Rg16Float (Table 5.1's RG16F) where the device renders it.
 fn moments_format(gpu: &GpuContext) -> wgpu::TextureFormat {
-    if gpu.formats().hdr == wgpu::TextureFormat::Rgba16Float {
-        wgpu::TextureFormat::Rg16Float
-    } else {
-        gpu.formats().hdr
-    }
+    gpu.formats().moments
 }
 
 impl AtlasBuilder {
@@ -351,7 +347,12 @@ impl AtlasBuilder {
                 .collect();
             let depth = self.drawer.depth_tiles(gpu, items, &tiles, bw, bh)?;
             let moments = GpuImage::target(gpu, "vsm moments", bw, bh, format);
-            self.moments.draw(gpu, &[Bind::Uniform(&[0u8; 16]), Bind::Texture(&depth)], &[&moments.view], &[format])?;
+            let depth_as_float = Bind::View(
+                &depth.view,
+                wgpu::TextureViewDimension::D2,
+                wgpu::TextureSampleType::Float { filterable: false },
+            );
+            self.moments.draw(gpu, &[Bind::Uniform(&[0u8; 16]), depth_as_float], &[&moments.view], &[format])?;
             let sigmas: Vec<f32> = batch.iter().map(|l| l.sigma).collect();
             let blurred = self.blur(gpu, &moments, t, bc, &sigmas)?;
             if single {

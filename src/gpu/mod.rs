@@ -92,6 +92,9 @@ pub struct Formats {
     pub matrix_f16: wgpu::TextureFormat,
     /// The hardware depth buffer: Depth32Float, else Depth24Plus.
     pub depth: wgpu::TextureFormat,
+    /// Two-channel moments (variance shadow maps): Rg16Float, else the first renderable of
+    /// Rgba16Float, Rgba32Float (llvmpipe's GL cannot render Rg16Float).
+    pub moments: wgpu::TextureFormat,
     /// Display-ready 8-bit colour: Rgba8UnormSrgb.
     pub ldr: wgpu::TextureFormat,
     /// Whether 32-bit float textures can be sampled with a filtering sampler.
@@ -111,6 +114,7 @@ impl Formats {
             float32_renderable: renders(F::Rgba32Float),
             matrix_f16: first(&[F::Rgba16Float, F::Rgba32Float]),
             depth: first(&[F::Depth32Float, F::Depth24Plus]),
+            moments: first(&[F::Rg16Float, F::Rgba16Float, F::Rgba32Float]),
             ldr: F::Rgba8UnormSrgb,
             float32_filterable: features(F::Rgba32Float)
                 .is_some_and(|x| x.flags.contains(wgpu::TextureFormatFeatureFlags::FILTERABLE)),

@@ -268,10 +268,14 @@ fn cached<P: Clone>(
     }
     let (deps, module) = cache.module(gpu, shader);
     let built = module.and_then(|module| {
-        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // Internal errors too: a backend that cannot translate the shader (naga's GLSL for GL)
+        // reports an internal error, not a validation one.
+        let internal = gpu.device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let p = build(&module);
-        match pollster::block_on(scope.pop()) {
-            Some(e) => Err(ShaderError { file: shader.to_string(), message: e.to_string() }),
+        let validation = pollster::block_on(validation.pop());
+        match validation.or(pollster::block_on(internal.pop())) {
+            Some(e) => Err(ShaderError { file: shader.to_string(), message: format!("{e:#}") }),
             None => Ok(p),
         }
     });

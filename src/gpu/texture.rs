@@ -144,9 +144,20 @@ impl GpuImage {
     /// uploads, display targets). Always readable back (COPY_SRC).
     pub fn create(gpu: &GpuContext, label: &str, desc: TextureDesc) -> GpuImage {
         let desc = TextureDesc { usage: desc.usage | wgpu::TextureUsages::COPY_SRC, ..desc };
+        let mut size = desc.extent();
+        // wgpu's GL backend makes every square texture of 6k layers a cube map
+        // (GL_TEXTURE_CUBE_MAP[_ARRAY]), which then reads as zero through 2D-array views: a
+        // spare layer keeps a 2D array (cube faces kept for `textureLoad`) a 2D array there.
+        if gpu.info.backend == wgpu::Backend::Gl
+            && desc.kind == TextureKind::D2Array
+            && desc.width == desc.height
+            && desc.layers % 6 == 0
+        {
+            size.depth_or_array_layers += 1;
+        }
         let texture = gpu.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
-            size: desc.extent(),
+            size,
             mip_level_count: desc.mips,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,

@@ -57,17 +57,10 @@ pub struct PemSet {
 /// (shaders/cube.wgsl reads it with `textureLoad`: OpenGL cannot view a cube texture as an
 /// array, and the CPU twins then match exactly), for rendering into faces and levels.
 pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> anyhow::Result<GpuImage> {
-    anyhow::ensure!(gpu.info.backend != wgpu::Backend::Gl, "{GL_UNSUPPORTED}");
     let usage =
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
     Ok(GpuImage::create(gpu, label, TextureDesc::array(size, size, 6, gpu.formats().hdr, usage).with_full_mips()))
 }
-
-/// Why the IBL nodes refuse the GL backend: there, the six-layer mip-mapped arrays they keep
-/// cube maps in read back and sample as zero (uploaded, copied or rendered alike), so every
-/// IBL image would be black. Not yet understood; Vulkan (lavapipe or a GPU) is exact.
-pub const GL_UNSUPPORTED: &str = "image-based lighting does not run on the GL backend yet (its cube-map arrays read \
-     back as zero there); render with Vulkan (WERKSTATT_BACKEND=vulkan: lavapipe or a GPU)";
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -340,8 +333,10 @@ impl CubePasses {
             return Ok(norms.share());
         }
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let desc = TextureDesc::array(cube.width, cube.width, 6, wgpu::TextureFormat::R32Float, usage)
-            .with_mips(cube.desc.mips);
+        // One float channel, as precise as the device renders (linear depth's format: R32Float,
+        // or 16-bit floats on llvmpipe's GL).
+        let desc =
+            TextureDesc::array(cube.width, cube.width, 6, gpu.formats().linear_depth, usage).with_mips(cube.desc.mips);
         let norms = GpuImage::create(gpu, "Phong normalization", desc);
         let size = cube.width as usize;
         for mip in 1..cube.desc.mips {
