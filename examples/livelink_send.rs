@@ -14,7 +14,7 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
-use werkstatt::nodes::live_link::{encode_frame, encode_topology};
+use werkstatt::nodes::mesh::live_link::{encode_frame, encode_topology};
 
 struct Options {
     address: String,

@@ -1,79 +1,70 @@
-//! The node library: one file per node family. `ALL` is the registry.
+//! The node library, one folder per family, as `src/` is grouped: `core` (numbers, maths, time,
+//! watching, writing and previewing images), `mesh` (primitives, mesh files, sequences, the live
+//! link), `cloth`, `render` (materials and draws, camera, G-buffer, direct light, tone mapping,
+//! export), one folder per technique (`warp`, `cuboid`, `tessellation`, `ibl`, `occlusion`) and
+//! `compare`. The nodes are glue: the algorithms they run live in `src/` (`src/warp/`, ...).
+//! `ALL` is the registry.
 
-pub mod attach;
-pub mod basic;
-pub mod camera;
-pub mod cloth;
+/// Cloth nodes: the simulator (`src/cloth/`) as a node. (Declared here, not in a
+/// `nodes/cloth/mod.rs`: that path was the simulator's before it moved to `src/cloth/`.)
+pub mod cloth {
+    pub mod node;
+}
+pub mod compare;
+pub mod core;
 pub mod cuboid;
-pub mod cuboid_grid;
-pub mod curves;
-pub mod direct_light;
-pub mod environment_map;
-pub mod export;
-pub mod gbuffer;
-pub mod geometry;
-pub mod hybrid_occlusion;
-pub mod ibl_shading;
-pub mod image_difference;
-pub mod live_link;
-pub mod matrix_texture;
-pub mod median_cut;
-pub mod mesh_sequence;
-pub mod output;
-pub mod pems;
-pub mod placements;
-pub mod reference_occlusion;
-pub mod scene;
-pub mod shadow_atlas;
-pub mod ssao;
-pub mod tessellate;
-pub mod tonemap;
+pub mod ibl;
+pub mod mesh;
+pub mod occlusion;
+pub mod render;
+pub mod tessellation;
+pub mod warp;
 
 use crate::core::node::prelude::*;
 
 /// Every node kind, in the order `werkstatt nodes` and the docs list them.
 pub static ALL: &[&NodeSpec] = &[
-    &basic::NUMBER,
-    &basic::MATH,
-    &basic::TIME,
-    &geometry::PRIMITIVE,
-    &geometry::MESH_FILE,
-    &geometry::TRANSFORM_MESH,
-    &tessellate::TESSELLATE,
+    &core::basic::NUMBER,
+    &core::basic::MATH,
+    &core::basic::TIME,
+    &mesh::geometry::PRIMITIVE,
+    &mesh::geometry::MESH_FILE,
+    &mesh::geometry::TRANSFORM_MESH,
+    &tessellation::tessellate::TESSELLATE,
     &cloth::node::CLOTH_SIM,
-    &mesh_sequence::MESH_SEQUENCE,
-    &live_link::LIVE_LINK,
-    &scene::MATERIAL,
-    &scene::DRAW,
-    &scene::MERGE,
-    &cuboid::CUBOID,
-    &cuboid_grid::CUBOID_GRID,
-    &cuboid::DEFORM,
-    &cuboid::DEFORM_SURFACE,
-    &camera::ORBIT_CAMERA,
-    &matrix_texture::MATRIX_TEXTURE,
-    &placements::SCATTER,
-    &placements::GRID_PLACEMENT,
-    &placements::CURVE_PLACEMENT,
-    &placements::PLACEMENT_FILE,
-    &curves::SVG_CURVES,
-    &attach::POINT_ATTACHMENT,
-    &attach::AREA_ATTACHMENT,
-    &attach::CURVE_ATTACHMENT,
-    &gbuffer::GBUFFER_PASS,
-    &direct_light::DIRECT_LIGHT,
-    &environment_map::ENVIRONMENT_MAP,
-    &median_cut::MEDIAN_CUT,
-    &pems::PEMS,
-    &shadow_atlas::SHADOW_ATLAS,
-    &ibl_shading::IBL_SHADING,
-    &ssao::SSAO,
-    &hybrid_occlusion::HYBRID_OCCLUSION,
-    &reference_occlusion::REFERENCE_OCCLUSION,
-    &tonemap::TONEMAP,
-    &image_difference::IMAGE_DIFFERENCE,
-    &output::IMAGE_WRITE,
-    &output::PREVIEW,
-    &export::EXPORT_GEOMETRY,
-    &basic::WATCH,
+    &mesh::mesh_sequence::MESH_SEQUENCE,
+    &mesh::live_link::LIVE_LINK,
+    &render::scene::MATERIAL,
+    &render::scene::DRAW,
+    &render::scene::MERGE,
+    &cuboid::cuboid::CUBOID,
+    &cuboid::cuboid_grid::CUBOID_GRID,
+    &cuboid::cuboid::DEFORM,
+    &cuboid::cuboid::DEFORM_SURFACE,
+    &render::camera::ORBIT_CAMERA,
+    &warp::matrix_texture::MATRIX_TEXTURE,
+    &warp::placements::SCATTER,
+    &warp::placements::GRID_PLACEMENT,
+    &warp::placements::CURVE_PLACEMENT,
+    &warp::placements::PLACEMENT_FILE,
+    &warp::curves::SVG_CURVES,
+    &warp::attach::POINT_ATTACHMENT,
+    &warp::attach::AREA_ATTACHMENT,
+    &warp::attach::CURVE_ATTACHMENT,
+    &render::gbuffer::GBUFFER_PASS,
+    &render::direct_light::DIRECT_LIGHT,
+    &ibl::environment_map::ENVIRONMENT_MAP,
+    &ibl::median_cut::MEDIAN_CUT,
+    &ibl::pems::PEMS,
+    &ibl::shadow_atlas::SHADOW_ATLAS,
+    &ibl::ibl_shading::IBL_SHADING,
+    &occlusion::ssao::SSAO,
+    &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
+    &occlusion::reference_occlusion::REFERENCE_OCCLUSION,
+    &render::tonemap::TONEMAP,
+    &compare::image_difference::IMAGE_DIFFERENCE,
+    &core::output::IMAGE_WRITE,
+    &core::output::PREVIEW,
+    &render::export::EXPORT_GEOMETRY,
+    &core::basic::WATCH,
 ];

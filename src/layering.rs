@@ -1,26 +1,29 @@
 //! A test of the module structure: no module of `src/` (or the node library) imports one that
 //! imports it back, directly or through others, so each layer can be read and changed alone.
-//! Modules of the layer folders (`core`, `io`, `app`) count one by one (`core::graph`); the
-//! `render` folder (the scene and the drawer, whose items carry their kind of draw) and a
-//! technique's folder (`warp`, `cuboid`, ...) count as one module each.
+//! Modules of the layer folders (`core`, `io`, `app`) count one by one (`core::graph`), and so
+//! do the node library's family folders (`nodes/render/` is `nodes::render`); the `render`
+//! folder (the scene and the drawer, whose items carry their kind of draw) and a technique's
+//! folder (`cloth`, `warp`, `cuboid`, `tessellation`, `ibl`, `occlusion`) count as one module
+//! each. A technique imports no node (`crate::nodes`): the nodes are built on the techniques.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// Folders of `src/` that group modules of one layer, each module counted alone.
-const LAYERS: [&str; 3] = ["core", "io", "app"];
+/// Folders of `src/` that group modules of one layer, each module counted alone, and the node
+/// library (`nodes/`, beside `src/`), each family counted alone.
+const LAYERS: [&str; 4] = ["core", "io", "app", "nodes"];
 
 /// The module a source file belongs to (`src/gpu/pool.rs` -> `gpu`, `src/core/graph.rs` ->
-/// `core::graph`, `src/render/draw/kinds/mesh.rs` -> `render`).
+/// `core::graph`, `src/render/draw/kinds/mesh.rs` -> `render`, `nodes/warp/attach.rs` ->
+/// `nodes::warp`).
 fn module_of(root: &Path, file: &Path) -> Option<String> {
     let rel = file.strip_prefix(root).ok()?;
     let mut parts = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned());
     let top = parts.next()?;
-    if top == "nodes" {
-        return Some("nodes".into());
-    }
-    let first = parts.next()?;
-    let name = first.trim_end_matches(".rs").to_string();
+    let name = match top.as_str() {
+        "nodes" => top,
+        _ => parts.next()?.trim_end_matches(".rs").to_string(),
+    };
     if LAYERS.contains(&name.as_str()) {
         let second = parts.next()?;
         let inner = second.trim_end_matches(".rs");
@@ -108,4 +111,17 @@ fn no_module_imports_one_that_imports_it_back() {
     assert!(graph.len() > 10, "found only {:?}", graph.keys());
     let cycles: Vec<String> = graph.keys().filter_map(|m| cycle_from(&graph, m)).map(|c| c.join(" -> ")).collect();
     assert!(cycles.is_empty(), "import cycles:\n{}", cycles.join("\n"));
+}
+
+/// The technique folders of `src/`: algorithms the nodes run, below the node library.
+const TECHNIQUES: [&str; 6] = ["cloth", "warp", "cuboid", "tessellation", "ibl", "occlusion"];
+
+#[test]
+fn no_technique_imports_a_node() {
+    let graph = imports(Path::new(env!("CARGO_MANIFEST_DIR")));
+    for technique in TECHNIQUES {
+        let deps = graph.get(technique).unwrap_or_else(|| panic!("no module {technique} in src/"));
+        let nodes: Vec<&String> = deps.iter().filter(|d| d.split("::").next() == Some("nodes")).collect();
+        assert!(nodes.is_empty(), "{technique} imports {nodes:?}: a technique must not depend on the nodes");
+    }
 }

@@ -10,13 +10,16 @@
 //! - [`mesh`] and [`color`]: the geometry and colour encodings every layer shares;
 //! - [`render`]: the scene that flows between render nodes, and the scene drawer with its item
 //!   kinds ([`render::draw`]);
-//! - one module per technique: [`warp`] (deferred warping), [`cuboid`] (the cuboid scene graph),
-//!   [`tessellation`], [`ibl`] (image-based lighting, shadows);
+//! - one module per technique: [`cloth`] (the cloth simulator), [`warp`] (deferred warping),
+//!   [`cuboid`] (the cuboid scene graph), [`tessellation`], [`ibl`] (image-based lighting,
+//!   shadows), [`occlusion`] (SSAO and its ray-traced reference);
 //! - [`io`]: writing images and geometry;
-//! - [`nodes`]: the node library, one file per node family, and its registry;
+//! - [`nodes`]: the node library, one folder per family as above (`nodes/render/`,
+//!   `nodes/warp/`, ...), and its registry;
 //! - [`app`]: the command line, the batch renderer, image regression, the editor, the benches.
 
 pub mod app;
+pub mod cloth;
 pub mod color;
 pub mod core;
 pub mod cuboid;
@@ -26,6 +29,7 @@ pub mod io;
 #[cfg(test)]
 mod layering;
 pub mod mesh;
+pub mod occlusion;
 pub mod render;
 pub mod tessellation;
 pub mod warp;

@@ -72,7 +72,7 @@ pub struct Vertex {
 impl Vertex {
     pub const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
         wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x2, 4 => Float32x3];
-    /// What the G-buffer and depth passes read (shaders/vertex_in.wgsl `MeshVertexIn`): position,
+    /// What the G-buffer and depth passes read (shaders/common/vertex_in.wgsl `MeshVertexIn`): position,
     /// normal and UV, leaving locations 2 and 4 to per-item data.
     pub const SHADING_ATTRIBUTES: [wgpu::VertexAttribute; 3] = [
         wgpu::VertexAttribute { format: wgpu::VertexFormat::Float32x3, offset: 0, shader_location: 0 },

@@ -4,12 +4,11 @@ use std::sync::Arc;
 
 use glam::{Mat4, Quat, Vec2, Vec3};
 
+use crate::cloth::{Cloth, Collider, FRAME_DT, FlagParams, Preset, SkirtParams, TableclothParams};
 use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::nodes::geometry;
+use crate::nodes::mesh::geometry;
 use crate::render::scene::{DrawItem, Material};
-
-use super::{Cloth, Collider, FRAME_DT, FlagParams, Preset, SkirtParams, TableclothParams};
 
 pub static CLOTH_SIM: NodeSpec = NodeSpec {
     kind: "ClothSim",

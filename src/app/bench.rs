@@ -104,9 +104,9 @@ pub fn attachments(
 
     use glam::{Affine2, Mat4, Vec2, Vec3};
 
-    use crate::nodes::attach::point_instance;
-    use crate::nodes::geometry;
-    use crate::nodes::matrix_texture::MatrixTextureNode;
+    use crate::nodes::mesh::geometry;
+    use crate::nodes::warp::attach::point_instance;
+    use crate::nodes::warp::matrix_texture::MatrixTextureNode;
     use crate::render::draw::{SceneDrawer, render_gbuffer};
     use crate::render::scene::{Camera, DrawItem, Material};
     use crate::warp::gpu::read_matrix;
@@ -250,7 +250,7 @@ pub struct ClothRow {
 /// Simulation time per frame (1/60 s) against triangle count for the tablecloth preset,
 /// after `warmup` frames so the cloth is in contact with the torus.
 pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
-    use crate::nodes::cloth::{FRAME_DT, Preset, TableclothParams};
+    use crate::cloth::{FRAME_DT, Preset, TableclothParams};
     let cpu_ns = || -> Option<u64> {
         std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
     };
@@ -576,7 +576,7 @@ pub fn occlusion_scene() -> anyhow::Result<(Vec<crate::render::scene::DrawItem>,
 
     use glam::{Mat4, Vec3};
 
-    use crate::nodes::geometry;
+    use crate::nodes::mesh::geometry;
     use crate::render::scene::{Camera, DrawItem, Material};
 
     let material = Arc::new(Material::default());
@@ -606,7 +606,7 @@ pub fn ssao(
     size: (u32, u32),
     mut report: impl FnMut(&SsaoRow),
 ) -> anyhow::Result<Vec<SsaoRow>> {
-    use crate::nodes::ssao::{SsaoMode, SsaoRunner, SsaoSettings};
+    use crate::occlusion::ssao::{SsaoMode, SsaoRunner, SsaoSettings};
     use crate::render::draw::{SceneDrawer, render_gbuffer};
 
     let (items, camera) = occlusion_scene()?;
@@ -851,7 +851,7 @@ fn tessellation_bench_camera() -> crate::render::scene::Camera {
 
 /// The 1024-triangle sphere of the tessellation bench and its random vertex levels in [1, level].
 fn tessellation_bench_mesh(level: u32) -> anyhow::Result<(std::sync::Arc<crate::mesh::Mesh>, Vec<f32>)> {
-    let mesh = std::sync::Arc::new(crate::nodes::geometry::sphere(1.0, 32, 16)?);
+    let mesh = std::sync::Arc::new(crate::nodes::mesh::geometry::sphere(1.0, 32, 16)?);
     let mut rng = crate::core::rng::SplitMix64::new(5);
     let levels = (0..mesh.positions.len()).map(|_| 1.0 + (level as f32 - 1.0) * rng.next_f32()).collect();
     Ok((mesh, levels))
@@ -964,7 +964,7 @@ pub fn shadows(
     let mut rows = Vec::new();
     for &n in lights {
         for &tile in tiles {
-            let (columns, rows_) = crate::nodes::shadow_atlas::grid(n);
+            let (columns, rows_) = crate::nodes::ibl::shadow_atlas::grid(n);
             let (w, h) = (columns * tile, rows_ * tile);
             let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
             let mut row = ShadowRow {
@@ -1045,7 +1045,7 @@ pub fn cuboids(
     /// A UV sphere of about `triangles` triangles.
     fn ball(triangles: usize) -> anyhow::Result<Arc<crate::mesh::Mesh>> {
         let v = ((triangles as f64 / 4.0).sqrt().round() as u32).max(2);
-        Ok(Arc::new(crate::nodes::geometry::sphere(1.0, 2 * v, v)?))
+        Ok(Arc::new(crate::nodes::mesh::geometry::sphere(1.0, 2 * v, v)?))
     }
     let material = Arc::new(Material::default());
     let camera = Camera {
@@ -1264,7 +1264,7 @@ pub fn table1(
     mut report: impl FnMut(&Table1Row),
 ) -> anyhow::Result<Vec<Table1Row>> {
     use crate::core::port::Value;
-    use crate::nodes::matrix_texture::MatrixTextureNode;
+    use crate::nodes::warp::matrix_texture::MatrixTextureNode;
     use crate::render::draw::{SceneDrawer, render_gbuffer};
 
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");

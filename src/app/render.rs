@@ -381,10 +381,10 @@ fn nothing_will_arrive(ev: &Evaluator) -> String {
     let waiting = failures(ev);
     let live = ev
         .reports()
-        .any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::live_link::LIVE_LINK.kind);
+        .any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::mesh::live_link::LIVE_LINK.kind);
     let mut msg = format!("nothing will arrive in a batch render: {}", waiting.join("; "));
     if live {
-        msg.push_str(&format!("\n  help: {}", crate::nodes::live_link::RECORD_HELP));
+        msg.push_str(&format!("\n  help: {}", crate::nodes::mesh::live_link::RECORD_HELP));
     }
     msg
 }

@@ -696,14 +696,14 @@ impl Graph {
                     });
                 }
             }
-            if spec.kind == crate::nodes::live_link::LIVE_LINK.kind {
+            if spec.kind == crate::nodes::mesh::live_link::LIVE_LINK.kind {
                 out.push(Warning {
                     place: Place::Node(id.clone()),
                     node: id.clone(),
                     kind: spec.kind,
                     message: "waits for a simulator to connect: `werkstatt render` fails unless one sends frames"
                         .into(),
-                    help: Some(crate::nodes::live_link::RECORD_HELP.into()),
+                    help: Some(crate::nodes::mesh::live_link::RECORD_HELP.into()),
                 });
             }
         }

@@ -126,7 +126,7 @@ impl Cuboid {
 
 /// How normals follow a trilinear transform (Fig. 4.5); both are evaluated at the vertex,
 /// since the Jacobian `J` varies with position. The discriminant indexes the drawer's
-/// trilinear pipelines (one vertex entry point each, shaders/cuboid_gbuffer.wgsl).
+/// trilinear pipelines (one vertex entry point each, shaders/cuboid/cuboid_gbuffer.wgsl).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum NormalMethod {
     /// Transform the tangent space: `n' = (J t) x (J b) = cof(J) n`, orthogonal to the
@@ -378,7 +378,7 @@ impl CuboidGrid {
     /// Appends each cell's coefficient matrix C (eq. 3.4, 3x8, computed in f64 from the
     /// corners) as 6 `vec4<f32>` per cell, cells in corner order (x fastest), to `rows`, the one
     /// storage buffer of all grids a draw uses. Per coordinate r two vec4: (c_xyz, c_yz, c_xz,
-    /// c_xy)[r] and (c_z, c_y, c_x, c_1)[r], so shaders/cuboid.wgsl evaluates eq. 3.4 as six dot
+    /// c_xy)[r] and (c_z, c_y, c_x, c_1)[r], so shaders/cuboid/cuboid.wgsl evaluates eq. 3.4 as six dot
     /// products after six loads. This replaces the dissertation's 3D texture of positions: the
     /// vertex stage would otherwise load the cell's 8 corners and form C itself for every
     /// vertex (per-lane gathers are most of the trilinear path's cost on lavapipe, and texel
@@ -406,7 +406,7 @@ impl CuboidGrid {
 
     /// The map from a point of the grid's content space (its item's model matrix applied)
     /// into the grid's cell coordinates, where cell (i, j, k) spans [i, i+1] x [j, j+1] x
-    /// [k, k+1] (shaders/cuboid.wgsl finds the cell and eq. 3.4's local point from these).
+    /// [k, k+1] (shaders/cuboid/cuboid.wgsl finds the cell and eq. 3.4's local point from these).
     /// The item's transform (src/render/draw/compose.rs `ItemVertex`) folds it after the model matrix.
     pub fn cell_map(&self) -> DMat4 {
         DMat4::from_scale(self.cell_scale()) * DMat4::from_translation(-self.box_min)

@@ -315,7 +315,7 @@ pub struct FullscreenPass {
 }
 
 impl FullscreenPass {
-    /// `shader` must define `vs_fullscreen` (include shaders/fullscreen.wgsl) and `fs_main`.
+    /// `shader` must define `vs_fullscreen` (include shaders/common/fullscreen.wgsl) and `fs_main`.
     /// [`FullscreenPass::run`] binds a uniform block at binding 0 and 2D textures at bindings
     /// 1.. of group 0; [`FullscreenPass::draw`] binds anything. The pipeline for the bound
     /// resources and targets comes from the context's cache on each run.

@@ -28,7 +28,7 @@ pub struct ShaderError {
 
 impl std::fmt::Display for ShaderError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "shaders/{}: {}", self.file, self.message)
+        write!(f, "shaders/{}: {}", crate::gpu::shaders::path(&self.file), self.message)
     }
 }
 
@@ -75,7 +75,7 @@ impl<'a> RenderPipelineDesc<'a> {
         }
     }
 
-    /// A full-screen triangle (`vs_fullscreen` of shaders/fullscreen.wgsl) and `fs_main`.
+    /// A full-screen triangle (`vs_fullscreen` of shaders/common/fullscreen.wgsl) and `fs_main`.
     pub fn fullscreen(
         shader: &'a str,
         groups: &'a [Option<&'a wgpu::BindGroupLayout>],

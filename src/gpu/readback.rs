@@ -181,7 +181,7 @@ pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32)
     Ok(Pixels { width, height, rgba, is_ldr })
 }
 
-/// A 2D depth texture through a compute copy into a buffer (shaders/depth_readback.wgsl):
+/// A 2D depth texture through a compute copy into a buffer (shaders/common/depth_readback.wgsl):
 /// OpenGL ES cannot copy depth to a buffer (wgpu's GL backend then reads zeros), and one path
 /// for every backend keeps the values comparable.
 fn read_back_depth(gpu: &GpuContext, image: &GpuImage) -> anyhow::Result<Pixels> {

@@ -1,70 +1,88 @@
-//! WGSL sources, one file per pass under `shaders/`, embedded in the binary. A line
-//! `// #include "name.wgsl"` is replaced by that file, so passes share code (the G-buffer
-//! output, the deferred-warping transform) without copies.
+//! WGSL sources, one file per pass under `shaders/`, grouped in folders by family as `src/` is
+//! (`shaders/render/tonemap.wgsl`), embedded in the binary. Passes name a shader by its file
+//! name alone (`tonemap.wgsl`), unique across the folders. A line `// #include "name.wgsl"` is
+//! replaced by that file, so passes share code (the G-buffer output, the deferred-warping
+//! transform) without copies.
 
 use anyhow::{Context as _, bail};
 
 const EMBEDDED: &[(&str, &str)] = &[
-    ("vertex_in.wgsl", include_str!("../../shaders/vertex_in.wgsl")),
-    ("object.wgsl", include_str!("../../shaders/object.wgsl")),
-    ("gbuffer_common.wgsl", include_str!("../../shaders/gbuffer_common.wgsl")),
-    ("depth.wgsl", include_str!("../../shaders/depth.wgsl")),
-    ("depth_readback.wgsl", include_str!("../../shaders/depth_readback.wgsl")),
-    ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
-    ("fullscreen.wgsl", include_str!("../../shaders/fullscreen.wgsl")),
-    ("direct_light.wgsl", include_str!("../../shaders/direct_light.wgsl")),
-    ("tonemap.wgsl", include_str!("../../shaders/tonemap.wgsl")),
-    ("image_difference.wgsl", include_str!("../../shaders/image_difference.wgsl")),
-    ("display.wgsl", include_str!("../../shaders/display.wgsl")),
-    ("matrix_out.wgsl", include_str!("../../shaders/matrix_out.wgsl")),
-    ("matrix_texture.wgsl", include_str!("../../shaders/matrix_texture.wgsl")),
-    ("matrix_filter.wgsl", include_str!("../../shaders/matrix_filter.wgsl")),
-    ("piece_map.wgsl", include_str!("../../shaders/piece_map.wgsl")),
-    ("warp.wgsl", include_str!("../../shaders/warp.wgsl")),
-    ("tessellate.wgsl", include_str!("../../shaders/tessellate.wgsl")),
-    ("pn.wgsl", include_str!("../../shaders/pn.wgsl")),
-    ("gbuffer_pn.wgsl", include_str!("../../shaders/gbuffer_pn.wgsl")),
-    ("instance_in.wgsl", include_str!("../../shaders/instance_in.wgsl")),
-    ("item_in.wgsl", include_str!("../../shaders/item_in.wgsl")),
-    ("attach.wgsl", include_str!("../../shaders/attach.wgsl")),
-    ("attach_export.wgsl", include_str!("../../shaders/attach_export.wgsl")),
-    ("attach_resolve.wgsl", include_str!("../../shaders/attach_resolve.wgsl")),
-    ("cube.wgsl", include_str!("../../shaders/cube.wgsl")),
-    ("pem_filter.wgsl", include_str!("../../shaders/pem_filter.wgsl")),
-    ("depth_tiles.wgsl", include_str!("../../shaders/depth_tiles.wgsl")),
-    ("pem_phong.wgsl", include_str!("../../shaders/pem_phong.wgsl")),
-    ("cube_preview.wgsl", include_str!("../../shaders/cube_preview.wgsl")),
-    ("ibl_shading.wgsl", include_str!("../../shaders/ibl_shading.wgsl")),
-    ("ssao.wgsl", include_str!("../../shaders/ssao.wgsl")),
-    ("vsm.wgsl", include_str!("../../shaders/vsm.wgsl")),
-    ("vsm_blur.wgsl", include_str!("../../shaders/vsm_blur.wgsl")),
-    ("hybrid_occlusion.wgsl", include_str!("../../shaders/hybrid_occlusion.wgsl")),
-    ("cuboid.wgsl", include_str!("../../shaders/cuboid.wgsl")),
-    ("cuboid_gbuffer.wgsl", include_str!("../../shaders/cuboid_gbuffer.wgsl")),
-    ("cuboid_depth.wgsl", include_str!("../../shaders/cuboid_depth.wgsl")),
+    ("common/vertex_in.wgsl", include_str!("../../shaders/common/vertex_in.wgsl")),
+    ("common/object.wgsl", include_str!("../../shaders/common/object.wgsl")),
+    ("common/gbuffer_common.wgsl", include_str!("../../shaders/common/gbuffer_common.wgsl")),
+    ("render/depth.wgsl", include_str!("../../shaders/render/depth.wgsl")),
+    ("common/depth_readback.wgsl", include_str!("../../shaders/common/depth_readback.wgsl")),
+    ("render/gbuffer.wgsl", include_str!("../../shaders/render/gbuffer.wgsl")),
+    ("common/fullscreen.wgsl", include_str!("../../shaders/common/fullscreen.wgsl")),
+    ("render/direct_light.wgsl", include_str!("../../shaders/render/direct_light.wgsl")),
+    ("render/tonemap.wgsl", include_str!("../../shaders/render/tonemap.wgsl")),
+    ("compare/image_difference.wgsl", include_str!("../../shaders/compare/image_difference.wgsl")),
+    ("render/display.wgsl", include_str!("../../shaders/render/display.wgsl")),
+    ("warp/matrix_out.wgsl", include_str!("../../shaders/warp/matrix_out.wgsl")),
+    ("warp/matrix_texture.wgsl", include_str!("../../shaders/warp/matrix_texture.wgsl")),
+    ("warp/matrix_filter.wgsl", include_str!("../../shaders/warp/matrix_filter.wgsl")),
+    ("warp/piece_map.wgsl", include_str!("../../shaders/warp/piece_map.wgsl")),
+    ("warp/warp.wgsl", include_str!("../../shaders/warp/warp.wgsl")),
+    ("tessellation/tessellate.wgsl", include_str!("../../shaders/tessellation/tessellate.wgsl")),
+    ("tessellation/pn.wgsl", include_str!("../../shaders/tessellation/pn.wgsl")),
+    ("tessellation/gbuffer_pn.wgsl", include_str!("../../shaders/tessellation/gbuffer_pn.wgsl")),
+    ("common/instance_in.wgsl", include_str!("../../shaders/common/instance_in.wgsl")),
+    ("common/item_in.wgsl", include_str!("../../shaders/common/item_in.wgsl")),
+    ("warp/attach.wgsl", include_str!("../../shaders/warp/attach.wgsl")),
+    ("warp/attach_export.wgsl", include_str!("../../shaders/warp/attach_export.wgsl")),
+    ("warp/attach_resolve.wgsl", include_str!("../../shaders/warp/attach_resolve.wgsl")),
+    ("ibl/cube.wgsl", include_str!("../../shaders/ibl/cube.wgsl")),
+    ("ibl/pem_filter.wgsl", include_str!("../../shaders/ibl/pem_filter.wgsl")),
+    ("render/depth_tiles.wgsl", include_str!("../../shaders/render/depth_tiles.wgsl")),
+    ("ibl/pem_phong.wgsl", include_str!("../../shaders/ibl/pem_phong.wgsl")),
+    ("ibl/cube_preview.wgsl", include_str!("../../shaders/ibl/cube_preview.wgsl")),
+    ("ibl/ibl_shading.wgsl", include_str!("../../shaders/ibl/ibl_shading.wgsl")),
+    ("occlusion/ssao.wgsl", include_str!("../../shaders/occlusion/ssao.wgsl")),
+    ("ibl/vsm.wgsl", include_str!("../../shaders/ibl/vsm.wgsl")),
+    ("ibl/vsm_blur.wgsl", include_str!("../../shaders/ibl/vsm_blur.wgsl")),
+    ("occlusion/hybrid_occlusion.wgsl", include_str!("../../shaders/occlusion/hybrid_occlusion.wgsl")),
+    ("cuboid/cuboid.wgsl", include_str!("../../shaders/cuboid/cuboid.wgsl")),
+    ("cuboid/cuboid_gbuffer.wgsl", include_str!("../../shaders/cuboid/cuboid_gbuffer.wgsl")),
+    ("cuboid/cuboid_depth.wgsl", include_str!("../../shaders/cuboid/cuboid_depth.wgsl")),
 ];
 
+/// The file name of every shader (`tonemap.wgsl`).
 pub fn names() -> impl Iterator<Item = &'static str> {
-    EMBEDDED.iter().map(|(n, _)| *n)
+    EMBEDDED.iter().map(|(p, _)| file_name(p))
 }
 
-/// The source of `shaders/NAME` with includes expanded: read from `WERKSTATT_SHADER_DIR` when
+/// The path of every shader under `shaders/` (`render/tonemap.wgsl`).
+pub fn paths() -> impl Iterator<Item = &'static str> {
+    EMBEDDED.iter().map(|(p, _)| *p)
+}
+
+/// The path under `shaders/` of the shader named `name` (`tonemap.wgsl` -> `render/tonemap.wgsl`);
+/// `name` itself when no embedded shader has that name.
+pub fn path(name: &str) -> &str {
+    EMBEDDED.iter().map(|(p, _)| *p).find(|p| file_name(p) == name).unwrap_or(name)
+}
+
+fn file_name(path: &str) -> &str {
+    path.rsplit('/').next().unwrap_or(path)
+}
+
+/// The source of the shader named `NAME` with includes expanded: read from `WERKSTATT_SHADER_DIR` when
 /// set (live editing), otherwise the copy embedded at build time.
 pub fn source(name: &str) -> anyhow::Result<String> {
     let dir = shader_dir();
     Ok(expand(name, &mut |n| read(dir.as_deref(), n))?.0)
 }
 
-/// The text of one file, `shaders/NAME`, without expanding includes: from `dir` if given,
-/// else the embedded copy.
+/// The text of one file, `shaders/FAMILY/NAME`, without expanding includes: from `dir` if given
+/// (`dir/FAMILY/NAME`, see [`path`]), else the embedded copy.
 pub fn read(dir: Option<&std::path::Path>, name: &str) -> anyhow::Result<String> {
     if let Some(dir) = dir {
-        let path = dir.join(name);
+        let path = dir.join(path(name));
         return std::fs::read_to_string(&path).with_context(|| format!("cannot read shader {}", path.display()));
     }
     EMBEDDED
         .iter()
-        .find(|(n, _)| *n == name)
+        .find(|(p, _)| file_name(p) == name)
         .map(|(_, s)| s.to_string())
         .with_context(|| format!("no shader named {name} is embedded"))
 }
@@ -112,4 +130,16 @@ fn expand_into(
 /// Where shader sources are read from disk when live editing, if anywhere.
 pub fn shader_dir() -> Option<std::path::PathBuf> {
     std::env::var_os("WERKSTATT_SHADER_DIR").map(std::path::PathBuf::from)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn shader_file_names_are_unique_across_the_folders() {
+        let mut names: Vec<&str> = super::names().collect();
+        names.sort();
+        let count = names.len();
+        names.dedup();
+        assert_eq!(names.len(), count, "two shaders share a file name: passes could not tell them apart");
+    }
 }

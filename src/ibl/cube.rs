@@ -1,4 +1,4 @@
-//! Cube maps on the CPU: the face convention the shaders share (shaders/cube.wgsl), texel
+//! Cube maps on the CPU: the face convention the shaders share (shaders/ibl/cube.wgsl), texel
 //! directions and solid angles, and equirectangular light probes loaded and resampled.
 //!
 //! Faces are in wgpu's layer order +X, -X, +Y, -Y, +Z, -Z with the sampling convention of
@@ -96,7 +96,7 @@ impl CubeImage {
 
     /// Bilinear lookup along `d`, seamless like the hardware's cube sampling: a tap that falls
     /// off the face is taken from the neighbouring face (the texel nearest to where the tap's
-    /// direction lands). shaders/cube.wgsl `cube_bilinear` does the same with `textureLoad`.
+    /// direction lands). shaders/ibl/cube.wgsl `cube_bilinear` does the same with `textureLoad`.
     pub fn sample(&self, d: Vec3) -> Vec4 {
         let (face, u, v) = dir_to_face(d);
         let s = self.size as f32;
@@ -143,7 +143,7 @@ pub fn equirect_uv(d: Vec3) -> (f32, f32) {
 }
 
 /// The direction at equirectangular coordinates (u, v): the inverse of [`equirect_uv`]
-/// (shaders/cube.wgsl `equirect_dir`).
+/// (shaders/ibl/cube.wgsl `equirect_dir`).
 pub fn equirect_dir(u: f32, v: f32) -> Vec3 {
     let (phi, theta) = ((u - 0.5) * std::f32::consts::TAU, v * std::f32::consts::PI);
     Vec3::new(theta.sin() * phi.sin(), theta.cos(), -theta.sin() * phi.cos())

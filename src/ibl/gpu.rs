@@ -54,7 +54,7 @@ pub struct PemSet {
 }
 
 /// A cube map of face size `size` with its full mip chain, stored as a 2D array of six layers
-/// (shaders/cube.wgsl reads it with `textureLoad`: OpenGL cannot view a cube texture as an
+/// (shaders/ibl/cube.wgsl reads it with `textureLoad`: OpenGL cannot view a cube texture as an
 /// array, and the CPU twins then match exactly), for rendering into faces and levels.
 pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> anyhow::Result<GpuImage> {
     let usage =
@@ -220,7 +220,7 @@ impl CubePasses {
         }
     }
 
-    /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/pem_filter.wgsl,
+    /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/ibl/pem_filter.wgsl,
     /// pem_phong.wgsl); level 0 is black outside `bounds`.
     pub fn filter_chain(
         &mut self,

@@ -205,7 +205,7 @@ fn plane_solid_angle(u: f32, v: f32, h: f32) -> f32 {
 /// source texel apart on the face's plane around the texel's centre, extended past
 /// its edges into the neighbouring faces and read with the seamless bilinear lookup. The
 /// weights depend only on geometry, so PEMs filtered this way still sum to the filtered map.
-/// shaders/pem_phong.wgsl `fs_phong` is the GPU version.
+/// shaders/ibl/pem_phong.wgsl `fs_phong` is the GPU version.
 pub fn phong_level(plain: &[CubeImage], level: usize) -> CubeImage {
     let src = &plain[phong_source(level)];
     let n = (plain[0].size >> level).max(1);

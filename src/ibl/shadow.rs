@@ -1,4 +1,4 @@
-//! The shadow atlas value that flows from `ShadowAtlas` (nodes/shadow_atlas.rs) to
+//! The shadow atlas value that flows from `ShadowAtlas` (nodes/ibl/shadow_atlas.rs) to
 //! `IblShading`: here, below the port table, so the port types need no node module.
 
 use glam::{Mat4, Vec3};

@@ -1,5 +1,5 @@
 //! Adaptive tessellation with barycentric warping (dissertation sections 3.1.3, 4.1.3, 5.1.3;
-//! `docs/tessellation.md`): the CPU reference of `shaders/tessellate.wgsl`, which mirrors it
+//! `docs/tessellation.md`): the CPU reference of `shaders/tessellation/tessellate.wgsl`, which mirrors it
 //! function by function.
 //!
 //! A triangle with three edge levels (edge `e` runs from corner `e` to corner `e + 1`) is
@@ -47,7 +47,7 @@ crate::choice!(
 );
 
 impl Mode {
-    /// The mode's number in shaders/tessellate.wgsl.
+    /// The mode's number in shaders/tessellation/tessellate.wgsl.
     pub fn index(self) -> u32 {
         match self {
             Mode::Uniform => 0,
@@ -723,7 +723,7 @@ pub fn wireframe(vertices: &[Vertex], indices: &[u32], width: f32) -> anyhow::Re
     Ok(mesh)
 }
 
-/// shaders/tessellate.wgsl `Params`.
+/// shaders/tessellation/tessellate.wgsl `Params`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
@@ -776,7 +776,7 @@ pub fn patch_capacity(mode: Mode, max_level: u32) -> (u32, u32) {
     ((m + 1) * (m + 2) / 2, m * m)
 }
 
-/// The compute passes of shaders/tessellate.wgsl, kept between frames.
+/// The compute passes of shaders/tessellation/tessellate.wgsl, kept between frames.
 pub struct GpuTessellator {
     vertex_levels: crate::gpu::ComputePass,
     edge_lengths: crate::gpu::ComputePass,

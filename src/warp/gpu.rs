@@ -11,7 +11,7 @@ use crate::mesh::{GpuMesh, Mesh, has_area};
 
 use super::{AttachedDraw, InstanceData, MatrixTexels, MatrixTexture, TexelFrame, WarpedLayout, WarpedVertex};
 
-/// Group 2 of shaders/warp.wgsl: the matrix texture's three columns, the warp settings
+/// Group 2 of shaders/warp/warp.wgsl: the matrix texture's three columns, the warp settings
 /// (`uniform`, from `WarpSettings::uniform`) and the seam map.
 pub fn warp_binds<'a>(m: &'a MatrixTexture, uniform: &'a [f32; 4]) -> [Bind<'a>; 5] {
     [
@@ -34,7 +34,7 @@ pub fn warp_layout(gpu: &GpuContext, visibility: wgpu::ShaderStages) -> wgpu::Bi
     ])
 }
 
-/// Looks up point attachments' frames once per instance (shaders/attach_resolve.wgsl).
+/// Looks up point attachments' frames once per instance (shaders/warp/attach_resolve.wgsl).
 pub struct InstanceResolver {
     pass: ComputePass,
 }

@@ -65,7 +65,7 @@ impl MatrixTexels {
 
     /// The frame a footprint texel contributes: its own if a piece covers it, else, for a gutter
     /// texel beside a seam, the partner piece's frame (bilinear over its covered texels) turned
-    /// into this piece's UV directions. The CPU twin of `texel_or_partner` in shaders/warp.wgsl.
+    /// into this piece's UV directions. The CPU twin of `texel_or_partner` in shaders/warp/warp.wgsl.
     fn texel_or_partner(&self, x: i32, y: i32) -> Option<TexelFrame> {
         let res = self.resolution as i32;
         if let Some(t) = self.covered(x, y) {
@@ -80,7 +80,7 @@ impl MatrixTexels {
         Some(TexelFrame { tu: b.tu * m[0][0] + b.tv * m[0][1], n: b.n, tv: b.tu * m[1][0] + b.tv * m[1][1], p: b.p })
     }
 
-    /// The CPU twin of `partner_bilinear` in shaders/warp.wgsl.
+    /// The CPU twin of `partner_bilinear` in shaders/warp/warp.wgsl.
     fn partner_bilinear(&self, uv: Vec2) -> Option<TexelFrame> {
         let (base, f) = footprint(uv, self.resolution);
         let (mut acc, mut weight) = (TexelFrame { tu: Vec3::ZERO, n: Vec3::ZERO, tv: Vec3::ZERO, p: Vec3::ZERO }, 0.0);
@@ -102,7 +102,7 @@ impl MatrixTexels {
         })
     }
 
-    /// The CPU twin of `lookup_frame` in shaders/warp.wgsl.
+    /// The CPU twin of `lookup_frame` in shaders/warp/warp.wgsl.
     pub fn lookup(&self, uv: Vec2, min_weight: f32) -> Option<TexelFrame> {
         self.lookup_surface(uv, min_weight).map(|s| s.frame)
     }
@@ -177,7 +177,7 @@ fn bilinear_weight(f: Vec2, ox: i32, oy: i32) -> f32 {
     (if ox == 1 { f.x } else { 1.0 - f.x }) * if oy == 1 { f.y } else { 1.0 - f.y }
 }
 
-/// The CPU twin of `uv_derivatives` in shaders/warp.wgsl.
+/// The CPU twin of `uv_derivatives` in shaders/warp/warp.wgsl.
 fn uv_derivatives(du: Vec3, wu: f32, dv: Vec3, wv: f32, dims: Vec2, f: &TexelFrame) -> [Vec3; 2] {
     let a = if wu > 1e-6 { du * (dims.x / wu) } else { f.tu };
     let b = if wv > 1e-6 { dv * (dims.y / wv) } else { f.tv };
@@ -368,7 +368,7 @@ impl ArcTable {
     }
 }
 
-/// Per-instance data, laid out as the `Instance` struct of shaders/warp.wgsl.
+/// Per-instance data, laid out as the `Instance` struct of shaders/warp/warp.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct InstanceData {
@@ -441,7 +441,7 @@ impl InstanceData {
     }
 }
 
-/// Uniform settings of one attachment draw, laid out as `Warp` in shaders/warp.wgsl.
+/// Uniform settings of one attachment draw, laid out as `Warp` in shaders/warp/warp.wgsl.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WarpSettings {
     pub mode: WarpMode,
@@ -528,7 +528,7 @@ pub struct WarpedVertex {
     pub valid: bool,
 }
 
-/// The CPU reference of `warp_vertex` in shaders/warp.wgsl (eqs. 1-12).
+/// The CPU reference of `warp_vertex` in shaders/warp/warp.wgsl (eqs. 1-12).
 pub fn warp_vertex_cpu(
     texels: &MatrixTexels,
     s: &WarpSettings,
@@ -650,7 +650,7 @@ pub fn warp_instance_cpu(
     }
 }
 
-/// The CPU twin of `fur_bend` in shaders/warp.wgsl (eqs. 11-12 in frame coordinates): the
+/// The CPU twin of `fur_bend` in shaders/warp/warp.wgsl (eqs. 11-12 in frame coordinates): the
 /// bent point and its derivative by the height.
 pub fn fur_bend(f: &TexelFrame, q: Vec3, c: f32) -> (Vec3, Vec3) {
     let up = Vec3::new(f.tu.y, f.n.y, f.tv.y);
@@ -665,14 +665,14 @@ pub fn fur_bend(f: &TexelFrame, q: Vec3, c: f32) -> (Vec3, Vec3) {
     (bent, u - b * c * (up - u * u.dot(up)) / lw)
 }
 
-/// The CPU twin of `normal_matrix` in shaders/warp.wgsl: cofactors with the determinant's sign.
+/// The CPU twin of `normal_matrix` in shaders/warp/warp.wgsl: cofactors with the determinant's sign.
 pub fn normal_matrix(m: Mat3) -> Mat3 {
     let (c0, c1, c2) = (m.y_axis.cross(m.z_axis), m.z_axis.cross(m.x_axis), m.x_axis.cross(m.y_axis));
     let sign = if m.x_axis.dot(c0) < 0.0 { -1.0 } else { 1.0 };
     Mat3::from_cols(c0, c1, c2) * sign
 }
 
-/// The CPU twin of `curve_direction` in shaders/warp.wgsl: the tangent's direction, or at a
+/// The CPU twin of `curve_direction` in shaders/warp/warp.wgsl: the tangent's direction, or at a
 /// degenerate end its limit (c2 - c0 at t = 0, c3 - c1 at t = 1).
 pub fn curve_direction(c: &[Vec2; 4], t: f32) -> Vec2 {
     let end = if t < 0.5 { c[2] - c[0] } else { c[3] - c[1] };

@@ -370,13 +370,19 @@ fn help_exists_for_every_command() {
 
 #[test]
 fn every_shader_file_is_embedded() {
-    let mut files: Vec<String> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders"))
+    // shaders/FAMILY/NAME.wgsl, one folder deep.
+    let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders"));
+    let mut files: Vec<String> = std::fs::read_dir(root)
         .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".wgsl"))
+        .map(|e| e.unwrap().path())
+        .flat_map(
+            |p| if p.is_dir() { std::fs::read_dir(p).unwrap().map(|e| e.unwrap().path()).collect() } else { vec![p] },
+        )
+        .filter(|p| p.extension().is_some_and(|x| x == "wgsl"))
+        .map(|p| p.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/"))
         .collect();
     files.sort();
-    let mut embedded: Vec<String> = werkstatt::gpu::shaders::names().map(str::to_string).collect();
+    let mut embedded: Vec<String> = werkstatt::gpu::shaders::paths().map(str::to_string).collect();
     embedded.sort();
     assert_eq!(files, embedded, "shaders/ and the embedded list in src/gpu/shaders.rs differ");
 }

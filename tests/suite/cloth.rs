@@ -4,10 +4,10 @@
 //! in release mode.
 
 use glam::{Vec2, Vec3};
-use werkstatt::nodes::cloth::collider::uv_sphere_mesh;
-use werkstatt::nodes::cloth::pattern::{circle_outline, rectangle_outline, trapezoid_outline};
-use werkstatt::nodes::cloth::presets::TABLE_TORUS;
-use werkstatt::nodes::cloth::*;
+use werkstatt::cloth::collider::uv_sphere_mesh;
+use werkstatt::cloth::pattern::{circle_outline, rectangle_outline, trapezoid_outline};
+use werkstatt::cloth::presets::TABLE_TORUS;
+use werkstatt::cloth::*;
 
 fn tablecloth() -> Preset {
     Preset::Tablecloth(TableclothParams { triangles: 2500, seed: 7, ..Default::default() })

@@ -223,7 +223,7 @@ pub fn world_positions(ev: &werkstatt::core::eval::Evaluator, margin_percent: u3
             let (x, y) = (i % w, i / w);
             let d = depth.rgba[i as usize * channels];
             let border = x < mx || x >= w - mx || y < my || y >= h - my;
-            (d > 0.0 && !border).then(|| werkstatt::nodes::reference_occlusion::world_position(&g.view, x, y, d))
+            (d > 0.0 && !border).then(|| werkstatt::occlusion::reference::world_position(&g.view, x, y, d))
         })
         .collect()
 }

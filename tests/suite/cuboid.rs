@@ -159,7 +159,7 @@ fn rotate_mesh(mesh: &Mesh, r: DQuat, t: DVec3) -> Mesh {
 
 #[test]
 fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
-    let body = werkstatt::nodes::geometry::sphere(1.0, 24, 16).unwrap();
+    let body = werkstatt::nodes::mesh::geometry::sphere(1.0, 24, 16).unwrap();
     let (cols, rows) = (3, 3);
     let frames_on = |mesh: &Mesh| {
         let mut frames = Vec::new();
@@ -181,7 +181,7 @@ fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
         let before = grid_on(&body, lift);
         let after = grid_on(&rotate_mesh(&body, r, t), lift);
         assert!(before.as_affine(LINEAR_TOLERANCE).is_none(), "the anchored grid follows the sphere's curvature");
-        let object = werkstatt::nodes::geometry::cube(1.5).unwrap();
+        let object = werkstatt::nodes::mesh::geometry::cube(1.5).unwrap();
         let size = before.corners.iter().fold(0.0f64, |m, c| m.max(c.length()));
         let mut worst: f64 = 0.0;
         for p in &object.positions {
@@ -197,7 +197,7 @@ fn a_rigid_motion_of_the_base_mesh_moves_the_anchored_object_rigidly() {
 /// normals; lifted along each anchor's normal, the columns splay (by the sphere's curvature).
 #[test]
 fn an_anchor_grid_lifted_along_the_mean_normal_has_parallel_columns() {
-    let body = werkstatt::nodes::geometry::sphere(1.0, 48, 32).unwrap();
+    let body = werkstatt::nodes::mesh::geometry::sphere(1.0, 48, 32).unwrap();
     let (cols, rows, height) = (3, 3, 0.5);
     let frames: Vec<_> = (0..cols * rows)
         .map(|k| {
@@ -224,8 +224,8 @@ fn an_anchor_grid_lifted_along_the_mean_normal_has_parallel_columns() {
 /// bends, and it moves rigidly with the sphere.
 #[test]
 fn a_row_of_anchors_drives_a_one_dimensional_grid() {
-    use werkstatt::nodes::cuboid_grid::anchor_row_frames;
-    let plane = werkstatt::nodes::geometry::plane(2.0, 8, 8).unwrap();
+    use werkstatt::nodes::cuboid::cuboid_grid::anchor_row_frames;
+    let plane = werkstatt::nodes::mesh::geometry::plane(2.0, 8, 8).unwrap();
     let (a, b) = (DVec2::new(0.2, 0.5), DVec2::new(0.8, 0.5));
     let frames = anchor_row_frames(&plane, a, b, 4).unwrap();
     for f in &frames {
@@ -235,13 +235,13 @@ fn a_row_of_anchors_drives_a_one_dimensional_grid() {
     let grid = anchor_row(&frames, width, height, -DVec3::ONE, DVec3::ONE, NormalMethod::TangentSpace).unwrap();
     assert_eq!(grid.cells, [3, 1, 1]);
     let expected = |p: DVec3| DVec3::new(0.6 * p.x, height * (p.z + 1.0) / 2.0, -width / 2.0 * p.y);
-    let cube = werkstatt::nodes::geometry::cube(2.0).unwrap();
+    let cube = werkstatt::nodes::mesh::geometry::cube(2.0).unwrap();
     let worst =
         cube.positions.iter().map(|p| grid.eval(p.as_dvec3()).distance(expected(p.as_dvec3()))).fold(0.0, f64::max);
     assert!(worst < 1e-6, "the row's grid is off its analytic map by {worst}");
     assert!(grid.as_affine(LINEAR_TOLERANCE).is_some(), "a row on a plane is affine: the fast path applies");
 
-    let body = werkstatt::nodes::geometry::sphere(1.0, 24, 16).unwrap();
+    let body = werkstatt::nodes::mesh::geometry::sphere(1.0, 24, 16).unwrap();
     let (r, t) = (DQuat::from_scaled_axis(DVec3::new(0.3, -1.1, 0.5)), DVec3::new(0.7, -2.0, 1.3));
     let row_on = |mesh: &Mesh| {
         let anchors: Vec<Anchor> = (0..5)
@@ -326,7 +326,7 @@ fn bad_cuboid_parameters_are_node_errors() {
 #[test]
 fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
     let gpu = common::gpu();
-    let plate = werkstatt::nodes::geometry::plane(2.0, 24, 24).unwrap();
+    let plate = werkstatt::nodes::mesh::geometry::plane(2.0, 24, 24).unwrap();
     let whole = Mat4::from_rotation_x(0.3);
     // Inside cell (1, 1, 0) of the 3x2x1 grid.
     let small = Mat4::from_translation(Vec3::new(0.0, 0.3, 0.0)) * whole * Mat4::from_scale(Vec3::splat(0.25));
@@ -411,7 +411,7 @@ fn the_trilinear_vertex_stage_matches_the_cpu_transform() {
 #[test]
 fn items_sharing_a_mesh_draw_instanced_as_if_drawn_one_by_one() {
     let gpu = common::gpu();
-    let ball = Arc::new(werkstatt::nodes::geometry::sphere(0.5, 12, 6).unwrap());
+    let ball = Arc::new(werkstatt::nodes::mesh::geometry::sphere(0.5, 12, 6).unwrap());
     // A twisted grid over lo..hi (content space: after the item's model matrix).
     let grid = |k: usize, cells, (lo, hi): (DVec3, DVec3), method| {
         let (twist, centre) = (0.4 + 0.3 * k as f64, (lo + hi) / 2.0);

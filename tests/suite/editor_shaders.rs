@@ -68,8 +68,9 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     assert_eq!(werkstatt::gpu::shaders::shader_dir(), Some(dir.clone()), "the parent sets WERKSTATT_SHADER_DIR");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    for name in werkstatt::gpu::shaders::names() {
-        std::fs::copy(root().join("shaders").join(name), dir.join(name)).unwrap();
+    for path in werkstatt::gpu::shaders::paths() {
+        std::fs::create_dir_all(dir.join(path).parent().unwrap()).unwrap();
+        std::fs::copy(root().join("shaders").join(path), dir.join(path)).unwrap();
     }
     let gpu = GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)");
     let mut graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
@@ -78,7 +79,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     live.sync(&graph, 1, None);
     settle(&mut live, &gpu);
     assert_eq!(live.state("tonemap"), NodeState::Ok);
-    let original = std::fs::read_to_string(dir.join("tonemap.wgsl")).unwrap();
+    let original = std::fs::read_to_string(dir.join("render/tonemap.wgsl")).unwrap();
     let exposure = |graph: &mut Graph, live: &mut Live, value: f64, generation: u64| {
         werkstatt::app::editor::document::set_param(graph, "tonemap", "exposure", ParamValue::Float(value)).unwrap();
         live.sync(graph, generation, None);
@@ -94,7 +95,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     let gbuffer_runs = live.runs("gbuffer");
 
     // A broken shader: the error is reported, the last good pipeline keeps rendering.
-    std::fs::write(dir.join("tonemap.wgsl"), original.replace("fn aces(", "fn aces( this is not wgsl")).unwrap();
+    std::fs::write(dir.join("render/tonemap.wgsl"), original.replace("fn aces(", "fn aces( this is not wgsl")).unwrap();
     live.reload_shaders(&gpu);
     let err = live.shader_error.clone().expect("the compile error is kept");
     assert!(err.contains("tonemap.wgsl"), "{err}");
@@ -113,7 +114,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     );
     assert_ne!(red, original, "the test edits a line that exists");
     std::thread::sleep(Duration::from_millis(20));
-    std::fs::write(dir.join("tonemap.wgsl"), red).unwrap();
+    std::fs::write(dir.join("render/tonemap.wgsl"), red).unwrap();
     std::thread::sleep(Duration::from_millis(600));
     settle(&mut live, &gpu);
     assert_eq!(live.shader_error, None);

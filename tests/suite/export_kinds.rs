@@ -8,7 +8,7 @@ use glam::{DVec3, Mat4, Vec3};
 use werkstatt::cuboid::{CuboidGrid, NormalMethod, bend, unit_corner};
 use werkstatt::gpu::read_back;
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::geometry::{icosahedron, plane};
+use werkstatt::nodes::mesh::geometry::{icosahedron, plane};
 use werkstatt::render::draw::SceneDrawer;
 use werkstatt::render::draw::compose::VertexStage;
 use werkstatt::render::draw::export::flatten;

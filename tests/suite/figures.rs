@@ -145,16 +145,17 @@ fn placement_file_errors_name_file_and_line() {
     let dir = out_dir("placement-file");
     let bad = dir.join("bad.csv");
     std::fs::write(&bad, "piece,u,v,angle,scale\n0,0.5,0.5,0,1\n0,0.5,oops,0,1\n").unwrap();
-    let e = werkstatt::nodes::placements::load_placements(&bad).unwrap_err().to_string();
+    let e = werkstatt::nodes::warp::placements::load_placements(&bad).unwrap_err().to_string();
     assert!(e.contains("bad.csv:3") && e.contains("oops"), "{e}");
     std::fs::write(&bad, "0,1.5,0.5,0,1\n").unwrap();
-    let e = werkstatt::nodes::placements::load_placements(&bad).unwrap_err().to_string();
+    let e = werkstatt::nodes::warp::placements::load_placements(&bad).unwrap_err().to_string();
     assert!(e.contains("outside [0, 1]"), "{e}");
-    let good = werkstatt::nodes::placements::load_placements(&root().join("assets/placements/buttons.csv")).unwrap();
+    let good =
+        werkstatt::nodes::warp::placements::load_placements(&root().join("assets/placements/buttons.csv")).unwrap();
     assert_eq!(good.len(), 5);
     let ron = dir.join("layout.ron");
     std::fs::write(&ron, "[(0, 0.25, 0.5, 45.0, 2.0)]").unwrap();
-    assert_eq!(werkstatt::nodes::placements::load_placements(&ron).unwrap()[0].angle, 45.0);
+    assert_eq!(werkstatt::nodes::warp::placements::load_placements(&ron).unwrap()[0].angle, 45.0);
 }
 
 #[test]

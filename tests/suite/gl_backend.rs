@@ -16,7 +16,7 @@ use werkstatt::core::graph::Graph;
 use werkstatt::core::param::ParamValue;
 use werkstatt::core::resources::Resources;
 use werkstatt::gpu::{Backend, GpuContext, read_back};
-use werkstatt::nodes::live_link::{encode_frame, encode_topology};
+use werkstatt::nodes::mesh::live_link::{encode_frame, encode_topology};
 
 /// The GL context, or `None` (test skipped) where the machine has no EGL library.
 fn gl() -> Option<GpuContext> {

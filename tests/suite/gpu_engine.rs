@@ -47,7 +47,8 @@ fn ran(ev: &Evaluator) -> Vec<String> {
 fn shader_copy(gpu: &GpuContext, name: &str) -> PathBuf {
     let dir = out_dir(name).join("shaders");
     std::fs::create_dir_all(&dir).unwrap();
-    for s in werkstatt::gpu::shaders::names() {
+    for s in werkstatt::gpu::shaders::paths() {
+        std::fs::create_dir_all(dir.join(s).parent().unwrap()).unwrap();
         std::fs::copy(root().join("shaders").join(s), dir.join(s)).unwrap();
     }
     gpu.set_shader_dir(Some(dir.clone()));
@@ -167,7 +168,7 @@ fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
 
     // fullscreen.wgsl is included by the lighting and tone-mapping shaders only.
     edit(
-        &dir.join("fullscreen.wgsl"),
+        &dir.join("common/fullscreen.wgsl"),
         "return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);",
         "return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0) ;",
     );
@@ -179,7 +180,7 @@ fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
 
     // A real change to the tone mapper: only it and the output re-run, and it shows.
     edit(
-        &dir.join("tonemap.wgsl"),
+        &dir.join("render/tonemap.wgsl"),
         "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
         "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
     );
@@ -206,14 +207,14 @@ fn a_broken_shader_keeps_the_last_good_pipeline_and_reports_a_typed_error() {
     settle(&mut ev, &gpu, &res, 0, &s);
     let good = centre(&gpu, &ev, "image");
 
-    edit(&dir.join("tonemap.wgsl"), "fn aces(", "fn aces( this is not wgsl");
+    edit(&dir.join("render/tonemap.wgsl"), "fn aces(", "fn aces( this is not wgsl");
     assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
     settle(&mut ev, &gpu, &res, 0, &s);
     let r = ev.report("tonemap").unwrap();
     assert_eq!(r.status, &NodeStatus::Ok, "it ran on the last good pipeline");
     assert_eq!(r.shader_errors.len(), 1, "{:?}", r.shader_errors);
     assert_eq!(r.shader_errors[0].file, "tonemap.wgsl");
-    assert!(r.shader_errors[0].to_string().contains("shaders/tonemap.wgsl"), "{}", r.shader_errors[0]);
+    assert!(r.shader_errors[0].to_string().contains("shaders/render/tonemap.wgsl"), "{}", r.shader_errors[0]);
     assert_eq!(centre(&gpu, &ev, "image"), good, "the old pipeline renders as before");
     assert!(ev.report("light").unwrap().shader_errors.is_empty(), "the error is on the node that uses the shader");
 
@@ -232,7 +233,7 @@ fn a_broken_shader_keeps_the_last_good_pipeline_and_reports_a_typed_error() {
     assert_eq!(fresh.report("light").unwrap().status, &NodeStatus::Ok);
 
     // Fixed: the node recovers.
-    edit(&dir.join("tonemap.wgsl"), "fn aces( this is not wgsl", "fn aces(");
+    edit(&dir.join("render/tonemap.wgsl"), "fn aces( this is not wgsl", "fn aces(");
     assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
     settle(&mut ev, &gpu, &res, 1, &s);
     assert!(ev.report("tonemap").unwrap().shader_errors.is_empty());

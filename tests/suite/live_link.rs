@@ -12,7 +12,7 @@ use werkstatt::core::graph::Graph;
 use werkstatt::core::port::Value;
 use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::live_link::{
+use werkstatt::nodes::mesh::live_link::{
     HEADER_BYTES, Header, MAX_VERTICES, MSG_FRAME, MSG_TOPOLOGY, VERSION, encode_frame, encode_topology,
 };
 

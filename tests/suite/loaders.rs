@@ -3,7 +3,7 @@
 
 use glam::Vec2;
 use werkstatt::mesh::load_mesh_file;
-use werkstatt::nodes::curves::load_svg;
+use werkstatt::nodes::warp::curves::load_svg;
 
 use crate::common::out_dir;
 

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 use werkstatt::mesh::{Mesh, load_mesh_file};
-use werkstatt::nodes::geometry;
+use werkstatt::nodes::mesh::geometry;
 
 fn quad() -> (Vec<Vec3>, Vec<Vec2>, Vec<u32>) {
     (

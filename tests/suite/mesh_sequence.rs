@@ -9,7 +9,7 @@ use werkstatt::core::graph::Graph;
 use werkstatt::core::port::Value;
 use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::mesh_sequence::{Mode, bracket, load_frame, parse_obj};
+use werkstatt::nodes::mesh::mesh_sequence::{Mode, bracket, load_frame, parse_obj};
 
 use crate::common;
 

@@ -24,7 +24,7 @@ use werkstatt::core::port::Value;
 use werkstatt::gpu::{GpuImage, read_back};
 use werkstatt::ibl::gpu::Lights;
 use werkstatt::ibl::median_cut::RegionLight;
-use werkstatt::nodes::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
+use werkstatt::nodes::ibl::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
 use werkstatt::render::scene::{DrawItem, Material};
 
 /// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
@@ -288,7 +288,7 @@ fn after_the_blur_a_planar_occluder_gives_the_lit_fraction_of_the_area_light() {
     eprintln!("sigma {sigma:.4} (world), {sigma_texels} texels; {} pixels; worst |VIS - Phi| {worst:.4}", pixels.len());
     // Rasterizing the edge at texel centres shifts it by up to half a texel: Phi's slope times
     // that (about 0.04 at this sigma of 5 texels), plus half-float moments. (Uncentred
-    // moments, before shaders/vsm.wgsl centred them, gave 0.05 here.)
+    // moments, before shaders/ibl/vsm.wgsl centred them, gave 0.05 here.)
     let tol = 0.4 * 0.5 / sigma_texels + 0.005;
     assert!(worst <= tol, "VIS departs from the lit fraction by {worst} (tolerance {tol})");
 }
@@ -366,7 +366,7 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
         }
     }
     // A real atlas: a floor lit from above and exactly edge-on, one light per tile.
-    let floor = Arc::new(werkstatt::nodes::geometry::plane(4.0, 1, 1).unwrap());
+    let floor = Arc::new(werkstatt::nodes::mesh::geometry::plane(4.0, 1, 1).unwrap());
     let items = white_items(&[(floor, Mat4::IDENTITY)]);
     let lights = Lights {
         lights: vec![light(Vec3::Y), light(Vec3::X), light(Vec3::new(0.0, 1.0, 1.0).normalize()), light(Vec3::Z)],

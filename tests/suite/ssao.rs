@@ -13,7 +13,7 @@ use crate::common::*;
 use werkstatt::core::graph::Graph;
 use werkstatt::core::port::Value;
 use werkstatt::gpu::read_back;
-use werkstatt::nodes::reference_occlusion::SceneBvh;
+use werkstatt::occlusion::reference::SceneBvh;
 
 /// A plane's (translate, rotate) for Draw.
 type Plane = ([f32; 3], [f32; 3]);

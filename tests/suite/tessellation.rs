@@ -1,4 +1,4 @@
-//! Adaptive tessellation on the GPU (shaders/tessellate.wgsl) against its CPU reference
+//! Adaptive tessellation on the GPU (shaders/tessellation/tessellate.wgsl) against its CPU reference
 //! (src/tessellation/mod.rs), and the properties the dissertation states: crack-free output,
 //! bit-identical shared edges, equal levels leaving the mesh unchanged, drawn without read-back.
 
@@ -8,7 +8,7 @@ use glam::Vec3;
 use werkstatt::core::rng::SplitMix64;
 use werkstatt::gpu::readback::read_buffer;
 use werkstatt::mesh::{Mesh, Vertex};
-use werkstatt::nodes::geometry::icosahedron;
+use werkstatt::nodes::mesh::geometry::icosahedron;
 use werkstatt::render::draw::kinds::pn_pixels::PnPixels;
 use werkstatt::tessellation::{
     self, GpuTessellator, Lod, Metric, Mode, PatchPoint, Settings, TessMesh, ViewLod, refine, triangle_edge_levels,
@@ -280,7 +280,7 @@ fn a_tessellated_item_draws_like_its_coarse_mesh_in_the_gbuffer_and_shadow_tiles
 fn per_pixel_pn_depth_is_planar_on_planar_input_and_follows_the_pn_surface() {
     use std::sync::Arc;
     use werkstatt::gpu::read_back;
-    use werkstatt::nodes::geometry::plane;
+    use werkstatt::nodes::mesh::geometry::plane;
     use werkstatt::render::draw::SceneDrawer;
     use werkstatt::render::scene::{DrawItem, View};
 

@@ -8,9 +8,9 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::attach::point_instance;
-use werkstatt::nodes::geometry;
-use werkstatt::nodes::matrix_texture::MatrixTextureNode;
+use werkstatt::nodes::mesh::geometry;
+use werkstatt::nodes::warp::attach::point_instance;
+use werkstatt::nodes::warp::matrix_texture::MatrixTextureNode;
 use werkstatt::warp::gpu::GpuWarper;
 use werkstatt::warp::gpu::read_matrix;
 use werkstatt::warp::{
@@ -385,7 +385,7 @@ fn lookups_past_a_seam_blend_into_the_partner_piece() {
 /// mirrored: check the built-in cloth's parametrization, piece by piece.
 #[test]
 fn cloth_matrix_frames_are_right_handed() {
-    use werkstatt::nodes::cloth::{FlagParams, Preset, SkirtParams};
+    use werkstatt::cloth::{FlagParams, Preset, SkirtParams};
     for preset in [
         Preset::Skirt(SkirtParams { triangles: 1500, ..Default::default() }),
         Preset::Flag(FlagParams { triangles: 800, ..Default::default() }),
@@ -662,7 +662,7 @@ fn fur_gravity_keeps_each_vertex_at_its_distance_to_its_foot() {
 /// `size` on a plane of side 1 through height H has world slope H k / size along the turned x.
 #[test]
 fn decal_rotation_turns_the_normals() {
-    use werkstatt::nodes::attach::area_tex;
+    use werkstatt::nodes::warp::attach::area_tex;
     let (m, _) = matrix(&geometry::plane(1.0, 4, 4).unwrap(), 64, F32, 0);
     let (k, size, height) = (0.5f32, 0.2f32, 0.1f32);
     let ridge = tilted_tile(k, 0.0, 2);
@@ -685,7 +685,7 @@ fn decal_rotation_turns_the_normals() {
 /// Eq. 6 scales the whole geometry: a 2:1 decal stays 2:1 (its longer side is `size`).
 #[test]
 fn decals_keep_their_aspect_ratio() {
-    use werkstatt::nodes::attach::area_tex;
+    use werkstatt::nodes::warp::attach::area_tex;
     let (lo, hi) = (Vec3::new(-1.0, 0.0, -0.5), Vec3::new(1.0, 0.0, 0.5));
     let t = area_tex(lo, hi, true, Vec2::splat(0.5), 0.2, 0.0);
     let (a, b) = (t.transform_point2(Vec2::new(lo.x, lo.z)), t.transform_point2(Vec2::new(hi.x, hi.z)));

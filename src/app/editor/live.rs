@@ -200,9 +200,11 @@ impl ShaderWatch {
     }
 
     fn scan(&self) -> BTreeMap<PathBuf, (SystemTime, u64)> {
-        let Ok(entries) = std::fs::read_dir(&self.dir) else { return BTreeMap::new() };
-        entries
-            .flatten()
+        // The shaders' folder and the family folders in it (render/, warp/, ...).
+        let folders = std::fs::read_dir(&self.dir).into_iter().flatten().flatten().map(|e| e.path());
+        std::iter::once(self.dir.clone())
+            .chain(folders.filter(|p| p.is_dir()))
+            .flat_map(|d| std::fs::read_dir(d).into_iter().flatten().flatten())
             .filter(|e| e.path().extension().is_some_and(|x| x == "wgsl"))
             .filter_map(|e| {
                 let m = e.metadata().ok()?;

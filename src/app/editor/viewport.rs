@@ -14,7 +14,7 @@ use crate::gpu::{FullscreenPass, GpuContext, GpuImage};
 
 const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
-/// The display conversion: a full-screen pass over shaders/display.wgsl.
+/// The display conversion: a full-screen pass over shaders/render/display.wgsl.
 struct Converter {
     pass: FullscreenPass,
 }

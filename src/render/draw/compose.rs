@@ -13,7 +13,7 @@ use crate::render::scene::{DrawItem, Image8};
 
 use super::objects::OBJECT_SIZE;
 
-/// shaders/item_in.wgsl `ItemIn`: an item's vertex-stage transform, one entry of the
+/// shaders/common/item_in.wgsl `ItemIn`: an item's vertex-stage transform, one entry of the
 /// instance-rate vertex buffer of all items of a pass (lavapipe fetches it once per batch of
 /// vertices; read from the objects' storage buffer, it was a gather per vertex).
 #[repr(C)]
@@ -28,7 +28,7 @@ pub struct ItemVertex {
     /// texture. Zero without one.
     grid: [u32; 4],
     /// A single cuboid's (a grid of one cell) coefficient matrix C, by rows as in
-    /// shaders/cuboid.wgsl (zero otherwise): read as instance attributes, where a grid's cells
+    /// shaders/cuboid/cuboid.wgsl (zero otherwise): read as instance attributes, where a grid's cells
     /// cost a texel load per row and vertex.
     cuboid: [[f32; 4]; 6],
 }
@@ -41,7 +41,7 @@ impl ItemVertex {
         9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
     ];
 
-    /// shaders/item_in.wgsl `CuboidItemIn`: the transform and normal, then C's rows at
+    /// shaders/common/item_in.wgsl `CuboidItemIn`: the transform and normal, then C's rows at
     /// locations 2, 4 and 12-15.
     const CUBOID_ATTRIBUTES: [wgpu::VertexAttribute; 13] = {
         let mut a =
@@ -188,7 +188,7 @@ fn box_after(m: Mat4, lo: glam::Vec3, hi: glam::Vec3) -> (DVec3, DVec3) {
     })
 }
 
-/// Cells per texel row of a pass's cell texture (shaders/cuboid.wgsl `CELLS_PER_ROW`), each
+/// Cells per texel row of a pass's cell texture (shaders/cuboid/cuboid.wgsl `CELLS_PER_ROW`), each
 /// cell [`CuboidGrid::ROWS_PER_CELL`] texels.
 const CELLS_PER_ROW: usize = 1024;
 
@@ -263,7 +263,7 @@ impl Composed {
     }
 }
 
-/// A pass's cell texture (shaders/cuboid.wgsl `cuboid_cells`: rgba32float, a row of C per
+/// A pass's cell texture (shaders/cuboid/cuboid.wgsl `cuboid_cells`: rgba32float, a row of C per
 /// texel, [`CELLS_PER_ROW`] cells per texel row), one per pass until the next submit
 /// ([`WriteSlots`]). Lavapipe loads a texel for each vertex with a few vector instructions; a
 /// storage buffer indexed per vertex costs it a loop over the lanes with a branch per

@@ -9,7 +9,7 @@ use crate::render::scene::{DrawItem, Image8};
 
 use super::compose::ComposedItem;
 
-/// shaders/object.wgsl `Object`: one entry of the storage buffer of all objects of a pass.
+/// shaders/common/object.wgsl `Object`: one entry of the storage buffer of all objects of a pass.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuObject {

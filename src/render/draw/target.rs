@@ -3,7 +3,7 @@
 
 use glam::{Mat4, Vec4};
 
-/// The most tiles one depth draw fills (the size of the views array in shaders/depth_tiles.wgsl).
+/// The most tiles one depth draw fills (the size of the views array in shaders/render/depth_tiles.wgsl).
 pub const MAX_TILES: usize = 64;
 
 /// One tile of a depth target: the view drawn into it and where it lies in the texture.
@@ -14,7 +14,7 @@ pub struct Tile {
     pub rect: [u32; 4],
 }
 
-/// shaders/gbuffer.wgsl's frame uniform.
+/// shaders/render/gbuffer.wgsl's frame uniform.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct FrameUniform {
@@ -22,7 +22,7 @@ pub struct FrameUniform {
     pub view: [[f32; 4]; 4],
 }
 
-/// shaders/depth_tiles.wgsl `TileView`: a tile's view-projection folded with the map from clip
+/// shaders/render/depth_tiles.wgsl `TileView`: a tile's view-projection folded with the map from clip
 /// space into its rectangle of the texture, and that rectangle in texels (x0, y0, x1, y1) for
 /// the fragment test.
 #[repr(C)]

@@ -1,6 +1,6 @@
 //! Deferred-warped detail geometry (Knuth et al., "Deferred Warping"): instances of a detail
-//! mesh warped through the matrix texture in the vertex stage (shaders/attach.wgsl, or
-//! shaders/depth.wgsl `vs_attached`), and exported through the same warp run as a compute pass
+//! mesh warped through the matrix texture in the vertex stage (shaders/warp/attach.wgsl, or
+//! shaders/render/depth.wgsl `vs_attached`), and exported through the same warp run as a compute pass
 //! or its CPU twin.
 
 use crate::mesh::Vertex;
@@ -44,7 +44,7 @@ impl ItemKind for AttachedDraw {
             TargetKind::GBuffer => ("attach.wgsl", "vs_main"),
             TargetKind::DepthTiles => ("depth.wgsl", "vs_attached"),
         };
-        // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp.wgsl).
+        // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp/warp.wgsl).
         let constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
         let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants };
         let vertex = [Some(Vertex::layout()), Some(InstanceData::layout())];

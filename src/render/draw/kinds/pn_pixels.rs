@@ -1,5 +1,5 @@
 //! Per-pixel PN depth (dissertation 4.1.3): the G-buffer evaluates the PN patch of each
-//! triangle per fragment (shaders/gbuffer_pn.wgsl), reading the triangle's corners from the
+//! triangle per fragment (shaders/tessellation/gbuffer_pn.wgsl), reading the triangle's corners from the
 //! mesh's storage buffers; other targets, and items under a non-linear grid, draw the mesh as
 //! it is.
 

@@ -1,0 +1,3 @@
+//! Comparison nodes: the difference of two images.
+
+pub mod image_difference;

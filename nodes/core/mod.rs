@@ -1,0 +1,4 @@
+//! Basic nodes: numbers, maths, time, watching values, writing and previewing images.
+
+pub mod basic;
+pub mod output;

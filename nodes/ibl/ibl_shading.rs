@@ -1,0 +1,195 @@
+//! `IblShading`: the deferred image-based lighting pass of eq. 3.43.
+
+use std::sync::Arc;
+
+use crate::core::node::prelude::*;
+use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
+use crate::ibl::gpu::{PemSet, cube_target};
+use crate::ibl::pem::TABLE;
+use crate::nodes::ibl::shadow_atlas::ShadowAtlas;
+use crate::render::scene::GBuffer;
+
+crate::choice!(
+    /// What IblShading sums.
+    pub enum IblMode {
+        /// Eq. 3.43: one lookup per PEM (each to be weighted by its light's visibility).
+        Pems = "pems",
+        /// One lookup into the filtered full map: eq. 3.43 with every visibility 1.
+        Full = "full",
+    }
+);
+
+crate::choice!(
+    /// What shows where nothing was drawn.
+    pub enum Background {
+        Color = "color",
+        Environment = "environment",
+    }
+);
+
+/// PEMs bound per pass (shaders/ibl/ibl_shading.wgsl pem0..pem7); passes accumulate.
+pub const PEMS_PER_PASS: usize = 8;
+
+pub static IBL_SHADING: NodeSpec = NodeSpec {
+    kind: "IblShading",
+    category: Category::Lighting,
+    doc: "Deferred image-based lighting (eq. 3.43): per pixel, albedo x the sum over regions of VIS_i x PEM_i, each looked up along r' = n(1-g) + r g at the mip level calibrated for glossiness g (s = 1/(1-g), lobe volumes matched). VIS_i = 1 unless a shadow atlas (of the same lights, in the same order) is connected: then, per pixel, the world position from the G-buffer depth, moved along the normal by `normal_offset`, is transformed into light i's tile, the blurred moments (mu, E[d^2]) sampled bilinearly (clamped to the tile, optionally jittered), and VIS_i = 1 for t <= mu, else linstep(bleed_reduction, 1, var / (var + (t - mu)^2)) with var = max(E[d^2] - mu^2, min_variance) and t the receiver's light depth minus depth_bias. Cloth and detail geometry alike; the G-buffer's glossiness (and its parameter maps) drive it.",
+    inputs: &[
+        PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer to shade."),
+        PortSpec::required("pems", PortType::Pems, "The filtered partial environment maps."),
+        PortSpec::optional(
+            "shadows",
+            PortType::ShadowAtlas,
+            "Variance shadow maps of the PEMs' lights (ShadowAtlas): VIS_i by Chebyshev's inequality; unconnected, every VIS_i is 1.",
+        ),
+    ],
+    outputs: &[PortSpec::output("image", PortType::Texture, "Linear HDR radiance.")],
+    params: &[
+        ParamSpec::new(
+            "mode",
+            ParamKind::Choice { default: "pems", options: IblMode::OPTIONS },
+            "Sum the PEMs (eq. 3.43) or look up the filtered full map once (equal without shadows).",
+        ),
+        ParamSpec::new(
+            "background",
+            ParamKind::Choice { default: "environment", options: Background::OPTIONS },
+            "What shows where nothing was drawn.",
+        ),
+        ParamSpec::new(
+            "background_color",
+            ParamKind::Color { default: [0.05, 0.05, 0.06] },
+            "Background colour (background = color).",
+        ),
+        ParamSpec::new(
+            "background_level",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 16.0 },
+            "Mip level of the environment shown behind the scene (0 sharp; higher blurs it).",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(IblShadingNode::default()),
+};
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct IblUniform {
+    inv_view_proj: [[f32; 4]; 4],
+    size: [f32; 4],
+    background: [f32; 4],
+    misc: [f32; 4],
+    levels: [f32; 36],
+}
+
+/// shaders/ibl/ibl_shading.wgsl `Shadow`: the lights of one pass (world to atlas coordinates,
+/// their tiles in atlas coordinates inset by half a texel) and the lookup settings.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ShadowUniform {
+    to_atlas: [[[f32; 4]; 4]; PEMS_PER_PASS],
+    rect: [[f32; 4]; PEMS_PER_PASS],
+    /// min variance, bleed reduction, jitter (texels), 1 when shadows are on.
+    params: [f32; 4],
+    /// atlas width, height (texels), normal offset (world), depth bias.
+    bias: [f32; 4],
+    eye: [f32; 4],
+    forward: [f32; 4],
+}
+
+impl ShadowUniform {
+    fn new(atlas: Option<&ShadowAtlas>, first: usize, g: &GBuffer) -> ShadowUniform {
+        let mut u: ShadowUniform = bytemuck::Zeroable::zeroed();
+        let Some(a) = atlas else { return u };
+        let (w, h) = (a.atlas.width as f32, a.atlas.height as f32);
+        for (k, l) in a.lights.iter().skip(first).take(PEMS_PER_PASS).enumerate() {
+            u.to_atlas[k] = l.to_atlas.to_cols_array_2d();
+            let [x, y, tw, th] = l.rect.map(|v| v as f32);
+            u.rect[k] = [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h];
+        }
+        let p = &a.params;
+        u.params = [p.min_variance, p.bleed_reduction, p.jitter, 1.0];
+        u.bias = [w, h, p.normal_offset, p.depth_bias];
+        let forward = g.view.inv_view.transform_vector3(glam::Vec3::NEG_Z).normalize();
+        u.eye = g.view.eye.extend(1.0).to_array();
+        u.forward = forward.extend(0.0).to_array();
+        u
+    }
+}
+
+#[derive(Default)]
+struct IblShadingNode {
+    pass: Option<FullscreenPass>,
+    /// Bound in the PEM slots a pass leaves empty.
+    empty_cube: Option<GpuImage>,
+}
+
+impl Node for IblShadingNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let g: Arc<GBuffer> = cx.input("gbuffer")?;
+        let pems: Arc<PemSet> = cx.input("pems")?;
+        let mode: IblMode = cx.choice("mode");
+        let mut shadows: Option<Arc<ShadowAtlas>> = cx.optional("shadows");
+        if let Some(s) = &shadows {
+            if mode == IblMode::Full {
+                cx.warn("mode full looks up the filtered full map once: the shadow atlas is ignored (use mode pems)");
+                shadows = None;
+            } else if s.lights.len() != pems.pems.len() {
+                return Err(NodeError::msg(format!(
+                    "the shadow atlas has {} lights but there are {} PEMs: feed both from the same MedianCut",
+                    s.lights.len(),
+                    pems.pems.len()
+                )));
+            }
+        }
+        let background: Background = cx.choice("background");
+        let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("ibl_shading.wgsl"));
+        if self.empty_cube.is_none() {
+            self.empty_cube = Some(cube_target(gpu, "empty cube", 1)?);
+        }
+        let empty = self.empty_cube.as_ref().expect("made above");
+
+        let mut levels = [0.0f32; 36];
+        levels[..TABLE].copy_from_slice(&pems.calibration.levels);
+        let top = (pems.full.desc.mips - 1) as f32;
+        let (w, h) = (g.width(), g.height());
+        let batches: Vec<&[GpuImage]> = match mode {
+            IblMode::Full => vec![&[]],
+            IblMode::Pems => pems.pems.chunks(PEMS_PER_PASS).collect(),
+        };
+        let bg = cx.vec3("background_color");
+        let mut previous: Option<GpuImage> = None;
+        for (i, batch) in batches.iter().enumerate() {
+            let uniform = IblUniform {
+                inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
+                size: [w as f32, h as f32, batch.len() as f32, if i == 0 { 1.0 } else { 0.0 }],
+                background: [bg.x, bg.y, bg.z, if background == Background::Environment { 1.0 } else { 0.0 }],
+                misc: [
+                    cx.f32("background_level").min(top),
+                    top,
+                    if mode == IblMode::Full { 1.0 } else { 0.0 },
+                    pems.full.width as f32,
+                ],
+                levels,
+            };
+            let out = GpuImage::target(gpu, "ibl shading", w, h, gpu.formats().hdr);
+            let mut binds = vec![
+                Bind::Uniform(bytemuck::bytes_of(&uniform)),
+                Bind::Texture(&g.color),
+                Bind::Texture(&g.normal),
+                Bind::Texture(&g.depth),
+                Bind::Texture(previous.as_ref().unwrap_or(&g.color)),
+                Bind::Texture(&pems.full),
+            ];
+            binds.extend((0..PEMS_PER_PASS).map(|k| Bind::Texture(batch.get(k).unwrap_or(empty))));
+            let shadow = ShadowUniform::new(shadows.as_deref(), i * PEMS_PER_PASS, &g);
+            // Without an atlas the G-buffer's colour stands in for it (never read).
+            binds.push(Bind::Texture(shadows.as_ref().map_or(&g.color, |s| &s.atlas)));
+            binds.push(Bind::Uniform(bytemuck::bytes_of(&shadow)));
+            binds.push(Bind::Sampler(SamplerKind::LinearClamp));
+            pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
+            previous = Some(out);
+        }
+        cx.set("image", Arc::new(previous.expect("at least one pass")));
+        Ok(())
+    }
+}

@@ -1,0 +1,477 @@
+//! `ShadowAtlas`: variance shadow maps of many directional lights in one texture (dissertation
+//! §4.2.1, Fig. 4.11; `../shared/TECHNIQUES.md` §4), one tile per median-cut light, for the
+//! visibility term VIS_i of eq. 3.43 (`IblShading`'s `shadows` input).
+//!
+//! Choices the text leaves open, and what this node does:
+//!
+//! - **Layout**: a grid of `tile_size` x `tile_size` tiles, `ceil(sqrt(N))` columns, tile i at
+//!   column i mod columns, row i / columns. Each tile has a guard band of `guard` texels per
+//!   side; the light's projection maps the scene into the tile's inner square and extends
+//!   into the guard band, so the guard holds real geometry (the blur reads it).
+//! - **Frustum**: orthographic along -direction, fitted to the bounding sphere (centre c,
+//!   radius R) of the drawn items' transformed mesh bounds: the inner square spans [-R, R]
+//!   across, depth [0, 1] spans 2R (near plane R in front of c, far plane R behind it).
+//! - **Drawing**: `SceneDrawer::depth_tiles`, one instanced draw per batch of <= 64 lights,
+//!   then a moments pass writes (c, c^2) of the centred depth c = d - 1/2 (Rg16Float) and a separable Gaussian blurs each
+//!   tile; more than 64 lights draw batch by batch into a batch texture whose tiles are
+//!   copied into the atlas.
+//! - **Blur width** (an area light of the region's size): the region's solid angle Omega is a
+//!   cone of angular radius theta = acos(1 - Omega / 2 pi); an occluder at the reference
+//!   distance d_ref = 0.25 R above its receiver casts a penumbra of half-width
+//!   tan(theta) d_ref, so sigma = blur_scale tan(theta) d_ref / texel (texel = 2R / inner
+//!   tile width, world units), clamped so that 3 sigma <= guard. The blur's taps are clamped
+//!   to the tile (guard included): it never reads another tile.
+//! - **Guard**: `guard` = -1 derives it: ceil(3 sigma_max), sigma_max the widest unclamped
+//!   sigma (at texel 2R / tile_size) among the lights carrying at least the mean energy
+//!   (regions over dark parts of a map are huge but nearly black: they take the clamp), at
+//!   most tile_size / 8. An explicit guard is at most tile_size / 4.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3, Vec4};
+
+use crate::core::node::prelude::*;
+use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
+use crate::ibl::gpu::Lights;
+use crate::render::draw::{MAX_TILES, SceneDrawer, Tile};
+use crate::render::scene::DrawItem;
+
+/// The reference occluder-receiver distance of the blur rule, as a fraction of the scene's
+/// bounding radius.
+pub const REFERENCE_DISTANCE: f32 = 0.25;
+/// The most lights one atlas holds (batches of 64).
+pub const MAX_LIGHTS: usize = 1024;
+
+pub static SHADOW_ATLAS: NodeSpec = NodeSpec {
+    kind: "ShadowAtlas",
+    category: Category::Lighting,
+    doc: "Variance shadow maps of many directional lights (one per median-cut region) in one atlas texture (Fig. 4.11), for IblShading's \
+visibility term (eq. 3.43). Per light an orthographic view along -direction fitted to the bounding sphere (c, R) of the drawn items; \
+the inner tile (tile minus `guard` texels per side) spans [-R, R], the guard band holds real geometry. Depth drawn with one instanced \
+draw per batch of 64 lights, moments (c, c^2) of the centred depth c = d - 1/2 in Rg16Float (finer half floats near the scene), then a separable Gaussian per tile whose sigma models an area light of \
+the region's solid angle Omega: theta = acos(1 - Omega / 2pi), sigma = blur_scale tan(theta) 0.25 R / texel, clamped to 3 sigma <= guard; \
+taps are clamped to the tile, so no blur reads another tile. Memory: atlas texels x 4 bytes (Table 5.1: N x res^2 x 4 B).",
+    inputs: &[
+        PortSpec::required("scene", PortType::Scene, "The occluders (coarse items only unless coarse_only is off)."),
+        PortSpec::required("lights", PortType::Lights, "Directional lights (MedianCut), one tile each."),
+    ],
+    outputs: &[
+        PortSpec::output("shadows", PortType::ShadowAtlas, "The atlas with each light's matrices and tile."),
+        PortSpec::output(
+            "atlas",
+            PortType::Texture,
+            "The atlas itself (Rg16Float moments of the centred depth d - 1/2), for inspection.",
+        ),
+        PortSpec::output("memory_mb", PortType::Scalar, "Atlas memory in MiB (texels x 4 bytes)."),
+    ],
+    params: &[
+        ParamSpec::new(
+            "tile_size",
+            ParamKind::Int { default: 128, min: 16, max: 1024 },
+            "Tile width and height in texels (guard band included).",
+        ),
+        ParamSpec::new(
+            "guard",
+            ParamKind::Int { default: -1, min: -1, max: 256 },
+            "Guard band per tile side in texels; -1 derives it: ceil(3 sigma) of the widest blur among lights with at least the mean energy, at most tile/8.",
+        ),
+        ParamSpec::new(
+            "coarse_only",
+            ParamKind::Bool { default: true },
+            "Draw only coarse items (the simulation surface), not detail attachments (the dissertation).",
+        ),
+        ParamSpec::new(
+            "blur_scale",
+            ParamKind::Float { default: 1.0, min: 0.0, max: 16.0 },
+            "Multiplies the blur width rule (0: no blur).",
+        ),
+        ParamSpec::new(
+            "bleed_reduction",
+            ParamKind::Float { default: 0.3, min: 0.0, max: 0.99 },
+            "Light-bleeding reduction: VIS = linstep(b, 1, p_max).",
+        ),
+        ParamSpec::new(
+            "min_variance",
+            ParamKind::Float { default: 1e-5, min: 0.0, max: 1.0 },
+            "Lower bound of the variance (depth units^2; depth spans 2R).",
+        ),
+        ParamSpec::new(
+            "jitter",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 8.0 },
+            "Noise-jittered lookup (Fig. 4.13): offset in texels from a tiled 4x4 hash per light; 0 = off.",
+        ),
+        ParamSpec::new(
+            "normal_offset",
+            ParamKind::Float { default: 1.0, min: 0.0, max: 16.0 },
+            "Lookup point moved along the surface normal by this many texels (world size) against acne.",
+        ),
+        ParamSpec::new(
+            "depth_bias",
+            ParamKind::Float { default: 0.002, min: 0.0, max: 0.5 },
+            "Receiver depth bias, as a fraction of the depth range 2R.",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(ShadowAtlasNode::default()),
+};
+
+pub use crate::ibl::shadow::{ShadowAtlas, ShadowLight, VsmParams};
+
+/// The geometry settings of an atlas (the node's parameters without the lookup ones).
+#[derive(Clone, Copy, Debug)]
+pub struct AtlasSettings {
+    pub tile_size: u32,
+    /// None: derived from the widest blur.
+    pub guard: Option<u32>,
+    pub coarse_only: bool,
+    pub blur_scale: f32,
+}
+
+/// The bounding sphere (centre, radius) of the items' transformed mesh bounds.
+pub fn bounding_sphere(items: &[DrawItem]) -> (Vec3, f32) {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for item in items {
+        let (a, b) = item.mesh.bounds();
+        if a.x > b.x {
+            continue;
+        }
+        for k in 0..8 {
+            let corner = Vec3::new(
+                if k & 1 == 0 { a.x } else { b.x },
+                if k & 2 == 0 { a.y } else { b.y },
+                if k & 4 == 0 { a.z } else { b.z },
+            );
+            let w = item.model.transform_point3(corner);
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+    }
+    if lo.x > hi.x {
+        return (Vec3::ZERO, 1.0);
+    }
+    ((lo + hi) / 2.0, ((hi - lo).length() / 2.0).max(1e-4))
+}
+
+/// The angular radius of a cone of solid angle `omega`.
+pub fn cone_angle(omega: f32) -> f32 {
+    (1.0 - omega / (2.0 * std::f32::consts::PI)).clamp(-1.0, 1.0).acos()
+}
+
+/// The blur's sigma in texels for a region of solid angle `omega`, before the guard clamp.
+pub fn blur_sigma(omega: f32, radius: f32, texel_world: f32, blur_scale: f32) -> f32 {
+    let theta = cone_angle(omega).min(1.4);
+    blur_scale * theta.tan() * REFERENCE_DISTANCE * radius / texel_world
+}
+
+/// The orthographic view of a light along -`direction` fitted to the sphere (c, r), its
+/// inner square [-r, r] mapped to the tile minus `guard` texels per side.
+pub fn light_view_proj(direction: Vec3, center: Vec3, radius: f32, tile: u32, guard: u32) -> Mat4 {
+    let l = direction.normalize_or(Vec3::Y);
+    let up = if l.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+    let view = Mat4::look_at_rh(center + l * 2.0 * radius, center, up);
+    let ext = radius * tile as f32 / (tile - 2 * guard).max(1) as f32;
+    Mat4::orthographic_rh(-ext, ext, -ext, ext, radius, 3.0 * radius) * view
+}
+
+/// The map from a light's clip space to atlas coordinates of the tile `rect` (texels) in a
+/// `width` x `height` atlas (NDC y up, texel rows down, as `depth_tiles` draws it).
+pub fn clip_to_atlas(rect: [u32; 4], width: u32, height: u32) -> Mat4 {
+    let (w, h) = (width as f32, height as f32);
+    let [x, y, tw, th] = rect.map(|v| v as f32);
+    Mat4::from_cols(
+        Vec4::new(tw / (2.0 * w), 0.0, 0.0, 0.0),
+        Vec4::new(0.0, -th / (2.0 * h), 0.0, 0.0),
+        Vec4::new(0.0, 0.0, 1.0, 0.0),
+        Vec4::new((x + tw / 2.0) / w, (y + th / 2.0) / h, 0.0, 1.0),
+    )
+}
+
+/// Columns and rows of the atlas grid for `n` tiles.
+pub fn grid(n: usize) -> (u32, u32) {
+    let columns = (n as f64).sqrt().ceil().max(1.0) as u32;
+    (columns, (n as u32).div_ceil(columns).max(1))
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BlurUniform {
+    /// x: tile size, y: columns, z: tiles in this texture, w: direction (0 horizontal, 1 vertical).
+    layout: [f32; 4],
+    sigma: [[f32; 4]; MAX_TILES / 4],
+}
+
+/// The passes of an atlas, kept between frames.
+pub struct AtlasBuilder {
+    drawer: SceneDrawer,
+    moments: FullscreenPass,
+    blur: FullscreenPass,
+}
+
+impl Default for AtlasBuilder {
+    fn default() -> Self {
+        AtlasBuilder {
+            drawer: SceneDrawer::default(),
+            moments: FullscreenPass::new("vsm.wgsl").with_fragment_entry("fs_moments"),
+            blur: FullscreenPass::new("vsm_blur.wgsl").with_fragment_entry("fs_blur"),
+        }
+    }
+}
+
+/// The moments format: Rg16Float (Table 5.1's RG16F) where the device renders it.
+fn moments_format(gpu: &GpuContext) -> wgpu::TextureFormat {
+    gpu.formats().moments
+}
+
+impl AtlasBuilder {
+    /// The separable per-tile Gaussian (shaders/ibl/vsm_blur.wgsl) of `src`, a grid of `tile`-texel
+    /// tiles, `columns` wide, tile j blurred with `sigmas[j]` (texels; at most 64 tiles), taps
+    /// clamped to the tile. Slots past the last tile become far (0.5, 0.25: centred depth 1/2). Returns a new texture
+    /// of the atlas format.
+    pub fn blur(
+        &mut self,
+        gpu: &GpuContext,
+        src: &GpuImage,
+        tile: u32,
+        columns: u32,
+        sigmas: &[f32],
+    ) -> anyhow::Result<GpuImage> {
+        anyhow::ensure!(sigmas.len() <= MAX_TILES, "one blur covers at most {MAX_TILES} tiles");
+        let format = moments_format(gpu);
+        let mut sigma = [[0.0f32; 4]; MAX_TILES / 4];
+        for (j, s) in sigmas.iter().enumerate() {
+            sigma[j / 4][j % 4] = *s;
+        }
+        let uniform = |dir: f32| BlurUniform { layout: [tile as f32, columns as f32, sigmas.len() as f32, dir], sigma };
+        let mut input = src;
+        let mut outputs = Vec::new();
+        for dir in [0.0, 1.0] {
+            let out = GpuImage::target(gpu, "vsm blur", src.width, src.height, format);
+            let u = uniform(dir);
+            self.blur.draw(
+                gpu,
+                &[Bind::Uniform(bytemuck::bytes_of(&u)), Bind::Texture(input)],
+                &[&out.view],
+                &[format],
+            )?;
+            outputs.push(out);
+            input = outputs.last().expect("pushed");
+        }
+        Ok(outputs.pop().expect("two passes"))
+    }
+
+    /// Draws the atlas of `lights` for `items` (all of them: filter coarse items before).
+    pub fn build(
+        &mut self,
+        gpu: &GpuContext,
+        items: &[DrawItem],
+        lights: &Lights,
+        s: &AtlasSettings,
+        params: VsmParams,
+    ) -> anyhow::Result<ShadowAtlas> {
+        let n = lights.lights.len();
+        anyhow::ensure!((1..=MAX_LIGHTS).contains(&n), "the atlas holds 1 to {MAX_LIGHTS} lights, not {n}");
+        let t = s.tile_size.max(16);
+        let (center, radius) = bounding_sphere(items);
+        // The guard fits the widest blur among the lights that carry at least the mean
+        // energy: median-cut regions over dark parts of a map are huge (and their sigmas with
+        // them) but carry little light; they get the guard's clamp.
+        let mean_energy = lights.lights.iter().map(|l| l.energy).sum::<f32>() / n as f32;
+        let max_sigma = |texel: f32| {
+            lights
+                .lights
+                .iter()
+                .filter(|l| l.energy >= mean_energy)
+                .map(|l| blur_sigma(l.solid_angle, radius, texel, s.blur_scale))
+                .fold(0.0, f32::max)
+        };
+        let guard = match s.guard {
+            Some(g) => g.min(t / 4),
+            None => ((3.0 * max_sigma(2.0 * radius / t as f32)).ceil() as u32).min(t / 8),
+        };
+        let texel_world = 2.0 * radius / (t - 2 * guard) as f32;
+        let (columns, rows) = grid(n);
+        let (width, height) = (columns * t, rows * t);
+        let max_dim = gpu.limits.max_texture_dimension_2d;
+        anyhow::ensure!(
+            width <= max_dim && height <= max_dim,
+            "a {width}x{height} atlas ({n} tiles of {t}) exceeds the device's {max_dim} texels"
+        );
+        let format = moments_format(gpu);
+        let shadow_lights: Vec<ShadowLight> = lights
+            .lights
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let rect = [(i as u32 % columns) * t, (i as u32 / columns) * t, t, t];
+                let view_proj = light_view_proj(l.direction, center, radius, t, guard);
+                let sigma = blur_sigma(l.solid_angle, radius, texel_world, s.blur_scale).min(guard as f32 / 3.0);
+                let direction = l.direction.normalize_or(Vec3::Y);
+                ShadowLight {
+                    direction,
+                    view_proj,
+                    to_atlas: clip_to_atlas(rect, width, height) * view_proj,
+                    rect,
+                    sigma,
+                }
+            })
+            .collect();
+
+        let single = n <= MAX_TILES;
+        let make_atlas = |gpu: &GpuContext| {
+            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_DST;
+            let atlas = gpu.acquire("shadow atlas", TextureDesc::d2(width, height, format, usage));
+            // Grid slots past the last light hold no tile: cleared (zeros) for inspection.
+            gpu.record(|enc| {
+                enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("shadow atlas clear"),
+                    color_attachments: &[atlas.clear_attachment()],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+            });
+            atlas
+        };
+        let mut atlas: Option<GpuImage> = None;
+        for batch in shadow_lights.chunks(MAX_TILES) {
+            // A batch texture laid out like the atlas (one batch) or 8 columns wide.
+            let bc = if single { columns } else { 8 };
+            let (bw, bh) = (bc * t, (batch.len() as u32).div_ceil(bc) * t);
+            let tiles: Vec<Tile> = batch
+                .iter()
+                .enumerate()
+                .map(|(j, l)| Tile { view_proj: l.view_proj, rect: [(j as u32 % bc) * t, (j as u32 / bc) * t, t, t] })
+                .collect();
+            let depth = self.drawer.depth_tiles(gpu, items, &tiles, bw, bh)?;
+            let moments = GpuImage::target(gpu, "vsm moments", bw, bh, format);
+            let depth_as_float = Bind::View(
+                &depth.view,
+                wgpu::TextureViewDimension::D2,
+                wgpu::TextureSampleType::Float { filterable: false },
+            );
+            self.moments.draw(gpu, &[Bind::Uniform(&[0u8; 16]), depth_as_float], &[&moments.view], &[format])?;
+            let sigmas: Vec<f32> = batch.iter().map(|l| l.sigma).collect();
+            let blurred = self.blur(gpu, &moments, t, bc, &sigmas)?;
+            if single {
+                atlas = Some(blurred);
+            } else {
+                let atlas = atlas.get_or_insert_with(|| make_atlas(gpu));
+                gpu.record(|enc| {
+                    for (j, l) in batch.iter().enumerate() {
+                        let src = [(j as u32 % bc) * t, (j as u32 / bc) * t];
+                        enc.copy_texture_to_texture(
+                            wgpu::TexelCopyTextureInfo {
+                                texture: &blurred.texture,
+                                mip_level: 0,
+                                origin: wgpu::Origin3d { x: src[0], y: src[1], z: 0 },
+                                aspect: wgpu::TextureAspect::All,
+                            },
+                            wgpu::TexelCopyTextureInfo {
+                                texture: &atlas.texture,
+                                mip_level: 0,
+                                origin: wgpu::Origin3d { x: l.rect[0], y: l.rect[1], z: 0 },
+                                aspect: wgpu::TextureAspect::All,
+                            },
+                            wgpu::Extent3d { width: t, height: t, depth_or_array_layers: 1 },
+                        );
+                    }
+                });
+            }
+        }
+        let atlas = atlas.expect("at least one batch");
+        let bytes = width as u64 * height as u64 * format.block_copy_size(None).unwrap_or(4) as u64;
+        Ok(ShadowAtlas {
+            atlas,
+            lights: shadow_lights,
+            tile_size: t,
+            guard,
+            columns,
+            center,
+            radius,
+            texel_world,
+            params: VsmParams { normal_offset: params.normal_offset * texel_world, ..params },
+            bytes,
+        })
+    }
+}
+
+#[derive(Default)]
+struct ShadowAtlasNode {
+    builder: AtlasBuilder,
+}
+
+impl Node for ShadowAtlasNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let scene: Arc<Vec<DrawItem>> = cx.input("scene")?;
+        let lights: Arc<Lights> = cx.input("lights")?;
+        let coarse_only = cx.bool("coarse_only");
+        let items: Vec<DrawItem> = scene.iter().filter(|i| !(coarse_only && i.detail)).cloned().collect();
+        let guard = cx.int("guard");
+        let settings = AtlasSettings {
+            tile_size: cx.int("tile_size").clamp(16, 1024) as u32,
+            guard: (guard >= 0).then_some(guard as u32),
+            coarse_only,
+            blur_scale: cx.f32("blur_scale"),
+        };
+        let params = VsmParams {
+            min_variance: cx.f32("min_variance"),
+            bleed_reduction: cx.f32("bleed_reduction").clamp(0.0, 0.99),
+            jitter: cx.f32("jitter"),
+            normal_offset: cx.f32("normal_offset"),
+            depth_bias: cx.f32("depth_bias"),
+        };
+        let atlas =
+            self.builder.build(gpu, &items, &lights, &settings, params).map_err(|e| NodeError::msg(e.to_string()))?;
+        cx.set("memory_mb", atlas.bytes as f64 / (1u64 << 20) as f64);
+        cx.set("atlas", Arc::new(atlas.atlas.share()));
+        cx.set("shadows", Arc::new(atlas));
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_light_maps_the_bounding_sphere_into_the_inner_tile() {
+        let (c, r, t, g) = (Vec3::new(1.0, 2.0, 3.0), 2.0, 128u32, 8u32);
+        for dir in [Vec3::Y, Vec3::new(0.3, 0.8, -0.5).normalize(), -Vec3::Y, Vec3::X] {
+            let vp = light_view_proj(dir, c, r, t, g);
+            let inner = (t - 2 * g) as f32 / t as f32;
+            // The sphere's extreme points across the view land on the inner square's edges.
+            let up = if dir.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+            let side = dir.cross(up).normalize();
+            let p = vp.project_point3(c + side * r);
+            assert!((p.x.abs() - inner).abs() < 1e-4 && p.y.abs() < 1e-4, "{dir}: {p}");
+            // Depth 0 toward the light, 1 away from it, linear.
+            assert!(vp.project_point3(c + dir * r).z.abs() < 1e-5);
+            assert!((vp.project_point3(c - dir * r).z - 1.0).abs() < 1e-5);
+            assert!((vp.project_point3(c).z - 0.5).abs() < 1e-5);
+        }
+        // The atlas map puts the tile's centre at its rectangle's centre.
+        let m = clip_to_atlas([128, 256, 128, 128], 512, 384);
+        let centre = m.project_point3(Vec3::ZERO);
+        assert!((centre.x - 192.0 / 512.0).abs() < 1e-6 && (centre.y - 320.0 / 384.0).abs() < 1e-6);
+        let top_left = m.project_point3(Vec3::new(-1.0, 1.0, 0.0));
+        assert!((top_left.x - 0.25).abs() < 1e-6 && (top_left.y - 256.0 / 384.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_blur_rule_follows_the_solid_angle() {
+        // A hemisphere is a cone of 90 degrees; a tiny region a tiny one.
+        assert!((cone_angle(2.0 * std::f32::consts::PI) - std::f32::consts::FRAC_PI_2).abs() < 1e-5);
+        assert!(cone_angle(1e-6) < 1e-2);
+        // Omega = 4 pi / 128: theta ~ 10.1 degrees, tan ~ 0.178; R = 2, texel = 4/112.
+        let s = blur_sigma(4.0 * std::f32::consts::PI / 128.0, 2.0, 4.0 / 112.0, 1.0);
+        assert!((s - 0.178 * 0.5 * 28.0).abs() < 0.1, "{s}");
+        assert_eq!(grid(1), (1, 1));
+        assert_eq!(grid(5), (3, 2));
+        assert_eq!(grid(128), (12, 11));
+        assert_eq!(grid(512), (23, 23));
+    }
+}

@@ -1,0 +1,77 @@
+//! Exports warped detail geometry (and plain meshes) as OBJ or PLY, computed by the same
+//! warp code as rendering (shaders/warp/warp.wgsl, run as a compute pass): "the geometry can be
+//! post-processed or even exported without rendering output" (paper section 6).
+
+use std::sync::Arc;
+
+use crate::core::node::prelude::*;
+use crate::io::geometry::GeometryFormat;
+use crate::mesh::Mesh;
+use crate::render::draw::kind::{ExportCx, ExportDevice};
+use crate::render::scene::DrawItem;
+use crate::warp::gpu::{GpuWarper, WarpDevice};
+
+pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
+    kind: "ExportGeometry",
+    category: Category::Output,
+    doc: "Writes a scene's geometry as it renders (attachments warped, tessellations refined, items under cuboid grids deformed by eq. 3.4) as <out>/<node id>_<frame>.obj or .ply; outlier vertices' triangles are left out, as rendering discards them. A kind of item that cannot be exported (per-pixel PN depth) is an error.",
+    inputs: &[PortSpec::required("scene", PortType::Scene, "What to export.")],
+    outputs: &[PortSpec::output("mesh", PortType::Mesh, "The exported geometry as one mesh.")],
+    params: &[
+        ParamSpec::new(
+            "format",
+            ParamKind::Choice { default: "obj", options: GeometryFormat::OPTIONS },
+            "File format (PLY is binary little-endian).",
+        ),
+        ParamSpec::new(
+            "warp",
+            ParamKind::Choice { default: "auto", options: WarpDevice::OPTIONS },
+            "Where the exported geometry is computed: on the GPU (attachments by the warp's compute pass, tessellations read back), or by the CPU twins of the same shaders (the same geometry); auto takes the CPU on a CPU adapter such as lavapipe, where it is faster (werkstatt bench export).",
+        ),
+        ParamSpec::new(
+            "frame",
+            ParamKind::Int { default: -1, min: -1, max: i64::MAX },
+            "Only export at this frame (-1: every frame).",
+        ),
+    ],
+    is_output: true,
+    create: || Box::new(ExportNode::default()),
+};
+
+#[derive(Default)]
+struct ExportNode {
+    warper: GpuWarper,
+    /// The last export, the `mesh` output on frames a fixed-frame export skips.
+    last: Option<Arc<Mesh>>,
+}
+
+impl Node for ExportNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let items: Arc<Vec<DrawItem>> = cx.input("scene")?;
+        let wanted = cx.int("frame");
+        // Only a chosen frame makes the node read the time (and re-run every frame).
+        let export = wanted < 0 || cx.time().frame == wanted;
+        // A fixed-frame export skips the warp on other frames (the batch runner warns when
+        // its frame is outside the rendered range); `mesh` is then the last export, or the
+        // scene of this frame before the first one.
+        let mesh = match &self.last {
+            Some(last) if !export => last.clone(),
+            _ => {
+                let device = match WarpDevice::resolve(cx.choice("warp"), gpu) {
+                    WarpDevice::Cpu => ExportDevice::Cpu,
+                    _ => ExportDevice::Gpu,
+                };
+                let mut export = ExportCx { gpu, device, warper: &mut self.warper };
+                Arc::new(crate::render::draw::export::flatten(&mut export, &items)?)
+            }
+        };
+        if export {
+            cx.count("triangles", mesh.triangle_count());
+            cx.emit(Product::Geometry { mesh: mesh.clone(), format: cx.choice("format") });
+            self.last = Some(mesh.clone());
+        }
+        cx.set("mesh", mesh);
+        Ok(())
+    }
+}

@@ -1,0 +1,206 @@
+//! Materials and drawable items: what a G-buffer pass draws.
+
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use crate::core::node::prelude::*;
+use crate::mesh::Mesh;
+use crate::render::scene::{DrawItem, Image8, Material};
+
+pub static MATERIAL: NodeSpec = NodeSpec {
+    kind: "Material",
+    category: Category::Scene,
+    doc: "Base colour and glossiness, optionally modulated by a texture (a procedural checker or an image file).",
+    inputs: &[],
+    outputs: &[PortSpec::output("material", PortType::Material, "The material.")],
+    params: &[
+        ParamSpec::new("base_color", ParamKind::Color { default: [0.8, 0.8, 0.8] }, "Linear RGB base colour."),
+        ParamSpec::new("glossiness", ParamKind::Float { default: 0.2, min: 0.0, max: 1.0 }, "0 rough, 1 mirror-like."),
+        ParamSpec::new("texture", ParamKind::Choice { default: "none", options: BaseMap::OPTIONS }, "Base-colour map."),
+        ParamSpec::new(
+            "texture_path",
+            ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] },
+            "Image for texture = file.",
+        ),
+        ParamSpec::new("checker_color", ParamKind::Color { default: [0.2, 0.2, 0.2] }, "Second colour of the checker."),
+        ParamSpec::new(
+            "uv_scale",
+            ParamKind::Float { default: 8.0, min: 1e-3, max: 1e4 },
+            "Texture repeats per UV unit.",
+        ),
+        ParamSpec::new(
+            "gloss_map",
+            ParamKind::Choice { default: "none", options: GlossMap::OPTIONS },
+            "Glossiness parameter map (Fig. 5.23): satin stripes, or an image whose red channel blends gloss_min..glossiness.",
+        ),
+        ParamSpec::new(
+            "gloss_map_path",
+            ParamKind::Path { default: "", extensions: &["png", "jpg", "jpeg"] },
+            "Image for gloss_map = file (read as data, not colour).",
+        ),
+        ParamSpec::new(
+            "gloss_min",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
+            "Glossiness where the map is 0.",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(MaterialNode),
+};
+
+crate::choice!(
+    enum BaseMap {
+        None = "none",
+        Checker = "checker",
+        File = "file",
+    }
+);
+
+crate::choice!(
+    enum GlossMap {
+        None = "none",
+        Stripes = "stripes",
+        File = "file",
+    }
+);
+
+struct MaterialNode;
+impl Node for MaterialNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let texture = match cx.choice::<BaseMap>("texture") {
+            BaseMap::Checker => Some(Arc::new(checker(cx.vec3("checker_color")))),
+            BaseMap::File => {
+                if cx.str("texture_path").is_empty() {
+                    return Err(NodeError::msg("texture = \"file\" but parameter \"texture_path\" is empty"));
+                }
+                let path = cx.path("texture_path");
+                Some(cx.load(&path, load_image)?)
+            }
+            BaseMap::None => None,
+        };
+        let gloss_map = match cx.choice::<GlossMap>("gloss_map") {
+            GlossMap::Stripes => Some(Arc::new(stripes())),
+            GlossMap::File => {
+                if cx.str("gloss_map_path").is_empty() {
+                    return Err(NodeError::msg("gloss_map = \"file\" but parameter \"gloss_map_path\" is empty"));
+                }
+                let path = cx.path("gloss_map_path");
+                let img = cx.load(&path, load_image)?;
+                Some(Arc::new(Image8::new_linear(img.width, img.height, img.rgba.clone())))
+            }
+            GlossMap::None => None,
+        };
+        cx.set(
+            "material",
+            Value::Material(Arc::new(Material {
+                base_color: cx.vec3("base_color"),
+                glossiness: cx.f32("glossiness"),
+                texture,
+                uv_scale: cx.f32("uv_scale"),
+                gloss_map,
+                gloss_min: cx.f32("gloss_min"),
+            })),
+        );
+        Ok(())
+    }
+}
+
+/// An 8x8 checker of white and `dark` (linear), stored sRGB-encoded.
+fn checker(dark: Vec3) -> Image8 {
+    let n = 64u32;
+    let encode = |c: f32| (255.0 * crate::color::linear_to_srgb(c.clamp(0.0, 1.0))).round() as u8;
+    let dark = [encode(dark.x), encode(dark.y), encode(dark.z), 255];
+    let mut rgba = Vec::with_capacity((n * n * 4) as usize);
+    for y in 0..n {
+        for x in 0..n {
+            let odd = ((x / 8) + (y / 8)) % 2 == 1;
+            rgba.extend_from_slice(if odd { &dark } else { &[255, 255, 255, 255] });
+        }
+    }
+    Image8::new(n, n, rgba)
+}
+
+/// Satin stripes: 8 glossy (1) and 8 matte (0) bands along u, a data map.
+fn stripes() -> Image8 {
+    let n = 64u32;
+    let mut rgba = Vec::with_capacity((n * n * 4) as usize);
+    for _y in 0..n {
+        for x in 0..n {
+            let v = if (x / 4) % 2 == 0 { 255 } else { 0 };
+            rgba.extend_from_slice(&[v, v, v, 255]);
+        }
+    }
+    Image8::new_linear(n, n, rgba)
+}
+
+fn load_image(path: &std::path::Path) -> anyhow::Result<Image8> {
+    let img = image::open(path).map_err(|e| anyhow::anyhow!("cannot read image: {e}"))?.to_rgba8();
+    Ok(Image8::new(img.width(), img.height(), img.into_raw()))
+}
+
+pub static DRAW: NodeSpec = NodeSpec {
+    kind: "Draw",
+    category: Category::Scene,
+    doc: "Places a mesh with a material and a transform (scale, then rotate XYZ in degrees, then translate).",
+    inputs: &[
+        PortSpec::required("mesh", PortType::Mesh, "What to draw."),
+        PortSpec::optional("material", PortType::Material, "Its material (default: light grey)."),
+    ],
+    outputs: &[PortSpec::output("scene", PortType::Scene, "One draw item.")],
+    params: &[
+        crate::nodes::mesh::geometry::TRANSLATE,
+        crate::nodes::mesh::geometry::ROTATE,
+        crate::nodes::mesh::geometry::SCALE,
+        ParamSpec::new(
+            "detail",
+            ParamKind::Bool { default: false },
+            "Mark as detail geometry: the G-buffer normal's alpha is 1 (no pass reads the flag yet).",
+        ),
+    ],
+    is_output: false,
+    create: || Box::new(DrawNode),
+};
+
+struct DrawNode;
+impl Node for DrawNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let mesh: Arc<Mesh> = cx.input("mesh")?;
+        let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
+        let model = crate::nodes::mesh::geometry::model_matrix(cx)?;
+        cx.count("triangles", mesh.triangle_count());
+        let item = DrawItem { detail: cx.bool("detail"), ..DrawItem::plain(mesh, material, model) };
+        cx.set("scene", Arc::new(vec![item]));
+        Ok(())
+    }
+}
+
+pub static MERGE: NodeSpec = NodeSpec {
+    kind: "Merge",
+    category: Category::Scene,
+    doc: "Combines up to four scenes into one.",
+    inputs: &[
+        PortSpec::optional("a", PortType::Scene, "Scene a."),
+        PortSpec::optional("b", PortType::Scene, "Scene b."),
+        PortSpec::optional("c", PortType::Scene, "Scene c."),
+        PortSpec::optional("d", PortType::Scene, "Scene d."),
+    ],
+    outputs: &[PortSpec::output("scene", PortType::Scene, "All items, in input order.")],
+    params: &[],
+    is_output: false,
+    create: || Box::new(MergeNode),
+};
+
+struct MergeNode;
+impl Node for MergeNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let mut items = Vec::new();
+        for port in ["a", "b", "c", "d"] {
+            if let Some(s) = cx.optional::<Arc<Vec<DrawItem>>>(port) {
+                items.extend(s.iter().cloned());
+            }
+        }
+        cx.set("scene", Arc::new(items));
+        Ok(())
+    }
+}

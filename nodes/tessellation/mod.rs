@@ -1,0 +1,3 @@
+//! Tessellation nodes (src/tessellation/).
+
+pub mod tessellate;

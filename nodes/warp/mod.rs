@@ -1,0 +1,6 @@
+//! Deferred-warping nodes (src/warp/): the matrix texture, placements, curves and attachments.
+
+pub mod attach;
+pub mod curves;
+pub mod matrix_texture;
+pub mod placements;

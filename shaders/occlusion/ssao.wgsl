@@ -1,0 +1,339 @@
+// Screen-space ambient occlusion on the G-buffer (nodes/occlusion/ssao.rs), five entry points:
+//   fs_sphere   the dissertation's depth-only sphere sampling (§3.2.2, §4.2.2),
+//   fs_horizon  a horizon-based, normal-aware variant after GTAO (Jimenez et al. 2016),
+//   fs_blur     the edge-aware (plane- and normal-aware) 4x4 filter that removes the dither,
+//   fs_upsample the depth-aware upsampling of a half-resolution result,
+//   fs_apply    an image times the factor.
+// Every pass writes the visibility factor v in [0, 1] (1 = unoccluded) to rgb, alpha 1.
+// Positions are reconstructed in view space from the G-buffer's linear depth (-z_view).
+// An AO texel q stands for G-buffer pixel q * scale (scale 1, or 2 at half resolution).
+
+struct Ssao {
+    // View to clip (the G-buffer's projection).
+    proj: mat4x4<f32>,
+    // World to view (for the G-buffer's world normals).
+    view: mat4x4<f32>,
+    // xy: G-buffer size in pixels; zw: size of the AO texture this pass reads or writes.
+    size: vec4<f32>,
+    // x: radius (world units), y: samples, z: strength (exponent), w: scale (1 or 2).
+    params: vec4<f32>,
+    // x: depth bias, y: range (how far in front of a sample an occluder may be),
+    // z: plane tolerance of the blur and upsampling,
+    // w: 1 when the blur follows (the estimate is written unclamped, the blur clamps and
+    // applies the strength: the tile's average is then exactly the 16N-sample estimate).
+    misc: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> u: Ssao;
+@group(0) @binding(1) var g_depth: texture_2d<f32>;
+@group(0) @binding(2) var g_normal: texture_2d<f32>;
+// fs_blur, fs_upsample, fs_apply: the AO texture read.
+@group(0) @binding(3) var ao_in: texture_2d<f32>;
+// fs_apply: the image multiplied.
+@group(0) @binding(4) var image: texture_2d<f32>;
+
+// #include "fullscreen.wgsl"
+
+const PI: f32 = 3.14159265;
+const GOLDEN_ANGLE: f32 = 2.39996323;
+const INV_PHI: f32 = 0.61803399;
+
+// The 4x4 interleaving pattern: each pixel of a 4x4 tile takes one of 16 rotations of the kernel.
+const BAYER: array<u32, 16> = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
+
+fn pattern(q: vec2<i32>) -> u32 {
+    return BAYER[u32(q.x & 3) + 4u * u32(q.y & 3)];
+}
+
+fn gsize() -> vec2<f32> {
+    return u.size.xy;
+}
+
+// The G-buffer pixel (integer) an AO texel stands for.
+fn gpixel(q: vec2<i32>) -> vec2<i32> {
+    return min(q * i32(u.params.w), vec2<i32>(gsize()) - 1);
+}
+
+fn inside(p: vec2<i32>) -> bool {
+    let s = vec2<i32>(gsize());
+    return p.x >= 0 && p.y >= 0 && p.x < s.x && p.y < s.y;
+}
+
+fn depth_at(p: vec2<i32>) -> f32 {
+    return textureLoad(g_depth, p, 0).r;
+}
+
+// The view-space point at G-buffer pixel position `pix` (pixel units, y down) and depth d.
+fn view_pos(pix: vec2<f32>, d: f32) -> vec3<f32> {
+    let ndc = vec2<f32>(pix.x / gsize().x * 2.0 - 1.0, 1.0 - pix.y / gsize().y * 2.0);
+    let x = (ndc.x + u.proj[2][0]) * d / u.proj[0][0];
+    let y = (ndc.y + u.proj[2][1]) * d / u.proj[1][1];
+    return vec3<f32>(x, y, -d);
+}
+
+// The G-buffer pixel position (pixel units, y down) a view-space point projects to.
+fn to_pixel(q: vec3<f32>) -> vec2<f32> {
+    let c = u.proj * vec4<f32>(q, 1.0);
+    let ndc = c.xy / c.w;
+    return vec2<f32>((ndc.x * 0.5 + 0.5) * gsize().x, (0.5 - ndc.y * 0.5) * gsize().y);
+}
+
+fn view_normal(p: vec2<i32>) -> vec3<f32> {
+    let n = textureLoad(g_normal, p, 0).xyz;
+    return normalize((u.view * vec4<f32>(n, 0.0)).xyz);
+}
+
+fn output(v: f32) -> vec4<f32> {
+    return vec4<f32>(v, v, v, 1.0);
+}
+
+// Clamped to [0, 1] and raised to the strength (pow(0, 0) is undefined in WGSL: 1e-4 floor).
+fn strengthen(v: f32) -> f32 {
+    return pow(clamp(v, 1e-4, 1.0), u.params.z);
+}
+
+// The estimate's output: as it is when the blur follows, else clamped and raised to the strength.
+fn finish(v: f32) -> vec4<f32> {
+    if u.misc.w > 0.5 {
+        return output(v);
+    }
+    return output(strengthen(v));
+}
+
+// Depth-only sphere sampling. N samples fill a sphere of radius R around the pixel's point;
+// sample k of the pixel with pattern value b (0..15) takes direction 16k + b of a spherical
+// Fibonacci set of 16N directions and radius R t, t = fract((k + 0.5) / phi + (b + 0.5) / 16)
+// (uniform in radius: the volume density falls as 1/r^2, denser toward the centre). A sample
+// is occluded when the G-buffer's depth where it projects is in front of it by more than the
+// bias and by less than the range; samples off screen, and samples within the bias of the
+// surface in front or behind (undecided), are not counted. With f the occluded
+// fraction, v = clamp(2 (1 - f), 0, 1): a plane occludes half the sphere and gives 1.
+@fragment
+fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let q = vec2<i32>(frag.xy);
+    let gp = gpixel(q);
+    let d = depth_at(gp);
+    if d <= 0.0 {
+        return output(1.0);
+    }
+    let p = view_pos(vec2<f32>(gp) + 0.5, d);
+    let radius = u.params.x;
+    let n = u32(u.params.y);
+    let b = pattern(q);
+    let total = f32(n * 16u);
+    // The larger of the bias parameter and one G-buffer pixel's footprint at this depth
+    // (a neighbouring pixel's centre depth differs from the sample ray's by about that much).
+    let bias = max(u.misc.x, 2.0 * d / (u.proj[1][1] * gsize().y));
+    var occluded = 0.0;
+    var counted = 0.0;
+    for (var k = 0u; k < n; k++) {
+        let i = f32(k * 16u + b);
+        let z = 1.0 - 2.0 * (i + 0.5) / total;
+        let s = sqrt(max(1.0 - z * z, 0.0));
+        let phi = i * GOLDEN_ANGLE;
+        let t = fract((f32(k) + 0.5) * INV_PHI + (f32(b) + 0.5) / 16.0);
+        let sample_pos = p + vec3<f32>(s * cos(phi), s * sin(phi), z) * (radius * t);
+        let sp = vec2<i32>(floor(to_pixel(sample_pos)));
+        if !inside(sp) || sample_pos.z >= 0.0 {
+            continue;
+        }
+        let scene = depth_at(sp);
+        let diff = -sample_pos.z - scene;
+        if scene > 0.0 && abs(diff) <= bias {
+            // On the surface within the bias: undecided, not counted (symmetric, so a plane
+            // still occludes exactly half of the decided samples).
+            continue;
+        }
+        counted += 1.0;
+        if scene > 0.0 && diff > 0.0 && diff < u.misc.y {
+            occluded += 1.0;
+        }
+    }
+    if counted == 0.0 {
+        return output(1.0);
+    }
+    return finish(2.0 * (1.0 - occluded / counted));
+}
+
+// Horizon-based, normal-aware occlusion after GTAO. Two slices per pixel, their angles
+// rotated by the 4x4 pattern (32 directions over a tile); on each side of a slice, samples/4
+// steps out to the radius's projection (squared spacing, jittered by the pattern) find the
+// horizon: the highest sample seen from the point within the world radius (a linear fade over
+// the last quarter). The cosine-weighted visibility between the two horizons is integrated
+// analytically about the normal projected into the slice (the paper's eq. 10), times the
+// projected normal's length, and averaged over the slices: 1 on an open plane, 1/2 at a
+// 90-degree concave edge, 1/4 in a corner.
+@fragment
+fn fs_horizon(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let q = vec2<i32>(frag.xy);
+    let gp = gpixel(q);
+    let d = depth_at(gp);
+    if d <= 0.0 {
+        return output(1.0);
+    }
+    let centre = vec2<f32>(gp) + 0.5;
+    let p = view_pos(centre, d);
+    let v = normalize(-p);
+    let normal = view_normal(gp);
+    let radius = u.params.x;
+    // The radius's length in G-buffer pixels at this depth.
+    let radius_px = radius * u.proj[1][1] * 0.5 * gsize().y / d;
+    if radius_px < 1.0 {
+        return output(1.0);
+    }
+    let slices = 2u;
+    let steps = max(u32(u.params.y) / 4u, 1u);
+    let b = f32(pattern(q));
+    let jitter = fract((b + 0.5) * INV_PHI);
+    var visibility = 0.0;
+    for (var s = 0u; s < slices; s++) {
+        let phi = (f32(s) + (b + 0.5) / 16.0) * PI / f32(slices);
+        let dir = vec3<f32>(cos(phi), sin(phi), 0.0);
+        // Screen y points down, view y up.
+        let screen_dir = vec2<f32>(dir.x, -dir.y);
+        let ortho = normalize(dir - dot(dir, v) * v);
+        let axis = normalize(cross(ortho, v));
+        let projected = normal - axis * dot(normal, axis);
+        let len = length(projected);
+        if len < 1e-4 {
+            visibility += 1.0;
+            continue;
+        }
+        let cos_n = clamp(dot(projected, v) / len, -1.0, 1.0);
+        let n_angle = sign(dot(ortho, projected)) * acos(cos_n);
+        // The lowest horizons: the tangent plane's in the slice.
+        let low0 = cos(n_angle + 0.5 * PI);
+        let low1 = cos(n_angle - 0.5 * PI);
+        var h_cos0 = low0;
+        var h_cos1 = low1;
+        for (var j = 0u; j < steps; j++) {
+            let t = (f32(j) + jitter) / f32(steps);
+            let offset = max(radius_px * t * t, f32(j) + 1.0);
+            for (var side = 0; side < 2; side++) {
+                let sign_side = select(-1.0, 1.0, side == 0);
+                let sp = vec2<i32>(floor(centre + sign_side * screen_dir * offset));
+                if !inside(sp) {
+                    continue;
+                }
+                let sd = depth_at(sp);
+                if sd <= 0.0 {
+                    continue;
+                }
+                let delta = view_pos(vec2<f32>(sp) + 0.5, sd) - p;
+                let dist = length(delta);
+                if dist < 1e-6 {
+                    continue;
+                }
+                // Samples within 3 degrees of the tangent plane count as on it: pixel-centre
+                // taps off the slice and half-float normals would otherwise darken a plane.
+                if dot(delta, normal) < 0.05 * dist {
+                    continue;
+                }
+                let c = dot(delta / dist, v);
+                let fade = clamp((radius - dist) / (0.25 * radius), 0.0, 1.0);
+                if side == 0 {
+                    h_cos0 = max(h_cos0, mix(low0, c, fade));
+                } else {
+                    h_cos1 = max(h_cos1, mix(low1, c, fade));
+                }
+            }
+        }
+        var h0 = -acos(clamp(h_cos1, -1.0, 1.0));
+        var h1 = acos(clamp(h_cos0, -1.0, 1.0));
+        h0 = n_angle + clamp(h0 - n_angle, -0.5 * PI, 0.5 * PI);
+        h1 = n_angle + clamp(h1 - n_angle, -0.5 * PI, 0.5 * PI);
+        let sin_n = sin(n_angle);
+        let arc0 = (cos_n + 2.0 * h0 * sin_n - cos(2.0 * h0 - n_angle)) * 0.25;
+        let arc1 = (cos_n + 2.0 * h1 * sin_n - cos(2.0 * h1 - n_angle)) * 0.25;
+        visibility += len * (arc0 + arc1);
+    }
+    return finish(visibility / f32(slices));
+}
+
+// How much neighbour AO texel `o` belongs to the surface of the point `p` with normal `n`:
+// its point must lie within the plane tolerance of p's tangent plane (so slanted planes keep
+// their whole neighbourhood) and face the same way (weight (n . n_o)^4).
+fn similarity(p: vec3<f32>, n: vec3<f32>, o: vec2<i32>) -> f32 {
+    let go = gpixel(o);
+    let d = depth_at(go);
+    if d <= 0.0 {
+        return 0.0;
+    }
+    let po = view_pos(vec2<f32>(go) + 0.5, d);
+    let plane = clamp(1.0 - abs(dot(po - p, n)) / u.misc.z, 0.0, 1.0);
+    let facing = pow(clamp(dot(view_normal(go), n), 0.0, 1.0), 4.0);
+    return plane * facing;
+}
+
+// The edge-aware filter over the 4x4 tile (offsets -2..1): exactly one pixel of each pattern
+// value, so a uniform region's average is the full 16N-sample estimate.
+@fragment
+fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let q = vec2<i32>(frag.xy);
+    let gp = gpixel(q);
+    let d = depth_at(gp);
+    let own = textureLoad(ao_in, q, 0).r;
+    if d <= 0.0 {
+        return output(strengthen(own));
+    }
+    let p = view_pos(vec2<f32>(gp) + 0.5, d);
+    let n = view_normal(gp);
+    let size = vec2<i32>(u.size.zw);
+    var sum = 0.0;
+    var weight = 0.0;
+    for (var y = -2; y <= 1; y++) {
+        for (var x = -2; x <= 1; x++) {
+            let o = q + vec2<i32>(x, y);
+            if o.x < 0 || o.y < 0 || o.x >= size.x || o.y >= size.y {
+                continue;
+            }
+            var w = 1.0;
+            if x != 0 || y != 0 {
+                w = similarity(p, n, o);
+            }
+            sum += w * textureLoad(ao_in, o, 0).r;
+            weight += w;
+        }
+    }
+    return output(strengthen(sum / weight));
+}
+
+// Half resolution to full: the four nearest half-resolution texels, bilinear weights times
+// their similarity to this pixel's surface; the nearest texel where none is similar.
+@fragment
+fn fs_upsample(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let px = vec2<i32>(frag.xy);
+    let d = depth_at(px);
+    let half_pos = vec2<f32>(px) / u.params.w;
+    let base = vec2<i32>(floor(half_pos));
+    let f = half_pos - vec2<f32>(base);
+    let size = vec2<i32>(u.size.zw);
+    let nearest = textureLoad(ao_in, min(vec2<i32>(round(half_pos)), size - 1), 0).r;
+    if d <= 0.0 {
+        return output(nearest);
+    }
+    let p = view_pos(vec2<f32>(px) + 0.5, d);
+    let n = view_normal(px);
+    var sum = 0.0;
+    var weight = 0.0;
+    for (var y = 0; y <= 1; y++) {
+        for (var x = 0; x <= 1; x++) {
+            let o = min(base + vec2<i32>(x, y), size - 1);
+            let bilinear = select(1.0 - f.x, f.x, x == 1) * select(1.0 - f.y, f.y, y == 1);
+            let w = bilinear * similarity(p, n, o);
+            sum += w * textureLoad(ao_in, o, 0).r;
+            weight += w;
+        }
+    }
+    if weight < 1e-4 {
+        return output(nearest);
+    }
+    return output(sum / weight);
+}
+
+@fragment
+fn fs_apply(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let px = vec2<i32>(frag.xy);
+    let c = textureLoad(image, px, 0);
+    return vec4<f32>(c.rgb * textureLoad(ao_in, px, 0).r, c.a);
+}
