@@ -66,7 +66,7 @@ pub static IBL_SHADING: NodeSpec = NodeSpec {
             "Mip level of the environment shown behind the scene (0 sharp; higher blurs it).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(IblShadingNode::default()),
 };
 

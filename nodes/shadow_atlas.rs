@@ -111,7 +111,7 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
             "Receiver depth bias, as a fraction of the depth range 2R.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ShadowAtlasNode::default()),
 };
 

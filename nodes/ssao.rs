@@ -84,7 +84,7 @@ half_resolution computes at half size and upsamples depth- and normal-aware. Det
             "Exponent applied to the factor (1 leaves it as estimated; 0 turns occlusion off).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(SsaoNode::default()),
 };
 

@@ -91,7 +91,7 @@ fn migrations_upgrade_old_versions_in_order() {
     assert_eq!(notes, ["Constant is now Number", "canvas units halved"]);
     assert_eq!((g.version, g.nodes["c"].kind.as_str(), g.nodes["c"].pos), (3, "Number", [2.0, 4.0]));
     let mut old = Graph { version: 0, ..Graph::new() };
-    assert!(migrate(&mut old, 3, &table).unwrap_err().contains("no migration from version 0"));
+    assert!(migrate(&mut old, 3, &table).unwrap_err().to_string().contains("no migration from version 0"));
 }
 
 #[test]
