@@ -94,8 +94,20 @@ struct SsaoUniform {
     proj: [[f32; 4]; 4],
     view: [[f32; 4]; 4],
     size: [f32; 4],
-    params: [f32; 4],
-    misc: [f32; 4],
+    /// World units.
+    radius: f32,
+    samples: f32,
+    /// The exponent.
+    strength: f32,
+    /// 1, or 2 at half resolution.
+    scale: f32,
+    depth_bias: f32,
+    /// How far in front of a sample an occluder may be.
+    range: f32,
+    /// Of the blur and upsampling.
+    plane_tolerance: f32,
+    /// 1 when the blur follows.
+    blur: f32,
 }
 
 #[derive(Default)]
@@ -146,8 +158,14 @@ impl Passes {
             proj: g.view.proj.to_cols_array_2d(),
             view: g.view.view.to_cols_array_2d(),
             size: [w as f32, h as f32, tw as f32, th as f32],
-            params: [s.radius, s.samples as f32, s.strength, scale as f32],
-            misc: [BIAS * s.radius, RANGE * s.radius, PLANE_TOLERANCE * s.radius, if s.blur { 1.0 } else { 0.0 }],
+            radius: s.radius,
+            samples: s.samples as f32,
+            strength: s.strength,
+            scale: scale as f32,
+            depth_bias: BIAS * s.radius,
+            range: RANGE * s.radius,
+            plane_tolerance: PLANE_TOLERANCE * s.radius,
+            blur: if s.blur { 1.0 } else { 0.0 },
         };
         let run = |pass: &mut FullscreenPass, u: SsaoUniform, ao: &GpuImage, out: &GpuImage| {
             let binds = [
@@ -230,8 +248,14 @@ impl Node for SsaoNode {
                     proj: g.view.proj.to_cols_array_2d(),
                     view: g.view.view.to_cols_array_2d(),
                     size: [g.width() as f32, g.height() as f32, g.width() as f32, g.height() as f32],
-                    params: [settings.radius, settings.samples as f32, settings.strength, 1.0],
-                    misc: [0.0; 4],
+                    radius: settings.radius,
+                    samples: settings.samples as f32,
+                    strength: settings.strength,
+                    scale: 1.0,
+                    depth_bias: 0.0,
+                    range: 0.0,
+                    plane_tolerance: 0.0,
+                    blur: 0.0,
                 };
                 let binds = [
                     Bind::Uniform(bytemuck::bytes_of(&u)),

@@ -100,7 +100,7 @@ fn atomic_save_replaces_the_file() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("g.ron");
     std::fs::write(&path, "old").unwrap();
-    let g = werkstatt::app::bench::chain_graph(3);
+    let g = werkstatt::app::chain_graph(3);
     g.save(&path).unwrap();
     assert_eq!(std::fs::read_to_string(&path).unwrap(), g.to_ron());
     let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();

@@ -497,7 +497,7 @@ mod tests {
     fn the_viewport_prefers_preview_then_outputs() {
         let g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
         assert_eq!(viewed_port(&g, None), Some(p("image.image")));
-        assert_eq!(viewed_port(&crate::app::bench::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
+        assert_eq!(viewed_port(&crate::app::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
         assert_eq!(viewed_port(&Graph::new(), None), None);
         assert_eq!(camera_for(&g, Some("image")), Some("camera".into()));
         let mut cam = CameraOverride::from_graph(&g, "camera").unwrap();
