@@ -36,3 +36,8 @@ pub mod warp;
 
 #[path = "../nodes/mod.rs"]
 pub mod nodes;
+
+/// `docs/adding-a-node.md`: its snippets are doctests, so the guide compiles against the code.
+#[doc = include_str!("../docs/adding-a-node.md")]
+#[cfg(doctest)]
+pub struct AddingANodeDoctests;

@@ -53,7 +53,7 @@ pub static CLOTH_SIM: NodeSpec = NodeSpec {
             "Mean wind speed in m/s (flag).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ClothSimNode::default()),
 };
 

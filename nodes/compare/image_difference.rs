@@ -25,7 +25,7 @@ pub static IMAGE_DIFFERENCE: NodeSpec = NodeSpec {
         ParamKind::Float { default: 8.0, min: 0.0, max: 1e4 },
         "Scale of the visible difference (small differences become visible).",
     )],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ImageDifferenceNode::default()),
 };
 

@@ -10,7 +10,7 @@ pub static NUMBER: NodeSpec = NodeSpec {
     inputs: &[],
     outputs: &[PortSpec::output("value", PortType::Scalar, "The constant.")],
     params: &[ParamSpec::new("value", ParamKind::Float { default: 0.0, min: -1e12, max: 1e12 }, "The value.")],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(NumberNode),
 };
 
@@ -49,7 +49,7 @@ pub static MATH: NodeSpec = NodeSpec {
             "b when the input is unconnected.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MathNode),
 };
 
@@ -101,7 +101,7 @@ pub static TIME: NodeSpec = NodeSpec {
         PortSpec::output("frame", PortType::Scalar, "The frame number."),
     ],
     params: &[],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(TimeNode),
 };
 
@@ -125,7 +125,7 @@ pub static WATCH: NodeSpec = NodeSpec {
         ParamSpec::new("min", ParamKind::Float { default: -1e12, min: -1e12, max: 1e12 }, "Lowest accepted value."),
         ParamSpec::new("max", ParamKind::Float { default: 1e12, min: -1e12, max: 1e12 }, "Highest accepted value."),
     ],
-    is_output: true,
+    capabilities: Capabilities::OUTPUT,
     create: || Box::new(WatchNode),
 };
 

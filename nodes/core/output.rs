@@ -17,7 +17,7 @@ pub static IMAGE_WRITE: NodeSpec = NodeSpec {
         ParamKind::Choice { default: "png", options: ImageFormat::OPTIONS },
         "File format.",
     )],
-    is_output: true,
+    capabilities: Capabilities::OUTPUT,
     create: || Box::new(ImageWriteNode),
 };
 
@@ -28,7 +28,7 @@ pub static PREVIEW: NodeSpec = NodeSpec {
     inputs: &[PortSpec::required("image", PortType::Texture, "The image to show.")],
     outputs: &[PortSpec::output("image", PortType::Texture, "The same image.")],
     params: &[],
-    is_output: true,
+    capabilities: Capabilities::OUTPUT.with(Capabilities::PREVIEW),
     create: || Box::new(PreviewNode),
 };
 

@@ -91,7 +91,7 @@ pub static CUBOID: NodeSpec = NodeSpec {
         BOX_MAX,
         NORMALS,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(CuboidNode),
 };
 
@@ -125,7 +125,7 @@ pub static DEFORM_SURFACE: NodeSpec = NodeSpec {
     ],
     outputs: &[PortSpec::output("surface", PortType::Surface, "The deformed surface.")],
     params: &[],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(DeformSurfaceNode),
 };
 
@@ -149,7 +149,7 @@ pub static DEFORM: NodeSpec = NodeSpec {
     ],
     outputs: &[PortSpec::output("scene", PortType::Scene, "The sub-scene, transformed.")],
     params: &[],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(DeformNode),
 };
 

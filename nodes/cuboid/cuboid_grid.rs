@@ -85,7 +85,7 @@ pub static CUBOID_GRID: NodeSpec = NodeSpec {
         BOX_MAX,
         NORMALS,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(CuboidGridNode),
 };
 

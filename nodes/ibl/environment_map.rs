@@ -42,7 +42,7 @@ pub static ENVIRONMENT_MAP: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("intensity", ParamKind::Float { default: 1.0, min: 0.0, max: 1e6 }, "Radiance scale."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(EnvironmentMapNode::default()),
 };
 

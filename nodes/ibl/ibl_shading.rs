@@ -66,7 +66,7 @@ pub static IBL_SHADING: NodeSpec = NodeSpec {
             "Mip level of the environment shown behind the scene (0 sharp; higher blurs it).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(IblShadingNode::default()),
 };
 
@@ -76,7 +76,12 @@ struct IblUniform {
     inv_view_proj: [[f32; 4]; 4],
     size: [f32; 4],
     background: [f32; 4],
-    misc: [f32; 4],
+    background_level: f32,
+    top_level: f32,
+    /// 1 to shade with the full filtered map (one lookup, no partition).
+    full_map: f32,
+    /// Face size of level 0.
+    face_size: f32,
     levels: [f32; 36],
 }
 
@@ -87,8 +92,12 @@ struct IblUniform {
 struct ShadowUniform {
     to_atlas: [[[f32; 4]; 4]; PEMS_PER_PASS],
     rect: [[f32; 4]; PEMS_PER_PASS],
-    /// min variance, bleed reduction, jitter (texels), 1 when shadows are on.
-    params: [f32; 4],
+    min_variance: f32,
+    bleed_reduction: f32,
+    /// In texels.
+    jitter: f32,
+    /// 1 when shadows are on.
+    enabled: f32,
     /// atlas width, height (texels), normal offset (world), depth bias.
     bias: [f32; 4],
     eye: [f32; 4],
@@ -106,7 +115,7 @@ impl ShadowUniform {
             u.rect[k] = [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h];
         }
         let p = &a.params;
-        u.params = [p.min_variance, p.bleed_reduction, p.jitter, 1.0];
+        (u.min_variance, u.bleed_reduction, u.jitter, u.enabled) = (p.min_variance, p.bleed_reduction, p.jitter, 1.0);
         u.bias = [w, h, p.normal_offset, p.depth_bias];
         let forward = g.view.inv_view.transform_vector3(glam::Vec3::NEG_Z).normalize();
         u.eye = g.view.eye.extend(1.0).to_array();
@@ -163,12 +172,10 @@ impl Node for IblShadingNode {
                 inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
                 size: [w as f32, h as f32, batch.len() as f32, if i == 0 { 1.0 } else { 0.0 }],
                 background: [bg.x, bg.y, bg.z, if background == Background::Environment { 1.0 } else { 0.0 }],
-                misc: [
-                    cx.f32("background_level").min(top),
-                    top,
-                    if mode == IblMode::Full { 1.0 } else { 0.0 },
-                    pems.full.width as f32,
-                ],
+                background_level: cx.f32("background_level").min(top),
+                top_level: top,
+                full_map: if mode == IblMode::Full { 1.0 } else { 0.0 },
+                face_size: pems.full.width as f32,
                 levels,
             };
             let out = GpuImage::target(gpu, "ibl shading", w, h, gpu.formats().hdr);

@@ -27,7 +27,7 @@ pub static MEDIAN_CUT: NodeSpec = NodeSpec {
         ParamKind::Int { default: 16, min: 1, max: 4096 },
         "Number of regions (and lights).",
     )],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MedianCutNode),
 };
 

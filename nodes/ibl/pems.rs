@@ -41,7 +41,7 @@ pub static PEMS: NodeSpec = NodeSpec {
             "The mip level the preview shows.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(PemsNode::default()),
 };
 

@@ -1,5 +1,5 @@
 //! `ShadowAtlas`: variance shadow maps of many directional lights in one texture (dissertation
-//! §4.2.1, Fig. 4.11; `../shared/TECHNIQUES.md` §4), one tile per median-cut light, for the
+//! §4.2.1, Fig. 4.11), one tile per median-cut light, for the
 //! visibility term VIS_i of eq. 3.43 (`IblShading`'s `shadows` input).
 //!
 //! Choices the text leaves open, and what this node does:
@@ -111,7 +111,7 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
             "Receiver depth bias, as a fraction of the depth range 2R.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ShadowAtlasNode::default()),
 };
 

@@ -43,7 +43,7 @@ pub static PRIMITIVE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("segments_v", ParamKind::Int { default: 24, min: 1, max: 4096 }, "Subdivisions along v."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(PrimitiveNode),
 };
 
@@ -253,7 +253,7 @@ pub static MESH_FILE: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("normalize", ParamKind::Bool { default: true }, "Centre the mesh and scale it to unit height."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MeshFileNode),
 };
 
@@ -298,7 +298,7 @@ pub static TRANSFORM_MESH: NodeSpec = NodeSpec {
     inputs: &[PortSpec::required("mesh", PortType::Mesh, "The mesh.")],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The transformed mesh.")],
     params: &[TRANSLATE, ROTATE, SCALE],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(TransformMeshNode),
 };
 

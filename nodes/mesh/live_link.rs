@@ -43,7 +43,7 @@ pub static LIVE_LINK: NodeSpec = NodeSpec {
             "A folder (relative to the graph's) to record the session into: every frame received is written as frame_NNNN.obj (the simulator's frame number; pattern pieces as OBJ objects, UVs kept), the sequence MeshSequence plays, so a streamed session becomes a batch render or CI case. Empty: no recording.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::external_source(RECORD_HELP),
     create: || Box::<LiveLinkNode>::default(),
 };
 

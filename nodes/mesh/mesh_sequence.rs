@@ -55,7 +55,7 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
             "Blend positions (and normals, renormalized; tangents recomputed) linearly between the two files around the time; off: show the file at or before it.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::<MeshSequenceNode>::default(),
 };
 

@@ -32,7 +32,7 @@ occlusion both see is counted twice (over-occlusion, §6.2.2). Also outputs each
         ParamKind::Bool { default: true },
         "Apply the local factor (off: combined is global, bit for bit).",
     )],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(HybridOcclusionNode::default()),
 };
 

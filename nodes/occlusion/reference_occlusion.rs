@@ -38,7 +38,7 @@ attachments are not traced. Slow (seconds); meant for tests and benches.",
         ),
         ParamSpec::new("seed", ParamKind::Int { default: 0, min: 0, max: 1 << 31 }, "Seed of the ray directions."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ReferenceOcclusionNode),
 };
 

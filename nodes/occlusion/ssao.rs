@@ -67,7 +67,7 @@ half_resolution computes at half size and upsamples depth- and normal-aware. Det
             "Exponent applied to the factor (1 leaves it as estimated; 0 turns occlusion off).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(SsaoNode::default()),
 };
 
@@ -109,8 +109,14 @@ impl Node for SsaoNode {
                     proj: g.view.proj.to_cols_array_2d(),
                     view: g.view.view.to_cols_array_2d(),
                     size: [g.width() as f32, g.height() as f32, g.width() as f32, g.height() as f32],
-                    params: [settings.radius, settings.samples as f32, settings.strength, 1.0],
-                    misc: [0.0; 4],
+                    radius: settings.radius,
+                    samples: settings.samples as f32,
+                    strength: settings.strength,
+                    scale: 1.0,
+                    depth_bias: 0.0,
+                    range: 0.0,
+                    plane_tolerance: 0.0,
+                    blur: 0.0,
                 };
                 let binds = [
                     Bind::Uniform(bytemuck::bytes_of(&u)),

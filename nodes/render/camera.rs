@@ -63,7 +63,7 @@ pub static ORBIT_CAMERA: NodeSpec = NodeSpec {
         ParamSpec::new("near", ParamKind::Float { default: 0.05, min: 1e-5, max: 1e4 }, "Near clipping distance."),
         ParamSpec::new("far", ParamKind::Float { default: 100.0, min: 1e-3, max: 1e7 }, "Far clipping distance."),
     ],
-    is_output: false,
+    capabilities: Capabilities::ORBIT_CAMERA,
     create: || Box::new(OrbitCameraNode),
 };
 

@@ -32,7 +32,7 @@ pub static DIRECT_LIGHT: NodeSpec = NodeSpec {
             "Colour where nothing was drawn.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(DirectLightNode::default()),
 };
 

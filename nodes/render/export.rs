@@ -34,7 +34,7 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
             "Only export at this frame (-1: every frame).",
         ),
     ],
-    is_output: true,
+    capabilities: Capabilities::OUTPUT,
     create: || Box::new(ExportNode::default()),
 };
 

@@ -23,7 +23,7 @@ pub static GBUFFER_PASS: NodeSpec = NodeSpec {
         PortSpec::output("depth", PortType::Texture, "Linear view depth; 0 where empty."),
     ],
     params: &[] as &[ParamSpec],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(GBufferPassNode::default()),
 };
 

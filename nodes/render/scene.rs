@@ -45,7 +45,7 @@ pub static MATERIAL: NodeSpec = NodeSpec {
             "Glossiness where the map is 0.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MaterialNode),
 };
 
@@ -158,7 +158,7 @@ pub static DRAW: NodeSpec = NodeSpec {
             "Mark as detail geometry: the G-buffer normal's alpha is 1 (no pass reads the flag yet).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(DrawNode),
 };
 
@@ -187,7 +187,7 @@ pub static MERGE: NodeSpec = NodeSpec {
     ],
     outputs: &[PortSpec::output("scene", PortType::Scene, "All items, in input order.")],
     params: &[],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MergeNode),
 };
 

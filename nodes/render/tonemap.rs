@@ -36,7 +36,7 @@ pub static TONEMAP: NodeSpec = NodeSpec {
             "The tone curve.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(TonemapNode::default()),
 };
 

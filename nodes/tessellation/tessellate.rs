@@ -86,7 +86,7 @@ pub static TESSELLATE: NodeSpec = NodeSpec {
             "Width of the wireframe output's ribbons, in scene units.",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(TessellateNode::default()),
 };
 

@@ -119,7 +119,7 @@ pub static POINT_ATTACHMENT: NodeSpec = NodeSpec {
         GRAVITY,
         MIN_WEIGHT,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(PointAttachmentNode),
 };
 
@@ -183,7 +183,7 @@ pub static AREA_ATTACHMENT: NodeSpec = NodeSpec {
         GRAVITY,
         MIN_WEIGHT,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(AreaAttachmentNode),
 };
 
@@ -255,7 +255,7 @@ pub static CURVE_ATTACHMENT: NodeSpec = NodeSpec {
         GRAVITY,
         MIN_WEIGHT,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(CurveAttachmentNode),
 };
 

@@ -20,7 +20,7 @@ pub static SVG_CURVES: NodeSpec = NodeSpec {
         ParamSpec::new("scale", ParamKind::Float { default: 1.0, min: 1e-6, max: 1e6 }, "UV units per document width."),
         ParamSpec::new("offset", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "UV offset (x = u, y = v; z unused)."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(SvgCurvesNode),
 };
 

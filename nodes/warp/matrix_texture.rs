@@ -60,7 +60,7 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
         crate::nodes::mesh::geometry::ROTATE,
         crate::nodes::mesh::geometry::SCALE,
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(MatrixTextureNode::default()),
 };
 

@@ -142,7 +142,7 @@ pub static SCATTER: NodeSpec = NodeSpec {
         REGION[2],
         REGION[3],
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(ScatterNode),
 };
 
@@ -227,7 +227,7 @@ pub static GRID_PLACEMENT: NodeSpec = NodeSpec {
         REGION[2],
         REGION[3],
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(GridNode),
 };
 
@@ -277,7 +277,7 @@ pub static CURVE_PLACEMENT: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("scale", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Scale of each placement."),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(CurvePlacementNode),
 };
 
@@ -324,7 +324,7 @@ pub static PLACEMENT_FILE: NodeSpec = NodeSpec {
             "What u, v mean: packed-pattern (atlas) UVs, or 0-1 across the row's piece (its UV bounding rectangle).",
         ),
     ],
-    is_output: false,
+    capabilities: Capabilities::NONE,
     create: || Box::new(PlacementFileNode),
 };
 

@@ -12,9 +12,12 @@ struct Ibl {
     size: vec4<f32>,
     // rgb: background colour; w: background mode (0 colour, 1 the environment map).
     background: vec4<f32>,
-    // x: background mip level, y: top mip level, z: 1 to shade with the full filtered map
-    // (one lookup, no partition), w: face size of level 0.
-    misc: vec4<f32>,
+    background_level: f32,
+    top_level: f32,
+    // 1 to shade with the full filtered map (one lookup, no partition).
+    full_map: f32,
+    // Face size of level 0.
+    face_size: f32,
     // Mip level for s = 2^(i * 10 / 32), i = 0..32 (33 entries).
     levels: array<vec4<f32>, 9>,
 };
@@ -41,8 +44,12 @@ struct Shadow {
     to_atlas: array<mat4x4<f32>, 8>,
     // Each tile in atlas coordinates, inset by half a texel: x0, y0, x1, y1.
     rect: array<vec4<f32>, 8>,
-    // x: min variance, y: bleed reduction, z: jitter (texels), w: 1 when shadows are on.
-    params: vec4<f32>,
+    min_variance: f32,
+    bleed_reduction: f32,
+    // In texels.
+    jitter: f32,
+    // 1 when shadows are on.
+    enabled: f32,
     // x, y: atlas size (texels), z: normal offset (world), w: depth bias.
     bias: vec4<f32>,
     eye: vec4<f32>,
@@ -56,7 +63,7 @@ struct Shadow {
 // #include "cube.wgsl"
 
 fn lookup(tex: texture_2d_array<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
-    return cube_trilinear(tex, u32(ibl.misc.w), ibl.misc.y, d, lod).rgb;
+    return cube_trilinear(tex, u32(ibl.face_size), ibl.top_level, d, lod).rgb;
 }
 
 fn table(i: u32) -> f32 {
@@ -74,7 +81,7 @@ fn level_for_glossiness(g: f32) -> f32 {
     let x = max(log2(max(s, 1.0)), 0.0) * 3.2;
     let i = min(u32(floor(x)), 31u);
     let l = table(i) + (table(i + 1u) - table(i)) * (x - f32(i));
-    return clamp(l, 0.0, ibl.misc.y);
+    return clamp(l, 0.0, ibl.top_level);
 }
 
 fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
@@ -87,15 +94,15 @@ fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
 
 // VIS_k of the pass's light k at world position p (pixel px for the jitter).
 fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
-    if shadow.params.w < 0.5 {
+    if shadow.enabled < 0.5 {
         return 1.0;
     }
     let c = shadow.to_atlas[k] * vec4<f32>(p, 1.0);
     var uv = c.xy;
-    if shadow.params.z > 0.0 {
+    if shadow.jitter > 0.0 {
         // A 4x4 tiled hash per light (Fig. 4.13): a different pattern for each light.
         let n = hash2(vec2<u32>(px) % vec2<u32>(4u), k + 1u) * 2.0 - 1.0;
-        uv += n * shadow.params.z / shadow.bias.xy;
+        uv += n * shadow.jitter / shadow.bias.xy;
     }
     let r = shadow.rect[k];
     uv = clamp(uv, r.xy, r.zw);
@@ -105,10 +112,10 @@ fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
     if t <= m.x {
         return 1.0;
     }
-    let variance = max(m.y - m.x * m.x, shadow.params.x);
+    let variance = max(m.y - m.x * m.x, shadow.min_variance);
     let d = t - m.x;
     let p_max = variance / (variance + d * d);
-    let b = shadow.params.y;
+    let b = shadow.bleed_reduction;
     return clamp((p_max - b) / (1.0 - b), 0.0, 1.0);
 }
 
@@ -130,7 +137,7 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             return vec4<f32>(prior, 1.0);
         }
         if ibl.background.w > 0.5 {
-            return vec4<f32>(lookup(env, ray, ibl.misc.x), 1.0);
+            return vec4<f32>(lookup(env, ray, ibl.background_level), 1.0);
         }
         return vec4<f32>(ibl.background.rgb, 1.0);
     }
@@ -143,7 +150,7 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let level = level_for_glossiness(g);
 
     var sum = vec3<f32>(0.0);
-    if ibl.misc.z > 0.5 {
+    if ibl.full_map > 0.5 {
         sum = lookup(env, sample_dir, level);
     } else {
         let count = u32(ibl.size.z);

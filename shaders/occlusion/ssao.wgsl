@@ -15,13 +15,21 @@ struct Ssao {
     view: mat4x4<f32>,
     // xy: G-buffer size in pixels; zw: size of the AO texture this pass reads or writes.
     size: vec4<f32>,
-    // x: radius (world units), y: samples, z: strength (exponent), w: scale (1 or 2).
-    params: vec4<f32>,
-    // x: depth bias, y: range (how far in front of a sample an occluder may be),
-    // z: plane tolerance of the blur and upsampling,
-    // w: 1 when the blur follows (the estimate is written unclamped, the blur clamps and
+    // World units.
+    radius: f32,
+    samples: f32,
+    // The exponent.
+    strength: f32,
+    // 1, or 2 at half resolution.
+    scale: f32,
+    depth_bias: f32,
+    // How far in front of a sample an occluder may be.
+    range: f32,
+    // Of the blur and upsampling.
+    plane_tolerance: f32,
+    // 1 when the blur follows (the estimate is written unclamped, the blur clamps and
     // applies the strength: the tile's average is then exactly the 16N-sample estimate).
-    misc: vec4<f32>,
+    blur: f32,
 };
 
 @group(0) @binding(0) var<uniform> u: Ssao;
@@ -51,7 +59,7 @@ fn gsize() -> vec2<f32> {
 
 // The G-buffer pixel (integer) an AO texel stands for.
 fn gpixel(q: vec2<i32>) -> vec2<i32> {
-    return min(q * i32(u.params.w), vec2<i32>(gsize()) - 1);
+    return min(q * i32(u.scale), vec2<i32>(gsize()) - 1);
 }
 
 fn inside(p: vec2<i32>) -> bool {
@@ -89,12 +97,12 @@ fn output(v: f32) -> vec4<f32> {
 
 // Clamped to [0, 1] and raised to the strength (pow(0, 0) is undefined in WGSL: 1e-4 floor).
 fn strengthen(v: f32) -> f32 {
-    return pow(clamp(v, 1e-4, 1.0), u.params.z);
+    return pow(clamp(v, 1e-4, 1.0), u.strength);
 }
 
 // The estimate's output: as it is when the blur follows, else clamped and raised to the strength.
 fn finish(v: f32) -> vec4<f32> {
-    if u.misc.w > 0.5 {
+    if u.blur > 0.5 {
         return output(v);
     }
     return output(strengthen(v));
@@ -117,13 +125,13 @@ fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         return output(1.0);
     }
     let p = view_pos(vec2<f32>(gp) + 0.5, d);
-    let radius = u.params.x;
-    let n = u32(u.params.y);
+    let radius = u.radius;
+    let n = u32(u.samples);
     let b = pattern(q);
     let total = f32(n * 16u);
     // The larger of the bias parameter and one G-buffer pixel's footprint at this depth
     // (a neighbouring pixel's centre depth differs from the sample ray's by about that much).
-    let bias = max(u.misc.x, 2.0 * d / (u.proj[1][1] * gsize().y));
+    let bias = max(u.depth_bias, 2.0 * d / (u.proj[1][1] * gsize().y));
     var occluded = 0.0;
     var counted = 0.0;
     for (var k = 0u; k < n; k++) {
@@ -145,7 +153,7 @@ fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             continue;
         }
         counted += 1.0;
-        if scene > 0.0 && diff > 0.0 && diff < u.misc.y {
+        if scene > 0.0 && diff > 0.0 && diff < u.range {
             occluded += 1.0;
         }
     }
@@ -175,14 +183,14 @@ fn fs_horizon(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let p = view_pos(centre, d);
     let v = normalize(-p);
     let normal = view_normal(gp);
-    let radius = u.params.x;
+    let radius = u.radius;
     // The radius's length in G-buffer pixels at this depth.
     let radius_px = radius * u.proj[1][1] * 0.5 * gsize().y / d;
     if radius_px < 1.0 {
         return output(1.0);
     }
     let slices = 2u;
-    let steps = max(u32(u.params.y) / 4u, 1u);
+    let steps = max(u32(u.samples) / 4u, 1u);
     let b = f32(pattern(q));
     let jitter = fract((b + 0.5) * INV_PHI);
     var visibility = 0.0;
@@ -260,7 +268,7 @@ fn similarity(p: vec3<f32>, n: vec3<f32>, o: vec2<i32>) -> f32 {
         return 0.0;
     }
     let po = view_pos(vec2<f32>(go) + 0.5, d);
-    let plane = clamp(1.0 - abs(dot(po - p, n)) / u.misc.z, 0.0, 1.0);
+    let plane = clamp(1.0 - abs(dot(po - p, n)) / u.plane_tolerance, 0.0, 1.0);
     let facing = pow(clamp(dot(view_normal(go), n), 0.0, 1.0), 4.0);
     return plane * facing;
 }
@@ -304,7 +312,7 @@ fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 fn fs_upsample(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
     let d = depth_at(px);
-    let half_pos = vec2<f32>(px) / u.params.w;
+    let half_pos = vec2<f32>(px) / u.scale;
     let base = vec2<i32>(floor(half_pos));
     let f = half_pos - vec2<f32>(base);
     let size = vec2<i32>(u.size.zw);

@@ -6,13 +6,18 @@
 @group(2) @binding(1) var mt_n: texture_2d<f32>;
 @group(2) @binding(2) var mt_v: texture_2d<f32>;
 
+// src/warp/mod.rs `WarpUniform`. Time-dependent mappings (spin) are baked into each
+// instance's M_tex / M_tan by the nodes.
 struct Warp {
-    // x: mode (0 point, 1 area, 2 curve, 3 curve aligned to the curve normal,
-    //    4 no surface: plain instancing, M_tex's translation as the xz offset; a benchmark baseline,
-    //    5 point with the frame resolved once per instance by attach_resolve.wgsl),
-    // y: fur gravity c (eq. 11), z: lowest valid-texel weight, w: unused (time-dependent
-    //    mappings, spin, are baked into each instance's M_tex / M_tan by the nodes).
-    params: vec4<f32>,
+    // 0 point, 1 area, 2 curve, 3 curve aligned to the curve normal,
+    // 4 no surface: plain instancing, M_tex's translation as the xz offset; a benchmark baseline,
+    // 5 point with the frame resolved once per instance by attach_resolve.wgsl.
+    mode: f32,
+    // Fur gravity c (eq. 11).
+    gravity: f32,
+    // Lowest valid-texel weight.
+    min_weight: f32,
+    _pad: f32,
 };
 
 @group(2) @binding(3) var<uniform> warp: Warp;
@@ -157,7 +162,7 @@ fn lookup_frame(uv: vec2<f32>) -> SurfaceFrame {
     let sv = w00 * t00.tv + w10 * t10.tv + w01 * t01.tv + w11 * t11.tv;
     let sp = w00 * t00.p + w10 * t10.p + w01 * t01.p + w11 * t11.p;
     var frame: SurfaceFrame;
-    frame.valid = weight >= max(warp.params.z, 1e-6);
+    frame.valid = weight >= max(warp.min_weight, 1e-6);
     let inv = 1.0 / max(weight, 1e-6);
     let n = sn * inv;
     let u = su * inv;
@@ -282,7 +287,7 @@ fn fur_bend(f: SurfaceFrame, q: vec3<f32>, c: f32) -> mat2x3<f32> {
 }
 
 fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
-    let mode = i32(warp.params.x + 0.5);
+    let mode = i32(warp.mode + 0.5);
     var uv_in = vec2<f32>(0.0);         // f_uv(p), without the homogeneous 1
     var f_map = vec4<f32>(p, 1.0);      // eq. (5)
     var t = 0.0;
@@ -328,7 +333,7 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
     }
     // Fur gravity (eqs. 11-12): every hair vertex keeps its distance to the surface point
     // p_s below it (its foot on the tangent plane); normals bend with the hairs.
-    let c = warp.params.y;
+    let c = warp.gravity;
     if c > 0.0 {
         let bend = fur_bend(frame, q, c);
         q = bend[0];

@@ -38,7 +38,7 @@ pub struct IdleOverhead {
 
 pub fn idle_overhead(nodes: usize, frames: usize) -> anyhow::Result<IdleOverhead> {
     let graph = chain_graph(nodes.max(1));
-    let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+    let mut ev = Evaluator::new(&graph, &[])?;
     let resources = Resources::new(false);
     let settings = FrameSettings::default();
     let t = Instant::now();
@@ -355,7 +355,7 @@ pub fn ibl(
     set(&mut graph, "camera", "orbit_speed", ParamValue::Float(30.0))?;
     let resources = Resources::new(false);
     let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir, frames: None };
-    let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+    let mut ev = Evaluator::new(&graph, &[])?;
     let mut frame = 0i64;
     let mut step = |ev: &mut Evaluator| -> anyhow::Result<()> {
         settle_frame(ev, gpu, &resources, &settings, frame, "the IBL graph")?;
@@ -368,7 +368,7 @@ pub fn ibl(
         let (mode, count) = if n == 0 { ("full", 1) } else { ("pems", n) };
         set(&mut graph, "median_cut", "count", ParamValue::Int(count as i64))?;
         set(&mut graph, "ibl", "mode", ParamValue::Str(mode.into()))?;
-        ev.update(&graph, &[]).map_err(anyhow::Error::msg)?;
+        ev.update(&graph, &[])?;
         let t = Instant::now();
         step(&mut ev)?;
         let rebuild_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -949,13 +949,13 @@ pub fn shadows(
     };
     let resources = Resources::new(false);
     let settings = FrameSettings { width: size.0, height: size.1, base_dir: dir, frames: None };
-    let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+    let mut ev = Evaluator::new(&graph, &[])?;
     let mut frame = 0i64;
     let mut step = |ev: &mut Evaluator, graph: &mut Graph| -> anyhow::Result<()> {
         // Move a sphere by a hair: the scene changes, so everything downstream of it re-runs.
         let y = 0.3 + 1e-4 * (frame % 2) as f64;
         set(graph, "sphere_0", "translate", ParamValue::Vec(vec![-0.9, y, 0.3]))?;
-        ev.update(graph, &[]).map_err(anyhow::Error::msg)?;
+        ev.update(graph, &[])?;
         settle_frame(ev, gpu, &resources, &settings, frame, "the shadow graph")?;
         frame += 1;
         Ok(())
@@ -1274,7 +1274,7 @@ pub fn table1(
     for fig in TABLE1.iter().filter(|f| only.is_empty() || only.iter().any(|o| f.graph.starts_with(o.as_str()))) {
         let what = format!("{}.ron", fig.graph);
         let mut graph = Graph::load(&dir.join(&what)).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+        let mut ev = Evaluator::new(&graph, &[])?;
         settle_frame(&mut ev, gpu, &resources, &settings, 0, &what)?;
         let target = fig.paper_triangles as f64 * scale;
         for _ in 0..6 {
@@ -1307,7 +1307,7 @@ pub fn table1(
                     (other, _) => anyhow::bail!("{what}: {node}.{param} is {other:?}, not a number"),
                 };
             }
-            ev.update(&graph, &[]).map_err(anyhow::Error::msg)?;
+            ev.update(&graph, &[])?;
             settle_frame(&mut ev, gpu, &resources, &settings, 0, &what)?;
         }
         let triangles = attached_triangles(&ev, &graph);
@@ -1433,7 +1433,7 @@ pub fn export(
             scale = 0.8 / cols as f32,
         );
         let graph = Graph::load_str(&text, "export.ron".as_ref()).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let mut ev = Evaluator::new(&graph, &[]).map_err(anyhow::Error::msg)?;
+        let mut ev = Evaluator::new(&graph, &[])?;
         settle_frame(&mut ev, gpu, &resources, &settings, 0, "the export scene")?;
         let Some(Value::Scene(items)) = ev.output("buttons", "scene") else {
             anyhow::bail!("the export scene has no attachments");

@@ -36,7 +36,7 @@ pub fn markdown() -> String {
         let _ = write!(out, "\n## {cat}\n");
         for s in specs {
             let _ = write!(out, "\n### {}\n\n{}\n", s.kind, s.doc);
-            if s.is_output {
+            if s.is_output() {
                 out.push_str("\nAn output node: evaluation pulls from it.\n");
             }
             if !s.inputs.is_empty() {
@@ -109,7 +109,7 @@ pub fn find(kind: &str) -> Result<&'static crate::core::node::NodeSpec, String> 
 /// type, default, range and doc.
 pub fn describe(s: &crate::core::node::NodeSpec) -> String {
     let mut out =
-        format!("{} ({}{})\n  {}\n", s.kind, s.category, if s.is_output { ", output node" } else { "" }, s.doc);
+        format!("{} ({}{})\n  {}\n", s.kind, s.category, if s.is_output() { ", output node" } else { "" }, s.doc);
     let width = |names: &mut dyn Iterator<Item = &str>| names.map(str::len).max().unwrap_or(0);
     if !s.inputs.is_empty() {
         out.push_str("\ninputs:\n");
@@ -174,7 +174,7 @@ pub fn node_json(s: &crate::core::node::NodeSpec) -> serde_json::Value {
         "kind": s.kind,
         "category": s.category.to_string(),
         "doc": s.doc,
-        "output_node": s.is_output,
+        "output_node": s.is_output(),
         "inputs": ports(s.inputs, true),
         "outputs": ports(s.outputs, false),
         "params": s.params.iter().map(param_json).collect::<Vec<_>>(),

@@ -140,7 +140,7 @@ pub const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(12
 pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
     let mut graph = Graph::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
     for s in sets {
-        graph.set_from_cli(s).map_err(anyhow::Error::msg)?;
+        graph.set_from_cli(s)?;
     }
     Ok(graph)
 }
@@ -178,7 +178,7 @@ pub fn render_graph(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext) -> an
 fn fixed_frame_warnings(graph: &Graph, (first, last): (i64, i64)) -> Vec<String> {
     let mut out = Vec::new();
     for (id, node) in &graph.nodes {
-        let Some(spec) = crate::core::spec::find(&node.kind).filter(|s| s.is_output) else { continue };
+        let Some(spec) = crate::core::spec::find(&node.kind).filter(|s| s.is_output()) else { continue };
         let Some((_, p)) = spec.param("frame") else { continue };
         let frame = node.params.get("frame").and_then(crate::core::param::ParamValue::as_f64).unwrap_or(match p.kind {
             crate::core::param::ParamKind::Int { default, .. } => default as f64,
@@ -197,7 +197,7 @@ fn fixed_frame_warnings(graph: &Graph, (first, last): (i64, i64)) -> Vec<String>
 fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &mut Stats) -> anyhow::Result<()> {
     let dumps: Vec<PortRef> = opts.dumps.iter().map(|d| parse_dump(graph, d)).collect::<anyhow::Result<_>>()?;
     let extra_roots: Vec<String> = dumps.iter().map(|d| d.node.clone()).collect();
-    let mut evaluator = Evaluator::new(graph, &extra_roots).map_err(anyhow::Error::msg)?;
+    let mut evaluator = Evaluator::new(graph, &extra_roots)?;
     if evaluator.roots().next().is_none() {
         bail!(
             "{}: the graph has no output node (ImageWrite, Preview or Watch), so there is nothing to render",
@@ -379,12 +379,15 @@ fn parse_dump(graph: &Graph, text: &str) -> anyhow::Result<PortRef> {
 /// will bring (a `LiveLink` waits for a simulator to connect), with what to do instead.
 fn nothing_will_arrive(ev: &Evaluator) -> String {
     let waiting = failures(ev);
-    let live = ev
+    // A pending external source (a LiveLink waiting for a simulator) says what to do instead.
+    let help = ev
         .reports()
-        .any(|r| matches!(r.status, NodeStatus::Pending(_)) && r.kind == crate::nodes::mesh::live_link::LIVE_LINK.kind);
+        .filter(|r| matches!(r.status, NodeStatus::Pending(_)))
+        .filter_map(|r| crate::core::spec::find(r.kind)?.capabilities.batch_help())
+        .next();
     let mut msg = format!("nothing will arrive in a batch render: {}", waiting.join("; "));
-    if live {
-        msg.push_str(&format!("\n  help: {}", crate::nodes::mesh::live_link::RECORD_HELP));
+    if let Some(help) = help {
+        msg.push_str(&format!("\n  help: {help}"));
     }
     msg
 }

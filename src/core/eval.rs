@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use crate::core::graph::Graph;
+use crate::core::graph::{Graph, GraphError};
 use crate::core::node::{EvalCx, INTERNAL_ERROR, Node, NodeError, NodeSpec, Product};
 use crate::core::param::ParamValue;
 use crate::core::port::Value;
@@ -109,7 +109,7 @@ fn mix(h: u64, x: u64) -> u64 {
 impl Evaluator {
     /// Compiles a validated graph. `extra_roots` are nodes to evaluate besides the output
     /// nodes (for `--dump node.port`).
-    pub fn new(graph: &Graph, extra_roots: &[String]) -> Result<Evaluator, String> {
+    pub fn new(graph: &Graph, extra_roots: &[String]) -> Result<Evaluator, GraphError> {
         let mut ev = Evaluator {
             ids: Vec::new(),
             index: HashMap::new(),
@@ -135,14 +135,14 @@ impl Evaluator {
     /// Recompiles after an edit, keeping the caches (and node instances) of nodes whose
     /// kind is unchanged: only what the edit touched re-runs.
     /// On an error the evaluator is left as it was.
-    pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), String> {
+    pub fn update(&mut self, graph: &Graph, extra_roots: &[String]) -> Result<(), GraphError> {
         // Check everything `rebuild` could fail on first, so a bad edit leaves the evaluator
         // (and its caches) as it was.
-        if let Some(p) = graph.validate().first() {
-            return Err(p.message.clone());
+        if let Some(p) = graph.validate().into_iter().next() {
+            return Err(p.into());
         }
         if let Some(id) = extra_roots.iter().find(|id| !graph.nodes.contains_key(*id)) {
-            return Err(format!("there is no node \"{id}\""));
+            return Err(GraphError::NoSuchNode(id.clone()));
         }
         let mut old = HashMap::new();
         let ids = std::mem::take(&mut self.ids);
@@ -159,10 +159,9 @@ impl Evaluator {
         graph: &Graph,
         extra_roots: &[String],
         mut old: HashMap<String, (&'static str, NodeState)>,
-    ) -> Result<(), String> {
-        let problems = graph.validate();
-        if let Some(p) = problems.first() {
-            return Err(p.message.clone());
+    ) -> Result<(), GraphError> {
+        if let Some(p) = graph.validate().into_iter().next() {
+            return Err(p.into());
         }
         self.ids.clear();
         self.index.clear();
@@ -172,7 +171,7 @@ impl Evaluator {
         self.sources.clear();
         self.state.clear();
         for (i, (id, doc)) in graph.nodes.iter().enumerate() {
-            let spec = spec::find(&doc.kind).ok_or_else(|| format!("unknown kind {}", doc.kind))?;
+            let spec = spec::find(&doc.kind).expect("validate() checked every kind");
             let params: Vec<ParamValue> = spec
                 .params
                 .iter()
@@ -216,8 +215,8 @@ impl Evaluator {
             let (Some(&from), Some(&to)) = (self.index.get(&link.from.node), self.index.get(&link.to.node)) else {
                 continue;
             };
-            let (out, _) = self.specs[from].output(&link.from.port).ok_or("unknown output")?;
-            let (inp, _) = self.specs[to].input(&link.to.port).ok_or("unknown input")?;
+            let (out, _) = self.specs[from].output(&link.from.port).expect("validate() checked every port");
+            let (inp, _) = self.specs[to].input(&link.to.port).expect("validate() checked every port");
             self.sources[to][inp] = Some((from, out));
         }
         self.linked = self.specs.iter().map(|s| vec![false; s.outputs.len()]).collect();
@@ -228,9 +227,9 @@ impl Evaluator {
         for (h, linked) in self.param_hash.iter_mut().zip(&self.linked) {
             *h = mix(*h, linked.iter().fold(0u64, |m, &l| (m << 1) | u64::from(l)));
         }
-        self.roots = (0..self.ids.len()).filter(|&i| self.specs[i].is_output).collect();
+        self.roots = (0..self.ids.len()).filter(|&i| self.specs[i].is_output()).collect();
         for id in extra_roots {
-            let &i = self.index.get(id).ok_or_else(|| format!("there is no node \"{id}\""))?;
+            let &i = self.index.get(id).ok_or_else(|| GraphError::NoSuchNode(id.clone()))?;
             if !self.roots.contains(&i) {
                 self.roots.push(i);
             }

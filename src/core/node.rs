@@ -76,12 +76,78 @@ pub struct NodeSpec {
     pub inputs: &'static [PortSpec],
     pub outputs: &'static [PortSpec],
     pub params: &'static [ParamSpec],
-    /// Output nodes are the roots evaluation pulls from; `render` writes their images.
-    pub is_output: bool,
+    /// What the engine may do with the node beyond evaluating it (an output root, the
+    /// viewport's preview, an orbit camera the viewport drives, a source that waits for another
+    /// program). Engine code asks for a capability, never for a kind by name. Most nodes have
+    /// none: `capabilities: Capabilities::NONE`.
+    pub capabilities: Capabilities,
     pub create: fn() -> Box<dyn Node>,
 }
 
+/// What the engine may do with a node beyond evaluating it: a set of flags, combined with
+/// [`Capabilities::with`] in a `const` (`Capabilities::OUTPUT.with(Capabilities::PREVIEW)`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    flags: u8,
+    /// For [`Capabilities::EXTERNAL_SOURCE`]: what to do instead in a batch render.
+    batch_help: Option<&'static str>,
+}
+
+impl Capabilities {
+    /// A plain node.
+    pub const NONE: Capabilities = Capabilities::flag(0);
+    /// A root that evaluation pulls from; `render` writes what it emits.
+    pub const OUTPUT: Capabilities = Capabilities::flag(1);
+    /// The image the editor's viewport shows before any other output.
+    pub const PREVIEW: Capabilities = Capabilities::flag(2);
+    /// A camera with `yaw`, `pitch` and `distance` parameters that dragging in the viewport
+    /// turns and zooms.
+    pub const ORBIT_CAMERA: Capabilities = Capabilities::flag(4);
+    /// Its values come from another program (a simulator), so a batch render may wait for them
+    /// forever; see [`Capabilities::external_source`] to say what to do instead.
+    pub const EXTERNAL_SOURCE: Capabilities = Capabilities::flag(8);
+
+    const fn flag(flags: u8) -> Self {
+        Capabilities { flags, batch_help: None }
+    }
+
+    /// [`Capabilities::EXTERNAL_SOURCE`] with the help a batch render prints when it waits for
+    /// the node.
+    pub const fn external_source(batch_help: &'static str) -> Self {
+        Capabilities { flags: Capabilities::EXTERNAL_SOURCE.flags, batch_help: Some(batch_help) }
+    }
+
+    /// The union of both sets (the help text of either).
+    pub const fn with(self, other: Capabilities) -> Self {
+        Capabilities {
+            flags: self.flags | other.flags,
+            batch_help: match self.batch_help {
+                Some(h) => Some(h),
+                None => other.batch_help,
+            },
+        }
+    }
+
+    /// Whether every flag of `other` is set.
+    pub const fn contains(self, other: Capabilities) -> bool {
+        self.flags & other.flags == other.flags
+    }
+
+    /// For an external source: what a batch render should do instead of waiting for it.
+    pub const fn batch_help(self) -> Option<&'static str> {
+        self.batch_help
+    }
+}
+
 impl NodeSpec {
+    /// Whether the node has every capability of `c`.
+    pub const fn has(&self, c: Capabilities) -> bool {
+        self.capabilities.contains(c)
+    }
+    /// Output nodes are the roots evaluation pulls from; `render` writes their products.
+    pub const fn is_output(&self) -> bool {
+        self.has(Capabilities::OUTPUT)
+    }
     pub fn input(&self, name: &str) -> Option<(usize, &PortSpec)> {
         self.inputs.iter().enumerate().find(|(_, p)| p.name == name)
     }
@@ -386,7 +452,7 @@ impl<'a> EvalCx<'a> {
 
     /// Hands the batch runner something to write this frame (output nodes only).
     pub fn emit(&mut self, product: Product) {
-        if !self.spec.is_output {
+        if !self.spec.is_output() {
             self.misuse("emits a product but is not an output node".into());
         }
         self.products.push(product);
@@ -429,7 +495,7 @@ impl<'a> EvalCx<'a> {
 
 /// What a node file needs: `use crate::core::node::prelude::*;`.
 pub mod prelude {
-    pub use super::{Category, EvalCx, Node, NodeError, NodeSpec, PortSpec, Product};
+    pub use super::{Capabilities, Category, EvalCx, Node, NodeError, NodeSpec, PortSpec, Product};
     pub use crate::core::param::{Choice, ParamKind, ParamSpec};
     pub use crate::core::port::{PortType, Value};
 }

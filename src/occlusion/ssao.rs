@@ -29,8 +29,20 @@ pub(crate) struct SsaoUniform {
     pub(crate) proj: [[f32; 4]; 4],
     pub(crate) view: [[f32; 4]; 4],
     pub(crate) size: [f32; 4],
-    pub(crate) params: [f32; 4],
-    pub(crate) misc: [f32; 4],
+    /// World units.
+    pub(crate) radius: f32,
+    pub(crate) samples: f32,
+    /// The exponent.
+    pub(crate) strength: f32,
+    /// 1, or 2 at half resolution.
+    pub(crate) scale: f32,
+    pub(crate) depth_bias: f32,
+    /// How far in front of a sample an occluder may be.
+    pub(crate) range: f32,
+    /// Of the blur and upsampling.
+    pub(crate) plane_tolerance: f32,
+    /// 1 when the blur follows.
+    pub(crate) blur: f32,
 }
 
 pub(crate) struct Passes {
@@ -76,8 +88,14 @@ impl Passes {
             proj: g.view.proj.to_cols_array_2d(),
             view: g.view.view.to_cols_array_2d(),
             size: [w as f32, h as f32, tw as f32, th as f32],
-            params: [s.radius, s.samples as f32, s.strength, scale as f32],
-            misc: [BIAS * s.radius, RANGE * s.radius, PLANE_TOLERANCE * s.radius, if s.blur { 1.0 } else { 0.0 }],
+            radius: s.radius,
+            samples: s.samples as f32,
+            strength: s.strength,
+            scale: scale as f32,
+            depth_bias: BIAS * s.radius,
+            range: RANGE * s.radius,
+            plane_tolerance: PLANE_TOLERANCE * s.radius,
+            blur: if s.blur { 1.0 } else { 0.0 },
         };
         let run = |pass: &mut FullscreenPass, u: SsaoUniform, ao: &GpuImage, out: &GpuImage| {
             let binds = [

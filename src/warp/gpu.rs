@@ -9,16 +9,18 @@ use crate::gpu::readback::read_buffer_with;
 use crate::gpu::{Bind, BufferRing, ComputePass, GpuContext, PooledBuffer, read_back, read_buffer};
 use crate::mesh::{GpuMesh, Mesh, has_area};
 
-use super::{AttachedDraw, InstanceData, MatrixTexels, MatrixTexture, TexelFrame, WarpedLayout, WarpedVertex};
+use super::{
+    AttachedDraw, InstanceData, MatrixTexels, MatrixTexture, TexelFrame, WarpUniform, WarpedLayout, WarpedVertex,
+};
 
 /// Group 2 of shaders/warp/warp.wgsl: the matrix texture's three columns, the warp settings
 /// (`uniform`, from `WarpSettings::uniform`) and the seam map.
-pub fn warp_binds<'a>(m: &'a MatrixTexture, uniform: &'a [f32; 4]) -> [Bind<'a>; 5] {
+pub fn warp_binds<'a>(m: &'a MatrixTexture, uniform: &'a WarpUniform) -> [Bind<'a>; 5] {
     [
         Bind::Texture(&m.col_u),
         Bind::Texture(&m.col_n),
         Bind::Texture(&m.col_v),
-        Bind::Uniform(bytemuck::cast_slice(uniform)),
+        Bind::Uniform(bytemuck::bytes_of(uniform)),
         Bind::Texture(&m.seams),
     ]
 }

@@ -451,11 +451,25 @@ pub struct WarpSettings {
     pub min_weight: f32,
 }
 
+/// `Warp` in shaders/warp/warp.wgsl, field for field.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct WarpUniform {
+    /// 0 point, 1 area, 2 curve, 3 curve aligned to the curve normal, 4 no surface (plain
+    /// instancing, a benchmark baseline), 5 point with the frame resolved once per instance.
+    pub mode: f32,
+    /// Fur gravity c of eq. (11).
+    pub gravity: f32,
+    /// Lowest valid-texel weight.
+    pub min_weight: f32,
+    pub _pad: f32,
+}
+
 impl WarpSettings {
     /// The `Warp` uniform; `resolved`: point frames were looked up per instance (mode 5).
-    pub fn uniform(&self, resolved: bool) -> [f32; 4] {
+    pub fn uniform(&self, resolved: bool) -> WarpUniform {
         let mode = if resolved && self.mode == WarpMode::Point { 5.0 } else { self.mode as u32 as f32 };
-        [mode, self.gravity, self.min_weight, 0.0]
+        WarpUniform { mode, gravity: self.gravity, min_weight: self.min_weight, _pad: 0.0 }
     }
 }
 

@@ -288,7 +288,7 @@ fn a_200_node_graph_stays_responsive() {
     let dir = temp_dir("big");
     let path = dir.join("chain.ron");
     // The benchmark chain, laid out as a user would: rows of 20 nodes.
-    let mut chain = werkstatt::app::bench::chain_graph(200);
+    let mut chain = werkstatt::app::chain_graph(200);
     for (i, node) in chain.nodes.values_mut().enumerate() {
         node.pos = [(i % 20) as f32 * 180.0, (i / 20) as f32 * 110.0];
     }

@@ -319,7 +319,7 @@ fn an_older_load_finishing_last_keeps_the_newer_value() {
 
 #[test]
 fn idle_frames_of_a_large_graph_run_nothing() {
-    let g = werkstatt::app::bench::chain_graph(200);
+    let g = werkstatt::app::chain_graph(200);
     let mut ev = Evaluator::new(&g, &[]).unwrap();
     let res = Resources::new(false);
     let s = FrameSettings::default();

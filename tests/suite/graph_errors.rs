@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use werkstatt::core::graph::{Diagnostic, Graph, ProblemKind};
+use werkstatt::core::eval::Evaluator;
+use werkstatt::core::graph::{Diagnostic, Graph, GraphError, ProblemKind};
 
 fn errors(name: &str) -> Vec<Diagnostic> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/bad").join(name);
@@ -165,16 +166,49 @@ fn missing_file_is_an_error_naming_it() {
 #[test]
 fn cli_set_errors_name_node_and_param() {
     let mut g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
-    let e = g.set_from_cli("camera.distanse=3").unwrap_err();
+    let err = g.set_from_cli("camera.distanse=3").unwrap_err();
+    assert!(matches!(&err, GraphError::SetUnknownParam { node, param, .. } if node == "camera" && param == "distanse"));
+    let e = err.to_string();
     assert!(e.contains("\"camera\"") && e.contains("distanse") && e.contains("distance"), "{e}");
-    let e = g.set_from_cli("camera.distance=far").unwrap_err();
+    let err = g.set_from_cli("camera.distance=far").unwrap_err();
+    assert!(matches!(&err, GraphError::SetValue { node, .. } if node == "camera"));
+    let e = err.to_string();
     assert!(e.contains("camera.distance") && e.contains("not a number"), "{e}");
-    let e = g.set_from_cli("camera.pitch=100").unwrap_err();
+    let e = g.set_from_cli("camera.pitch=100").unwrap_err().to_string();
     assert!(e.contains("out of range"), "{e}");
-    let e = g.set_from_cli("nobody.x=1").unwrap_err();
+    let err = g.set_from_cli("nobody.x=1").unwrap_err();
+    assert_eq!(err.node(), Some("nobody"));
+    let e = err.to_string();
     assert!(e.contains("no node \"nobody\""), "{e}");
+    assert!(matches!(g.set_from_cli("camera"), Err(GraphError::SetSyntax { .. })));
     g.set_from_cli("camera.distance=5").unwrap();
     assert_eq!(g.param("camera", "distance"), Some(werkstatt::core::param::ParamValue::Float(5.0)));
+}
+
+/// Loading and evaluation share one error type: a file's problems keep their file, line, node
+/// and port; an in-memory graph's problem names its node and port; a missing root its id.
+#[test]
+fn graph_errors_are_typed_and_name_file_line_node_and_port() {
+    let text = "(version: 1, nodes: {\n  \"t\": (kind: \"Tonemap\"),\n}, links: [])";
+    let err: GraphError = Graph::load_str(text, std::path::Path::new("typed.ron")).unwrap_err().into();
+    let GraphError::Load(load) = &err else { panic!("expected GraphError::Load, got {err:?}") };
+    let d = &load.diagnostics[0];
+    assert_eq!((d.file.to_str(), d.line, d.problem.node.as_deref()), (Some("typed.ron"), 2, Some("t")));
+    assert_eq!(err.node(), Some("t"));
+    assert!(err.to_string().starts_with("typed.ron:2:"), "{err}");
+
+    let (graph, _) = Graph::load_lenient(text, std::path::Path::new("typed.ron")).unwrap();
+    let err = Evaluator::new(&graph, &[]).err().expect("an unconnected required input");
+    let GraphError::Invalid(problem) = &err else { panic!("expected GraphError::Invalid, got {err:?}") };
+    assert_eq!((problem.kind.clone(), problem.port.as_deref()), (ProblemKind::MissingInput, Some("image")));
+    assert!(err.to_string().contains("node \"t\", port \"image\""), "{err}");
+
+    let ok =
+        Graph::load_str("(version: 1, nodes: {\"n\": (kind: \"Number\")}, links: [])", std::path::Path::new("x.ron"))
+            .unwrap();
+    let err = Evaluator::new(&ok, &["nope".to_string()]).err().expect("an unknown root");
+    assert!(matches!(&err, GraphError::NoSuchNode(id) if id == "nope"));
+    assert_eq!(err.node(), Some("nope"));
 }
 
 #[test]

@@ -124,7 +124,7 @@ fn run(spec: &NodeSpec, params: Params) -> Result<(), String> {
     }
     let target = ev.report(&id).expect("the node under test");
     // LiveLink waits for a simulator to connect; every other node must do its work.
-    if spec.kind != "LiveLink" && target.status != &NodeStatus::Ok {
+    if !spec.has(werkstatt::core::node::Capabilities::EXTERNAL_SOURCE) && target.status != &NodeStatus::Ok {
         return Err(format!("did not run to completion: {:?}", target.status));
     }
     for r in ev.reports() {
@@ -164,6 +164,38 @@ fn every_input_type_has_a_producer_in_this_test() {
     for spec in werkstatt::core::spec::all() {
         for input in spec.inputs {
             assert!(producer(input.ty).is_some(), "add a producer of {} for {}.{}", input.ty, spec.kind, input.name);
+        }
+    }
+}
+
+/// Engine code asks a spec for capabilities instead of comparing kind names; a capability
+/// promises what the engine then relies on.
+#[test]
+fn capabilities_keep_their_promises() {
+    use werkstatt::core::node::Capabilities;
+    let find = |kind| werkstatt::core::spec::find(kind).expect(kind);
+    assert!(find("Preview").has(Capabilities::PREVIEW) && find("Preview").is_output());
+    assert!(find("OrbitCamera").has(Capabilities::ORBIT_CAMERA) && !find("OrbitCamera").is_output());
+    assert!(find("LiveLink").has(Capabilities::EXTERNAL_SOURCE));
+    assert!(!find("Math").has(Capabilities::OUTPUT) && find("Math").capabilities == Capabilities::NONE);
+    let both = Capabilities::OUTPUT.with(Capabilities::PREVIEW);
+    assert!(both.contains(Capabilities::OUTPUT) && both.contains(Capabilities::PREVIEW));
+    assert!(!both.contains(Capabilities::ORBIT_CAMERA) && both.contains(Capabilities::NONE));
+    for spec in werkstatt::core::spec::all() {
+        // The viewport previews an image: a preview node has a texture output.
+        if spec.has(Capabilities::PREVIEW) {
+            assert!(spec.outputs.iter().any(|p| p.ty.viewable()), "{} previews no texture", spec.kind);
+        }
+        // The viewport's drag writes these three parameters.
+        if spec.has(Capabilities::ORBIT_CAMERA) {
+            for name in ["yaw", "pitch", "distance"] {
+                let p = spec.param(name).map(|(_, p)| &p.kind);
+                assert!(matches!(p, Some(ParamKind::Float { .. })), "{} lacks float parameter {name}", spec.kind);
+            }
+        }
+        // A batch render that waits for an external source says what to do instead.
+        if spec.has(Capabilities::EXTERNAL_SOURCE) {
+            assert!(spec.capabilities.batch_help().is_some_and(|h| !h.is_empty()), "{}", spec.kind);
         }
     }
 }

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use crate::core::eval::{Evaluator, FrameSettings, FrameSummary, FrameTime, NodeStatus};
 use crate::core::graph::{Graph, Place, PortRef, ProblemKind};
+use crate::core::node::Capabilities;
 use crate::core::param::ParamValue;
 use crate::core::port::Value;
 use crate::core::resources::Resources;
@@ -133,7 +134,7 @@ impl CameraOverride {
     }
 
     fn apply(&self, g: &mut Graph) {
-        if g.nodes.get(&self.node).is_some_and(|n| n.kind == "OrbitCamera") {
+        if is_orbit_camera(g, &self.node) {
             for (name, v) in [("yaw", self.yaw), ("pitch", self.pitch), ("distance", self.distance)] {
                 let _ = crate::app::editor::document::set_param(g, &self.node, name, ParamValue::Float(v));
             }
@@ -141,9 +142,15 @@ impl CameraOverride {
     }
 }
 
-/// The OrbitCamera that feeds `node` (the viewed one), else the first in the graph.
+/// Whether node `id` is a camera the viewport orbits ([`Capabilities::ORBIT_CAMERA`]).
+fn is_orbit_camera(graph: &Graph, id: &str) -> bool {
+    graph.nodes.get(id).and_then(|n| spec::find(&n.kind)).is_some_and(|s| s.has(Capabilities::ORBIT_CAMERA))
+}
+
+/// The orbit camera ([`Capabilities::ORBIT_CAMERA`]) that feeds `node` (the viewed one), else
+/// the first in the graph.
 pub fn camera_for(graph: &Graph, node: Option<&str>) -> Option<String> {
-    let is_cam = |id: &str| graph.nodes.get(id).is_some_and(|n| n.kind == "OrbitCamera");
+    let is_cam = |id: &str| is_orbit_camera(graph, id);
     if let Some(start) = node {
         let mut stack = vec![start.to_string()];
         let mut seen = BTreeSet::new();
@@ -159,7 +166,8 @@ pub fn camera_for(graph: &Graph, node: Option<&str>) -> Option<String> {
     graph.nodes.keys().find(|id| is_cam(id)).cloned()
 }
 
-/// The port the viewport shows: the inspected port, else the first Preview node's image,
+/// The port the viewport shows: the inspected port, else the first preview node's image
+/// ([`Capabilities::PREVIEW`]),
 /// else the first output node with a texture output, else the first output node's value
 /// (a Watch), shown as text.
 pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef> {
@@ -171,7 +179,7 @@ pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef
     let pick = |want_preview: bool| {
         graph.nodes.iter().find_map(|(id, n)| {
             let s = spec::find(&n.kind)?;
-            let ok = if want_preview { n.kind == "Preview" } else { s.is_output };
+            let ok = if want_preview { s.has(Capabilities::PREVIEW) } else { s.is_output() };
             if !ok {
                 return None;
             }
@@ -180,7 +188,7 @@ pub fn viewed_port(graph: &Graph, inspected: Option<&PortRef>) -> Option<PortRef
     };
     pick(true).or_else(|| pick(false)).or_else(|| {
         graph.nodes.iter().find_map(|(id, n)| {
-            let s = spec::find(&n.kind).filter(|s| s.is_output)?;
+            let s = spec::find(&n.kind).filter(|s| s.is_output())?;
             s.outputs.first().map(|p| PortRef { node: id.clone(), port: p.name.into() })
         })
     })
@@ -308,7 +316,7 @@ impl Live {
             Ok(()) => self.engine_error = None,
             Err(e) => {
                 // `update` leaves the evaluator as it was; start over from the runnable graph.
-                self.engine_error = Some(e);
+                self.engine_error = Some(e.to_string());
                 self.evaluator = Evaluator::new(&run, &[]).ok();
             }
         }
@@ -491,7 +499,7 @@ mod tests {
     fn the_viewport_prefers_preview_then_outputs() {
         let g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
         assert_eq!(viewed_port(&g, None), Some(p("image.image")));
-        assert_eq!(viewed_port(&crate::app::bench::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
+        assert_eq!(viewed_port(&crate::app::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
         assert_eq!(viewed_port(&Graph::new(), None), None);
         assert_eq!(camera_for(&g, Some("image")), Some("camera".into()));
         let mut cam = CameraOverride::from_graph(&g, "camera").unwrap();
