@@ -1,6 +1,7 @@
 //! The node library: one file per node family. `ALL` is the registry.
 
 pub mod attach;
+pub mod avatar;
 pub mod basic;
 pub mod camera;
 pub mod cloth;
@@ -39,6 +40,7 @@ pub static ALL: &[&NodeSpec] = &[
     &geometry::PRIMITIVE,
     &geometry::MESH_FILE,
     &geometry::TRANSFORM_MESH,
+    &avatar::AVATAR,
     &tessellate::TESSELLATE,
     &cloth::node::CLOTH_SIM,
     &mesh_sequence::MESH_SEQUENCE,

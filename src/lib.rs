@@ -11,12 +11,14 @@
 //! - [`render`]: the scene that flows between render nodes, and the scene drawer with its item
 //!   kinds ([`render::draw`]);
 //! - one module per technique: [`warp`] (deferred warping), [`cuboid`] (the cuboid scene graph),
-//!   [`tessellation`], [`ibl`] (image-based lighting, shadows);
+//!   [`tessellation`], [`ibl`] (image-based lighting, shadows), [`avatar`] (a skinned, posed,
+//!   dressed MakeHuman body);
 //! - [`io`]: writing images and geometry;
 //! - [`nodes`]: the node library, one file per node family, and its registry;
 //! - [`app`]: the command line, the batch renderer, image regression, the editor, the benches.
 
 pub mod app;
+pub mod avatar;
 pub mod color;
 pub mod core;
 pub mod cuboid;
