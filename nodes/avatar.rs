@@ -21,7 +21,11 @@ pub static AVATAR: NodeSpec = NodeSpec {
     doc: "MakeHuman's base body (helper geometry hidden), skinned by its default skeleton and weights (linear blend or dual quaternions) and posed every frame from a BVH motion, retargeted onto the skeleton through a joint map; optionally wearing a .mhclo proxy garment fitted to the posed body. In metres, feet on y = 0, facing +Z. Paths are relative to the graph's folder; the defaults are the bundled assets/avatar files.",
     inputs: &[],
     outputs: &[
-        PortSpec::output("surface", PortType::Surface, "The posed body (UVs are MakeHuman's texture coordinates, v down)."),
+        PortSpec::output(
+            "surface",
+            PortType::Surface,
+            "The posed body (UVs are MakeHuman's texture coordinates, v down).",
+        ),
         PortSpec::output(
             "collision",
             PortType::Mesh,
@@ -139,7 +143,8 @@ impl Node for AvatarNode {
         let body = cx.load(&mesh_path, Body::load)?;
         let skel_text = cx.load(&skel_path, load_text)?;
         let weights_text = cx.load(&weights_path, load_text)?;
-        let rig_key = vec![Arc::as_ptr(&body) as usize, Arc::as_ptr(&skel_text) as usize, Arc::as_ptr(&weights_text) as usize];
+        let rig_key =
+            vec![Arc::as_ptr(&body) as usize, Arc::as_ptr(&skel_text) as usize, Arc::as_ptr(&weights_text) as usize];
         if self.rig.as_ref().is_none_or(|(k, _)| *k != rig_key) {
             let n = body.obj.positions.len();
             let skeleton = Skeleton::from_mhskel(&skel_text, &skel_path.display().to_string(), &body.obj.positions)
@@ -205,10 +210,7 @@ impl Node for AvatarNode {
             let proxy = cx.load(&clo_path, Proxy::load)?;
             let name = clo_path.display().to_string();
             proxy.check(body.obj.positions.len(), &name).map_err(|e| NodeError::msg(format!("{e:#}")))?;
-            let obj_path = proxy
-                .obj_file
-                .clone()
-                .ok_or_else(|| NodeError::msg(format!("{name} names no obj_file")))?;
+            let obj_path = proxy.obj_file.clone().ok_or_else(|| NodeError::msg(format!("{name} names no obj_file")))?;
             let garment = cx.load(&obj_path, load_garment)?;
             if garment.0.positions.len() != proxy.bindings.len() {
                 return Err(NodeError::msg(format!(
@@ -236,8 +238,8 @@ impl Node for AvatarNode {
 
         let surface = avatar::split_surface(&body.surface, &posed, place, hidden.as_deref())
             .map_err(|e| NodeError::msg(format!("the posed body: {e:#}")))?;
-        let collision =
-            avatar::collision_mesh(&body, &posed, place).map_err(|e| NodeError::msg(format!("the collision body: {e:#}")))?;
+        let collision = avatar::collision_mesh(&body, &posed, place)
+            .map_err(|e| NodeError::msg(format!("the collision body: {e:#}")))?;
         let surface = Arc::new(surface);
         cx.count("triangles", surface.triangle_count());
         cx.set("clothes", clothes.unwrap_or_else(|| surface.clone()));

@@ -50,7 +50,10 @@ impl<'a> Tokens<'a> {
         self.words.get(self.at).or(self.words.last()).map_or(1, |w| w.0)
     }
     fn next(&mut self, what: &str) -> anyhow::Result<&'a str> {
-        let w = self.words.get(self.at).with_context(|| format!("{}: the file ends where {what} was expected", self.file))?;
+        let w = self
+            .words
+            .get(self.at)
+            .with_context(|| format!("{}: the file ends where {what} was expected", self.file))?;
         self.at += 1;
         Ok(w.1)
     }
@@ -65,7 +68,10 @@ impl<'a> Tokens<'a> {
     fn number(&mut self, what: &str) -> anyhow::Result<f64> {
         let line = self.line();
         let w = self.next(what)?;
-        w.parse::<f64>().ok().filter(|v| v.is_finite()).with_context(|| format!("{}:{line}: {what}: {w:?} is not a number", self.file))
+        w.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .with_context(|| format!("{}:{line}: {what}: {w:?} is not a number", self.file))
     }
 }
 
@@ -177,7 +183,10 @@ impl Bvh {
             for _ in 0..channels {
                 let line = t.line();
                 if t.at < t.words.len() && line != first {
-                    bail!("{file}:{line}: frame {f} (line {first}) has {} values, the hierarchy {channels} channels", row.len());
+                    bail!(
+                        "{file}:{line}: frame {f} (line {first}) has {} values, the hierarchy {channels} channels",
+                        row.len()
+                    );
                 }
                 row.push(t.number(&format!("frame {f}"))?);
             }

@@ -17,7 +17,11 @@ use glam::{DMat3, DVec3, Vec3};
 pub enum Binding {
     /// The clothes vertex is this body vertex.
     Exact(u32),
-    Weighted { v: [u32; 3], w: [f32; 3], d: Vec3 },
+    Weighted {
+        v: [u32; 3],
+        w: [f32; 3],
+        d: Vec3,
+    },
 }
 
 #[derive(Clone, Debug)]
@@ -50,7 +54,13 @@ impl Proxy {
             Verts,
             Delete,
         }
-        let mut p = Proxy { name: String::new(), obj_file: None, scale: [None; 3], bindings: Vec::new(), delete_verts: Vec::new() };
+        let mut p = Proxy {
+            name: String::new(),
+            obj_file: None,
+            scale: [None; 3],
+            bindings: Vec::new(),
+            delete_verts: Vec::new(),
+        };
         let mut section = Section::Header;
         for (i, line) in text.lines().enumerate() {
             let n = i + 1;
@@ -78,14 +88,18 @@ impl Proxy {
                             w: [float(3)?, float(4)?, float(5)?],
                             d: Vec3::new(float(6)?, float(7)?, float(8)?),
                         }),
-                        k => bail!("{file}:{n}: a vertex line has {k} fields (1, or 3 vertices, 3 weights and an offset)"),
+                        k => bail!(
+                            "{file}:{n}: a vertex line has {k} fields (1, or 3 vertices, 3 weights and an offset)"
+                        ),
                     }
                     continue;
                 }
                 Section::Delete if numeric => {
                     let mut k = 0;
                     while k < words.len() {
-                        let a: u32 = words[k].parse().with_context(|| format!("{file}:{n}: {:?} is not a vertex index", words[k]))?;
+                        let a: u32 = words[k]
+                            .parse()
+                            .with_context(|| format!("{file}:{n}: {:?} is not a vertex index", words[k]))?;
                         if words.get(k + 1) == Some(&"-") {
                             let b: u32 = words
                                 .get(k + 2)
@@ -115,7 +129,8 @@ impl Proxy {
                     let parse = || -> Option<(u32, u32, f32)> {
                         Some((words.get(1)?.parse().ok()?, words.get(2)?.parse().ok()?, words.get(3)?.parse().ok()?))
                     };
-                    let s = parse().with_context(|| format!("{file}:{n}: expected {first} <vertex> <vertex> <distance>"))?;
+                    let s = parse()
+                        .with_context(|| format!("{file}:{n}: expected {first} <vertex> <vertex> <distance>"))?;
                     if s.2 <= 0.0 {
                         bail!("{file}:{n}: {first} distance {} is not positive", s.2);
                     }
@@ -157,7 +172,9 @@ impl Proxy {
     pub fn check(&self, n: usize, file: &str) -> anyhow::Result<()> {
         let m = self.max_vertex() as usize;
         if m >= n {
-            bail!("{file} refers to body vertex {m}, but the body has {n} vertices (use the full base mesh with its helpers)");
+            bail!(
+                "{file} refers to body vertex {m}, but the body has {n} vertices (use the full base mesh with its helpers)"
+            );
         }
         Ok(())
     }

@@ -123,13 +123,14 @@ impl Retarget {
         bvh_file: &str,
         dst: &Skeleton,
     ) -> anyhow::Result<Retarget> {
-        let axes = map.axes_rotation().map_err(|e| anyhow::anyhow!("{map_file}:{}: {e}", line_of(map_text, "axes").max(1)))?;
+        let axes =
+            map.axes_rotation().map_err(|e| anyhow::anyhow!("{map_file}:{}: {e}", line_of(map_text, "axes").max(1)))?;
         let here = |name: &str| format!("{map_file}:{}", line_of(map_text, name));
         let mut table = vec![None; dst.bones.len()];
         for (bone, joint) in &map.bones {
-            let b = dst.index(bone).with_context(|| {
-                format!("{}: bone {bone:?} is not a bone of the destination skeleton", here(bone))
-            })?;
+            let b = dst
+                .index(bone)
+                .with_context(|| format!("{}: bone {bone:?} is not a bone of the destination skeleton", here(bone)))?;
             let j = bvh.index(joint).with_context(|| {
                 format!("{}: joint {joint:?} (mapped to bone {bone:?}) is not a joint of {bvh_file}", here(joint))
             })?;
@@ -144,9 +145,9 @@ impl Retarget {
             bail!("{map_file}: the map connects no bone of the skeleton to a joint of {bvh_file}");
         }
         let root = match &map.root {
-            Some(r) => bvh
-                .index(r)
-                .with_context(|| format!("{}: root joint {r:?} is not a joint of {bvh_file}", here(r)))?,
+            Some(r) => {
+                bvh.index(r).with_context(|| format!("{}: root joint {r:?} is not a joint of {bvh_file}", here(r)))?
+            }
             None => 0,
         };
         let source_rest: Vec<DVec3> = bvh.rest_positions().into_iter().map(|p| axes * p * map.scale).collect();

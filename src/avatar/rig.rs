@@ -95,7 +95,8 @@ impl Skeleton {
     pub fn from_mhskel(text: &str, file: &str, positions: &[Vec3]) -> anyhow::Result<Skeleton> {
         let json: serde_json::Value =
             serde_json::from_str(text).with_context(|| format!("{file} is not valid JSON"))?;
-        let bones = json.get("bones").and_then(|b| b.as_object()).with_context(|| format!("{file} has no \"bones\""))?;
+        let bones =
+            json.get("bones").and_then(|b| b.as_object()).with_context(|| format!("{file} has no \"bones\""))?;
         let joints =
             json.get("joints").and_then(|b| b.as_object()).with_context(|| format!("{file} has no \"joints\""))?;
         let joint = |bone: &str, name: Option<&str>| -> anyhow::Result<DVec3> {
@@ -146,11 +147,7 @@ impl Skeleton {
 
     /// The skinning transform of every bone: rest position -> posed position.
     pub fn skinning(&self, pose: &Pose) -> Vec<Rigid> {
-        self.globals(pose)
-            .into_iter()
-            .zip(&self.bones)
-            .map(|((q, h), b)| Rigid { q, t: h - q * b.head })
-            .collect()
+        self.globals(pose).into_iter().zip(&self.bones).map(|((q, h), b)| Rigid { q, t: h - q * b.head }).collect()
     }
 }
 
@@ -270,7 +267,10 @@ pub fn skin(rest: &[Vec3], weights: &Weights, bones: &[Rigid], method: Skinning)
                     // same rotation but would cancel).
                     let pivot = list.iter().max_by(|a, b| a.1.total_cmp(&b.1)).map(|(b, _)| dqs[*b as usize].real);
                     let pivot = pivot.unwrap_or(DQuat::IDENTITY);
-                    let mut sum = DualQuat { real: DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0), dual: DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0) };
+                    let mut sum = DualQuat {
+                        real: DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+                        dual: DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+                    };
                     for &(b, w) in list {
                         let d = dqs[b as usize];
                         let w = if d.real.dot(pivot) < 0.0 { -w } else { w };
