@@ -662,3 +662,23 @@ fn the_collision_mesh_matches_the_surface() {
     }
     assert!(surface.positions.len() > collision.positions.len());
 }
+
+#[test]
+fn the_avatar_graphs_render_a_moving_body() {
+    for graph in ["avatar_walk", "worksuit_fitted"] {
+        let out = crate::common::out_dir(&format!("avatar-graph-{graph}"));
+        let sets = ["median_cut.count=4", "environment.size=32", "shadow_atlas.tile_size=16"];
+        crate::common::render_graph(&root().join(format!("graphs/{graph}.ron")), &out, (0, 4), (64, 48), &sets, &[])
+            .unwrap_or_else(|e| panic!("{graph}: {e:#}"));
+        let mut images: Vec<PathBuf> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "png"))
+            .collect();
+        images.sort();
+        assert_eq!(images.len(), 5, "{graph}: {images:?}");
+        let (first, last) = (crate::common::read_png(&images[0]), crate::common::read_png(&images[4]));
+        let changed = first.pixels().zip(last.pixels()).filter(|(a, b)| a != b).count();
+        assert!(changed > 50, "{graph}: only {changed} pixels change while the avatar walks");
+    }
+}
