@@ -30,6 +30,7 @@ pub static ALL: &[&NodeSpec] = &[
     &mesh::geometry::PRIMITIVE,
     &mesh::geometry::MESH_FILE,
     &mesh::geometry::TRANSFORM_MESH,
+    &mesh::avatar::AVATAR,
     &tessellation::tessellate::TESSELLATE,
     &cloth::node::CLOTH_SIM,
     &mesh::mesh_sequence::MESH_SEQUENCE,

@@ -12,13 +12,15 @@
 //!   kinds ([`render::draw`]);
 //! - one module per technique: [`cloth`] (the cloth simulator), [`warp`] (deferred warping),
 //!   [`cuboid`] (the cuboid scene graph), [`tessellation`], [`ibl`] (image-based lighting,
-//!   shadows), [`occlusion`] (SSAO and its ray-traced reference);
+//!   shadows), [`occlusion`] (SSAO and its ray-traced reference), [`avatar`] (a skinned, posed,
+//!   dressed MakeHuman body);
 //! - [`io`]: writing images and geometry;
 //! - [`nodes`]: the node library, one folder per family as above (`nodes/render/`,
 //!   `nodes/warp/`, ...), and its registry;
 //! - [`app`]: the command line, the batch renderer, image regression, the editor, the benches.
 
 pub mod app;
+pub mod avatar;
 pub mod cloth;
 pub mod color;
 pub mod core;

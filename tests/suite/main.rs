@@ -6,6 +6,7 @@
 
 mod common;
 
+mod avatar;
 mod cli;
 mod cloth;
 mod cuboid;

@@ -55,6 +55,14 @@ fn fixture_params(kind: &str) -> Params {
     let data = |p: &str| ParamValue::Str(common::root().join(p).display().to_string());
     match kind {
         "MeshFile" => vec![("path", data("assets/meshes/spot.obj"))],
+        "Avatar" => vec![
+            ("mesh", data("assets/avatar/makehuman-base.obj")),
+            ("skeleton", data("assets/avatar/default.mhskel")),
+            ("weights", data("assets/avatar/default_weights.mhw")),
+            ("motion", data("assets/avatar/walk1.bvh")),
+            ("joint_map", data("assets/avatar/makehuman-old-rig.ron")),
+            ("clothes", data("assets/avatar/male_worksuit01.mhclo")),
+        ],
         "SvgCurves" => vec![("path", data("assets/patterns/embroidery.svg"))],
         "PlacementFile" => vec![("path", data("assets/placements/buttons.csv"))],
         "MeshSequence" => vec![("path", data("tests/data/sequence"))],
