@@ -626,10 +626,8 @@ fn a_joint_map_naming_a_missing_joint_names_file_line_and_joint() {
     let m = JointMap::parse("(axes: (\"x\", \"y\", \"-z\"), bones: {})", "m.ron").unwrap();
     assert!(m.axes_rotation().unwrap_err().to_string().contains("not a rotation"));
     // At the node, the error names the file too.
-    let text = format!(
-        r#"(version: 1, nodes: {{"avatar": (kind: "Avatar", params: {{"mesh": "makehuman-base.obj", "skeleton": "default.mhskel", "weights": "default_weights.mhw", "motion": "walk1.bvh", "joint_map": "missing.ron"}})}}, links: [])"#
-    );
-    let g = Graph::load_str(&text, &asset("test.ron")).unwrap();
+    let text = r#"(version: 1, nodes: {"avatar": (kind: "Avatar", params: {"mesh": "makehuman-base.obj", "skeleton": "default.mhskel", "weights": "default_weights.mhw", "motion": "walk1.bvh", "joint_map": "missing.ron"})}, links: [])"#;
+    let g = Graph::load_str(text, &asset("test.ron")).unwrap();
     let mut ev = Evaluator::new(&g, &["avatar".to_string()]).unwrap();
     let res = Resources::new(false);
     for _ in 0..50 {
