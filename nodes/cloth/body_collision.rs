@@ -1,0 +1,372 @@
+//! Collision of the cloth with a moving body given as a triangle mesh (a
+//! skinned avatar, one pose per frame).
+//!
+//! Per frame: the body moves linearly from its previous pose to the new one
+//! over the frame's substeps. A [`AabbTree`] over the triangles is refitted to
+//! the boxes the triangles sweep during the frame; every cloth vertex gathers
+//! the triangles whose swept box meets its own predicted sweep (`x` to
+//! `x + v dt`, widened by the thickness and a slack), once per frame. Each
+//! substep a vertex then looks for its closest point on the body *at that
+//! substep's time* among its candidates only, and is pushed out to the
+//! thickness along the outside direction; friction acts on its motion
+//! relative to the body surface point, so a moving limb drags cloth along.
+//! A vertex that strays outside the box it gathered for queries the tree
+//! directly (counted in [`BodyStats::fallbacks`]).
+//!
+//! Inside or outside is decided by the angle-weighted pseudo-normal of the
+//! closest feature (face, edge or vertex; Bærentzen and Aanæs 2005), which
+//! is exact for a closed, consistently wound mesh, also at edges and corners
+//! where a face normal alone misjudges. Because contacts are resolved every
+//! substep against the body at that substep's pose, a limb moving at speed
+//! `s` sinks at most `s h` (h the substep) into the cloth before it is
+//! pushed out: 8 mm at 10 m/s with 20 substeps at 60 Hz, well below a limb's
+//! radius, so the nearest feature stays on the side the vertex came from.
+
+use glam::Vec3;
+
+use super::bvh::{Aabb, AabbTree};
+
+/// A body mesh moving from pose to pose, one pose per frame.
+#[derive(Clone, Debug)]
+pub struct BodyMesh {
+    triangles: Vec<[u32; 3]>,
+    /// Triangle across edge `k` (from corner `k` to `k + 1`), `u32::MAX` on a border.
+    adjacent: Vec<[u32; 3]>,
+    start: Vec<Vec3>,
+    end: Vec<Vec3>,
+    /// Face and angle-weighted vertex normals at the start and end pose.
+    face_n: [Vec<Vec3>; 2],
+    vert_n: [Vec<Vec3>; 2],
+    boxes: Vec<Aabb>,
+    tree: AabbTree,
+    /// Per-vertex candidate triangles (CSR) and the box they were gathered for.
+    cand_start: Vec<u32>,
+    cand: Vec<u32>,
+    query: Vec<Aabb>,
+    pub stats: BodyStats,
+}
+
+/// Work counters of the last frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BodyStats {
+    /// Vertex-triangle candidates gathered.
+    pub candidates: usize,
+    /// Substep queries of vertices that left their gathered box.
+    pub fallbacks: usize,
+    /// Vertices pushed out (summed over substeps).
+    pub contacts: usize,
+}
+
+/// The feature of a triangle that holds a closest point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    Vertex(u8),
+    /// Edge from corner `k` to corner `k + 1`.
+    Edge(u8),
+    Face,
+}
+
+/// Closest point on triangle `abc` to `p` with its barycentric coordinates
+/// and feature (Ericson, Real-Time Collision Detection, 5.1.5).
+pub fn closest_point_feature(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> (Vec3, [f32; 3], Feature) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0], Feature::Vertex(0));
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0], Feature::Vertex(1));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + ab * v, [1.0 - v, v, 0.0], Feature::Edge(0));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0], Feature::Vertex(2));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + ac * w, [1.0 - w, 0.0, w], Feature::Edge(2));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + (c - b) * w, [0.0, 1.0 - w, w], Feature::Edge(1));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    (a + ab * v + ac * w, [1.0 - v - w, v, w], Feature::Face)
+}
+
+/// Face normals (unit) and angle-weighted vertex normals of a mesh.
+fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec<Vec3>) {
+    face.clear();
+    vert.clear();
+    vert.resize(pos.len(), Vec3::ZERO);
+    for t in tris {
+        let p = t.map(|i| pos[i as usize]);
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        face.push(n);
+        for k in 0..3 {
+            let e1 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
+            let e2 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
+            let angle = e1.dot(e2).clamp(-1.0, 1.0).acos();
+            vert[t[k] as usize] += n * angle;
+        }
+    }
+}
+
+impl BodyMesh {
+    /// A body at rest in `positions` (metres; triangles CCW seen from outside).
+    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        assert!(triangles.iter().flatten().all(|&i| (i as usize) < positions.len()), "body index out of range");
+        let mut half: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(3 * triangles.len());
+        for (t, tri) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                half.push((a.min(b), a.max(b), t as u32, k as u32));
+            }
+        }
+        half.sort_unstable();
+        let mut adjacent = vec![[u32::MAX; 3]; triangles.len()];
+        for w in half.windows(2) {
+            if w[0].0 == w[1].0 && w[0].1 == w[1].1 {
+                adjacent[w[0].2 as usize][w[0].3 as usize] = w[1].2;
+                adjacent[w[1].2 as usize][w[1].3 as usize] = w[0].2;
+            }
+        }
+        let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(|i| positions[i as usize]))).collect();
+        let tree = AabbTree::build(&boxes);
+        let mut body = BodyMesh {
+            triangles,
+            adjacent,
+            start: positions.clone(),
+            end: positions,
+            face_n: [Vec::new(), Vec::new()],
+            vert_n: [Vec::new(), Vec::new()],
+            boxes,
+            tree,
+            cand_start: Vec::new(),
+            cand: Vec::new(),
+            query: Vec::new(),
+            stats: BodyStats::default(),
+        };
+        let [f0, f1] = &mut body.face_n;
+        let [v0, v1] = &mut body.vert_n;
+        normals(&body.end, &body.triangles, f1, v1);
+        f0.clone_from(f1);
+        v0.clone_from(v1);
+        body
+    }
+
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// The pose at the end of the last (or coming) frame.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.end
+    }
+
+    /// Sets the pose the body reaches at the end of the next frame; it moves
+    /// there linearly from the current pose over that frame.
+    pub fn move_to(&mut self, positions: &[Vec3]) {
+        assert_eq!(positions.len(), self.end.len(), "a body pose needs one position per body vertex");
+        self.end.copy_from_slice(positions);
+        let [_, f1] = &mut self.face_n;
+        let [_, v1] = &mut self.vert_n;
+        normals(&self.end, &self.triangles, f1, v1);
+    }
+
+    /// Refits the tree to the frame's sweep and gathers each free vertex's
+    /// candidate triangles. `radius` is the thickness plus slack.
+    pub(crate) fn begin_frame(&mut self, x: &[Vec3], v: &[Vec3], inv_mass: &[f32], dt: f32, radius: f32) {
+        self.stats = BodyStats::default();
+        for (k, t) in self.triangles.iter().enumerate() {
+            let [a, b, c] = t.map(|i| i as usize);
+            self.boxes[k] = Aabb::from_points(&[self.start[a], self.start[b], self.start[c]])
+                .union(Aabb::from_points(&[self.end[a], self.end[b], self.end[c]]));
+        }
+        self.tree.refit(&self.boxes);
+        let all = self.tree.bounds();
+        self.cand_start.clear();
+        self.cand.clear();
+        self.query.clear();
+        self.cand_start.push(0);
+        for i in 0..x.len() {
+            // Predicted sweep, a little longer than the velocity says.
+            let q = Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]).inflate(radius);
+            if inv_mass[i] > 0.0 && q.overlaps(&all) {
+                let boxes = &self.boxes;
+                let cand = &mut self.cand;
+                self.tree.query(&q, |t| {
+                    if boxes[t as usize].overlaps(&q) {
+                        cand.push(t)
+                    }
+                });
+            }
+            self.query.push(q);
+            self.cand_start.push(self.cand.len() as u32);
+        }
+        self.stats.candidates = self.cand.len();
+    }
+
+    /// The frame is done: its end pose is the next frame's start.
+    pub(crate) fn end_frame(&mut self) {
+        self.start.copy_from_slice(&self.end);
+        let [f0, f1] = &mut self.face_n;
+        f0.clone_from(f1);
+        let [v0, v1] = &mut self.vert_n;
+        v0.clone_from(v1);
+    }
+
+    fn corner(&self, i: u32, s: f32) -> Vec3 {
+        self.start[i as usize].lerp(self.end[i as usize], s)
+    }
+
+    /// Outward pseudo-normal (not unit) of `feature` of triangle `t` at time `s`.
+    fn pseudo_normal(&self, t: u32, feature: Feature, s: f32) -> Vec3 {
+        let face = |t: u32| self.face_n[0][t as usize].lerp(self.face_n[1][t as usize], s);
+        match feature {
+            Feature::Face => face(t),
+            Feature::Edge(k) => {
+                let other = self.adjacent[t as usize][k as usize];
+                if other == u32::MAX { face(t) } else { face(t) + face(other) }
+            }
+            Feature::Vertex(k) => {
+                let v = self.triangles[t as usize][k as usize] as usize;
+                self.vert_n[0][v].lerp(self.vert_n[1][v], s)
+            }
+        }
+    }
+
+    /// Closest body point to `p` among `tris` at time `s` (0 = frame start,
+    /// 1 = frame end): `(signed distance, outward unit normal, triangle,
+    /// barycentrics)`.
+    fn closest(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<(f32, Vec3, u32, [f32; 3])> {
+        let mut best: Option<(f32, u32, Vec3, [f32; 3], Feature)> = None;
+        for t in tris {
+            let [a, b, c] = self.triangles[t as usize].map(|i| self.corner(i, s));
+            let (q, bary, feature) = closest_point_feature(p, a, b, c);
+            let d2 = p.distance_squared(q);
+            if best.is_none_or(|(bd, bt, ..)| d2 < bd || (d2 == bd && t < bt)) {
+                best = Some((d2, t, q, bary, feature));
+            }
+        }
+        let (d2, t, q, bary, feature) = best?;
+        let pn = self.pseudo_normal(t, feature, s);
+        let d = d2.sqrt();
+        let outside = (p - q).dot(pn) >= 0.0;
+        let n = if d > 1e-7 { (p - q) / d } else { pn.normalize_or(Vec3::Y) };
+        Some(if outside { (d, n, t, bary) } else { (-d, -n, t, bary) })
+    }
+
+    /// Pushes free vertices out to `thickness` at time `s1` and applies
+    /// friction to their motion since `prev` relative to the body's motion
+    /// since `s0`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn collide(
+        &mut self,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        inv_mass: &[f32],
+        s0: f32,
+        s1: f32,
+        thickness: f32,
+        friction: f32,
+    ) {
+        for i in 0..x.len() {
+            if inv_mass[i] == 0.0 {
+                continue;
+            }
+            let p = x[i];
+            let inside_box = {
+                let q = &self.query[i];
+                let r = Aabb::around(p, thickness);
+                q.min.cmple(r.min).all() && r.max.cmple(q.max).all()
+            };
+            let hit = if inside_box {
+                let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
+                if a == b {
+                    continue;
+                }
+                self.closest(p, s1, self.cand[a..b].iter().copied())
+            } else {
+                self.stats.fallbacks += 1;
+                let mut near = Vec::new();
+                let q = Aabb::around(p, 2.0 * thickness);
+                self.tree.query(&q, |t| {
+                    if self.boxes[t as usize].overlaps(&q) {
+                        near.push(t)
+                    }
+                });
+                self.closest(p, s1, near.into_iter())
+            };
+            let Some((dist, n, t, bary)) = hit else {
+                continue;
+            };
+            if dist >= thickness {
+                continue;
+            }
+            self.stats.contacts += 1;
+            let depth = thickness - dist;
+            let mut xi = p + n * depth;
+            let tri = self.triangles[t as usize];
+            let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s1) - self.corner(tri[k], s0)) * bary[k]).sum();
+            let rel = (xi - prev[i]) - body_motion;
+            let tangential = rel - n * rel.dot(n);
+            let tl = tangential.length();
+            if tl > 0.0 {
+                xi -= tangential * (friction * depth / tl).min(1.0);
+            }
+            x[i] = xi;
+        }
+    }
+
+    /// Smallest signed distance of any of `points` to the body (end pose), or
+    /// `None` when none is within `max_distance`.
+    pub fn min_clearance(&self, points: &[Vec3], max_distance: f32) -> Option<f32> {
+        let mut best: Option<f32> = None;
+        let mut near = Vec::new();
+        for &p in points {
+            near.clear();
+            let q = Aabb::around(p, max_distance);
+            self.tree.query(&q, |t| near.push(t));
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied()) {
+                if d <= max_distance {
+                    best = Some(best.map_or(d, |b: f32| b.min(d)));
+                }
+            }
+        }
+        best
+    }
+
+    /// Number of segments `[a, b]` (cloth edges) that cross a body triangle
+    /// (end pose).
+    pub fn count_crossings(&self, x: &[Vec3], edges: &[[u32; 2]]) -> usize {
+        let mut n = 0;
+        for e in edges {
+            let (a, b) = (x[e[0] as usize], x[e[1] as usize]);
+            let q = Aabb::from_points(&[a, b]);
+            let mut hit = false;
+            self.tree.query(&q, |t| {
+                if !hit {
+                    let [p0, p1, p2] = self.triangles[t as usize].map(|i| self.end[i as usize]);
+                    hit = super::intersections::segment_hits_triangle(a, b, p0, p1, p2);
+                }
+            });
+            n += hit as usize;
+        }
+        n
+    }
+}
