@@ -25,6 +25,7 @@
 use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
+use super::self_collision::track_side;
 
 /// A body mesh moving from pose to pose, one pose per frame.
 #[derive(Clone, Debug)]
@@ -43,6 +44,13 @@ pub struct BodyMesh {
     cand_start: Vec<u32>,
     cand: Vec<u32>,
     query: Vec<Aabb>,
+    /// Tree over the cloth triangles (built on the first frame), their boxes,
+    /// and the `(body vertex, cloth triangle, side)` pairs of this frame and
+    /// the last, sorted.
+    cloth_tree: Option<AabbTree>,
+    cloth_boxes: Vec<Aabb>,
+    vt_pairs: Vec<(u32, u32, f32)>,
+    vt_previous: Vec<(u32, u32, f32)>,
     pub stats: BodyStats,
 }
 
@@ -55,6 +63,10 @@ pub struct BodyStats {
     pub fallbacks: usize,
     /// Vertices pushed out (summed over substeps).
     pub contacts: usize,
+    /// Body-vertex / cloth-triangle pairs gathered.
+    pub vertex_pairs: usize,
+    /// Cloth triangles pushed off a body vertex (summed over substeps).
+    pub triangle_contacts: usize,
 }
 
 /// The feature of a triangle that holds a closest point.
@@ -160,6 +172,10 @@ impl BodyMesh {
             cand_start: Vec::new(),
             cand: Vec::new(),
             query: Vec::new(),
+            cloth_tree: None,
+            cloth_boxes: Vec::new(),
+            vt_pairs: Vec::new(),
+            vt_previous: Vec::new(),
             stats: BodyStats::default(),
         };
         let [f0, f1] = &mut body.face_n;
@@ -190,7 +206,16 @@ impl BodyMesh {
 
     /// Refits the tree to the frame's sweep and gathers each free vertex's
     /// candidate triangles. `radius` is the thickness plus slack.
-    pub(crate) fn begin_frame(&mut self, x: &[Vec3], v: &[Vec3], inv_mass: &[f32], dt: f32, radius: f32) {
+    pub(crate) fn begin_frame(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        cloth_triangles: &[[u32; 3]],
+        dt: f32,
+        thickness: f32,
+        radius: f32,
+    ) {
         self.stats = BodyStats::default();
         for (k, t) in self.triangles.iter().enumerate() {
             let [a, b, c] = t.map(|i| i as usize);
@@ -219,6 +244,106 @@ impl BodyMesh {
             self.cand_start.push(self.cand.len() as u32);
         }
         self.stats.candidates = self.cand.len();
+        self.gather_vertex_pairs(x, v, inv_mass, cloth_triangles, dt, thickness, radius);
+    }
+
+    /// Body vertices against cloth triangles: the body must not poke through
+    /// the cloth between cloth vertices (a stretched cloth wrapped around a
+    /// limb, a sharp body edge under a coarse cloth). Each pair records the
+    /// side of the triangle the body vertex is on at the frame start (or, in
+    /// contact, the side of last frame's pair).
+    #[allow(clippy::too_many_arguments)]
+    fn gather_vertex_pairs(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        tris: &[[u32; 3]],
+        dt: f32,
+        thickness: f32,
+        radius: f32,
+    ) {
+        let sweep = |i: usize| Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]);
+        self.cloth_boxes.clear();
+        self.cloth_boxes.extend(tris.iter().map(|t| {
+            let [a, b, c] = t.map(|i| i as usize);
+            sweep(a).union(sweep(b)).union(sweep(c)).inflate(0.5 * radius)
+        }));
+        let tree = self.cloth_tree.get_or_insert_with(|| AabbTree::build(&self.cloth_boxes));
+        tree.refit(&self.cloth_boxes);
+        std::mem::swap(&mut self.vt_pairs, &mut self.vt_previous);
+        self.vt_pairs.clear();
+        let all = tree.bounds();
+        let mut prev_k = 0;
+        for b in 0..self.end.len() {
+            let q = Aabb::from_points(&[self.start[b], self.end[b]]).inflate(0.5 * radius);
+            if !q.overlaps(&all) {
+                continue;
+            }
+            let first = self.vt_pairs.len();
+            let (boxes, pairs) = (&self.cloth_boxes, &mut self.vt_pairs);
+            tree.query(&q, |t| {
+                if boxes[t as usize].overlaps(&q) && tris[t as usize].iter().any(|&i| inv_mass[i as usize] > 0.0) {
+                    pairs.push((b as u32, t, 0.0));
+                }
+            });
+            self.vt_pairs[first..].sort_unstable_by_key(|p| p.1);
+            let p = self.start[b];
+            for pair in &mut self.vt_pairs[first..] {
+                let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
+                let n = (bb - a).cross(c - a).normalize_or_zero();
+                let d = (p - a).dot(n);
+                let mut side = if d >= 0.0 { 1.0 } else { -1.0 };
+                if d.abs() < thickness {
+                    let prev = &self.vt_previous;
+                    while prev_k < prev.len() && (prev[prev_k].0, prev[prev_k].1) < (pair.0, pair.1) {
+                        prev_k += 1;
+                    }
+                    if let Some(old) = prev.get(prev_k).filter(|o| (o.0, o.1) == (pair.0, pair.1)) {
+                        side = old.2;
+                    }
+                }
+                pair.2 = side;
+            }
+        }
+        self.stats.vertex_pairs = self.vt_pairs.len();
+    }
+
+    /// Pushes cloth triangles off the body vertices at time `s` (the body
+    /// does not move): the body vertex ends `thickness` from the triangle on
+    /// its recorded side.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn push_triangles(
+        &mut self,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        w: &[f32],
+        tris: &[[u32; 3]],
+        s0: f32,
+        s: f32,
+        thickness: f32,
+    ) {
+        for k in 0..self.vt_pairs.len() {
+            let (b, t) = (self.vt_pairs[k].0, self.vt_pairs[k].1);
+            let p = self.corner(b, s);
+            let [ia, ib, ic] = tris[t as usize].map(|j| j as usize);
+            let moved = |i: usize| x[i].distance(prev[i]);
+            let reach = thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
+            let side = &mut self.vt_pairs[k].2;
+            let Some((n, d, [ba, bu, bv])) = track_side(p, [x[ia], x[ib], x[ic]], side, thickness, reach) else {
+                continue;
+            };
+            let wsum = w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
+            if wsum == 0.0 {
+                continue;
+            }
+            // The triangle moves against n by (thickness - d) at the body point.
+            let k = (thickness - d) / wsum;
+            x[ia] -= n * (w[ia] * ba * k);
+            x[ib] -= n * (w[ib] * bu * k);
+            x[ic] -= n * (w[ic] * bv * k);
+            self.stats.triangle_contacts += 1;
+        }
     }
 
     /// The frame is done: its end pose is the next frame's start.
@@ -368,5 +493,97 @@ impl BodyMesh {
             n += hit as usize;
         }
         n
+    }
+}
+
+/// Closed box mesh (12 triangles, CCW seen from outside) with `rotation`
+/// applied about its centre.
+pub fn box_mesh(center: Vec3, half: Vec3, rotation: glam::Quat) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let pos = (0..8)
+        .map(|i| {
+            let s = Vec3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -1.0 } else { 1.0 },
+                if i & 4 == 0 { -1.0 } else { 1.0 },
+            );
+            center + rotation * (s * half)
+        })
+        .collect();
+    let quads = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    let tris = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+    (pos, tris)
+}
+
+/// Closed capsule mesh around the segment `a`-`b` (a limb): a cylinder of
+/// `rings` bands with hemispherical caps, `segments` around, CCW outside.
+pub fn capsule_mesh(a: Vec3, b: Vec3, radius: f32, rings: u32, segments: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let axis = (b - a).normalize();
+    let (u, w) = axis.any_orthonormal_pair();
+    let cap_rings = (segments / 4).max(2);
+    // Profile from the pole at `a` to the pole at `b`: (point on axis, radius).
+    let mut profile: Vec<(Vec3, f32)> = Vec::new();
+    for k in 1..=cap_rings {
+        let t = std::f32::consts::FRAC_PI_2 * k as f32 / cap_rings as f32;
+        profile.push((a - axis * (radius * t.cos()), radius * t.sin()));
+    }
+    for k in 1..rings {
+        profile.push((a.lerp(b, k as f32 / rings as f32), radius));
+    }
+    for k in 0..cap_rings {
+        let t = std::f32::consts::FRAC_PI_2 * k as f32 / cap_rings as f32;
+        profile.push((b + axis * (radius * t.sin()), radius * t.cos()));
+    }
+    let mut pos = vec![a - axis * radius];
+    for &(c, r) in &profile {
+        for s in 0..segments {
+            let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+            pos.push(c + (u * phi.cos() + w * phi.sin()) * r);
+        }
+    }
+    pos.push(b + axis * radius);
+    let last = (pos.len() - 1) as u32;
+    let ring = |r: usize, s: u32| 1 + r as u32 * segments + s % segments;
+    let mut tris = Vec::new();
+    let n = profile.len();
+    for s in 0..segments {
+        tris.push([0, ring(0, s + 1), ring(0, s)]);
+        tris.push([last, ring(n - 1, s), ring(n - 1, s + 1)]);
+    }
+    for r in 0..n - 1 {
+        for s in 0..segments {
+            let (p, q, pp, qq) = (ring(r, s), ring(r, s + 1), ring(r + 1, s), ring(r + 1, s + 1));
+            tris.push([p, q, qq]);
+            tris.push([p, qq, pp]);
+        }
+    }
+    (pos, tris)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Signed volume: positive when the mesh is closed and wound CCW outside.
+    fn volume(pos: &[Vec3], tris: &[[u32; 3]]) -> f32 {
+        tris.iter().map(|t| pos[t[0] as usize].dot(pos[t[1] as usize].cross(pos[t[2] as usize])) / 6.0).sum()
+    }
+
+    #[test]
+    fn shapes_are_closed_and_outward() {
+        let (p, t) = box_mesh(Vec3::ONE, Vec3::new(0.5, 1.0, 1.5), glam::Quat::from_rotation_y(0.3));
+        assert!((volume(&p, &t) - 6.0).abs() < 1e-4);
+        let (p, t) = capsule_mesh(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.0), 0.1, 8, 32);
+        let exact = std::f32::consts::PI * 0.01 * (1.0 + 4.0 / 3.0 * 0.1);
+        let v = volume(&p, &t);
+        assert!(v > 0.95 * exact && v < exact, "{v} vs {exact}");
+        let body = BodyMesh::new(p, t);
+        assert!(body.adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
+        // Signs from pseudo-normals: inside a thin limb and beside its caps.
+        let all = 0..body.triangles.len() as u32;
+        assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone()).unwrap().0 < 0.0);
+        let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone()).unwrap();
+        assert!((d - 0.1).abs() < 2e-3 && n.z > 0.99, "{d} {n}");
+        let (d, ..) = body.closest(Vec3::new(0.0, 0.09, 1.05), 1.0, all).unwrap();
+        assert!(d < 0.0, "{d}");
     }
 }

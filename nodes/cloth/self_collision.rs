@@ -82,7 +82,14 @@ impl SelfCollision {
                 if inv_mass[i] == 0.0 && tri.iter().all(|&j| inv_mass[j as usize] == 0.0) {
                     return;
                 }
-                pairs.push((i as u32, t, 0.0));
+                // Near enough at the frame start for what the two can close
+                // in on each other this frame.
+                let [a, b, c] = tri.map(|j| j as usize);
+                let closing = (v[i] - (v[a] + v[b] + v[c]) / 3.0).length() * (1.25 * dt);
+                let q_near = super::collider::closest_point_on_triangle(x[i], x[a], x[b], x[c]);
+                if x[i].distance(q_near) <= thickness + slack + closing {
+                    pairs.push((i as u32, t, 0.0));
+                }
             });
             self.pairs[start..].sort_unstable_by_key(|p| p.1);
             for pair in &mut self.pairs[start..] {
@@ -107,39 +114,18 @@ impl SelfCollision {
     }
 
     /// One Gauss-Seidel sweep over the pairs.
-    /// `max_depth` is how far behind a triangle a vertex can get within one
-    /// substep (thickness plus the largest relative motion).
-    pub(crate) fn solve(&mut self, x: &mut [Vec3], w: &[f32], triangles: &[[u32; 3]], thickness: f32, max_depth: f32) {
-        for &(i, t, side) in &self.pairs {
-            let i = i as usize;
+    /// `prev` are the positions at the substep's start: a vertex can get
+    /// behind a triangle by at most what the two moved.
+    pub(crate) fn solve(&mut self, x: &mut [Vec3], prev: &[Vec3], w: &[f32], triangles: &[[u32; 3]], thickness: f32) {
+        for pair in &mut self.pairs {
+            let (i, t) = (pair.0 as usize, pair.1);
             let [ia, ib, ic] = triangles[t as usize].map(|j| j as usize);
-            let (a, b, c) = (x[ia], x[ib], x[ic]);
-            let (e1, e2) = (b - a, c - a);
-            let cross = e1.cross(e2);
-            let len2 = cross.length_squared();
-            if len2 < 1e-20 {
+            let moved = |k: usize| x[k].distance(prev[k]);
+            let reach = thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
+            let Some((n, d, [ba, bu, bv])) = track_side(x[i], [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)
+            else {
                 continue;
-            }
-            let n = cross * (side / len2.sqrt());
-            let rel = x[i] - a;
-            let d = rel.dot(n);
-            if d >= thickness {
-                continue;
-            }
-            if d < -max_depth {
-                // Farther behind than any vertex moves in a substep: it went
-                // around the border, not through; leave it to other pairs.
-                continue;
-            }
-            // Barycentrics of the projection onto the plane.
-            let inv = 1.0 / len2;
-            let bu = rel.cross(e2).dot(cross) * inv;
-            let bv = e1.cross(rel).dot(cross) * inv;
-            let ba = 1.0 - bu - bv;
-            let eps = -0.05;
-            if ba < eps || bu < eps || bv < eps {
-                continue;
-            }
+            };
             let wsum = w[i] + w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
             if wsum == 0.0 {
                 continue;
@@ -152,4 +138,47 @@ impl SelfCollision {
             self.stats.contacts += 1;
         }
     }
+}
+
+/// The side tracking shared by vertex-triangle pairs: returns the unit
+/// normal pointing to the recorded `side`, the distance `d` of `p` along it
+/// and the projection's barycentrics when `p` must be pushed (over the
+/// triangle, closer than `thickness` on the recorded side or behind it by
+/// less than `reach`, what the two moved this substep). Where `p` is not over
+/// the triangle, or farther behind than it can have got by passing through
+/// it, the side is updated instead: `p` went around the border.
+#[inline]
+pub(crate) fn track_side(
+    p: Vec3,
+    tri: [Vec3; 3],
+    side: &mut f32,
+    thickness: f32,
+    reach: f32,
+) -> Option<(Vec3, f32, [f32; 3])> {
+    let [a, b, c] = tri;
+    let (e1, e2) = (b - a, c - a);
+    let cross = e1.cross(e2);
+    let len2 = cross.length_squared();
+    if len2 < 1e-20 {
+        return None;
+    }
+    let n = cross / len2.sqrt();
+    let rel = p - a;
+    let d_raw = rel.dot(n);
+    let d = d_raw * *side;
+    if d >= thickness {
+        return None;
+    }
+    let inv = 1.0 / len2;
+    let bu = rel.cross(e2).dot(cross) * inv;
+    let bv = e1.cross(rel).dot(cross) * inv;
+    let ba = 1.0 - bu - bv;
+    let eps = -0.05;
+    if ba < eps || bu < eps || bv < eps || d < -reach {
+        if d_raw != 0.0 {
+            *side = d_raw.signum();
+        }
+        return None;
+    }
+    Some((n * *side, d, [ba, bu, bv]))
 }

@@ -494,7 +494,8 @@ impl Cloth {
         // the slack covers motion the prediction misses.
         let slack = 2.0 * self.params.body_thickness.max(self.params.self_thickness);
         if let Some(body) = &mut self.body {
-            body.begin_frame(&self.x, &self.v, &self.inv_mass, dt, self.params.body_thickness + slack);
+            let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
+            body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, dt, th, th + slack);
         }
         if self.params.self_collision {
             let tris = self.mesh.triangles();
@@ -563,23 +564,34 @@ impl Cloth {
         self.timings.constraints_ms += (t1 - t0).as_secs_f64() * 1e3;
         if let Some(sc) = &mut self.self_collision {
             let th = self.params.self_thickness;
-            // A vertex and a triangle close in on each other at up to twice
-            // the speed limit.
-            let max_depth = th + 2.0 * self.params.max_speed * h;
-            sc.solve(&mut self.x, &self.inv_mass, self.mesh.triangles(), th, max_depth);
+            sc.solve(&mut self.x, &self.prev, &self.inv_mass, self.mesh.triangles(), th);
         }
         let t2 = Instant::now();
         self.timings.self_collision_ms += (t2 - t1).as_secs_f64() * 1e3;
         self.collide();
         if let Some(body) = &mut self.body {
             let p = &self.params;
+            body.push_triangles(
+                &mut self.x,
+                &self.prev,
+                &self.inv_mass,
+                self.mesh.triangles(),
+                s0,
+                s1,
+                p.body_thickness,
+            );
             body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
         }
         self.timings.body_collision_ms += t2.elapsed().as_secs_f64() * 1e3;
         let inv_h = 1.0 / h;
+        let max2 = self.params.max_speed * self.params.max_speed;
         for i in 0..self.x.len() {
             if self.inv_mass[i] > 0.0 {
-                self.v[i] = (self.x[i] - self.prev[i]) * inv_h;
+                let v = (self.x[i] - self.prev[i]) * inv_h;
+                // Contacts may move a vertex faster than the limit (a limb
+                // hitting it); its velocity, carried to the next substep, not.
+                let l2 = v.length_squared();
+                self.v[i] = if l2 > max2 { v * (self.params.max_speed / l2.sqrt()) } else { v };
             }
         }
     }

@@ -8,6 +8,7 @@ mod common;
 
 mod cli;
 mod cloth;
+mod cloth_collision;
 mod cuboid;
 #[cfg(feature = "editor")]
 mod editor;
