@@ -496,21 +496,43 @@ impl BodyMesh {
     }
 }
 
-/// Closed box mesh (12 triangles, CCW seen from outside) with `rotation`
-/// applied about its centre.
-pub fn box_mesh(center: Vec3, half: Vec3, rotation: glam::Quat) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let pos = (0..8)
-        .map(|i| {
-            let s = Vec3::new(
-                if i & 1 == 0 { -1.0 } else { 1.0 },
-                if i & 2 == 0 { -1.0 } else { 1.0 },
-                if i & 4 == 0 { -1.0 } else { 1.0 },
-            );
-            center + rotation * (s * half)
-        })
-        .collect();
-    let quads = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
-    let tris = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+/// Closed box mesh, each face an `n` x `n` grid of quads (two triangles
+/// each, CCW seen from outside), with `rotation` applied about its centre.
+/// A body mesh's vertices are what stops the body poking through the cloth
+/// between cloth vertices, so a box body wants `n` of about its edge length
+/// over the cloth's edge length.
+pub fn box_mesh(center: Vec3, half: Vec3, rotation: glam::Quat, n: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let n = n.max(1);
+    let mut pos: Vec<Vec3> = Vec::new();
+    let mut tris = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    // Each face: the outward axis and two tangent axes with u x v = normal.
+    let faces = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (-Vec3::X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (-Vec3::Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (-Vec3::Z, Vec3::Y, Vec3::X),
+    ];
+    for (normal, u, v) in faces {
+        let mut id = |i: u32, j: u32| -> u32 {
+            // Integer lattice key, so shared edge vertices are welded.
+            let unit = normal + u * (2.0 * i as f32 / n as f32 - 1.0) + v * (2.0 * j as f32 / n as f32 - 1.0);
+            let key = (unit * n as f32).round().as_ivec3().to_array();
+            *index.entry(key).or_insert_with(|| {
+                pos.push(center + rotation * (unit * half));
+                (pos.len() - 1) as u32
+            })
+        };
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                tris.push([a, b, c]);
+                tris.push([a, c, d]);
+            }
+        }
+    }
     (pos, tris)
 }
 
@@ -570,8 +592,12 @@ mod tests {
 
     #[test]
     fn shapes_are_closed_and_outward() {
-        let (p, t) = box_mesh(Vec3::ONE, Vec3::new(0.5, 1.0, 1.5), glam::Quat::from_rotation_y(0.3));
-        assert!((volume(&p, &t) - 6.0).abs() < 1e-4);
+        for n in [1, 3] {
+            let (p, t) = box_mesh(Vec3::ONE, Vec3::new(0.5, 1.0, 1.5), glam::Quat::from_rotation_y(0.3), n);
+            assert!((volume(&p, &t) - 6.0).abs() < 1e-4);
+            assert_eq!(p.len() as u32, 6 * n * n + 2, "welded");
+            assert!(BodyMesh::new(p, t).adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
+        }
         let (p, t) = capsule_mesh(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.0), 0.1, 8, 32);
         let exact = std::f32::consts::PI * 0.01 * (1.0 + 4.0 / 3.0 * 0.1);
         let v = volume(&p, &t);

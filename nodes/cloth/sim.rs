@@ -571,6 +571,8 @@ impl Cloth {
         self.collide();
         if let Some(body) = &mut self.body {
             let p = &self.params;
+            // Half the thickness: this only stops the body poking through between cloth
+            // vertices; the full gap fights the vertex contacts where a chord sags.
             body.push_triangles(
                 &mut self.x,
                 &self.prev,
@@ -578,7 +580,7 @@ impl Cloth {
                 self.mesh.triangles(),
                 s0,
                 s1,
-                p.body_thickness,
+                0.5 * p.body_thickness,
             );
             body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
         }

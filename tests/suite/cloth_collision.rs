@@ -60,12 +60,12 @@ fn cloth_dropped_on_a_sphere_body_stays_outside() {
 
 #[test]
 fn cloth_dropped_on_a_box_body_stays_outside() {
-    let c = drop_onto(box_mesh(Vec3::ZERO, Vec3::new(0.15, 0.2, 0.12), Quat::from_rotation_y(0.5)), 90);
+    let c = drop_onto(box_mesh(Vec3::ZERO, Vec3::new(0.15, 0.2, 0.12), Quat::from_rotation_y(0.5), 24), 90);
     let top = c.positions().iter().map(|p| p.y).fold(f32::MIN, f32::max);
     assert!((0.2..0.215).contains(&top), "top at {top}");
 }
 
-/// A curtain pinned along its top edge, with a limb (capsule, 5 cm radius,
+/// A 60 cm curtain (1.5 cm edges) pinned along its top edge, with a limb (capsule, 5 cm radius,
 /// 90 cm long) swinging through it about a vertical axis; the tip peaks at
 /// about 9 m/s.
 struct LimbScene {
@@ -79,9 +79,9 @@ const SWING_HZ: f32 = 1.5;
 
 impl LimbScene {
     fn new(self_collision: bool) -> LimbScene {
-        let mesh = sheet(80.0, 80.0, 2.5);
+        let mesh = sheet(60.0, 60.0, 1.5);
         let start: Vec<Vec3> =
-            mesh.rest_positions().iter().map(|p| Vec3::new(p.x - 40.0, p.y, 0.0) * CM + Vec3::Y * 0.2).collect();
+            mesh.rest_positions().iter().map(|p| Vec3::new(p.x - 30.0, p.y, 0.0) * CM + Vec3::Y * 0.2).collect();
         let top = mesh.piece_meshes()[0].edge_chains[2].clone();
         // No tethers: they pull the pinned curtain back through the limb; a
         // garment on a body has no pins anyway.
@@ -171,7 +171,7 @@ fn folded_strip(self_collision: bool, frames: u32) -> (Cloth, usize) {
         .collect();
     let params = SimParams { self_collision, bend_compliance: 1e3, ..SimParams::default() };
     let mut c = Cloth::new(mesh, start, params);
-    let (floor, tris) = box_mesh(Vec3::new(0.0, -0.1, 0.0), Vec3::new(1.0, 0.1, 1.0), Quat::IDENTITY);
+    let (floor, tris) = box_mesh(Vec3::new(0.0, -0.1, 0.0), Vec3::new(1.0, 0.1, 1.0), Quat::IDENTITY, 1);
     c.set_body(Some(BodyMesh::new(floor, tris)));
     let mut worst = 0;
     for _ in 0..frames {
@@ -209,37 +209,4 @@ fn speed_limit_bounds_free_fall() {
     let v = c.max_speed();
     assert!(v <= 2.0 * 1.0001 && v > 1.9, "max speed {v}");
     assert_finite(&c);
-}
-
-#[test]
-fn zz_debug() {
-    for sc in [true] {
-        let mut s = LimbScene::new(sc);
-        for f in 1..=30 {
-            s.step();
-            let c = &s.cloth;
-            eprintln!(
-                "sc {sc} frame {f}: crossings {} clearance {:?} stats {:?} speed {}",
-                c.body_crossings(),
-                c.body_clearance(0.2),
-                c.collision_stats(),
-                c.max_speed()
-            );
-            let x = c.positions();
-            let body = c.body().unwrap();
-            let mut shown = 0;
-            for (k, e) in c.edges().iter().enumerate() {
-                if shown < 3 && body.count_crossings(x, &[*e]) > 0 {
-                    shown += 1;
-                    let d: Vec<f32> = e.iter().map(|&i| body.min_clearance(&[x[i as usize]], 1.0).unwrap()).collect();
-                    eprintln!(
-                        "   edge {e:?} len {} rest {} d {d:?} at {:?}",
-                        x[e[0] as usize].distance(x[e[1] as usize]),
-                        c.rest_edge_lengths()[k],
-                        x[e[0] as usize]
-                    );
-                }
-            }
-        }
-    }
 }
