@@ -274,8 +274,8 @@ pub fn skin(rest: &[Vec3], weights: &Weights, bones: &[Rigid], method: Skinning)
                     for &(b, w) in list {
                         let d = dqs[b as usize];
                         let w = if d.real.dot(pivot) < 0.0 { -w } else { w };
-                        sum.real = sum.real + d.real * w;
-                        sum.dual = sum.dual + d.dual * w;
+                        sum.real += d.real * w;
+                        sum.dual += d.dual * w;
                     }
                     sum.to_rigid().apply(x).as_vec3()
                 })

@@ -151,7 +151,7 @@ impl GpuImage {
         if gpu.info.backend == wgpu::Backend::Gl
             && desc.kind == TextureKind::D2Array
             && desc.width == desc.height
-            && desc.layers % 6 == 0
+            && desc.layers.is_multiple_of(6)
         {
             size.depth_or_array_layers += 1;
         }
