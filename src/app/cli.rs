@@ -211,6 +211,32 @@ enum BenchWhat {
         #[arg(long, default_value_t = 60)]
         frames: usize,
     },
+    /// Draping with body and self collision: a skirt (about 10k particles) settling on a body
+    /// mesh, then the body walking; ms per 1/60 s frame split into collision detection,
+    /// constraints, self-collision and body collision, settling time, crossings and clearance.
+    Drape {
+        #[arg(long, default_value_t = 20000)]
+        triangles: usize,
+        /// Most frames to wait for the skirt to settle on the standing body.
+        #[arg(long, default_value_t = 120)]
+        settle: usize,
+        /// Timed frames of walking.
+        #[arg(long, default_value_t = 60)]
+        frames: usize,
+        /// Leg swing amplitude (degrees).
+        #[arg(long, default_value_t = 20.0)]
+        swing: f32,
+        /// Count crossings every N walking frames (0: never).
+        #[arg(long, default_value_t = 10)]
+        check_every: usize,
+        /// Write the start, settled and last cloth and every body pose as OBJ here (the
+        /// Blender peer, peers/blender_drape.py, reads them).
+        #[arg(long)]
+        obj_dir: Option<PathBuf>,
+        /// Also write the report as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Image-based lighting (graphs/fig3_13_glossiness.ron) against the number of median-cut
     /// regions: PEM rebuild time, frame time (G-buffer + shading), PEM memory. Region count
     /// 0 is one lookup into the filtered full map.
@@ -770,6 +796,29 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 );
             })?;
             out.write_json(&rows)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Drape { triangles, settle, frames, swing, check_every, obj_dir, json } } => {
+            let r = crate::app::bench::drape(triangles, settle, frames, swing, check_every, obj_dir.as_deref())?;
+            println!(
+                "skirt on a walking capsule body: {} particles, {} triangles, body {} triangles, self-collision on",
+                r.particles, r.triangles, r.body_triangles
+            );
+            println!("settled after {} frames ({:.0} ms)", r.settled_after_frames, r.settle_ms);
+            println!(
+                "| ms/frame | detection | constraints | self-collision | body collision |\n|---:|---:|---:|---:|---:|"
+            );
+            println!(
+                "| {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                r.frame_ms, r.detection_ms, r.constraints_ms, r.self_collision_ms, r.body_collision_ms
+            );
+            println!(
+                "walking: max body crossings {}, max self crossings {}, min clearance {:.2} mm, max speed {:.2} m/s",
+                r.max_body_crossings, r.max_self_crossings, r.min_clearance_mm, r.max_speed
+            );
+            if let Some(path) = json {
+                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&r)?.as_bytes())?;
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Cloth { triangles, warmup, frames } } => {

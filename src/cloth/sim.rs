@@ -15,9 +15,13 @@
 
 use glam::{Vec2, Vec3};
 
+use std::time::Instant;
+
 use super::SurfaceFrame;
+use super::body_collision::BodyMesh;
 use super::collider::Collider;
 use super::pattern::PatternMesh;
+use super::self_collision::SelfCollision;
 
 /// Pattern coordinates are centimetres; the simulation runs in metres.
 pub const CM: f32 = 0.01;
@@ -125,6 +129,18 @@ pub struct SimParams {
     /// iteration counts used here.
     pub tethers: bool,
     pub wind: Option<Wind>,
+    /// Distance kept between cloth vertices and a body mesh (m); GarmentCode
+    /// drapes with 2.5 mm.
+    pub body_thickness: f32,
+    /// Friction coefficient against a body mesh.
+    pub body_friction: f32,
+    /// Vertex-triangle self-collision (off by default: it costs about as much
+    /// as the constraints).
+    pub self_collision: bool,
+    /// Distance kept between a vertex and the cloth's other triangles (m).
+    pub self_thickness: f32,
+    /// Speed limit (m/s) applied to every vertex each substep (GarmentCode: 25).
+    pub max_speed: f32,
 }
 
 impl Default for SimParams {
@@ -144,6 +160,11 @@ impl Default for SimParams {
             friction: 0.4,
             tethers: true,
             wind: None,
+            body_thickness: 0.0025,
+            body_friction: 0.5,
+            self_collision: false,
+            self_thickness: 0.002,
+            max_speed: 25.0,
         }
     }
 }
@@ -182,6 +203,23 @@ pub struct Cloth {
 
     time: f64,
     frame: u64,
+
+    body: Option<BodyMesh>,
+    self_collision: Option<SelfCollision>,
+    timings: StepTimings,
+}
+
+/// Where the time of the last [`Cloth::step_frame`] went (milliseconds).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepTimings {
+    /// Refitting the trees and gathering body and self contact candidates.
+    pub detection_ms: f64,
+    /// Prediction and the XPBD constraints.
+    pub constraints_ms: f64,
+    /// Solving self contacts.
+    pub self_collision_ms: f64,
+    /// Analytic colliders and the body mesh (push-out and friction).
+    pub body_collision_ms: f64,
 }
 
 impl Cloth {
@@ -277,6 +315,9 @@ impl Cloth {
             lambda: vec![0.0; n_constraints],
             time: 0.0,
             frame: 0,
+            body: None,
+            self_collision: None,
+            timings: StepTimings::default(),
         }
     }
 
@@ -290,6 +331,37 @@ impl Cloth {
 
     pub fn add_collider(&mut self, c: Collider) {
         self.colliders.push(c);
+    }
+
+    /// Sets (or removes) the body mesh the cloth collides with; move it each
+    /// frame with `body_mut().move_to(pose)` before [`Cloth::step_frame`].
+    pub fn set_body(&mut self, body: Option<BodyMesh>) {
+        self.body = body;
+    }
+    pub fn body(&self) -> Option<&BodyMesh> {
+        self.body.as_ref()
+    }
+    pub fn body_mut(&mut self) -> Option<&mut BodyMesh> {
+        self.body.as_mut()
+    }
+
+    /// Turns self-collision on or off.
+    pub fn set_self_collision(&mut self, on: bool) {
+        self.params.self_collision = on;
+        if !on {
+            self.self_collision = None;
+        }
+    }
+
+    /// Time split of the last frame.
+    pub fn timings(&self) -> StepTimings {
+        self.timings
+    }
+    /// Candidate and contact counters of the last frame: body, then self.
+    pub fn collision_stats(
+        &self,
+    ) -> (Option<super::body_collision::BodyStats>, Option<super::self_collision::SelfStats>) {
+        (self.body.as_ref().map(|b| b.stats), self.self_collision.as_ref().map(|s| s.stats))
     }
 
     /// Fixes vertices in place: they get infinite mass and are never moved
@@ -416,14 +488,35 @@ impl Cloth {
     pub fn step_frame(&mut self, dt: f32) {
         assert!(dt.is_finite() && dt > 0.0, "frame time must be positive");
         let h = dt / self.params.substeps as f32;
-        for _ in 0..self.params.substeps {
-            self.substep(h);
+        self.timings = StepTimings::default();
+        let t0 = Instant::now();
+        // Contacts are gathered once per frame over the predicted motion;
+        // the slack covers motion the prediction misses.
+        let slack = 2.0 * self.params.body_thickness.max(self.params.self_thickness);
+        if let Some(body) = &mut self.body {
+            let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
+            body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, dt, th, th + slack);
+        }
+        if self.params.self_collision {
+            let tris = self.mesh.triangles();
+            let sc = self.self_collision.get_or_insert_with(|| SelfCollision::new(&self.x, tris));
+            sc.begin_frame(&self.x, &self.v, &self.inv_mass, tris, dt, self.params.self_thickness, slack);
+        }
+        self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
+        let n = self.params.substeps;
+        for k in 0..n {
+            self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32);
             self.time += h as f64;
+        }
+        if let Some(body) = &mut self.body {
+            body.end_frame();
         }
         self.frame += 1;
     }
 
-    fn substep(&mut self, h: f32) {
+    /// One substep from `s0` to `s1` (fractions of the frame, for the body's motion).
+    fn substep(&mut self, h: f32, s0: f32, s1: f32) {
+        let t0 = Instant::now();
         self.apply_wind();
         let g = self.params.gravity;
         let keep = (1.0 - self.params.damping * h).max(0.0);
@@ -434,6 +527,10 @@ impl Cloth {
                 continue;
             }
             self.v[i] = (self.v[i] + (g + self.force[i] * w) * h) * keep;
+            let speed2 = self.v[i].length_squared();
+            if speed2 > self.params.max_speed * self.params.max_speed {
+                self.v[i] *= self.params.max_speed / speed2.sqrt();
+            }
             self.x[i] += self.v[i] * h;
         }
 
@@ -463,11 +560,40 @@ impl Cloth {
             }
         }
 
+        let t1 = Instant::now();
+        self.timings.constraints_ms += (t1 - t0).as_secs_f64() * 1e3;
+        if let Some(sc) = &mut self.self_collision {
+            let th = self.params.self_thickness;
+            sc.solve(&mut self.x, &self.prev, &self.inv_mass, self.mesh.triangles(), th);
+        }
+        let t2 = Instant::now();
+        self.timings.self_collision_ms += (t2 - t1).as_secs_f64() * 1e3;
         self.collide();
+        if let Some(body) = &mut self.body {
+            let p = &self.params;
+            // Half the thickness: this only stops the body poking through between cloth
+            // vertices; the full gap fights the vertex contacts where a chord sags.
+            body.push_triangles(
+                &mut self.x,
+                &self.prev,
+                &self.inv_mass,
+                self.mesh.triangles(),
+                s0,
+                s1,
+                0.5 * p.body_thickness,
+            );
+            body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
+        }
+        self.timings.body_collision_ms += t2.elapsed().as_secs_f64() * 1e3;
         let inv_h = 1.0 / h;
+        let max2 = self.params.max_speed * self.params.max_speed;
         for i in 0..self.x.len() {
             if self.inv_mass[i] > 0.0 {
-                self.v[i] = (self.x[i] - self.prev[i]) * inv_h;
+                let v = (self.x[i] - self.prev[i]) * inv_h;
+                // Contacts may move a vertex faster than the limit (a limb
+                // hitting it); its velocity, carried to the next substep, not.
+                let l2 = v.length_squared();
+                self.v[i] = if l2 > max2 { v * (self.params.max_speed / l2.sqrt()) } else { v };
             }
         }
     }
@@ -621,6 +747,25 @@ impl Cloth {
         self.frame
     }
     /// Largest relative edge elongation `len / rest - 1` over all edges.
+    /// Cloth edges crossing the body surface (0 without a body).
+    pub fn body_crossings(&self) -> usize {
+        self.body.as_ref().map_or(0, |b| b.count_crossings(&self.x, &self.edges))
+    }
+    /// Cloth edges crossing cloth triangles that do not share a vertex with them.
+    pub fn self_crossings(&self) -> usize {
+        super::intersections::count_self_crossings(&self.x, &self.edges, self.mesh.triangles())
+    }
+    /// Smallest signed distance (m) of a free vertex to the body, among those
+    /// within `max_distance`; `None` without a body or with none that close.
+    pub fn body_clearance(&self, max_distance: f32) -> Option<f32> {
+        let free: Vec<Vec3> = self.x.iter().zip(&self.inv_mass).filter(|(_, w)| **w > 0.0).map(|(p, _)| *p).collect();
+        self.body.as_ref()?.min_clearance(&free, max_distance)
+    }
+    /// Largest vertex speed (m/s).
+    pub fn max_speed(&self) -> f32 {
+        super::intersections::max_speed(&self.v)
+    }
+
     pub fn max_strain(&self) -> f32 {
         self.edges
             .iter()

@@ -9,6 +9,7 @@ mod common;
 mod avatar;
 mod cli;
 mod cloth;
+mod cloth_collision;
 mod cuboid;
 #[cfg(feature = "editor")]
 mod editor;

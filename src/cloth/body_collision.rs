@@ -1,0 +1,615 @@
+//! Collision of the cloth with a moving body given as a triangle mesh (a
+//! skinned avatar, one pose per frame).
+//!
+//! Per frame: the body moves linearly from its previous pose to the new one
+//! over the frame's substeps. A [`AabbTree`] over the triangles is refitted to
+//! the boxes the triangles sweep during the frame; every cloth vertex gathers
+//! the triangles whose swept box meets its own predicted sweep (`x` to
+//! `x + v dt`, widened by the thickness and a slack), once per frame. Each
+//! substep a vertex then looks for its closest point on the body *at that
+//! substep's time* among its candidates only, and is pushed out to the
+//! thickness along the outside direction; friction acts on its motion
+//! relative to the body surface point, so a moving limb drags cloth along.
+//! A vertex that strays outside the box it gathered for queries the tree
+//! directly (counted in [`BodyStats::fallbacks`]).
+//!
+//! Inside or outside is decided by the angle-weighted pseudo-normal of the
+//! closest feature (face, edge or vertex; Bærentzen and Aanæs 2005), which
+//! is exact for a closed, consistently wound mesh, also at edges and corners
+//! where a face normal alone misjudges. Because contacts are resolved every
+//! substep against the body at that substep's pose, a limb moving at speed
+//! `s` sinks at most `s h` (h the substep) into the cloth before it is
+//! pushed out: 8 mm at 10 m/s with 20 substeps at 60 Hz, well below a limb's
+//! radius, so the nearest feature stays on the side the vertex came from.
+
+use glam::Vec3;
+
+use super::bvh::{Aabb, AabbTree};
+use super::self_collision::track_side;
+
+/// A body mesh moving from pose to pose, one pose per frame.
+#[derive(Clone, Debug)]
+pub struct BodyMesh {
+    triangles: Vec<[u32; 3]>,
+    /// Triangle across edge `k` (from corner `k` to `k + 1`), `u32::MAX` on a border.
+    adjacent: Vec<[u32; 3]>,
+    start: Vec<Vec3>,
+    end: Vec<Vec3>,
+    /// Face and angle-weighted vertex normals at the start and end pose.
+    face_n: [Vec<Vec3>; 2],
+    vert_n: [Vec<Vec3>; 2],
+    boxes: Vec<Aabb>,
+    tree: AabbTree,
+    /// Per-vertex candidate triangles (CSR) and the box they were gathered for.
+    cand_start: Vec<u32>,
+    cand: Vec<u32>,
+    query: Vec<Aabb>,
+    /// Tree over the cloth triangles (built on the first frame), their boxes,
+    /// and the `(body vertex, cloth triangle, side)` pairs of this frame and
+    /// the last, sorted.
+    cloth_tree: Option<AabbTree>,
+    cloth_boxes: Vec<Aabb>,
+    vt_pairs: Vec<(u32, u32, f32)>,
+    vt_previous: Vec<(u32, u32, f32)>,
+    pub stats: BodyStats,
+}
+
+/// Work counters of the last frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BodyStats {
+    /// Vertex-triangle candidates gathered.
+    pub candidates: usize,
+    /// Substep queries of vertices that left their gathered box.
+    pub fallbacks: usize,
+    /// Vertices pushed out (summed over substeps).
+    pub contacts: usize,
+    /// Body-vertex / cloth-triangle pairs gathered.
+    pub vertex_pairs: usize,
+    /// Cloth triangles pushed off a body vertex (summed over substeps).
+    pub triangle_contacts: usize,
+}
+
+/// The feature of a triangle that holds a closest point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    Vertex(u8),
+    /// Edge from corner `k` to corner `k + 1`.
+    Edge(u8),
+    Face,
+}
+
+/// Closest point on triangle `abc` to `p` with its barycentric coordinates
+/// and feature (Ericson, Real-Time Collision Detection, 5.1.5).
+pub fn closest_point_feature(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> (Vec3, [f32; 3], Feature) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0], Feature::Vertex(0));
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0], Feature::Vertex(1));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + ab * v, [1.0 - v, v, 0.0], Feature::Edge(0));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0], Feature::Vertex(2));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + ac * w, [1.0 - w, 0.0, w], Feature::Edge(2));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + (c - b) * w, [0.0, 1.0 - w, w], Feature::Edge(1));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    (a + ab * v + ac * w, [1.0 - v - w, v, w], Feature::Face)
+}
+
+/// Face normals (unit) and angle-weighted vertex normals of a mesh.
+fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec<Vec3>) {
+    face.clear();
+    vert.clear();
+    vert.resize(pos.len(), Vec3::ZERO);
+    for t in tris {
+        let p = t.map(|i| pos[i as usize]);
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        face.push(n);
+        for k in 0..3 {
+            let e1 = (p[(k + 1) % 3] - p[k]).normalize_or_zero();
+            let e2 = (p[(k + 2) % 3] - p[k]).normalize_or_zero();
+            let angle = e1.dot(e2).clamp(-1.0, 1.0).acos();
+            vert[t[k] as usize] += n * angle;
+        }
+    }
+}
+
+impl BodyMesh {
+    /// A body at rest in `positions` (metres; triangles CCW seen from outside).
+    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        assert!(triangles.iter().flatten().all(|&i| (i as usize) < positions.len()), "body index out of range");
+        let mut half: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(3 * triangles.len());
+        for (t, tri) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                half.push((a.min(b), a.max(b), t as u32, k as u32));
+            }
+        }
+        half.sort_unstable();
+        let mut adjacent = vec![[u32::MAX; 3]; triangles.len()];
+        for w in half.windows(2) {
+            if w[0].0 == w[1].0 && w[0].1 == w[1].1 {
+                adjacent[w[0].2 as usize][w[0].3 as usize] = w[1].2;
+                adjacent[w[1].2 as usize][w[1].3 as usize] = w[0].2;
+            }
+        }
+        let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(|i| positions[i as usize]))).collect();
+        let tree = AabbTree::build(&boxes);
+        let mut body = BodyMesh {
+            triangles,
+            adjacent,
+            start: positions.clone(),
+            end: positions,
+            face_n: [Vec::new(), Vec::new()],
+            vert_n: [Vec::new(), Vec::new()],
+            boxes,
+            tree,
+            cand_start: Vec::new(),
+            cand: Vec::new(),
+            query: Vec::new(),
+            cloth_tree: None,
+            cloth_boxes: Vec::new(),
+            vt_pairs: Vec::new(),
+            vt_previous: Vec::new(),
+            stats: BodyStats::default(),
+        };
+        let [f0, f1] = &mut body.face_n;
+        let [v0, v1] = &mut body.vert_n;
+        normals(&body.end, &body.triangles, f1, v1);
+        f0.clone_from(f1);
+        v0.clone_from(v1);
+        body
+    }
+
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// The pose at the end of the last (or coming) frame.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.end
+    }
+
+    /// Sets the pose the body reaches at the end of the next frame; it moves
+    /// there linearly from the current pose over that frame.
+    pub fn move_to(&mut self, positions: &[Vec3]) {
+        assert_eq!(positions.len(), self.end.len(), "a body pose needs one position per body vertex");
+        self.end.copy_from_slice(positions);
+        let [_, f1] = &mut self.face_n;
+        let [_, v1] = &mut self.vert_n;
+        normals(&self.end, &self.triangles, f1, v1);
+    }
+
+    /// Refits the tree to the frame's sweep and gathers each free vertex's
+    /// candidate triangles. `radius` is the thickness plus slack.
+    pub(crate) fn begin_frame(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        cloth_triangles: &[[u32; 3]],
+        dt: f32,
+        thickness: f32,
+        radius: f32,
+    ) {
+        self.stats = BodyStats::default();
+        for (k, t) in self.triangles.iter().enumerate() {
+            let [a, b, c] = t.map(|i| i as usize);
+            self.boxes[k] = Aabb::from_points(&[self.start[a], self.start[b], self.start[c]])
+                .union(Aabb::from_points(&[self.end[a], self.end[b], self.end[c]]));
+        }
+        self.tree.refit(&self.boxes);
+        let all = self.tree.bounds();
+        self.cand_start.clear();
+        self.cand.clear();
+        self.query.clear();
+        self.cand_start.push(0);
+        for i in 0..x.len() {
+            // Predicted sweep, a little longer than the velocity says.
+            let q = Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]).inflate(radius);
+            if inv_mass[i] > 0.0 && q.overlaps(&all) {
+                let boxes = &self.boxes;
+                let cand = &mut self.cand;
+                self.tree.query(&q, |t| {
+                    if boxes[t as usize].overlaps(&q) {
+                        cand.push(t)
+                    }
+                });
+            }
+            self.query.push(q);
+            self.cand_start.push(self.cand.len() as u32);
+        }
+        self.stats.candidates = self.cand.len();
+        self.gather_vertex_pairs(x, v, inv_mass, cloth_triangles, dt, thickness, radius);
+    }
+
+    /// Body vertices against cloth triangles: the body must not poke through
+    /// the cloth between cloth vertices (a stretched cloth wrapped around a
+    /// limb, a sharp body edge under a coarse cloth). Each pair records the
+    /// side of the triangle the body vertex is on at the frame start (or, in
+    /// contact, the side of last frame's pair).
+    #[allow(clippy::too_many_arguments)]
+    fn gather_vertex_pairs(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        tris: &[[u32; 3]],
+        dt: f32,
+        thickness: f32,
+        radius: f32,
+    ) {
+        let sweep = |i: usize| Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]);
+        self.cloth_boxes.clear();
+        self.cloth_boxes.extend(tris.iter().map(|t| {
+            let [a, b, c] = t.map(|i| i as usize);
+            sweep(a).union(sweep(b)).union(sweep(c)).inflate(0.5 * radius)
+        }));
+        let tree = self.cloth_tree.get_or_insert_with(|| AabbTree::build(&self.cloth_boxes));
+        tree.refit(&self.cloth_boxes);
+        std::mem::swap(&mut self.vt_pairs, &mut self.vt_previous);
+        self.vt_pairs.clear();
+        let all = tree.bounds();
+        let mut prev_k = 0;
+        for b in 0..self.end.len() {
+            let q = Aabb::from_points(&[self.start[b], self.end[b]]).inflate(0.5 * radius);
+            if !q.overlaps(&all) {
+                continue;
+            }
+            let first = self.vt_pairs.len();
+            let (boxes, pairs) = (&self.cloth_boxes, &mut self.vt_pairs);
+            tree.query(&q, |t| {
+                if boxes[t as usize].overlaps(&q) && tris[t as usize].iter().any(|&i| inv_mass[i as usize] > 0.0) {
+                    pairs.push((b as u32, t, 0.0));
+                }
+            });
+            self.vt_pairs[first..].sort_unstable_by_key(|p| p.1);
+            let p = self.start[b];
+            for pair in &mut self.vt_pairs[first..] {
+                let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
+                let n = (bb - a).cross(c - a).normalize_or_zero();
+                let d = (p - a).dot(n);
+                let mut side = if d >= 0.0 { 1.0 } else { -1.0 };
+                if d.abs() < thickness {
+                    let prev = &self.vt_previous;
+                    while prev_k < prev.len() && (prev[prev_k].0, prev[prev_k].1) < (pair.0, pair.1) {
+                        prev_k += 1;
+                    }
+                    if let Some(old) = prev.get(prev_k).filter(|o| (o.0, o.1) == (pair.0, pair.1)) {
+                        side = old.2;
+                    }
+                }
+                pair.2 = side;
+            }
+        }
+        self.stats.vertex_pairs = self.vt_pairs.len();
+    }
+
+    /// Pushes cloth triangles off the body vertices at time `s` (the body
+    /// does not move): the body vertex ends `thickness` from the triangle on
+    /// its recorded side.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn push_triangles(
+        &mut self,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        w: &[f32],
+        tris: &[[u32; 3]],
+        s0: f32,
+        s: f32,
+        thickness: f32,
+    ) {
+        for k in 0..self.vt_pairs.len() {
+            let (b, t) = (self.vt_pairs[k].0, self.vt_pairs[k].1);
+            let p = self.corner(b, s);
+            let [ia, ib, ic] = tris[t as usize].map(|j| j as usize);
+            let moved = |i: usize| x[i].distance(prev[i]);
+            let reach = thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
+            let side = &mut self.vt_pairs[k].2;
+            let Some((n, d, [ba, bu, bv])) = track_side(p, [x[ia], x[ib], x[ic]], side, thickness, reach) else {
+                continue;
+            };
+            let wsum = w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
+            if wsum == 0.0 {
+                continue;
+            }
+            // The triangle moves against n by (thickness - d) at the body point.
+            let k = (thickness - d) / wsum;
+            x[ia] -= n * (w[ia] * ba * k);
+            x[ib] -= n * (w[ib] * bu * k);
+            x[ic] -= n * (w[ic] * bv * k);
+            self.stats.triangle_contacts += 1;
+        }
+    }
+
+    /// The frame is done: its end pose is the next frame's start.
+    pub(crate) fn end_frame(&mut self) {
+        self.start.copy_from_slice(&self.end);
+        let [f0, f1] = &mut self.face_n;
+        f0.clone_from(f1);
+        let [v0, v1] = &mut self.vert_n;
+        v0.clone_from(v1);
+    }
+
+    fn corner(&self, i: u32, s: f32) -> Vec3 {
+        self.start[i as usize].lerp(self.end[i as usize], s)
+    }
+
+    /// Outward pseudo-normal (not unit) of `feature` of triangle `t` at time `s`.
+    fn pseudo_normal(&self, t: u32, feature: Feature, s: f32) -> Vec3 {
+        let face = |t: u32| self.face_n[0][t as usize].lerp(self.face_n[1][t as usize], s);
+        match feature {
+            Feature::Face => face(t),
+            Feature::Edge(k) => {
+                let other = self.adjacent[t as usize][k as usize];
+                if other == u32::MAX { face(t) } else { face(t) + face(other) }
+            }
+            Feature::Vertex(k) => {
+                let v = self.triangles[t as usize][k as usize] as usize;
+                self.vert_n[0][v].lerp(self.vert_n[1][v], s)
+            }
+        }
+    }
+
+    /// Closest body point to `p` among `tris` at time `s` (0 = frame start,
+    /// 1 = frame end): `(signed distance, outward unit normal, triangle,
+    /// barycentrics)`.
+    fn closest(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<(f32, Vec3, u32, [f32; 3])> {
+        let mut best: Option<(f32, u32, Vec3, [f32; 3], Feature)> = None;
+        for t in tris {
+            let [a, b, c] = self.triangles[t as usize].map(|i| self.corner(i, s));
+            let (q, bary, feature) = closest_point_feature(p, a, b, c);
+            let d2 = p.distance_squared(q);
+            if best.is_none_or(|(bd, bt, ..)| d2 < bd || (d2 == bd && t < bt)) {
+                best = Some((d2, t, q, bary, feature));
+            }
+        }
+        let (d2, t, q, bary, feature) = best?;
+        let pn = self.pseudo_normal(t, feature, s);
+        let d = d2.sqrt();
+        let outside = (p - q).dot(pn) >= 0.0;
+        let n = if d > 1e-7 { (p - q) / d } else { pn.normalize_or(Vec3::Y) };
+        Some(if outside { (d, n, t, bary) } else { (-d, -n, t, bary) })
+    }
+
+    /// Pushes free vertices out to `thickness` at time `s1` and applies
+    /// friction to their motion since `prev` relative to the body's motion
+    /// since `s0`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn collide(
+        &mut self,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        inv_mass: &[f32],
+        s0: f32,
+        s1: f32,
+        thickness: f32,
+        friction: f32,
+    ) {
+        for i in 0..x.len() {
+            if inv_mass[i] == 0.0 {
+                continue;
+            }
+            let p = x[i];
+            let inside_box = {
+                let q = &self.query[i];
+                let r = Aabb::around(p, thickness);
+                q.min.cmple(r.min).all() && r.max.cmple(q.max).all()
+            };
+            let hit = if inside_box {
+                let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
+                if a == b {
+                    continue;
+                }
+                self.closest(p, s1, self.cand[a..b].iter().copied())
+            } else {
+                self.stats.fallbacks += 1;
+                let mut near = Vec::new();
+                let q = Aabb::around(p, 2.0 * thickness);
+                self.tree.query(&q, |t| {
+                    if self.boxes[t as usize].overlaps(&q) {
+                        near.push(t)
+                    }
+                });
+                self.closest(p, s1, near.into_iter())
+            };
+            let Some((dist, n, t, bary)) = hit else {
+                continue;
+            };
+            if dist >= thickness {
+                continue;
+            }
+            self.stats.contacts += 1;
+            let depth = thickness - dist;
+            let mut xi = p + n * depth;
+            let tri = self.triangles[t as usize];
+            let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s1) - self.corner(tri[k], s0)) * bary[k]).sum();
+            let rel = (xi - prev[i]) - body_motion;
+            let tangential = rel - n * rel.dot(n);
+            let tl = tangential.length();
+            if tl > 0.0 {
+                xi -= tangential * (friction * depth / tl).min(1.0);
+            }
+            x[i] = xi;
+        }
+    }
+
+    /// Smallest signed distance of any of `points` to the body (end pose), or
+    /// `None` when none is within `max_distance`.
+    pub fn min_clearance(&self, points: &[Vec3], max_distance: f32) -> Option<f32> {
+        let mut best: Option<f32> = None;
+        let mut near = Vec::new();
+        for &p in points {
+            near.clear();
+            let q = Aabb::around(p, max_distance);
+            self.tree.query(&q, |t| near.push(t));
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied()) {
+                if d <= max_distance {
+                    best = Some(best.map_or(d, |b: f32| b.min(d)));
+                }
+            }
+        }
+        best
+    }
+
+    /// Number of segments `[a, b]` (cloth edges) that cross a body triangle
+    /// (end pose).
+    pub fn count_crossings(&self, x: &[Vec3], edges: &[[u32; 2]]) -> usize {
+        let mut n = 0;
+        for e in edges {
+            let (a, b) = (x[e[0] as usize], x[e[1] as usize]);
+            let q = Aabb::from_points(&[a, b]);
+            let mut hit = false;
+            self.tree.query(&q, |t| {
+                if !hit {
+                    let [p0, p1, p2] = self.triangles[t as usize].map(|i| self.end[i as usize]);
+                    hit = super::intersections::segment_hits_triangle(a, b, p0, p1, p2);
+                }
+            });
+            n += hit as usize;
+        }
+        n
+    }
+}
+
+/// Closed box mesh, each face an `n` x `n` grid of quads (two triangles
+/// each, CCW seen from outside), with `rotation` applied about its centre.
+/// A body mesh's vertices are what stops the body poking through the cloth
+/// between cloth vertices, so a box body wants `n` of about its edge length
+/// over the cloth's edge length.
+pub fn box_mesh(center: Vec3, half: Vec3, rotation: glam::Quat, n: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let n = n.max(1);
+    let mut pos: Vec<Vec3> = Vec::new();
+    let mut tris = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    // Each face: the outward axis and two tangent axes with u x v = normal.
+    let faces = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (-Vec3::X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (-Vec3::Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (-Vec3::Z, Vec3::Y, Vec3::X),
+    ];
+    for (normal, u, v) in faces {
+        let mut id = |i: u32, j: u32| -> u32 {
+            // Integer lattice key, so shared edge vertices are welded.
+            let unit = normal + u * (2.0 * i as f32 / n as f32 - 1.0) + v * (2.0 * j as f32 / n as f32 - 1.0);
+            let key = (unit * n as f32).round().as_ivec3().to_array();
+            *index.entry(key).or_insert_with(|| {
+                pos.push(center + rotation * (unit * half));
+                (pos.len() - 1) as u32
+            })
+        };
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                tris.push([a, b, c]);
+                tris.push([a, c, d]);
+            }
+        }
+    }
+    (pos, tris)
+}
+
+/// Closed capsule mesh around the segment `a`-`b` (a limb): a cylinder of
+/// `rings` bands with hemispherical caps, `segments` around, CCW outside.
+pub fn capsule_mesh(a: Vec3, b: Vec3, radius: f32, rings: u32, segments: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let axis = (b - a).normalize();
+    let (u, w) = axis.any_orthonormal_pair();
+    let cap_rings = (segments / 4).max(2);
+    // Profile from the pole at `a` to the pole at `b`: (point on axis, radius).
+    let mut profile: Vec<(Vec3, f32)> = Vec::new();
+    for k in 1..=cap_rings {
+        let t = std::f32::consts::FRAC_PI_2 * k as f32 / cap_rings as f32;
+        profile.push((a - axis * (radius * t.cos()), radius * t.sin()));
+    }
+    for k in 1..rings {
+        profile.push((a.lerp(b, k as f32 / rings as f32), radius));
+    }
+    for k in 0..cap_rings {
+        let t = std::f32::consts::FRAC_PI_2 * k as f32 / cap_rings as f32;
+        profile.push((b + axis * (radius * t.sin()), radius * t.cos()));
+    }
+    let mut pos = vec![a - axis * radius];
+    for &(c, r) in &profile {
+        for s in 0..segments {
+            let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+            pos.push(c + (u * phi.cos() + w * phi.sin()) * r);
+        }
+    }
+    pos.push(b + axis * radius);
+    let last = (pos.len() - 1) as u32;
+    let ring = |r: usize, s: u32| 1 + r as u32 * segments + s % segments;
+    let mut tris = Vec::new();
+    let n = profile.len();
+    for s in 0..segments {
+        tris.push([0, ring(0, s + 1), ring(0, s)]);
+        tris.push([last, ring(n - 1, s), ring(n - 1, s + 1)]);
+    }
+    for r in 0..n - 1 {
+        for s in 0..segments {
+            let (p, q, pp, qq) = (ring(r, s), ring(r, s + 1), ring(r + 1, s), ring(r + 1, s + 1));
+            tris.push([p, q, qq]);
+            tris.push([p, qq, pp]);
+        }
+    }
+    (pos, tris)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Signed volume: positive when the mesh is closed and wound CCW outside.
+    fn volume(pos: &[Vec3], tris: &[[u32; 3]]) -> f32 {
+        tris.iter().map(|t| pos[t[0] as usize].dot(pos[t[1] as usize].cross(pos[t[2] as usize])) / 6.0).sum()
+    }
+
+    #[test]
+    fn shapes_are_closed_and_outward() {
+        for n in [1, 3] {
+            let (p, t) = box_mesh(Vec3::ONE, Vec3::new(0.5, 1.0, 1.5), glam::Quat::from_rotation_y(0.3), n);
+            assert!((volume(&p, &t) - 6.0).abs() < 1e-4);
+            assert_eq!(p.len() as u32, 6 * n * n + 2, "welded");
+            assert!(BodyMesh::new(p, t).adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
+        }
+        let (p, t) = capsule_mesh(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.0), 0.1, 8, 32);
+        let exact = std::f32::consts::PI * 0.01 * (1.0 + 4.0 / 3.0 * 0.1);
+        let v = volume(&p, &t);
+        assert!(v > 0.95 * exact && v < exact, "{v} vs {exact}");
+        let body = BodyMesh::new(p, t);
+        assert!(body.adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
+        // Signs from pseudo-normals: inside a thin limb and beside its caps.
+        let all = 0..body.triangles.len() as u32;
+        assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone()).unwrap().0 < 0.0);
+        let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone()).unwrap();
+        assert!((d - 0.1).abs() < 2e-3 && n.z > 0.99, "{d} {n}");
+        let (d, ..) = body.closest(Vec3::new(0.0, 0.09, 1.05), 1.0, all).unwrap();
+        assert!(d < 0.0, "{d}");
+    }
+}
