@@ -206,6 +206,7 @@ impl BodyMesh {
 
     /// Refits the tree to the frame's sweep and gathers each free vertex's
     /// candidate triangles. `radius` is the thickness plus slack.
+    #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn begin_frame(
         &mut self,
         x: &[Vec3],
@@ -467,10 +468,10 @@ impl BodyMesh {
             near.clear();
             let q = Aabb::around(p, max_distance);
             self.tree.query(&q, |t| near.push(t));
-            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied()) {
-                if d <= max_distance {
-                    best = Some(best.map_or(d, |b: f32| b.min(d)));
-                }
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied())
+                && d <= max_distance
+            {
+                best = Some(best.map_or(d, |b: f32| b.min(d)));
             }
         }
         best

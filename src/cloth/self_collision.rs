@@ -48,6 +48,7 @@ impl SelfCollision {
         }
     }
 
+    #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn begin_frame(
         &mut self,
         x: &[Vec3],
