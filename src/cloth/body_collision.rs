@@ -564,22 +564,7 @@ pub fn capsule_mesh(a: Vec3, b: Vec3, radius: f32, rings: u32, segments: u32) ->
         }
     }
     pos.push(b + axis * radius);
-    let last = (pos.len() - 1) as u32;
-    let ring = |r: usize, s: u32| 1 + r as u32 * segments + s % segments;
-    let mut tris = Vec::new();
-    let n = profile.len();
-    for s in 0..segments {
-        tris.push([0, ring(0, s + 1), ring(0, s)]);
-        tris.push([last, ring(n - 1, s), ring(n - 1, s + 1)]);
-    }
-    for r in 0..n - 1 {
-        for s in 0..segments {
-            let (p, q, pp, qq) = (ring(r, s), ring(r, s + 1), ring(r + 1, s), ring(r + 1, s + 1));
-            tris.push([p, q, qq]);
-            tris.push([p, qq, pp]);
-        }
-    }
-    (pos, tris)
+    (pos, super::collider::pole_ring_triangles(profile.len() as u32, segments))
 }
 
 #[cfg(test)]
@@ -610,7 +595,8 @@ mod tests {
         assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone()).unwrap().0 < 0.0);
         let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone()).unwrap();
         assert!((d - 0.1).abs() < 2e-3 && n.z > 0.99, "{d} {n}");
-        let (d, ..) = body.closest(Vec3::new(0.0, 0.09, 1.05), 1.0, all).unwrap();
+        // 0.086 from the cap's centre: inside its 0.1 radius.
+        let (d, ..) = body.closest(Vec3::new(0.0, 0.07, 1.05), 1.0, all).unwrap();
         assert!(d < 0.0, "{d}");
     }
 }

@@ -317,21 +317,27 @@ pub fn uv_sphere_mesh(center: Vec3, radius: f32, rings: u32, segments: u32) -> (
         }
     }
     pos.push(center - Vec3::Y * radius);
-    let south = (pos.len() - 1) as u32;
-    let ring = |r: u32, s: u32| 1 + (r - 1) * segments + s % segments;
+    (pos, pole_ring_triangles(rings - 1, segments))
+}
+
+/// The triangles of a closed surface of revolution laid out as vertex 0 (the first pole),
+/// `rings` rings of `segments` vertices, then the last pole; wound outward.
+pub(crate) fn pole_ring_triangles(rings: u32, segments: u32) -> Vec<[u32; 3]> {
+    let last = 1 + rings * segments;
+    let ring = |r: u32, s: u32| 1 + r * segments + s % segments;
     let mut tris = Vec::new();
     for s in 0..segments {
-        tris.push([0, ring(1, s + 1), ring(1, s)]);
-        tris.push([south, ring(rings - 1, s), ring(rings - 1, s + 1)]);
+        tris.push([0, ring(0, s + 1), ring(0, s)]);
+        tris.push([last, ring(rings - 1, s), ring(rings - 1, s + 1)]);
     }
-    for r in 1..rings - 1 {
+    for r in 0..rings - 1 {
         for s in 0..segments {
             let (a, b, c, d) = (ring(r, s), ring(r, s + 1), ring(r + 1, s), ring(r + 1, s + 1));
             tris.push([a, b, d]);
             tris.push([a, d, c]);
         }
     }
-    (pos, tris)
+    tris
 }
 
 #[cfg(test)]
