@@ -59,6 +59,7 @@ impl Node for ImageDifferenceNode {
             )));
         }
         let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("image_difference.wgsl"));
+        // `Params` in shaders/compare/image_difference.wgsl: the gain, padded to 16 bytes.
         let settings = [cx.f32("gain"), 0.0, 0.0, 0.0];
         let visible = GpuImage::target(gpu, "difference", a.width, a.height, LDR_FORMAT);
         let raw = GpuImage::target(gpu, "difference (raw)", a.width, a.height, gpu.formats().hdr);

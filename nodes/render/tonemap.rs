@@ -40,6 +40,17 @@ pub static TONEMAP: NodeSpec = NodeSpec {
     create: || Box::new(TonemapNode::default()),
 };
 
+/// `Params` in shaders/render/tonemap.wgsl, field for field.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct TonemapUniform {
+    /// 2^stops.
+    exposure: f32,
+    /// The `ToneCurve` index.
+    curve: u32,
+    pad: [f32; 2],
+}
+
 #[derive(Default)]
 struct TonemapNode {
     pass: Option<FullscreenPass>,
@@ -53,7 +64,7 @@ impl Node for TonemapNode {
             self.pass = Some(FullscreenPass::new("tonemap.wgsl"));
         }
         let op = cx.choice::<ToneCurve>("operator") as u32;
-        let settings = [cx.f32("exposure").exp2(), op as f32, 0.0, 0.0];
+        let settings = TonemapUniform { exposure: cx.f32("exposure").exp2(), curve: op, pad: [0.0; 2] };
         let out = GpuImage::target(gpu, "tonemapped", input.width, input.height, LDR_FORMAT);
         self.pass.as_mut().expect("created above").run(gpu, bytemuck::bytes_of(&settings), &[&input], &out)?;
         cx.set("image", Arc::new(out));

@@ -1,8 +1,11 @@
 // Exposure and tone mapping of an HDR image to display range; the sRGB target encodes.
 
 struct Params {
-    // x: exposure multiplier (2^stops), y: operator (0 none, 1 reinhard, 2 aces, 3 filmic).
-    settings: vec4<f32>,
+    // 2^stops.
+    exposure: f32,
+    // 0 none, 1 Reinhard, 2 ACES, 3 filmic.
+    curve: u32,
+    pad: vec2<f32>,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -23,8 +26,8 @@ fn hable(x: vec3<f32>) -> vec3<f32> {
 
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
-    let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;
-    let op = i32(params.settings.y + 0.5);
+    let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.exposure;
+    let op = params.curve;
     var mapped = c;
     if op == 1 {
         mapped = c / (1.0 + c);

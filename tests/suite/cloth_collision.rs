@@ -133,9 +133,11 @@ fn a_fast_limb_swinging_through_a_curtain_never_crosses_it() {
 
 #[test]
 fn collision_runs_are_bit_identical() {
+    // The limb's first frames, where body and self contacts both act (the later frames of
+    // this scene gather millions of self pairs: too slow for CI).
     let run = || {
         let mut s = LimbScene::new(true);
-        for _ in 0..25 {
+        for _ in 0..14 {
             s.step();
         }
         (s.cloth.positions().to_vec(), s.cloth.velocities().to_vec())

@@ -109,8 +109,8 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
 
     // A fixed shader that paints everything red, picked up by the file poll.
     let red = original.replace(
-        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
-        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.exposure;",
+        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.exposure;",
     );
     assert_ne!(red, original, "the test edits a line that exists");
     std::thread::sleep(Duration::from_millis(20));

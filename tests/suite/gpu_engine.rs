@@ -181,8 +181,8 @@ fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
     // A real change to the tone mapper: only it and the output re-run, and it shows.
     edit(
         &dir.join("render/tonemap.wgsl"),
-        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
-        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.settings.x;",
+        "let c = textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.exposure;",
+        "let c = vec3<f32>(4.0, 0.0, 0.0) + 0.0 * textureLoad(hdr, vec2<i32>(frag.xy), 0).rgb * params.exposure;",
     );
     assert_eq!(gpu.reload_shaders(), ["tonemap.wgsl"]);
     settle(&mut ev, &gpu, &res, 3, &s);
