@@ -27,6 +27,19 @@ crate::choice!(
     }
 );
 
+crate::choice!(
+    /// How IblShading reads the cube maps.
+    pub enum CubeLookup {
+        /// Hardware cube sampling where the backend can (`GpuContext::cube_sampling`), else reference.
+        Auto = "auto",
+        /// Hardware seamless trilinear filtering (shaders/ibl/ibl_shading_hw.wgsl).
+        Hardware = "hardware",
+        /// Eight `textureLoad` taps with seams handled in the shader (shaders/ibl/ibl_shading.wgsl):
+        /// the twin of the CPU reference, and what GL gets.
+        Reference = "reference",
+    }
+);
+
 /// PEMs bound per pass (shaders/ibl/ibl_shading.wgsl pem0..pem7); passes accumulate.
 pub const PEMS_PER_PASS: usize = 8;
 
@@ -64,6 +77,11 @@ pub static IBL_SHADING: NodeSpec = NodeSpec {
             "background_level",
             ParamKind::Float { default: 0.0, min: 0.0, max: 16.0 },
             "Mip level of the environment shown behind the scene (0 sharp; higher blurs it).",
+        ),
+        ParamSpec::new(
+            "cube_lookup",
+            ParamKind::Choice { default: "auto", options: CubeLookup::OPTIONS },
+            "How the cube maps are read: hardware filtering (fast; auto uses it where the backend can) or the textureLoad reference (the CPU twin's lookups, seams in the shader). Equal within filtering precision.",
         ),
     ],
     capabilities: Capabilities::NONE,
@@ -126,7 +144,8 @@ impl ShadowUniform {
 
 #[derive(Default)]
 struct IblShadingNode {
-    pass: Option<FullscreenPass>,
+    /// The pass and whether it samples in hardware (ibl_shading_hw.wgsl).
+    pass: Option<(FullscreenPass, bool)>,
     /// Bound in the PEM slots a pass leaves empty.
     empty_cube: Option<GpuImage>,
 }
@@ -151,7 +170,22 @@ impl Node for IblShadingNode {
             }
         }
         let background: Background = cx.choice("background");
-        let pass = self.pass.get_or_insert_with(|| FullscreenPass::new("ibl_shading.wgsl"));
+        let hardware = match cx.choice::<CubeLookup>("cube_lookup") {
+            CubeLookup::Auto => gpu.cube_sampling(),
+            CubeLookup::Reference => false,
+            CubeLookup::Hardware if gpu.cube_sampling() => true,
+            CubeLookup::Hardware => {
+                return Err(NodeError::msg(format!(
+                    "cube_lookup hardware: {} cannot sample these cube maps through cube views (use auto or reference)",
+                    gpu.adapter_name()
+                )));
+            }
+        };
+        if self.pass.as_ref().is_none_or(|(_, hw)| *hw != hardware) {
+            let shader = if hardware { "ibl_shading_hw.wgsl" } else { "ibl_shading.wgsl" };
+            self.pass = Some((FullscreenPass::new(shader), hardware));
+        }
+        let (pass, _) = self.pass.as_mut().expect("made above");
         if self.empty_cube.is_none() {
             self.empty_cube = Some(cube_target(gpu, "empty cube", 1)?);
         }
@@ -185,9 +219,16 @@ impl Node for IblShadingNode {
                 Bind::Texture(&g.normal),
                 Bind::Texture(&g.depth),
                 Bind::Texture(previous.as_ref().unwrap_or(&g.color)),
-                Bind::Texture(&pems.full),
             ];
-            binds.extend((0..PEMS_PER_PASS).map(|k| Bind::Texture(batch.get(k).unwrap_or(empty))));
+            // Bindings 5..13: the full map, then the pass's PEMs (the empty cube where it has fewer).
+            let cubes: Vec<&GpuImage> =
+                std::iter::once(&pems.full).chain((0..PEMS_PER_PASS).map(|k| batch.get(k).unwrap_or(empty))).collect();
+            let cube_views: Vec<wgpu::TextureView> =
+                if hardware { cubes.iter().map(|c| c.cube_view()).collect() } else { Vec::new() };
+            binds.extend(cubes.iter().enumerate().map(|(k, c)| match cube_views.get(k) {
+                Some(view) => Bind::View(view, wgpu::TextureViewDimension::Cube, c.desc.sample_type(true)),
+                None => Bind::Texture(c),
+            }));
             let shadow = ShadowUniform::new(shadows.as_deref(), i * PEMS_PER_PASS, &g);
             // Without an atlas the G-buffer's colour stands in for it (never read).
             binds.push(Bind::Texture(shadows.as_ref().map_or(&g.color, |s| &s.atlas)));

@@ -385,6 +385,14 @@ impl GpuContext {
         &self.formats
     }
 
+    /// Whether cube maps stored as six-layer arrays (`cube_target`) can be sampled through cube
+    /// views with filtering: not on wgpu's GL backend, where such arrays carry a spare layer
+    /// (see [`GpuImage::create`]), nor where the HDR format cannot be filtered.
+    pub fn cube_sampling(&self) -> bool {
+        let hdr_filterable = self.formats.hdr != wgpu::TextureFormat::Rgba32Float || self.formats.float32_filterable;
+        self.info.backend != wgpu::Backend::Gl && hdr_filterable
+    }
+
     // ---- creation (counted) ----
 
     /// Creates a texture. Every texture is made here, so [`GpuContext::created`] is honest.

@@ -37,6 +37,8 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("ibl/pem_phong.wgsl", include_str!("../../shaders/ibl/pem_phong.wgsl")),
     ("ibl/cube_preview.wgsl", include_str!("../../shaders/ibl/cube_preview.wgsl")),
     ("ibl/ibl_shading.wgsl", include_str!("../../shaders/ibl/ibl_shading.wgsl")),
+    ("ibl/ibl_shading_hw.wgsl", include_str!("../../shaders/ibl/ibl_shading_hw.wgsl")),
+    ("ibl/ibl_shading_common.wgsl", include_str!("../../shaders/ibl/ibl_shading_common.wgsl")),
     ("occlusion/ssao.wgsl", include_str!("../../shaders/occlusion/ssao.wgsl")),
     ("ibl/vsm.wgsl", include_str!("../../shaders/ibl/vsm.wgsl")),
     ("ibl/vsm_blur.wgsl", include_str!("../../shaders/ibl/vsm_blur.wgsl")),

@@ -285,6 +285,18 @@ impl GpuImage {
         })
     }
 
+    /// The six faces with all their mips as a cube, for filtered sampling
+    /// ([`GpuContext::cube_sampling`] says where that works).
+    pub fn cube_view(&self) -> wgpu::TextureView {
+        self.view_of(ViewSel {
+            dimension: wgpu::TextureViewDimension::Cube,
+            base_mip: 0,
+            mips: self.desc.mips,
+            base_layer: 0,
+            layers: 6,
+        })
+    }
+
     /// All layers as a 2D array (a cube map's faces, for writing from a compute pass).
     pub fn array_view(&self) -> wgpu::TextureView {
         self.view_of(ViewSel {

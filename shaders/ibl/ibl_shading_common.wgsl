@@ -1,0 +1,160 @@
+// Image-based lighting with partial environment maps, eq. 3.43 of the dissertation:
+//   c(x, y) = albedo * sum_i VIS_i(x, y) * PEM_i(r', level(g)),  r' = n (1 - g) + r g,
+// g the G-buffer's glossiness, level(g) the mip level whose filtered lobe matches the volume
+// of the Phong lobe of exponent s = 1 / (1 - g) (src/ibl/pem.rs Calibration). Up to 8 PEMs
+// per pass; passes accumulate through `previous`, so any number of regions works.
+// VIS_i is 1 without a shadow atlas; with one (nodes/ibl/shadow_atlas.rs), Chebyshev's upper
+// bound on the blurred moments of light i's tile, with light-bleeding reduction.
+// The pass is included by one of two files that declare the cube maps `env`, `pem0`..`pem7`
+// (bindings 5..13) and `lookup(cube, direction, lod)`: ibl_shading_hw.wgsl (hardware cube
+// sampling) and ibl_shading.wgsl (textureLoad, its reference twin).
+
+struct Ibl {
+    inv_view_proj: mat4x4<f32>,
+    // x: width, y: height, z: PEMs bound in this pass (0..8), w: 1 on the first pass.
+    size: vec4<f32>,
+    // rgb: background colour; w: background mode (0 colour, 1 the environment map).
+    background: vec4<f32>,
+    background_level: f32,
+    top_level: f32,
+    // 1 to shade with the full filtered map (one lookup, no partition).
+    full_map: f32,
+    // Face size of level 0.
+    face_size: f32,
+    // Mip level for s = 2^(i * 10 / 32), i = 0..32 (33 entries).
+    levels: array<vec4<f32>, 9>,
+};
+
+@group(0) @binding(0) var<uniform> ibl: Ibl;
+@group(0) @binding(1) var g_color: texture_2d<f32>;
+@group(0) @binding(2) var g_normal: texture_2d<f32>;
+@group(0) @binding(3) var g_depth: texture_2d<f32>;
+@group(0) @binding(4) var previous: texture_2d<f32>;
+@group(0) @binding(14) var atlas: texture_2d<f32>;
+
+struct Shadow {
+    // World to atlas coordinates (xy in [0, 1] over the atlas, z the light's depth), per PEM of the pass.
+    to_atlas: array<mat4x4<f32>, 8>,
+    // Each tile in atlas coordinates, inset by half a texel: x0, y0, x1, y1.
+    rect: array<vec4<f32>, 8>,
+    min_variance: f32,
+    bleed_reduction: f32,
+    // In texels.
+    jitter: f32,
+    // 1 when shadows are on.
+    enabled: f32,
+    // x, y: atlas size (texels), z: normal offset (world), w: depth bias.
+    bias: vec4<f32>,
+    eye: vec4<f32>,
+    forward: vec4<f32>,
+};
+@group(0) @binding(15) var<uniform> shadow: Shadow;
+// Bilinear lookups of the shadow atlas's moments.
+@group(0) @binding(16) var samp: sampler;
+
+// #include "fullscreen.wgsl"
+
+fn table(i: u32) -> f32 {
+    return ibl.levels[i / 4u][i % 4u];
+}
+
+// The calibrated mip level for glossiness g (Calibration::level_for_glossiness): s = 1/(1-g),
+// linear in log2 s between table entries, extrapolated past the last one with its slope,
+// clamped to [0, top]; g = 1 is the mirror, level 0.
+fn level_for_glossiness(g: f32) -> f32 {
+    if g >= 1.0 {
+        return 0.0;
+    }
+    let s = 1.0 / (1.0 - max(g, 0.0));
+    let x = max(log2(max(s, 1.0)), 0.0) * 3.2;
+    let i = min(u32(floor(x)), 31u);
+    let l = table(i) + (table(i + 1u) - table(i)) * (x - f32(i));
+    return clamp(l, 0.0, ibl.top_level);
+}
+
+fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
+    var h = p.x * 73856093u ^ p.y * 19349663u ^ k * 83492791u;
+    h = (h ^ (h >> 16u)) * 0x45d9f3bu;
+    h = (h ^ (h >> 16u)) * 0x45d9f3bu;
+    h = h ^ (h >> 16u);
+    return vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65535.0;
+}
+
+// VIS_k of the pass's light k at world position p (pixel px for the jitter).
+fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
+    if shadow.enabled < 0.5 {
+        return 1.0;
+    }
+    let c = shadow.to_atlas[k] * vec4<f32>(p, 1.0);
+    var uv = c.xy;
+    if shadow.jitter > 0.0 {
+        // A 4x4 tiled hash per light (Fig. 4.13): a different pattern for each light.
+        let n = hash2(vec2<u32>(px) % vec2<u32>(4u), k + 1u) * 2.0 - 1.0;
+        uv += n * shadow.jitter / shadow.bias.xy;
+    }
+    let r = shadow.rect[k];
+    uv = clamp(uv, r.xy, r.zw);
+    let m = textureSampleLevel(atlas, samp, uv, 0.0).xy;
+    // The atlas holds moments of the centred depth (shaders/ibl/vsm.wgsl).
+    let t = c.z - shadow.bias.w - 0.5;
+    if t <= m.x {
+        return 1.0;
+    }
+    let variance = max(m.y - m.x * m.x, shadow.min_variance);
+    let d = t - m.x;
+    let p_max = variance / (variance + d * d);
+    let b = shadow.bleed_reduction;
+    return clamp((p_max - b) / (1.0 - b), 0.0, 1.0);
+}
+
+@fragment
+fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let px = vec2<i32>(frag.xy);
+    let first = ibl.size.w > 0.5;
+    let prior = select(textureLoad(previous, px, 0).rgb, vec3<f32>(0.0), first);
+
+    // The view ray through this pixel.
+    let ndc = vec2<f32>(frag.x / ibl.size.x * 2.0 - 1.0, 1.0 - frag.y / ibl.size.y * 2.0);
+    let far_h = ibl.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let near_h = ibl.inv_view_proj * vec4<f32>(ndc, 0.0, 1.0);
+    let ray = normalize(far_h.xyz / far_h.w - near_h.xyz / near_h.w);
+
+    let depth = textureLoad(g_depth, px, 0).r;
+    if depth <= 0.0 {
+        if !first {
+            return vec4<f32>(prior, 1.0);
+        }
+        if ibl.background.w > 0.5 {
+            return vec4<f32>(lookup(env, ray, ibl.background_level), 1.0);
+        }
+        return vec4<f32>(ibl.background.rgb, 1.0);
+    }
+    let color = textureLoad(g_color, px, 0);
+    let n = normalize(textureLoad(g_normal, px, 0).xyz);
+    let g = clamp(color.a, 0.0, 1.0);
+    let r = reflect(ray, n);
+    // Eq. 3.39: the sample vector blends from the normal (diffuse) to the mirror direction.
+    let sample_dir = n * (1.0 - g) + r * g;
+    let level = level_for_glossiness(g);
+
+    var sum = vec3<f32>(0.0);
+    if ibl.full_map > 0.5 {
+        sum = lookup(env, sample_dir, level);
+    } else {
+        let count = u32(ibl.size.z);
+        // World position: depth is the linear view depth along the camera's forward axis.
+        let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz)) + n * shadow.bias.z;
+        // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
+        // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
+        // switch in a loop (8x the lookups).
+        if count > 0u { sum += visibility(0u, p, px) * lookup(pem0, sample_dir, level); }
+        if count > 1u { sum += visibility(1u, p, px) * lookup(pem1, sample_dir, level); }
+        if count > 2u { sum += visibility(2u, p, px) * lookup(pem2, sample_dir, level); }
+        if count > 3u { sum += visibility(3u, p, px) * lookup(pem3, sample_dir, level); }
+        if count > 4u { sum += visibility(4u, p, px) * lookup(pem4, sample_dir, level); }
+        if count > 5u { sum += visibility(5u, p, px) * lookup(pem5, sample_dir, level); }
+        if count > 6u { sum += visibility(6u, p, px) * lookup(pem6, sample_dir, level); }
+        if count > 7u { sum += visibility(7u, p, px) * lookup(pem7, sample_dir, level); }
+    }
+    return vec4<f32>(prior + color.rgb * sum, 1.0);
+}

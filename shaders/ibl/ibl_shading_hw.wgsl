@@ -1,0 +1,21 @@
+// IblShading (shaders/ibl/ibl_shading_common.wgsl) sampling the cube maps with the hardware's
+// seamless trilinear filtering: the faces (+X -X +Y -Y +Z -Z, shaders/ibl/cube.wgsl) are laid
+// out as Vulkan, Metal and D3D select cube faces, so one textureSampleLevel replaces the eight
+// taps of cube_trilinear. ibl_shading.wgsl is its reference twin.
+
+@group(0) @binding(5) var env: texture_cube<f32>;
+@group(0) @binding(6) var pem0: texture_cube<f32>;
+@group(0) @binding(7) var pem1: texture_cube<f32>;
+@group(0) @binding(8) var pem2: texture_cube<f32>;
+@group(0) @binding(9) var pem3: texture_cube<f32>;
+@group(0) @binding(10) var pem4: texture_cube<f32>;
+@group(0) @binding(11) var pem5: texture_cube<f32>;
+@group(0) @binding(12) var pem6: texture_cube<f32>;
+@group(0) @binding(13) var pem7: texture_cube<f32>;
+
+// `samp` (binding 16) is trilinear; the address mode does not apply to cube maps.
+fn lookup(tex: texture_cube<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
+    return textureSampleLevel(tex, samp, d, lod).rgb;
+}
+
+// #include "ibl_shading_common.wgsl"
