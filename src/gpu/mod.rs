@@ -28,7 +28,7 @@ pub mod texture;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use anyhow::{Context as _, bail};
 
@@ -214,15 +214,27 @@ pub struct GpuContext {
 /// GPU time per node from timestamp queries: passes ask for timestamp writes, which are
 /// attributed to the node the evaluator is running.
 struct GpuTimer {
-    queries: wgpu::QuerySet,
-    resolve: wgpu::Buffer,
-    read: wgpu::Buffer,
+    /// Query sets made as a frame needs them (a PEM set of 512 lights records about 40 000
+    /// passes; one set holds at most wgpu's 4096 queries), kept for later frames.
+    sets: [OnceLock<TimerSet>; MAX_TIMER_SETS],
     period_ns: f32,
-    /// (first query index of a pass, node id), in allocation order.
+    /// (pass number, node id), in allocation order: pass n uses queries 2 (n % PASSES_PER_SET)
+    /// and the next of set n / PASSES_PER_SET.
     passes: Mutex<Vec<(u32, Arc<str>)>>,
 }
 
-const MAX_TIMED_PASSES: u32 = 512;
+/// One query set and its resolve and read-back buffers.
+struct TimerSet {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    read: wgpu::Buffer,
+}
+
+/// Passes per query set: wgpu allows 4096 queries per set, two per pass.
+const PASSES_PER_SET: u32 = 2048;
+/// Passes timed per frame at most (later ones run untimed).
+const MAX_TIMER_SETS: usize = 64;
+const MAX_TIMED_PASSES: u32 = PASSES_PER_SET * MAX_TIMER_SETS as u32;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
@@ -352,23 +364,8 @@ impl GpuContext {
             staging: Mutex::default(),
         };
         if features.contains(wgpu::Features::TIMESTAMP_QUERY) {
-            let size = 2 * MAX_TIMED_PASSES as u64 * 8;
             gpu.timer = Some(GpuTimer {
-                queries: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("node timings"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: 2 * MAX_TIMED_PASSES,
-                }),
-                resolve: gpu.create_buffer(
-                    "timestamp resolve",
-                    size,
-                    wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                ),
-                read: gpu.create_buffer(
-                    "timestamp read",
-                    size,
-                    wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                ),
+                sets: std::array::from_fn(|_| OnceLock::new()),
                 period_ns: gpu.queue.get_timestamp_period(),
                 passes: Mutex::default(),
             });
@@ -580,12 +577,30 @@ impl GpuContext {
         let t = self.timer.as_ref()?;
         let node = lock(&self.current).node.clone()?;
         let mut passes = lock(&t.passes);
-        let index = 2 * passes.len() as u32;
-        if index >= 2 * MAX_TIMED_PASSES {
+        let pass = passes.len() as u32;
+        if pass >= MAX_TIMED_PASSES {
             return None;
         }
-        passes.push((index, node));
-        Some((&t.queries, index))
+        passes.push((pass, node));
+        let set = t.sets[(pass / PASSES_PER_SET) as usize].get_or_init(|| self.timer_set());
+        Some((&set.queries, 2 * (pass % PASSES_PER_SET)))
+    }
+
+    fn timer_set(&self) -> TimerSet {
+        let size = 2 * PASSES_PER_SET as u64 * 8;
+        TimerSet {
+            queries: self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("node timings"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * PASSES_PER_SET,
+            }),
+            resolve: self.create_buffer(
+                "timestamp resolve",
+                size,
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            ),
+            read: self.create_buffer("timestamp read", size, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ),
+        }
     }
 
     /// Timestamp writes for a render pass (see `next_timed_pass`).
@@ -616,16 +631,20 @@ impl GpuContext {
         if passes.is_empty() {
             return out;
         }
-        // Indices are 0..count: a node whose commands were dropped gave its queries back.
-        let count = 2 * passes.len() as u32;
-        self.record(|enc| {
-            enc.resolve_query_set(&t.queries, 0..count, &t.resolve, 0);
-            enc.copy_buffer_to_buffer(&t.resolve, 0, &t.read, 0, count as u64 * 8);
-        });
-        let Ok(data) = readback::map_read(self, &t.read, count as u64 * 8) else { return out };
-        let stamps: &[u64] = bytemuck::cast_slice(&data);
-        for (index, node) in &passes {
-            let (a, b) = (stamps[*index as usize], stamps[*index as usize + 1]);
+        // Passes are 0..n: a node whose commands were dropped gave its queries back.
+        let mut stamps: Vec<u64> = Vec::with_capacity(2 * passes.len());
+        for (k, first) in (0..passes.len() as u32).step_by(PASSES_PER_SET as usize).enumerate() {
+            let Some(set) = t.sets[k].get() else { return out };
+            let count = 2 * (passes.len() as u32 - first).min(PASSES_PER_SET);
+            self.record(|enc| {
+                enc.resolve_query_set(&set.queries, 0..count, &set.resolve, 0);
+                enc.copy_buffer_to_buffer(&set.resolve, 0, &set.read, 0, count as u64 * 8);
+            });
+            let Ok(data) = readback::map_read(self, &set.read, count as u64 * 8) else { return out };
+            stamps.extend_from_slice(bytemuck::cast_slice(&data));
+        }
+        for (pass, node) in &passes {
+            let (a, b) = (stamps[2 * *pass as usize], stamps[2 * *pass as usize + 1]);
             let ms = b.saturating_sub(a) as f64 * t.period_ns as f64 * 1e-6;
             *out.entry(node.clone()).or_insert(0.0) += ms;
         }
