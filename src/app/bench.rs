@@ -1645,3 +1645,137 @@ pub fn drape(
     r.body_collision_ms /= n;
     Ok(r)
 }
+
+/// A bench row as one line of a markdown table: the `werkstatt bench` commands print these, and
+/// `werkstatt bench all` writes them into its summary, so both show the same columns.
+pub trait MarkdownRow {
+    /// The header line and the alignment line.
+    const HEADER: &'static str;
+    fn markdown(&self) -> String;
+}
+
+/// `rows` as a markdown table.
+pub fn markdown_table<R: MarkdownRow>(rows: &[R]) -> String {
+    let mut s = format!("{}\n", R::HEADER);
+    for r in rows {
+        s.push_str(&r.markdown());
+        s.push('\n');
+    }
+    s
+}
+
+impl MarkdownRow for AttachRow {
+    const HEADER: &'static str = "| path | instances | triangles | ms/frame | MTri/s |\n|---|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {} | {:.2} | {:.2} |",
+            self.path, self.instances, self.triangles, self.ms_per_frame, self.mtri_per_s
+        )
+    }
+}
+
+impl MarkdownRow for ExportRow {
+    const HEADER: &'static str = "| buttons | triangles | GPU warp + read-back ms | GPU produce ms | CPU warp ms | CPU produce ms | auto | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {:.1} |",
+            self.buttons,
+            self.triangles,
+            self.gpu_warp_ms,
+            self.gpu_produce_ms,
+            self.cpu_warp_ms,
+            self.cpu_produce_ms,
+            self.auto,
+            self.write_ms,
+            self.megabytes
+        )
+    }
+}
+
+impl MarkdownRow for Table1Row {
+    const HEADER: &'static str = "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+            self.figure,
+            self.types,
+            self.paper_triangles,
+            self.paper_ms,
+            self.triangles,
+            self.matrix_ms,
+            self.gbuffer_ms,
+            self.ms_per_frame,
+            self.settings.join(" ")
+        )
+    }
+}
+
+impl MarkdownRow for IblRow {
+    const HEADER: &'static str =
+        "| regions | rebuild ms (cut + PEMs + frame) | ms/frame (G-buffer + IBL) | PEM MiB |\n|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        let n = if self.regions == 0 { "full map".to_string() } else { self.regions.to_string() };
+        format!("| {n} | {:.1} | {:.2} | {:.1} |", self.rebuild_ms, self.frame_ms, self.pem_mib)
+    }
+}
+
+impl MarkdownRow for TessellationRow {
+    const HEADER: &'static str = "| levels | mode | level | triangles | compute ms | Mtri/s (compute) | frame ms |\n|---|---|---:|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {} | {} | {:.2} | {:.1} | {:.2} |",
+            self.levels, self.mode, self.level, self.triangles, self.compute_ms, self.mtri_per_s, self.frame_ms
+        )
+    }
+}
+
+impl MarkdownRow for WarpCostRow {
+    const HEADER: &'static str = "| level | pattern ms | pattern_warp ms | compute cost | frame ms | frame ms (warp) | frame-rate loss |\n|---:|---:|---:|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {:.2} | {:.2} | {:+.1}% | {:.2} | {:.2} | {:+.1}% |",
+            self.level,
+            self.pattern_ms,
+            self.pattern_warp_ms,
+            100.0 * self.cost,
+            self.frame_pattern_ms,
+            self.frame_pattern_warp_ms,
+            100.0 * self.frame_rate_loss
+        )
+    }
+}
+
+impl MarkdownRow for SsaoRow {
+    const HEADER: &'static str = "| mode | resolution | ms/frame (Ssao passes) |\n|---|---|---:|";
+    fn markdown(&self) -> String {
+        let res = if self.half_resolution { "half" } else { "full" };
+        format!("| {} | {res} | {:.2} |", self.mode, self.ms_per_frame)
+    }
+}
+
+impl MarkdownRow for CuboidRow {
+    const HEADER: &'static str = "| scene | objects | triangles | draws | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
+            self.scene,
+            self.objects,
+            self.triangles,
+            self.draws,
+            self.fps_linear,
+            self.fps_trilinear,
+            100.0 * self.ratio
+        )
+    }
+}
+
+impl MarkdownRow for ShadowRow {
+    const HEADER: &'static str = "| lights | tile | atlas | atlas MiB | N x tile^2 x 4 B (Table 5.1) MiB | ms/frame |\n|---:|---:|---:|---:|---:|---:|";
+    fn markdown(&self) -> String {
+        let ms = self.ms_per_frame.map_or_else(|| format!("skipped ({})", self.note), |ms| format!("{ms:.1}"));
+        format!(
+            "| {} | {} | {}x{} | {:.1} | {:.1} | {ms} |",
+            self.lights, self.tile, self.atlas_width, self.atlas_height, self.atlas_mib, self.table_mib
+        )
+    }
+}

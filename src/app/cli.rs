@@ -6,6 +6,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+use crate::app::bench::{
+    AttachRow, CuboidRow, ExportRow, IblRow, MarkdownRow as _, ShadowRow, SsaoRow, Table1Row, TessellationRow, WarpCostRow,
+};
 use crate::core::graph::Graph;
 use crate::gpu::{Backend, GpuContext};
 
@@ -195,6 +198,26 @@ impl GpuBench {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Every GPU bench (attachments, table1, cuboids, pem-memory, ibl, shadows, ssao,
+    /// tessellation) in this order within a time budget: each bench's rows as JSON, all.json
+    /// (what ran, how long, each status) and summary.md (our tables beside the seeds' figures)
+    /// into DIR. Exit code 1 when a bench failed.
+    All {
+        /// The folder for the results.
+        #[arg(long, value_name = "DIR")]
+        json: PathBuf,
+        /// How much each bench measures: small on lavapipe, the papers' counts on a GPU.
+        #[arg(long, value_enum, default_value = "auto")]
+        preset: crate::app::bench_all::Preset,
+        /// Seconds after which no further bench starts [default: 480 for full, 600 for small].
+        #[arg(long)]
+        budget_s: Option<u64>,
+        /// Only these benches, comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// Evaluator overhead per idle frame (nothing changed) for a graph of cheap nodes.
     Graph {
         #[arg(long, default_value_t = 200)]
@@ -625,106 +648,65 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Command::Bench { what: BenchWhat::All { json, preset, budget_s, only, backend } } => {
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            let preset = preset.resolve(&gpu);
+            let budget = budget_s.map_or(preset.default_budget(), std::time::Duration::from_secs);
+            println!("adapter: {}, preset {preset:?}, budget {} s", gpu.adapter_name(), budget.as_secs());
+            let report = crate::app::bench_all::run_all(&gpu, preset, budget, &only, &json, |m| eprintln!("{m}"))?;
+            println!(
+                "{} bench(es) in {:.1} s, {} failed: {}",
+                report.benches.len(),
+                report.seconds,
+                report.failed(),
+                json.join("summary.md").display()
+            );
+            Ok(if report.failed() == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
         Command::Bench { what: BenchWhat::Attachments { counts, frames, no_cpu, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!("{:>18} {:>9} {:>12} {:>10} {:>9}", "path", "instances", "triangles", "ms/frame", "MTri/s");
-            let rows = crate::app::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| {
-                println!(
-                    "{:>18} {:>9} {:>12} {:>10.2} {:>9.2}",
-                    r.path, r.instances, r.triangles, r.ms_per_frame, r.mtri_per_s
-                );
-            })?;
+            println!("{}", AttachRow::HEADER);
+            let rows = crate::app::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Export { counts, frames, dir, out } } => {
             let (gpu, _) = out.open()?;
             println!("adapter: {}, median of {frames} run(s), PLY into {}", gpu.adapter_name(), dir.display());
-            println!(
-                "| buttons | triangles | GPU warp + read-back ms | GPU produce ms | CPU warp ms | CPU produce ms | auto | PLY write ms | MB |\n|---:|---:|---:|---:|---:|---:|---|---:|---:|"
-            );
-            let rows = crate::app::bench::export(&gpu, &counts, frames, &dir, |r| {
-                println!(
-                    "| {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {:.1} |",
-                    r.buttons,
-                    r.triangles,
-                    r.gpu_warp_ms,
-                    r.gpu_produce_ms,
-                    r.cpu_warp_ms,
-                    r.cpu_produce_ms,
-                    r.auto,
-                    r.write_ms,
-                    r.megabytes
-                );
-            })?;
+            println!("{}", ExportRow::HEADER);
+            let rows = crate::app::bench::export(&gpu, &counts, frames, &dir, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Table1 { frames, scale, only, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!(
-                "| figure | types | paper triangles | paper ms (GTX 580) | triangles | matrix ms | G-buffer ms | ms/frame | settings |\n|---|---|---:|---:|---:|---:|---:|---:|---|"
-            );
-            let rows = crate::app::bench::table1(&gpu, frames, size, scale, &only, |r| {
-                println!(
-                    "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
-                    r.figure,
-                    r.types,
-                    r.paper_triangles,
-                    r.paper_ms,
-                    r.triangles,
-                    r.matrix_ms,
-                    r.gbuffer_ms,
-                    r.ms_per_frame,
-                    r.settings.join(" ")
-                );
-            })?;
+            println!("{}", Table1Row::HEADER);
+            let rows = crate::app::bench::table1(&gpu, frames, size, scale, &only, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Ibl { regions, frames, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!(
-                "| regions | rebuild ms (cut + PEMs + frame) | ms/frame (G-buffer + IBL) | PEM MiB |\n|---:|---:|---:|---:|"
-            );
-            let rows = crate::app::bench::ibl(&gpu, &regions, frames, size, |r| {
-                let n = if r.regions == 0 { "full map".to_string() } else { r.regions.to_string() };
-                println!("| {n} | {:.1} | {:.2} | {:.1} |", r.rebuild_ms, r.frame_ms, r.pem_mib);
-            })?;
+            println!("{}", IblRow::HEADER);
+            let rows = crate::app::bench::ibl(&gpu, &regions, frames, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Tessellation { levels, frames, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!(
-                "| levels | mode | level | triangles | compute ms | Mtri/s (compute) | frame ms |\n|---|---|---:|---:|---:|---:|---:|"
-            );
-            let rows = crate::app::bench::tessellation(&gpu, &levels, frames, size, |r| {
-                println!(
-                    "| {} | {} | {} | {} | {:.2} | {:.1} | {:.2} |",
-                    r.levels, r.mode, r.level, r.triangles, r.compute_ms, r.mtri_per_s, r.frame_ms
-                );
-            })?;
+            println!("{}", TessellationRow::HEADER);
+            let rows = crate::app::bench::tessellation(&gpu, &levels, frames, size, |r| println!("{}", r.markdown()))?;
             let pairs = 4 * frames.max(1);
             println!(
-                "\nwarping's cost, random levels, median of {pairs} interleaved pairs (compute alone; whole frames with the G-buffer draw):\n| level | pattern ms | pattern_warp ms | compute cost | frame ms | frame ms (warp) | frame-rate loss |\n|---:|---:|---:|---:|---:|---:|---:|"
+                "\nwarping's cost, random levels, median of {pairs} interleaved pairs (compute alone; whole frames with the G-buffer draw):\n{}",
+                WarpCostRow::HEADER
             );
-            let costs = crate::app::bench::tessellation_warp_cost(&gpu, &levels, pairs, size, |r| {
-                println!(
-                    "| {} | {:.2} | {:.2} | {:+.1}% | {:.2} | {:.2} | {:+.1}% |",
-                    r.level,
-                    r.pattern_ms,
-                    r.pattern_warp_ms,
-                    100.0 * r.cost,
-                    r.frame_pattern_ms,
-                    r.frame_pattern_warp_ms,
-                    100.0 * r.frame_rate_loss
-                );
-            })?;
+            let costs =
+                crate::app::bench::tessellation_warp_cost(&gpu, &levels, pairs, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -736,11 +718,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 size.0,
                 size.1
             );
-            println!("| mode | resolution | ms/frame (Ssao passes) |\n|---|---|---:|");
-            let rows = crate::app::bench::ssao(&gpu, samples, frames, size, |r| {
-                let res = if r.half_resolution { "half" } else { "full" };
-                println!("| {} | {res} | {:.2} |", r.mode, r.ms_per_frame);
-            })?;
+            println!("{}", SsaoRow::HEADER);
+            let rows = crate::app::bench::ssao(&gpu, samples, frames, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -764,37 +743,16 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 size.0,
                 size.1
             );
-            println!(
-                "| scene | objects | triangles | draws | FPS linear | FPS trilinear | ratio |\n|---|---:|---:|---:|---:|---:|---:|"
-            );
-            let rows = crate::app::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| {
-                println!(
-                    "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0}% |",
-                    r.scene,
-                    r.objects,
-                    r.triangles,
-                    r.draws,
-                    r.fps_linear,
-                    r.fps_trilinear,
-                    100.0 * r.ratio
-                );
-            })?;
+            println!("{}", CuboidRow::HEADER);
+            let rows = crate::app::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Shadows { lights, tiles, frames, out } } => {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
-            println!(
-                "| lights | tile | atlas | atlas MiB | N x tile^2 x 4 B (Table 5.1) MiB | ms/frame |\n|---:|---:|---:|---:|---:|---:|"
-            );
-            let rows = crate::app::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| {
-                let ms = r.ms_per_frame.map_or_else(|| format!("skipped ({})", r.note), |ms| format!("{ms:.1}"));
-                println!(
-                    "| {} | {} | {}x{} | {:.1} | {:.1} | {ms} |",
-                    r.lights, r.tile, r.atlas_width, r.atlas_height, r.atlas_mib, r.table_mib
-                );
-            })?;
+            println!("{}", ShadowRow::HEADER);
+            let rows = crate::app::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }

@@ -3,6 +3,7 @@
 //! not part of the library's surface).
 
 mod bench;
+mod bench_all;
 pub mod cli;
 pub mod compare;
 pub mod docs;

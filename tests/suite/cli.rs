@@ -604,3 +604,36 @@ fn a_load_that_never_finishes_fails_after_the_pending_timeout() {
     assert!(err.contains("--pending-timeout must be a number of seconds"), "{err}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn bench_all_writes_every_benchs_rows_and_a_summary_within_its_budget() {
+    let dir = temp("bench-all");
+    let d = dir.to_str().unwrap();
+    let (code, out, err) = werkstatt(&["bench", "all", "--json", d, "--preset", "small", "--only", "ssao,pem-memory"]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    let all: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("all.json")).unwrap()).unwrap();
+    assert_eq!(all["preset"], "small");
+    let benches = all["benches"].as_array().unwrap();
+    // The fixed order, whatever the order of --only.
+    let names: Vec<&str> = benches.iter().map(|b| b["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["pem-memory", "ssao"]);
+    assert!(benches.iter().all(|b| b["status"] == "ok"), "{benches:?}");
+    let ssao: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("ssao.json")).unwrap()).unwrap();
+    let rows = ssao.as_array().unwrap();
+    assert_eq!(rows.len(), 4, "two modes at full and half resolution");
+    assert!(rows.iter().all(|r| r["ms_per_frame"].as_f64().unwrap() > 0.0));
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+    assert!(summary.contains("## ssao") && summary.contains("under 1 ms"), "{summary}");
+    assert!(summary.contains("| 256 | 256.00 | 384 | 1024.00 | 1536 |"), "Table 5.1's last row: {summary}");
+
+    // A spent budget skips what would start after it, and says so.
+    let (code, out, err) = werkstatt(&["bench", "all", "--json", d, "--only", "ssao", "--budget-s", "0"]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    let all: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("all.json")).unwrap()).unwrap();
+    assert!(all["benches"][0]["status"].as_str().unwrap().starts_with("skipped"), "{all}");
+    assert!(std::fs::read_to_string(dir.join("summary.md")).unwrap().contains("Not measured: skipped"));
+
+    let (code, _, err) = werkstatt(&["bench", "all", "--json", d, "--only", "ssoa"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("\"ssoa\"") && err.contains("attachments, table1"), "{err}");
+}
