@@ -77,7 +77,10 @@ const STEPS: [Step; 8] = [
                 _ => (&[1000, 4000], 1, false),
             };
             let rows = bench::attachments(gpu, counts, frames, VGA, cpu, |_| {})?;
-            Measured::new(serde_json::json!({ "counts": counts, "frames": frames, "size": VGA, "cpu_path": cpu }), &rows)
+            Measured::new(
+                serde_json::json!({ "counts": counts, "frames": frames, "size": VGA, "cpu_path": cpu }),
+                &rows,
+            )
         },
     },
     Step {
@@ -168,7 +171,11 @@ const STEPS: [Step; 8] = [
             Ok(Measured {
                 params: serde_json::json!({ "levels": levels, "frames": frames, "size": VGA }),
                 rows: serde_json::json!({ "rows": rows, "warp_cost": costs }),
-                markdown: format!("{}\nThe cost of warping (random levels):\n\n{}", markdown_table(&rows), markdown_table(&costs)),
+                markdown: format!(
+                    "{}\nThe cost of warping (random levels):\n\n{}",
+                    markdown_table(&rows),
+                    markdown_table(&costs)
+                ),
             })
         },
     },

@@ -7,7 +7,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 use crate::app::bench::{
-    AttachRow, CuboidRow, ExportRow, IblRow, MarkdownRow as _, ShadowRow, SsaoRow, Table1Row, TessellationRow, WarpCostRow,
+    AttachRow, CuboidRow, ExportRow, IblRow, MarkdownRow as _, ShadowRow, SsaoRow, Table1Row, TessellationRow,
+    WarpCostRow,
 };
 use crate::core::graph::Graph;
 use crate::gpu::{Backend, GpuContext};
@@ -667,7 +668,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!("{}", AttachRow::HEADER);
-            let rows = crate::app::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| println!("{}", r.markdown()))?;
+            let rows =
+                crate::app::bench::attachments(&gpu, &counts, frames, size, !no_cpu, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -705,8 +707,9 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 "\nwarping's cost, random levels, median of {pairs} interleaved pairs (compute alone; whole frames with the G-buffer draw):\n{}",
                 WarpCostRow::HEADER
             );
-            let costs =
-                crate::app::bench::tessellation_warp_cost(&gpu, &levels, pairs, size, |r| println!("{}", r.markdown()))?;
+            let costs = crate::app::bench::tessellation_warp_cost(&gpu, &levels, pairs, size, |r| {
+                println!("{}", r.markdown())
+            })?;
             out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -744,7 +747,9 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 size.1
             );
             println!("{}", CuboidRow::HEADER);
-            let rows = crate::app::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| println!("{}", r.markdown()))?;
+            let rows = crate::app::bench::cuboids(&gpu, spheres, &helices, frames, rounds, size, |r| {
+                println!("{}", r.markdown())
+            })?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -752,7 +757,8 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             let (gpu, size) = out.open()?;
             println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
             println!("{}", ShadowRow::HEADER);
-            let rows = crate::app::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| println!("{}", r.markdown()))?;
+            let rows =
+                crate::app::bench::shadows(&gpu, &lights, &tiles, frames, size, |r| println!("{}", r.markdown()))?;
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }

@@ -599,7 +599,11 @@ impl GpuContext {
                 size,
                 wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
             ),
-            read: self.create_buffer("timestamp read", size, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ),
+            read: self.create_buffer(
+                "timestamp read",
+                size,
+                wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            ),
         }
     }
 
