@@ -172,6 +172,8 @@ pub enum Bind<'a> {
     /// draw binds only its own part of a large buffer: lavapipe copies a bound storage range
     /// for every draw).
     DynamicStorage(&'a wgpu::Buffer, u64),
+    /// A write-only storage texture view (compute passes): its format and dimension.
+    StorageTexture(&'a wgpu::TextureView, wgpu::TextureFormat, wgpu::TextureViewDimension),
 }
 
 /// What identifies a bound resource, for the bind group cache.
@@ -223,6 +225,16 @@ impl Bindings {
                     Bind::Sampler(kind) => sampler_entry(binding, self.visibility, *kind),
                     Bind::Storage(_) => storage_entry_for(binding, self.visibility, true),
                     Bind::StorageRw(_) => storage_entry_for(binding, self.visibility, false),
+                    Bind::StorageTexture(_, format, view_dimension) => wgpu::BindGroupLayoutEntry {
+                        binding,
+                        visibility: self.visibility,
+                        ty: wgpu::BindingType::StorageTexture {
+                            access: wgpu::StorageTextureAccess::WriteOnly,
+                            format: *format,
+                            view_dimension: *view_dimension,
+                        },
+                        count: None,
+                    },
                 }
             })
             .collect()
@@ -264,7 +276,7 @@ impl Bindings {
                 (Bind::DynamicStorage(_, size), Some(buf)) => Key::Range(buf.clone(), *size),
                 (_, Some(buf)) => Key::Buffer(buf.clone()),
                 (Bind::Texture(img), _) => Key::View(img.view.clone()),
-                (Bind::View(view, ..), _) => Key::View((*view).clone()),
+                (Bind::View(view, ..), _) | (Bind::StorageTexture(view, ..), _) => Key::View((*view).clone()),
                 (Bind::Sampler(kind), _) => Key::Sampler(*kind),
                 _ => unreachable!("buffers are handled above"),
             });
@@ -291,7 +303,9 @@ impl Bindings {
                     (_, Some(buf), _) => buf.as_entire_binding(),
                     (_, _, Some(s)) => wgpu::BindingResource::Sampler(s),
                     (Bind::Texture(img), ..) => wgpu::BindingResource::TextureView(&img.view),
-                    (Bind::View(view, ..), ..) => wgpu::BindingResource::TextureView(view),
+                    (Bind::View(view, ..), ..) | (Bind::StorageTexture(view, ..), ..) => {
+                        wgpu::BindingResource::TextureView(view)
+                    }
                     _ => unreachable!("every bind is a buffer, a sampler or a view"),
                 },
             })

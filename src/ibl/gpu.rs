@@ -11,7 +11,7 @@ use glam::Vec3;
 use super::cube::{CubeImage, face_dir, texel_center};
 use super::median_cut::{RegionLight, Regions};
 use super::pem::{Calibration, Kernel};
-use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
+use crate::gpu::{Bind, ComputePass, FullscreenPass, GpuContext, GpuImage, TextureDesc};
 
 /// A light probe as a cube map (`EnvironmentMap`'s output).
 pub struct EnvMap {
@@ -55,11 +55,68 @@ pub struct PemSet {
 
 /// A cube map of face size `size` with its full mip chain, stored as a 2D array of six layers
 /// (shaders/ibl/cube.wgsl reads it with `textureLoad`: OpenGL cannot view a cube texture as an
-/// array, and the CPU twins then match exactly), for rendering into faces and levels.
+/// array, and the CPU twins then match exactly), for rendering or storing into faces and
+/// levels. Rgba16Float: WebGPU guarantees it renderable, filterable and storable.
 pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> anyhow::Result<GpuImage> {
-    let usage =
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-    Ok(GpuImage::create(gpu, label, TextureDesc::array(size, size, 6, gpu.formats().hdr, usage).with_full_mips()))
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::STORAGE_BINDING
+        | wgpu::TextureUsages::COPY_DST;
+    Ok(GpuImage::create(gpu, label, TextureDesc::array(size, size, 6, CUBE_FORMAT, usage).with_full_mips()))
+}
+
+/// The format of cube maps and PEMs (shaders/ibl/pem_filter.wgsl stores into it).
+const CUBE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Writes mip `level` of all six faces of `dst` with one of shaders/ibl/pem_filter.wgsl's
+/// passes (`params` and `binds` after it in group 0): one compute dispatch, or on GL one
+/// render pass per face.
+fn faces_pass(
+    gpu: &GpuContext,
+    (compute, render): &mut (ComputePass, FullscreenPass),
+    params: FilterParams,
+    binds: &[Bind<'_>],
+    dst: &GpuImage,
+    level: u32,
+) -> anyhow::Result<()> {
+    let size = dst.width >> level;
+    if gpu.info.backend != wgpu::Backend::Gl {
+        let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
+        group0.extend_from_slice(binds);
+        let store = store_level(dst, level);
+        let group1 = [Bind::StorageTexture(&store, CUBE_FORMAT, wgpu::TextureViewDimension::D2Array)];
+        return compute.dispatch(gpu, &[&group0, &group1], [size.div_ceil(8), size.div_ceil(8), 6]);
+    }
+    for face in 0..6 {
+        let params = FilterParams { face, ..params };
+        let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
+        group0.extend_from_slice(binds);
+        render.draw(gpu, &group0, &[&dst.layer_view(face, level)], &[dst.format])?;
+    }
+    Ok(())
+}
+
+/// The six faces of mip `level` of a cube map, as a 2D array.
+fn faces_of_level(cube: &GpuImage, level: u32) -> wgpu::TextureView {
+    cube.view_of(crate::gpu::texture::ViewSel {
+        dimension: wgpu::TextureViewDimension::D2Array,
+        base_mip: level,
+        mips: 1,
+        base_layer: 0,
+        layers: 6,
+    })
+}
+
+/// Mip `level` of every layer of a cube map's texture, for storing into its faces: GL binds
+/// images by whole levels (and its cube maps carry a spare layer, see `GpuImage::create`).
+fn store_level(cube: &GpuImage, level: u32) -> wgpu::TextureView {
+    cube.view_of(crate::gpu::texture::ViewSel {
+        dimension: wgpu::TextureViewDimension::D2Array,
+        base_mip: level,
+        mips: 1,
+        base_layer: 0,
+        layers: cube.texture.depth_or_array_layers(),
+    })
 }
 
 #[repr(C)]
@@ -170,8 +227,10 @@ struct PreviewParams {
 
 /// The passes that build cube maps: level 0 uploads, masking, the mip filters, previews.
 pub struct CubePasses {
-    filter: FullscreenPass,
-    mask: FullscreenPass,
+    /// shaders/ibl/pem_filter.wgsl: the filter and the mask, as compute (one dispatch per
+    /// level) or, on GL, as a render pass per face.
+    filter: (ComputePass, FullscreenPass),
+    mask: (ComputePass, FullscreenPass),
     phong: FullscreenPass,
     phong_norm: FullscreenPass,
     /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
@@ -183,8 +242,14 @@ pub struct CubePasses {
 impl Default for CubePasses {
     fn default() -> Self {
         CubePasses {
-            filter: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
-            mask: FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
+            filter: (
+                ComputePass::new("pem_filter.wgsl", "cs_filter"),
+                FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
+            ),
+            mask: (
+                ComputePass::new("pem_filter.wgsl", "cs_mask"),
+                FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
+            ),
             phong: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
             phong_norm: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong_norm"),
             norms: None,
@@ -239,26 +304,11 @@ impl CubePasses {
             weights[i] = v / total;
         }
         for mip in 1..cube.desc.mips {
-            let source = cube.view_of(crate::gpu::texture::ViewSel {
-                dimension: wgpu::TextureViewDimension::D2Array,
-                base_mip: mip - 1,
-                mips: 1,
-                base_layer: 0,
-                layers: 6,
-            });
+            let source = faces_of_level(cube, mip - 1);
+            let params = FilterParams { face: 0, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
             let sample_type = cube.desc.sample_type(false);
-            for face in 0..6 {
-                let params = FilterParams { face, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
-                self.filter.draw(
-                    gpu,
-                    &[
-                        Bind::Uniform(bytemuck::bytes_of(&params)),
-                        Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type),
-                    ],
-                    &[&cube.layer_view(face, mip)],
-                    &[cube.format],
-                )?;
-            }
+            let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type)];
+            faces_pass(gpu, &mut self.filter, params, &binds, cube, mip)?;
         }
         Ok(())
     }
@@ -379,27 +429,11 @@ impl CubePasses {
         region: u32,
         dst: &GpuImage,
     ) -> anyhow::Result<()> {
-        let source = src.view_of(crate::gpu::texture::ViewSel {
-            dimension: wgpu::TextureViewDimension::D2Array,
-            base_mip: 0,
-            mips: 1,
-            base_layer: 0,
-            layers: 6,
-        });
+        let source = faces_of_level(src, 0);
+        let params = FilterParams { face: 0, src_size: src.width, region, pad: 0, weights: [0.0; 28] };
         let sample_type = src.desc.sample_type(false);
-        for face in 0..6 {
-            let params = FilterParams { face, src_size: src.width, region, pad: 0, weights: [0.0; 28] };
-            self.mask.draw(
-                gpu,
-                &[
-                    Bind::Uniform(bytemuck::bytes_of(&params)),
-                    Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type),
-                    Bind::Texture(regions),
-                ],
-                &[&dst.layer_view(face, 0)],
-                &[dst.format],
-            )?;
-        }
+        let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type), Bind::Texture(regions)];
+        faces_pass(gpu, &mut self.mask, params, &binds, dst, 0)?;
         Ok(())
     }
 
