@@ -107,6 +107,16 @@ fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
     return clamp((p_max - b) / (1.0 - b), 0.0, 1.0);
 }
 
+// Light k's term: its PEM's radiance times its visibility. The shadow lookup is skipped where
+// the PEM is black along the lobe (most of many small regions for glossy pixels); the term is
+// then zero either way.
+fn lit(k: u32, radiance: vec3<f32>, p: vec3<f32>, px: vec2<i32>) -> vec3<f32> {
+    if all(radiance == vec3<f32>(0.0)) {
+        return radiance;
+    }
+    return visibility(k, p, px) * radiance;
+}
+
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
@@ -147,14 +157,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
         // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
         // switch in a loop (8x the lookups).
-        if count > 0u { sum += visibility(0u, p, px) * lookup(pem0, sample_dir, level); }
-        if count > 1u { sum += visibility(1u, p, px) * lookup(pem1, sample_dir, level); }
-        if count > 2u { sum += visibility(2u, p, px) * lookup(pem2, sample_dir, level); }
-        if count > 3u { sum += visibility(3u, p, px) * lookup(pem3, sample_dir, level); }
-        if count > 4u { sum += visibility(4u, p, px) * lookup(pem4, sample_dir, level); }
-        if count > 5u { sum += visibility(5u, p, px) * lookup(pem5, sample_dir, level); }
-        if count > 6u { sum += visibility(6u, p, px) * lookup(pem6, sample_dir, level); }
-        if count > 7u { sum += visibility(7u, p, px) * lookup(pem7, sample_dir, level); }
+        if count > 0u { sum += lit(0u, lookup(pem0, sample_dir, level), p, px); }
+        if count > 1u { sum += lit(1u, lookup(pem1, sample_dir, level), p, px); }
+        if count > 2u { sum += lit(2u, lookup(pem2, sample_dir, level), p, px); }
+        if count > 3u { sum += lit(3u, lookup(pem3, sample_dir, level), p, px); }
+        if count > 4u { sum += lit(4u, lookup(pem4, sample_dir, level), p, px); }
+        if count > 5u { sum += lit(5u, lookup(pem5, sample_dir, level), p, px); }
+        if count > 6u { sum += lit(6u, lookup(pem6, sample_dir, level), p, px); }
+        if count > 7u { sum += lit(7u, lookup(pem7, sample_dir, level), p, px); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }
