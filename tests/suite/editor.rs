@@ -39,9 +39,10 @@ fn wgpu_setup() -> egui_wgpu::WgpuSetup {
     egui_wgpu::WgpuSetup::CreateNew(setup)
 }
 
-/// The editor on `graph`, in a 1400x900 window with a wgpu renderer.
+/// The editor on `graph`, in a 2000x1100 window with a wgpu renderer: the default graph fits
+/// at the smallest framing zoom (titles readable), so every node is on screen.
 fn editor(graph: &Path) -> Harness<'static, EditorApp> {
-    editor_with(graph, Vec2::new(1400.0, 900.0), 1.0, options())
+    editor_with(graph, Vec2::new(2000.0, 1100.0), 1.0, options())
 }
 
 fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options) -> Harness<'static, EditorApp> {
@@ -58,18 +59,25 @@ fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options
 }
 
 /// Runs frames until the canvas has laid out and the evaluation has settled.
-/// Steps the UI at least six frames and until no file is loading (the default graph's light
-/// probe loads on a worker thread), with a 60 s deadline.
+/// Steps the UI at least six frames and until the evaluation worker is idle with nothing left
+/// to evaluate and no file loading (the default graph's light probe loads on a thread), with a
+/// 120 s deadline.
 fn settle(h: &mut Harness<'_, EditorApp>) {
     for _ in 0..6 {
         h.step();
     }
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    while h.state().live.last_summary.pending > 0 {
-        assert!(std::time::Instant::now() < deadline, "the editor's graph still waits for files after 60 s");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let live = &h.state().live;
+        if live.idle() && live.last_summary.pending == 0 && live.resources.in_flight() == 0 {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "the editor's evaluation did not settle in 120 s");
         std::thread::sleep(std::time::Duration::from_millis(5));
         h.step();
     }
+    // The finished evaluation is drawn.
+    h.step();
 }
 
 fn p(s: &str) -> PortRef {
@@ -646,7 +654,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
 
     let opts = Options { watch_files: true, ..options() };
-    let mut h = editor_with(&path, Vec2::new(1400.0, 900.0), 1.0, opts);
+    let mut h = editor_with(&path, Vec2::new(2000.0, 1100.0), 1.0, opts);
     assert!(h.query_by_label("Recover unsaved changes?").is_some(), "the autosave is offered");
     h.get_by_role_and_label(Role::Button, "Recover").click();
     settle(&mut h);

@@ -4,10 +4,12 @@
 //! The logic lives in plain Rust types that tests drive without a window:
 //! [`document`] (operations on a [`Graph`](crate::core::graph::Graph)), [`history`] (undo),
 //! [`state::EditorState`] (document, file, selection, clipboard, messages) and
-//! [`live::Live`] (evaluation). [`app::EditorApp`] draws them and turns input into calls.
+//! [`live::Live`] (evaluation, on a worker thread) and [`cost`] (estimates before evaluation).
+//! [`app::EditorApp`] draws them and turns input into calls.
 
 pub mod app;
 pub mod canvas;
+pub mod cost;
 pub mod document;
 pub mod files;
 pub mod history;
