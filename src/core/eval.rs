@@ -493,10 +493,13 @@ impl Evaluator {
             (r, cx.used_time, cx.misuse.into_inner())
         };
         if matches!(result, Err(NodeError::Cancelled)) {
-            // Nothing of the run is kept: its commands are dropped, it counts as not run.
+            // Nothing of the run is kept: its commands are dropped, it counts as not run, and a
+            // fresh instance replaces it, so caches it filled part-way (uniform rings, bind
+            // groups holding half a PEM set) are let go too.
             if let Some(scope) = scope {
                 scope.discard();
             }
+            state.instance = (spec.create)();
             state.fingerprint = None;
             state.status = NodeStatus::NotRun;
             state.ran_last_frame = false;

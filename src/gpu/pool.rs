@@ -206,7 +206,9 @@ impl GpuContext {
     pub fn release_unused(&self) -> (usize, usize) {
         let released = (self.pool.release_unused(), self.buffer_pool.release_unused());
         // Destruction waits for the GPU to be done with them.
-        let _ = self.device.poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(std::time::Duration::from_secs(5)) });
+        let _ = self
+            .device
+            .poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(std::time::Duration::from_secs(5)) });
         #[cfg(all(target_os = "linux", target_env = "gnu"))]
         // SAFETY: malloc_trim only returns free heap memory to the system; it is thread-safe.
         unsafe {

@@ -93,7 +93,6 @@ pub struct EditorApp {
     waker: super::live::Waker,
     /// The refusals already reported in the status bar.
     reported_refusals: std::collections::BTreeMap<String, String>,
-    render_state: Option<egui_wgpu::RenderState>,
     dialog: Option<Dialog>,
     options: Options,
     /// Time spent in each UI frame (layout, evaluation, canvas), newest last.
@@ -106,12 +105,17 @@ pub struct EditorApp {
 }
 
 impl EditorApp {
-    /// Creates the editor on eframe's wgpu device (shared with the engine), opening `path`.
+    /// Creates the editor, opening `path`. The engine opens a device of its own on the
+    /// window's adapter: the window paints on its device while the engine's worker submits.
     pub fn new(cc: &eframe::CreationContext<'_>, path: Option<PathBuf>, options: Options) -> Self {
-        let render_state = cc.wgpu_render_state.clone();
-        let gpu = render_state
-            .as_ref()
-            .map(|rs| Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), &rs.adapter)));
+        let mut engine_error = None;
+        let gpu = cc.wgpu_render_state.as_ref().and_then(|rs| match GpuContext::from_adapter(&rs.adapter) {
+            Ok(g) => Some(Arc::new(g)),
+            Err(e) => {
+                engine_error = Some(format!("{e:#}"));
+                None
+            }
+        });
         let egui_ctx = cc.egui_ctx.clone();
         let waker: super::live::Waker = Arc::new(move || egui_ctx.request_repaint());
         let limits = gpu.as_deref().map(cost::Limits::for_gpu);
@@ -126,7 +130,6 @@ impl EditorApp {
             inspector: Inspector { file_dialogs: options.file_dialogs },
             files: FileWatch::default(),
             gpu,
-            render_state,
             dialog: None,
             options,
             frame_times: FrameTimes::default(),
@@ -152,10 +155,13 @@ impl EditorApp {
         if let Some(gpu) = &app.gpu {
             app.state.info(format!("rendering on {}", gpu.adapter_name()));
         }
+        if let Some(e) = engine_error {
+            app.state.error(format!("cannot open a device for the engine: {e}"));
+        }
         app
     }
 
-    /// The GPU the nodes render with (the window's).
+    /// The GPU the nodes render with (a device of its own on the window's adapter).
     pub fn gpu(&self) -> Option<&GpuContext> {
         self.gpu.as_deref()
     }
@@ -537,9 +543,13 @@ impl EditorApp {
             if let Some(b) = self.live.busy() {
                 let node = b.node.as_deref().unwrap_or("");
                 ui.label(
-                    RichText::new(format!("rendering {node} {:.0}%, {:.1} s", b.fraction * 100.0, b.elapsed.as_secs_f64()))
-                        .small()
-                        .monospace(),
+                    RichText::new(format!(
+                        "rendering {node} {:.0}%, {:.1} s",
+                        b.fraction * 100.0,
+                        b.elapsed.as_secs_f64()
+                    ))
+                    .small()
+                    .monospace(),
                 )
                 .on_hover_text("the evaluation runs on its own thread; Esc cancels it");
             }
@@ -716,7 +726,7 @@ impl eframe::App for EditorApp {
         egui::Panel::right("side").resizable(true).default_size(420.0).min_size(280.0).show(ui, |ui| {
             let h = (ui.available_height() * 0.5).max(200.0);
             ui.allocate_ui(egui::vec2(ui.available_width(), h), |ui| {
-                self.viewport.show(ui, &mut self.state, &mut self.live, self.gpu.as_deref(), self.render_state.as_ref());
+                self.viewport.show(ui, &mut self.state, &mut self.live);
             });
             ui.separator();
             egui::ScrollArea::vertical().show(ui, |ui| self.inspector.show(ui, &mut self.state, &self.live));

@@ -289,8 +289,12 @@ impl Converter {
 pub struct Display {
     /// The port it shows.
     pub port: PortRef,
-    /// The picture, converted for display; `None` with `error` when it cannot be shown.
+    /// The picture, converted for display on the engine's device; `None` with `error` when it
+    /// cannot be shown.
     pub image: Option<GpuImage>,
+    /// The same picture on the CPU (gamma-encoded RGBA8, rows top down), for the window,
+    /// whose device is not the engine's.
+    pub pixels: Option<egui::ColorImage>,
     pub error: Option<String>,
     /// Counts finished evaluations, so the viewport registers each new picture once.
     pub stamp: u64,
@@ -564,10 +568,14 @@ impl Live {
                 e.insert(id.clone(), StaticError { message: why.clone(), blocked: false });
             }
             for l in run.links.iter().filter(|l| self.refused.contains_key(&l.from.node)) {
-                e.entry(l.to.node.clone()).or_insert(StaticError {
-                    message: format!("input \"{}\" waits for \"{}\", which was refused", l.to.port, l.from.node),
-                    blocked: true,
-                });
+                // Its input is unconnected now because of the refusal: it waits, it is not wrong.
+                e.insert(
+                    l.to.node.clone(),
+                    StaticError {
+                        message: format!("input \"{}\" waits for \"{}\", which was refused", l.to.port, l.from.node),
+                        blocked: true,
+                    },
+                );
             }
             errors.extend(e);
             run = r;
@@ -712,8 +720,13 @@ impl Live {
         let sent = self.worker.as_ref().and_then(|w| w.requests.as_ref()).is_some_and(|tx| tx.send(request).is_ok());
         if sent {
             self.sent_graph = wanted.graph;
-            self.in_flight =
-                Some(InFlight { generation, progress, started: Instant::now(), cancelled_at: None, wanted: wanted.clone() });
+            self.in_flight = Some(InFlight {
+                generation,
+                progress,
+                started: Instant::now(),
+                cancelled_at: None,
+                wanted: wanted.clone(),
+            });
             self.sent = Some((wanted, Instant::now()));
         } else {
             self.engine_error = Some("the evaluation thread stopped; reopen the graph".into());
@@ -963,12 +976,17 @@ impl WorkerState {
                         (Some(_), None) => Some(Err("no GPU display: the window has no wgpu renderer".into())),
                         (None, _) => None,
                     };
-                    let (image, error) = match converted {
-                        Some(Ok(i)) => (Some(i), None),
-                        Some(Err(e)) => (None, Some(e)),
-                        None => (None, None),
+                    let copied = match (converted, gpu) {
+                        (Some(Ok(i)), Some(gpu)) => Some(to_cpu(gpu, &i).map(|p| (i, p))),
+                        (Some(Err(e)), _) => Some(Err(e)),
+                        _ => None,
                     };
-                    Display { port: port.clone(), image, error, stamp: self.stamp }
+                    let (image, pixels, error) = match copied {
+                        Some(Ok((i, p))) => (Some(i), Some(p), None),
+                        Some(Err(e)) => (None, None, Some(e)),
+                        None => (None, None, None),
+                    };
+                    Display { port: port.clone(), image, pixels, error, stamp: self.stamp }
                 });
                 let snapshot = snapshot(ev, &self.last_cpu, r.viewed.as_ref(), summary, eval, display);
                 Finished { generation: r.generation, snapshot: Some(snapshot), cancelled: None, engine_error }
@@ -984,6 +1002,13 @@ impl WorkerState {
         }
         finished
     }
+}
+
+/// A display picture (Rgba8Unorm, gamma-encoded) read back for the window.
+fn to_cpu(gpu: &GpuContext, image: &GpuImage) -> Result<egui::ColorImage, String> {
+    let px = crate::gpu::read_back(gpu, image).map_err(|e| format!("{e:#}"))?;
+    let bytes: Vec<u8> = px.rgba.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+    Ok(egui::ColorImage::from_rgba_unmultiplied([px.width as usize, px.height as usize], &bytes))
 }
 
 /// Whether a value is plain data the UI may keep (no GPU memory, small).
@@ -1020,13 +1045,8 @@ fn snapshot(
             }
         };
         shader_errors.extend(r.shader_errors.iter().map(|e| format!("{id}: {e}")));
-        let node = NodeShot {
-            state,
-            warnings: r.warnings.to_vec(),
-            cpu: last_cpu.get(id).copied(),
-            ran: r.ran,
-            runs: r.runs,
-        };
+        let node =
+            NodeShot { state, warnings: r.warnings.to_vec(), cpu: last_cpu.get(id).copied(), ran: r.ran, runs: r.runs };
         s.nodes.insert(id.clone(), node);
         let Some(spec) = spec::find(r.kind) else { continue };
         for p in spec.outputs {

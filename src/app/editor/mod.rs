@@ -34,7 +34,8 @@ pub fn run(graph: Option<PathBuf>, backend: Backend) -> anyhow::Result<()> {
         Backend::Vulkan => wgpu::Backends::VULKAN,
         Backend::Gl => wgpu::Backends::GL,
     };
-    // One device for the window and the engine: ask for what the nodes need.
+    // The engine opens its own device on this adapter (see `EditorApp::new`); the window asks
+    // for the same features and limits.
     setup.device_descriptor = Arc::new(GpuContext::device_descriptor);
     let mut native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_title("werkstatt").with_inner_size([1440.0, 900.0]),

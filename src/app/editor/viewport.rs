@@ -1,24 +1,25 @@
 //! The viewport: the viewed texture (the graph's Preview, its first output, or any
-//! inspected texture port) shown live through egui-wgpu. The engine renders on the window's
-//! own device and the evaluation worker converts the texture for display on the GPU (any float
-//! format to gamma-encoded Rgba8Unorm, which is what egui samples); the viewport registers it
-//! with egui's renderer, and nothing is copied to the CPU. While an evaluation runs, the last
-//! finished picture stays, with its progress over it and a button to cancel.
+//! inspected texture port) shown live. The evaluation worker converts it for display on the
+//! engine's GPU (any float format to gamma-encoded Rgba8Unorm, which is what egui samples) and
+//! copies that to the CPU; the viewport hands the pixels to egui. The engine has a device of
+//! its own: on a software rasterizer a submit holds wgpu's queue for as long as the GPU work
+//! runs, and on a shared queue the window could not paint meanwhile. While an evaluation runs,
+//! the last finished picture stays, with its progress over it and a button to cancel.
 
 use egui::{Color32, RichText, Sense, Ui, Vec2};
 
 use super::live::{CameraOverride, Live, camera_for, viewed_port};
 use super::state::EditorState;
-use crate::gpu::{GpuContext, GpuImage};
+use crate::gpu::GpuImage;
 
 /// Render sizes offered in the viewport's toolbar.
 pub const SIZES: &[(u32, u32)] = &[(320, 240), (480, 360), (640, 480), (960, 720), (1280, 960)];
 
 pub struct Viewport {
-    /// The picture shown (a handle to the worker's display texture, kept while egui shows it).
+    /// The picture shown, on the engine's device (for tests that read it back).
     display: Option<GpuImage>,
-    texture_id: Option<egui::TextureId>,
-    /// The stamp of the picture registered, to register each new one once.
+    texture: Option<egui::TextureHandle>,
+    /// The stamp of the picture shown, to hand each new one to egui once.
     last_stamp: Option<u64>,
     pub message: Option<String>,
 }
@@ -31,37 +32,33 @@ impl Default for Viewport {
 
 impl Viewport {
     pub fn new() -> Self {
-        Viewport { display: None, texture_id: None, last_stamp: None, message: None }
+        Viewport { display: None, texture: None, last_stamp: None, message: None }
     }
 
-    /// The texture egui shows: the viewed port converted for display (None before the first).
+    /// The picture shown: the viewed port converted for display (None before the first).
     pub fn display(&self) -> Option<&GpuImage> {
         self.display.as_ref()
     }
 
-    /// Registers a newly finished picture with egui (the previous one is let go).
-    fn update_texture(&mut self, gpu: &GpuContext, render_state: &egui_wgpu::RenderState, image: &GpuImage, stamp: u64) {
-        if self.last_stamp == Some(stamp) && self.texture_id.is_some() {
+    /// Hands a newly finished picture to egui (the previous one is let go).
+    fn update_texture(&mut self, ctx: &egui::Context, display: &super::live::Display) {
+        if self.last_stamp == Some(display.stamp) && self.texture.is_some() {
             return;
         }
-        let mut renderer = render_state.renderer.write();
-        match self.texture_id {
-            Some(id) => {
-                renderer.update_egui_texture_from_wgpu_texture(&gpu.device, &image.view, wgpu::FilterMode::Linear, id)
-            }
-            None => {
-                self.texture_id =
-                    Some(renderer.register_native_texture(&gpu.device, &image.view, wgpu::FilterMode::Linear));
-            }
+        let Some(pixels) = display.pixels.clone() else { return };
+        match &mut self.texture {
+            Some(t) => t.set(pixels, egui::TextureOptions::LINEAR),
+            None => self.texture = Some(ctx.load_texture("viewport", pixels, egui::TextureOptions::LINEAR)),
         }
-        self.display = Some(image.share());
-        self.last_stamp = Some(stamp);
+        self.display = display.image.as_ref().map(GpuImage::share);
+        self.last_stamp = Some(display.stamp);
     }
 
     /// Over the picture: the running evaluation's progress and a cancel button, or that the
     /// user cancelled. Short evaluations (a playing animation's frames) show nothing.
     fn progress(&mut self, ui: &mut Ui, live: &mut Live, rect: egui::Rect) {
-        let bar = egui::Rect::from_min_size(rect.left_top() + Vec2::new(6.0, 6.0), Vec2::new(rect.width() - 12.0, 24.0));
+        let bar =
+            egui::Rect::from_min_size(rect.left_top() + Vec2::new(6.0, 6.0), Vec2::new(rect.width() - 12.0, 24.0));
         if let Some(busy) = live.busy().filter(|b| b.elapsed.as_millis() >= 150 || b.cancelling) {
             let text = match (&busy.node, busy.cancelling) {
                 (_, true) => "cancelling…".to_string(),
@@ -101,14 +98,7 @@ impl Viewport {
     }
 
     /// Draws the viewport: toolbar (what is shown, size, frame, play), image, orbit controls.
-    pub fn show(
-        &mut self,
-        ui: &mut Ui,
-        state: &mut EditorState,
-        live: &mut Live,
-        gpu: Option<&GpuContext>,
-        render_state: Option<&egui_wgpu::RenderState>,
-    ) {
+    pub fn show(&mut self, ui: &mut Ui, state: &mut EditorState, live: &mut Live) {
         let viewed = viewed_port(&state.graph, state.inspected.as_ref());
         ui.horizontal(|ui| {
             match &viewed {
@@ -149,17 +139,12 @@ impl Viewport {
         let Some(port) = viewed else { return };
         // The last finished picture of this port, while the next one is made.
         let display = live.display().filter(|d| d.port == port);
-        let image = display.and_then(|d| d.image.as_ref().map(|i| (i, d.stamp)));
-        let shown = match (image, gpu, render_state) {
-            (Some((img, stamp)), Some(gpu), Some(rs)) => {
-                self.update_texture(gpu, rs, img, stamp);
-                self.texture_id.zip(self.display.as_ref().map(|d| Vec2::new(d.width as f32, d.height as f32)))
+        let shown = match display.filter(|d| d.pixels.is_some()) {
+            Some(d) => {
+                self.update_texture(ui.ctx(), d);
+                self.texture.as_ref().map(|t| (t.id(), t.size_vec2()))
             }
-            (Some(_), _, _) => {
-                self.message = Some("no GPU display: the window has no wgpu renderer".into());
-                None
-            }
-            (None, _, _) => {
+            None => {
                 self.message = Some(match (live.state(&port.node), display.and_then(|d| d.error.clone())) {
                     (_, Some(e)) => e,
                     (super::live::NodeState::Failed(m), _) => format!("{}: {m}", port.node),
@@ -191,8 +176,7 @@ impl Viewport {
                 ui.painter().rect_filled(rect, 4.0, Color32::from_gray(25));
                 if let Some(m) = &self.message {
                     // A value (a Watch node's number) is news, anything else a problem.
-                    let color =
-                        if has_value { ui.visuals().strong_text_color() } else { super::canvas::ERROR_COLOR };
+                    let color = if has_value { ui.visuals().strong_text_color() } else { super::canvas::ERROR_COLOR };
                     ui.painter().text(
                         rect.center(),
                         egui::Align2::CENTER_CENTER,
