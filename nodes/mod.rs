@@ -63,6 +63,7 @@ pub static ALL: &[&NodeSpec] = &[
     &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
     &occlusion::reference_occlusion::REFERENCE_OCCLUSION,
     &render::tonemap::TONEMAP,
+    &core::delay::DELAY,
     &compare::image_difference::IMAGE_DIFFERENCE,
     &core::output::IMAGE_WRITE,
     &core::output::PREVIEW,

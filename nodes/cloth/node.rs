@@ -88,7 +88,10 @@ impl Node for ClothSimNode {
             self.state = Some((preset.build(), key.clone(), 0));
         }
         let (cloth, _, step) = self.state.as_mut().expect("built above");
+        // A long warm-up reports progress; a cancel keeps the steps made (the state stays whole).
+        let first = *step;
         while *step < target {
+            cx.progress((*step - first) as usize, (target - first) as usize)?;
             cloth.step_frame(FRAME_DT);
             *step += 1;
         }

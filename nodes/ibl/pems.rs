@@ -87,6 +87,8 @@ impl Node for PemsNode {
         self.passes.filter_chain(gpu, &full, kernel, &Footprint::whole(size))?;
         let mut pems = Vec::with_capacity(regions.lights.len());
         for region in 0..regions.lights.len() {
+            // Hundreds of regions take minutes on a software rasterizer: report and answer a cancel.
+            cx.progress(region, regions.lights.len())?;
             let pem = cube_target(gpu, "PEM", size)?;
             self.passes.mask(gpu, &env.cube, &ids, region as u32, &pem)?;
             let footprint = Footprint::of_region(&regions.ids, size as usize, region as u32);

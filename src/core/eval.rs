@@ -11,6 +11,7 @@ use crate::core::graph::{Graph, GraphError};
 use crate::core::node::{EvalCx, INTERNAL_ERROR, Node, NodeError, NodeSpec, Product};
 use crate::core::param::ParamValue;
 use crate::core::port::Value;
+use crate::core::progress::Progress;
 use crate::core::resources::{Resources, SlotRef};
 use crate::core::spec;
 use crate::gpu::{GpuContext, ShaderError};
@@ -84,6 +85,21 @@ pub struct FrameSummary {
     pub pending: usize,
     pub failed: usize,
 }
+
+/// An evaluation stopped by its [`Progress`] token, before or inside node `node`. Nodes that
+/// finished before keep their results; the rest re-run next time. Nothing half-made is kept.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cancelled {
+    pub node: String,
+}
+
+impl std::fmt::Display for Cancelled {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "evaluation cancelled at node \"{}\"", self.node)
+    }
+}
+
+impl std::error::Error for Cancelled {}
 
 /// One node's record for the last frame.
 #[derive(Clone, Debug)]
@@ -298,6 +314,25 @@ impl Evaluator {
         resources: &Resources,
         settings: &FrameSettings,
     ) -> FrameSummary {
+        // Nobody else holds this token, so nothing can cancel.
+        match self.evaluate_cancellable(time, gpu, resources, settings, &Progress::new()) {
+            Ok(summary) | Err((summary, _)) => summary,
+        }
+    }
+
+    /// [`Evaluator::evaluate`] that `progress` can cancel: checked before every node, and by
+    /// long nodes inside their loops (`EvalCx::progress`). A cancelled frame returns what ran
+    /// so far and where it stopped; the queued GPU work of the nodes that finished is still
+    /// submitted, the cancelled node's is dropped.
+    pub fn evaluate_cancellable(
+        &mut self,
+        time: FrameTime,
+        gpu: Option<&GpuContext>,
+        resources: &Resources,
+        settings: &FrameSettings,
+        progress: &Progress,
+    ) -> Result<FrameSummary, (FrameSummary, Cancelled)> {
+        let mut cancelled = None;
         let mut summary = FrameSummary::default();
         self.settings_hash = {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -343,8 +378,16 @@ impl Evaluator {
                 }
                 continue;
             }
+            if progress.cancelled() {
+                cancelled = Some(oi);
+                break;
+            }
+            progress.start_node(&self.ids[n]);
             self.release_outputs(n);
-            self.run_node(n, time, gpu, resources, settings);
+            if !self.run_node(n, time, gpu, resources, settings, progress) {
+                cancelled = Some(oi);
+                break;
+            }
             // Hash again: the run may have started or stopped reading the time, or touched resources.
             // Versions as the run saw them: a load or signal that changed during the run re-runs it.
             self.state[n].fingerprint = Some(self.recompute(n, time, true));
@@ -359,7 +402,14 @@ impl Evaluator {
         if let Some(gpu) = gpu {
             gpu.flush();
         }
-        summary
+        let Some(at) = cancelled else { return Ok(summary) };
+        // The nodes from the cancelled one on whose outputs were let go run again next time.
+        for &n in &self.order[at..] {
+            if self.released[n] {
+                self.state[n].fingerprint = None;
+            }
+        }
+        Err((summary, Cancelled { node: self.ids[self.order[at]].clone() }))
     }
 
     /// The fingerprint of node `n` from its current sources, time use, resources and signals;
@@ -394,7 +444,8 @@ impl Evaluator {
         gpu: Option<&GpuContext>,
         resources: &Resources,
         settings: &FrameSettings,
-    ) {
+        progress: &Progress,
+    ) -> bool {
         let mut inputs = std::mem::take(&mut self.scratch_inputs);
         inputs.clear();
         inputs.extend(self.sources[n].iter().map(|src| src.and_then(|(s, o)| self.state[s].outputs[o].clone())));
@@ -428,6 +479,7 @@ impl Evaluator {
                 products: &mut products,
                 misuse: RefCell::new(Vec::new()),
                 settings,
+                progress,
             };
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.instance.eval(&mut cx)));
             let r = r.unwrap_or_else(|panic| {
@@ -440,6 +492,22 @@ impl Evaluator {
             });
             (r, cx.used_time, cx.misuse.into_inner())
         };
+        if matches!(result, Err(NodeError::Cancelled)) {
+            // Nothing of the run is kept: its commands are dropped, it counts as not run, and a
+            // fresh instance replaces it, so caches it filled part-way (uniform rings, bind
+            // groups holding half a PEM set) are let go too.
+            if let Some(scope) = scope {
+                scope.discard();
+            }
+            state.instance = (spec.create)();
+            state.fingerprint = None;
+            state.status = NodeStatus::NotRun;
+            state.ran_last_frame = false;
+            state.products.clear();
+            inputs.clear();
+            self.scratch_inputs = inputs;
+            return false;
+        }
         let result = Self::check_contract(spec, result, &outputs, misuse);
         state.last_cpu = start.elapsed();
         let mut result = result;
@@ -453,7 +521,7 @@ impl Evaluator {
                 result = match result {
                     Ok(()) => Err(NodeError::Failed(e)),
                     Err(NodeError::Failed(m)) => Err(NodeError::Failed(format!("{m}; {e}"))),
-                    Err(pending) => Err(pending),
+                    Err(other) => Err(other),
                 };
             }
         }
@@ -478,9 +546,16 @@ impl Evaluator {
                 state.status = NodeStatus::Failed(m);
                 state.outputs.iter_mut().for_each(|o| *o = None);
             }
+            // Returned above; kept apart from failures should that ever change.
+            Err(NodeError::Cancelled) => {
+                state.products.clear();
+                state.status = NodeStatus::NotRun;
+                state.outputs.iter_mut().for_each(|o| *o = None);
+            }
         }
         inputs.clear();
         self.scratch_inputs = inputs;
+        true
     }
 
     /// Turns a node's programming errors (see [`INTERNAL_ERROR`]) into its result. In debug

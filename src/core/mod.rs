@@ -6,6 +6,7 @@ pub mod hash;
 pub mod node;
 pub mod param;
 pub mod port;
+pub mod progress;
 pub mod resources;
 pub mod rng;
 pub mod signal;

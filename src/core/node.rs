@@ -176,6 +176,9 @@ pub enum NodeError {
     /// A resource it needs is still loading; not an error in interactive mode.
     Pending(PathBuf),
     Failed(String),
+    /// The evaluation was cancelled while the node ran (see [`EvalCx::progress`]): nothing it
+    /// made is kept, and it runs again next time.
+    Cancelled,
 }
 
 impl NodeError {
@@ -273,9 +276,18 @@ pub struct EvalCx<'a> {
     /// Programming errors found while the node ran (see [`INTERNAL_ERROR`]).
     pub(crate) misuse: RefCell<Vec<String>>,
     pub settings: &'a FrameSettings,
+    pub(crate) progress: &'a crate::core::progress::Progress,
 }
 
 impl<'a> EvalCx<'a> {
+    /// Reports how far a long node is (`done` of `total` steps) and answers a cancel: call it
+    /// inside long loops and return its error (`cx.progress(i, n)?`), which ends the node
+    /// without outputs. Cheap enough for every iteration.
+    pub fn progress(&self, done: usize, total: usize) -> Result<(), NodeError> {
+        self.progress.set_fraction(if total == 0 { 1.0 } else { done as f32 / total as f32 });
+        if self.progress.cancelled() { Err(NodeError::Cancelled) } else { Ok(()) }
+    }
+
     fn misuse(&self, what: String) {
         self.misuse.borrow_mut().push(format!("{INTERNAL_ERROR}: node kind {} {what}", self.spec.kind));
     }

@@ -672,13 +672,23 @@ pub struct NodeScope<'a> {
 impl NodeScope<'_> {
     /// Finishes the node's commands inside its error scope; queues them if it raised no
     /// validation error, else drops them. Returns what the node did.
-    pub fn end(mut self) -> NodeGpu {
+    pub fn end(self) -> NodeGpu {
+        self.finish(true)
+    }
+
+    /// Ends the scope of a node that was cancelled: its commands are dropped unsubmitted, so
+    /// what it recorded (and the textures only those commands held) is let go.
+    pub fn discard(self) -> NodeGpu {
+        self.finish(false)
+    }
+
+    fn finish(mut self, keep: bool) -> NodeGpu {
         let gpu = self.gpu;
         let commands = gpu.finish_encoder();
         let error = self.scope.take().and_then(|s| pollster::block_on(s.pop())).map(|e| e.to_string());
         match (&error, commands) {
-            (None, Some(cb)) => lock(&gpu.queued).push(cb),
-            (Some(_), _) => {
+            (None, Some(cb)) if keep => lock(&gpu.queued).push(cb),
+            (Some(_), _) | (None, Some(_)) => {
                 // Its timed passes never run: forget their queries.
                 if let Some(t) = &gpu.timer {
                     lock(&t.passes).truncate(self.timed_before);

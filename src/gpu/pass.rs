@@ -103,6 +103,11 @@ impl<T> WriteSlots<T> {
     pub fn next(&mut self, gpu: &GpuContext, fits: impl Fn(&T) -> bool, make: impl FnOnce(Option<&T>) -> T) -> &T {
         let epoch = gpu.epoch();
         if epoch != self.epoch {
+            // The last epoch that wrote used `used` slots: far fewer than are kept means a
+            // workload that went down (600 PEMs, then 16), so the rest goes.
+            if self.used < self.slots.len() / 2 {
+                self.slots.truncate(self.used.max(1));
+            }
             self.epoch = epoch;
             self.used = 0;
         }

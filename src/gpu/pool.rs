@@ -50,6 +50,14 @@ impl TexturePool {
         entries.retain(|e| epoch.saturating_sub(e.last_used) < KEEP_UNUSED_EPOCHS);
     }
 
+    /// Releases every texture nobody holds now; returns how many.
+    pub(crate) fn release_unused(&self) -> usize {
+        let mut entries = lock(&self.entries);
+        let before = entries.len();
+        entries.retain(|e| Arc::strong_count(&e.image.shared) > 1);
+        before - entries.len()
+    }
+
     /// (textures held by the pool, of which in use).
     pub(crate) fn counts(&self) -> (usize, usize) {
         let entries = lock(&self.entries);
@@ -143,6 +151,14 @@ impl BufferPool {
         PooledBuffer { buffer, _lease: lease }
     }
 
+    /// Releases every buffer nobody holds now; returns how many.
+    fn release_unused(&self) -> usize {
+        let mut entries = lock(&self.entries);
+        let before = entries.len();
+        entries.retain(|e| Arc::strong_count(&e.lease) > 1);
+        before - entries.len()
+    }
+
     /// Called after each submit: marks the buffers nobody holds; releases long-unused ones.
     fn after_submit(&self, epoch: u64) {
         let mut entries = lock(&self.entries);
@@ -181,6 +197,24 @@ impl GpuContext {
     /// A pooled buffer of `size` bytes for the GPU to fill (contents undefined).
     pub fn scratch_pooled(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> PooledBuffer {
         self.buffer_pool.acquire(self, label, size, usage, None)
+    }
+
+    /// Gives back what nothing uses any more: pooled textures and buffers nobody holds (after a
+    /// cancelled or failed evaluation, or a parameter that went down, they would otherwise wait
+    /// 256 submits, for ever when nothing is evaluated), then lets wgpu destroy them and the C
+    /// heap return freed memory to the system. Returns the textures and buffers released.
+    pub fn release_unused(&self) -> (usize, usize) {
+        let released = (self.pool.release_unused(), self.buffer_pool.release_unused());
+        // Destruction waits for the GPU to be done with them.
+        let _ = self
+            .device
+            .poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(std::time::Duration::from_secs(5)) });
+        #[cfg(all(target_os = "linux", target_env = "gnu"))]
+        // SAFETY: malloc_trim only returns free heap memory to the system; it is thread-safe.
+        unsafe {
+            libc::malloc_trim(0);
+        }
+        released
     }
 
     pub(crate) fn pools_after_submit(&self, epoch: u64) {

@@ -39,9 +39,10 @@ fn wgpu_setup() -> egui_wgpu::WgpuSetup {
     egui_wgpu::WgpuSetup::CreateNew(setup)
 }
 
-/// The editor on `graph`, in a 1400x900 window with a wgpu renderer.
+/// The editor on `graph`, in a 2000x1100 window with a wgpu renderer: the default graph fits
+/// at the smallest framing zoom (titles readable), so every node is on screen.
 fn editor(graph: &Path) -> Harness<'static, EditorApp> {
-    editor_with(graph, Vec2::new(1400.0, 900.0), 1.0, options())
+    editor_with(graph, Vec2::new(2000.0, 1100.0), 1.0, options())
 }
 
 fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options) -> Harness<'static, EditorApp> {
@@ -58,18 +59,25 @@ fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options
 }
 
 /// Runs frames until the canvas has laid out and the evaluation has settled.
-/// Steps the UI at least six frames and until no file is loading (the default graph's light
-/// probe loads on a worker thread), with a 60 s deadline.
+/// Steps the UI at least six frames and until the evaluation worker is idle with nothing left
+/// to evaluate and no file loading (the default graph's light probe loads on a thread), with a
+/// 120 s deadline.
 fn settle(h: &mut Harness<'_, EditorApp>) {
     for _ in 0..6 {
         h.step();
     }
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    while h.state().live.last_summary.pending > 0 {
-        assert!(std::time::Instant::now() < deadline, "the editor's graph still waits for files after 60 s");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let live = &h.state().live;
+        if live.idle() && live.last_summary.pending == 0 && live.resources.in_flight() == 0 {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "the editor's evaluation did not settle in 120 s");
         std::thread::sleep(std::time::Duration::from_millis(5));
         h.step();
     }
+    // The finished evaluation is drawn.
+    h.step();
 }
 
 fn p(s: &str) -> PortRef {
@@ -315,7 +323,11 @@ fn a_200_node_graph_stays_responsive() {
     measure(&mut h, "changing a parameter every frame", &mut |h, i| {
         h.state_mut().state.set_param("m0000", "b", werkstatt::core::param::ParamValue::Float(i as f64)).unwrap();
     });
-    assert_eq!(last_runs(&h), (before.0 + 30, before.1 + 30), "each change re-runs the chain once");
+    settle(&mut h);
+    // Changes that come faster than the worker evaluates are merged: at most one run per change.
+    let runs = last_runs(&h);
+    assert!(runs.0 > before.0 && runs.0 <= before.0 + 30, "{before:?} -> {runs:?}");
+    assert_eq!(runs.0, runs.1, "each evaluation re-ran the whole chain");
     let pos_before = h.state().state.graph.nodes["m0100"].pos;
     let start = h.state().canvas.node_screen_rect("m0100").map(|r| r.left_top() + Vec2::new(20.0, 10.0));
     let start = start.expect("node m0100 is on screen");
@@ -330,6 +342,7 @@ fn a_200_node_graph_stays_responsive() {
     let (m, p95, _) = h.state().frame_times.stats().unwrap();
     eprintln!("200-node graph, inside EditorApp::ui (evaluation and layout): median {m:.1} ms, p95 {p95:.1} ms");
     // The last value is 1 + 199 more additions of 1, plus the b the loop set on the first node.
+    settle(&mut h);
     assert_eq!(h.state().live.output(&p("m0199.result")).map(|v| v.summary()), Some("228".into()));
 }
 
@@ -646,7 +659,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
 
     let opts = Options { watch_files: true, ..options() };
-    let mut h = editor_with(&path, Vec2::new(1400.0, 900.0), 1.0, opts);
+    let mut h = editor_with(&path, Vec2::new(2000.0, 1100.0), 1.0, opts);
     assert!(h.query_by_label("Recover unsaved changes?").is_some(), "the autosave is offered");
     h.get_by_role_and_label(Role::Button, "Recover").click();
     settle(&mut h);
@@ -739,4 +752,341 @@ fn a_new_graph_is_saved_through_save_as() {
     assert!(!h.state().state.is_dirty());
     assert_eq!(std::fs::read_to_string(&saved).unwrap(), h.state().state.graph.to_ron());
     assert_eq!(h.state().state.title(), "fresh.ron - werkstatt");
+}
+
+// ---- a slow graph: evaluation off the UI thread, progress, cancel, costs, memory ----
+
+/// The CPU time of the calling thread: what a UI frame costs itself, whatever else the
+/// (shared, loaded) machine runs meanwhile.
+fn thread_cpu() -> std::time::Duration {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec it is given.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    std::time::Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+}
+
+/// One UI frame, timed: (wall ms, CPU ms of the UI thread).
+fn timed_step(h: &mut Harness<'_, EditorApp>) -> (f64, f64) {
+    let (t, c) = (Instant::now(), thread_cpu());
+    h.step();
+    (t.elapsed().as_secs_f64() * 1e3, (thread_cpu() - c).as_secs_f64() * 1e3)
+}
+
+/// (median, p95, max) of frame times in ms.
+fn stats(v: &[f64]) -> (f64, f64, f64) {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    (at(0.5), at(0.95), v[v.len() - 1])
+}
+
+/// The default graph (8 lights) with a `Delay` node between the tone mapper and the output.
+fn copy_default_with_delay(dir: &Path) -> PathBuf {
+    let path = copy_default(dir);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let link = "(\"tonemap.image\", \"image.image\")";
+    assert!(text.contains(link), "default.ron no longer links tonemap to image");
+    let text = text.replace(link, "(\"tonemap.image\", \"delay.image\"), (\"delay.image\", \"image.image\")").replacen(
+        "nodes: {",
+        "nodes: {\n        \"delay\": (kind: \"Delay\", pos: (1440.0, 420.0), params: {}),",
+        1,
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Steps the UI until `done` holds, with a deadline; returns the frames' (wall, CPU) times.
+fn step_until(
+    h: &mut Harness<'_, EditorApp>,
+    what: &str,
+    timeout: std::time::Duration,
+    done: impl Fn(&EditorApp) -> bool,
+) -> Vec<(f64, f64)> {
+    let deadline = Instant::now() + timeout;
+    let mut times = Vec::new();
+    while !done(h.state()) {
+        assert!(Instant::now() < deadline, "{what}: not within {timeout:?}");
+        times.push(timed_step(h));
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    times
+}
+
+fn set_param(h: &mut Harness<'_, EditorApp>, node: &str, name: &str, v: werkstatt::core::param::ParamValue) {
+    h.state_mut().state.set_param(node, name, v).unwrap();
+}
+
+/// Runs the calling test alone in a child process (the test binary again, filtered to it):
+/// its timings and the process's memory are then its own. Returns true in the child.
+fn in_own_process(name: &str) -> bool {
+    const CHILD: &str = "WERKSTATT_TEST_EDITOR_CHILD";
+    if std::env::var_os(CHILD).is_some() {
+        return true;
+    }
+    let test = module_path!().split_once("::").map_or(name.to_string(), |(_, m)| format!("{m}::{name}"));
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", &test, "--test-threads=1", "--nocapture", "--include-ignored"])
+        .env(CHILD, "1")
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success() && stdout.contains("test result: ok. 1 passed"),
+        "the test in its own process ({}) failed:\n{stdout}\n{stderr}",
+        out.status
+    );
+    // Its figures, for the log.
+    for line in stderr.lines().filter(|l| l.starts_with("figure:")) {
+        eprintln!("{line}");
+    }
+    false
+}
+
+/// The resident memory of this process in MiB.
+fn rss_mib() -> f64 {
+    let statm = std::fs::read_to_string("/proc/self/statm").unwrap();
+    let pages: f64 = statm.split_whitespace().nth(1).unwrap().parse().unwrap();
+    pages * 4096.0 / (1u64 << 20) as f64
+}
+
+#[test]
+fn a_slow_node_keeps_the_ui_responsive_and_cancels() {
+    use werkstatt::core::param::ParamValue;
+    if !in_own_process("a_slow_node_keeps_the_ui_responsive_and_cancels") {
+        return;
+    }
+    let dir = temp_dir("slow");
+    let path = copy_default_with_delay(&dir);
+    let mut h = editor(&path);
+    let stamp = |app: &EditorApp| app.live.display().map(|d| d.stamp);
+    let before = stamp(h.state()).expect("the first frame is shown");
+    let shown = h.state().viewport_display().map(|d| d.texture.clone()).expect("a picture");
+    let delay_runs = h.state().live.runs("delay");
+
+    // A change that makes the delay take 5 s: the window keeps answering, the old frame stays.
+    set_param(&mut h, "delay", "seconds", ParamValue::Float(5.0));
+    step_until(&mut h, "the delay starts", std::time::Duration::from_secs(60), |app| {
+        app.live.busy().is_some_and(|b| b.node.as_deref() == Some("delay"))
+    });
+    let mut frames = Vec::new();
+    let t = Instant::now();
+    while t.elapsed() < std::time::Duration::from_millis(1500) {
+        frames.push(timed_step(&mut h));
+        // A window paints at most at its display's rate.
+        std::thread::sleep(std::time::Duration::from_millis(8));
+    }
+    let busy = h.state().live.busy().expect("still evaluating");
+    assert!(busy.fraction > 0.1 && busy.fraction < 0.9, "the delay reports its progress: {}", busy.fraction);
+    assert_eq!(stamp(h.state()), Some(before), "the viewport keeps the last finished frame");
+    assert_eq!(h.state().viewport_display().map(|d| d.texture.clone()), Some(shown.clone()));
+    assert!(h.query_by_label_contains("rendering… ").is_some(), "the viewport says it is rendering");
+    let wall: Vec<f64> = frames.iter().map(|f| f.0).collect();
+    let cpu: Vec<f64> = frames.iter().map(|f| f.1).collect();
+    let (wm, wp, wx) = stats(&wall);
+    let (cm, cp, _) = stats(&cpu);
+    eprintln!(
+        "figure: UI frames during a 5 s evaluation ({} frames): wall median {wm:.1} ms, p95 {wp:.1} ms, max {wx:.1} ms; \
+         UI thread CPU median {cm:.1} ms, p95 {cp:.1} ms",
+        frames.len()
+    );
+    // What the UI thread spends on a frame (immune to a loaded machine), and no frame waits for
+    // the evaluation (it would take seconds).
+    assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread during a slow evaluation");
+    assert!(wx < 1000.0, "a UI frame took {wx:.0} ms: it waited for the evaluation");
+    assert!(frames.len() >= 15, "only {} UI frames in 1.5 s", frames.len());
+
+    // Esc cancels: control (an idle worker) is back within 1 s, the old frame still shows.
+    let t = Instant::now();
+    h.key_press(egui::Key::Escape);
+    step_until(&mut h, "the cancel", std::time::Duration::from_secs(10), |app| app.live.busy().is_none());
+    let back = t.elapsed();
+    let (cancelled, latency) = h.state().live.last_cancel.clone().expect("the cancel was measured");
+    eprintln!(
+        "figure: Esc to an idle worker {:.0} ms (worker stopped {:.0} ms after the cancel)",
+        back.as_secs_f64() * 1e3,
+        latency.as_secs_f64() * 1e3
+    );
+    assert_eq!(cancelled.node, "delay");
+    assert!(back < std::time::Duration::from_secs(1), "the cancel took {back:?}");
+    assert_eq!(stamp(h.state()), Some(before), "a cancelled evaluation shows nothing half-made");
+    assert_eq!(h.state().live.runs("delay"), delay_runs, "a cancelled run does not count");
+    assert!(h.state().live.cancelled_by_user());
+    for _ in 0..10 {
+        h.step();
+    }
+    assert!(h.state().live.busy().is_none(), "a cancelled evaluation is not started again by itself");
+    assert!(h.query_by_label_contains("cancelled: showing the last finished frame").is_some());
+
+    // A quick value renders a new frame.
+    set_param(&mut h, "delay", "seconds", ParamValue::Float(0.0));
+    settle(&mut h);
+    assert!(stamp(h.state()) > Some(before), "a new frame was shown");
+    assert_eq!(h.state().live.runs("delay"), delay_runs + 1);
+}
+
+#[test]
+fn a_newer_edit_supersedes_a_running_evaluation() {
+    use werkstatt::core::param::ParamValue;
+    let dir = temp_dir("supersede");
+    let path = copy_default_with_delay(&dir);
+    let mut h = editor(&path);
+    let (delay_runs, tonemap_runs) = (h.state().live.runs("delay"), h.state().live.runs("tonemap"));
+    set_param(&mut h, "delay", "seconds", ParamValue::Float(60.0));
+    step_until(&mut h, "the delay starts", std::time::Duration::from_secs(60), |app| {
+        app.live.busy().is_some_and(|b| b.node.as_deref() == Some("delay"))
+    });
+    // The newer edit cancels the minute-long run at once and is evaluated instead.
+    let t = Instant::now();
+    set_param(&mut h, "delay", "seconds", ParamValue::Float(0.0));
+    settle(&mut h);
+    assert!(t.elapsed() < std::time::Duration::from_secs(30), "the newer edit waited for the older one");
+    let (cancelled, latency) = h.state().live.last_cancel.clone().expect("the older evaluation was cancelled");
+    assert_eq!(cancelled.node, "delay");
+    eprintln!("superseded after {:.0} ms", latency.as_secs_f64() * 1e3);
+    assert_eq!(h.state().live.runs("delay"), delay_runs + 1, "only the newer value ran to the end");
+    assert_eq!(h.state().live.runs("tonemap"), tonemap_runs, "upstream of the change nothing re-ran");
+    assert_eq!(h.state().live.state("delay"), werkstatt::app::editor::live::NodeState::Ok);
+}
+
+#[test]
+fn a_change_past_the_limits_is_refused_before_any_work() {
+    use werkstatt::core::param::ParamValue;
+    let dir = temp_dir("refused-cost");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let gpu_created = h.state().gpu().unwrap().created();
+    let pems_runs = h.state().live.runs("pems");
+    set_param(&mut h, "median_cut", "count", ParamValue::Int(2200));
+    // The window answers at once: the refusal is decided before the worker gets the graph.
+    let t = Instant::now();
+    h.step();
+    let first = t.elapsed();
+    settle(&mut h);
+    eprintln!("figure: the frame after the change to 2200 lights took {:.1} ms", first.as_secs_f64() * 1e3);
+    let state = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.state(id);
+    let werkstatt::app::editor::live::NodeState::Failed(why) = state(&h, "pems") else {
+        panic!("pems is refused: {:?}", state(&h, "pems"))
+    };
+    assert!(why.contains("refused before any work") && why.contains("2200 PEMs"), "{why}");
+    assert!(why.contains("budget"), "{why}");
+    assert!(
+        matches!(state(&h, "shadow_atlas"), werkstatt::app::editor::live::NodeState::Failed(m) if m.contains("at most 1024 lights"))
+    );
+    assert!(matches!(state(&h, "light"), werkstatt::app::editor::live::NodeState::Blocked(_)));
+    assert!(h.state().live.runs("pems") <= pems_runs, "no PEM was built");
+    let created = h.state().gpu().unwrap().created().since(gpu_created);
+    assert!(created.textures < 50, "{} textures were created for a refused change", created.textures);
+    assert!(h.query_by_label_contains("pems: refused before any work").is_some(), "the status bar says so");
+    // The inspector shows the estimate of the selected node.
+    let pems = header_point(&h, "pems");
+    click_at(&mut h, pems);
+    assert!(h.query_by_label_contains("estimated memory: 2200 PEMs (median_cut.count)").is_some());
+    // Back down, it runs again.
+    set_param(&mut h, "median_cut", "count", ParamValue::Int(8));
+    settle(&mut h);
+    assert_eq!(state(&h, "pems"), werkstatt::app::editor::live::NodeState::Ok);
+    assert_eq!(state(&h, "light"), werkstatt::app::editor::live::NodeState::Ok);
+}
+
+/// A PEM build of 600 lights cancelled a quarter in: (resident MiB before, at the peak, after;
+/// pooled textures held and in use after; PEMs runs before and after).
+fn cancelled_build(name: &str) -> (f64, f64, f64, (usize, usize), (u64, u64)) {
+    use werkstatt::core::param::ParamValue;
+    let dir = temp_dir(name);
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    for _ in 0..20 {
+        h.step();
+    }
+    let before = rss_mib();
+    let runs_before = h.state().live.runs("pems");
+    // 600 PEMs fit the budget (about 600 MiB): the build starts; cancel it a quarter in.
+    set_param(&mut h, "median_cut", "count", ParamValue::Int(600));
+    let mut peak = before;
+    let deadline = Instant::now() + std::time::Duration::from_secs(300);
+    while !h.state().live.busy().is_some_and(|b| b.node.as_deref() == Some("pems") && b.fraction >= 0.25) {
+        assert!(Instant::now() < deadline, "the PEM build did not get a quarter in within 300 s");
+        h.step();
+        peak = peak.max(rss_mib());
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    h.key_press(egui::Key::Escape);
+    step_until(&mut h, "the cancel", std::time::Duration::from_secs(10), |app| app.live.busy().is_none());
+    peak = peak.max(rss_mib());
+    for _ in 0..10 {
+        h.step();
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let after = rss_mib();
+    // SAFETY: reads the allocator's statistics.
+    let m = unsafe { libc::mallinfo2() };
+    eprintln!(
+        "figure: memory before {before:.1} MiB, during the build {peak:.1} MiB, after the cancel {after:.1} MiB \
+         (C heap after: {} MiB in use, {} MiB free, {} MiB in large mappings)",
+        m.uordblks >> 20,
+        m.fordblks >> 20,
+        m.hblkhd >> 20
+    );
+    let pool = h.state().gpu().unwrap().pool_counts();
+    (before, peak, after, pool, (runs_before, h.state().live.runs("pems")))
+}
+
+/// After a PEM build cancelled part-way, nothing of it is kept: the pool holds no texture
+/// nobody uses, the node did not count a run, and the half-made set is gone.
+#[test]
+fn a_cancelled_build_keeps_nothing_of_it() {
+    if !in_own_process("a_cancelled_build_keeps_nothing_of_it") {
+        return;
+    }
+    let (before, peak, _, (held, in_use), (runs_before, runs_after)) = cancelled_build("memory");
+    assert!(peak > before + 50.0, "the build allocated (peak {peak:.1} MiB): the test measures something");
+    assert_eq!(held, in_use, "the pool gave back every texture nobody uses");
+    assert_eq!(runs_after, runs_before, "a cancelled run does not count");
+}
+
+/// The issue's bound on the process's memory after a cancelled build. Not met yet: the C heap
+/// keeps about 90 MiB more in use per cancelled 150-PEM build (inside wgpu or lavapipe, not in
+/// werkstatt's pools or nodes, which are empty; see docs/editor.md).
+#[test]
+#[ignore = "not met: about 90 MiB of the C heap stays in use after a cancelled 150-PEM build (docs/editor.md)"]
+fn memory_after_a_cancelled_build_is_within_10_percent() {
+    if !in_own_process("memory_after_a_cancelled_build_is_within_10_percent") {
+        return;
+    }
+    let (before, _, after, _, _) = cancelled_build("memory-10");
+    assert!(after < before * 1.1, "after the cancel {after:.1} MiB, before {before:.1} MiB");
+}
+
+#[test]
+fn playback_keeps_the_ui_frames_short() {
+    if !in_own_process("playback_keeps_the_ui_frames_short") {
+        return;
+    }
+    let dir = temp_dir("playback");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    let finished = h.state().live.finished;
+    h.get_by_label("▶ play").click();
+    h.step();
+    // At least 6 s and 3 rendered frames (a loaded machine renders slower), within 300 s.
+    let mut frames = Vec::new();
+    let t = Instant::now();
+    while t.elapsed() < std::time::Duration::from_secs(6) || h.state().live.finished < finished + 3 {
+        assert!(t.elapsed() < std::time::Duration::from_secs(300), "playback rendered too few frames in 300 s");
+        frames.push(timed_step(&mut h));
+        // A window paints at most at its display's rate.
+        std::thread::sleep(std::time::Duration::from_millis(8));
+    }
+    let secs = t.elapsed().as_secs_f64();
+    let shown = h.state().live.finished - finished;
+    let (wm, wp, wx) = stats(&frames.iter().map(|f| f.0).collect::<Vec<_>>());
+    let (cm, cp, _) = stats(&frames.iter().map(|f| f.1).collect::<Vec<_>>());
+    eprintln!(
+        "figure: playback of default.ron (8 lights), {} UI frames and {shown} rendered frames in {secs:.1} s: UI wall median {wm:.1} ms, \
+         p95 {wp:.1} ms, max {wx:.1} ms; UI thread CPU median {cm:.1} ms, p95 {cp:.1} ms",
+        frames.len()
+    );
+    assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread while playing");
+    h.get_by_label("⏸ pause").click();
+    settle(&mut h);
 }

@@ -5,6 +5,7 @@
 //! variable set in the child's environment.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use werkstatt::app::editor::live::{Live, NodeState};
@@ -16,15 +17,8 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn settle(live: &mut Live, gpu: &GpuContext) {
-    for _ in 0..200 {
-        let s = live.evaluate(Some(gpu));
-        if s.pending == 0 && live.resources.in_flight() == 0 {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    panic!("evaluation did not settle");
+fn settle(live: &mut Live, gpu: &Arc<GpuContext>) {
+    assert!(live.wait_idle(Some(gpu), Duration::from_secs(120)), "evaluation did not settle in 120 s");
 }
 
 /// The centre pixel of the graph's output image.
@@ -72,7 +66,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
         std::fs::create_dir_all(dir.join(path).parent().unwrap()).unwrap();
         std::fs::copy(root().join("shaders").join(path), dir.join(path)).unwrap();
     }
-    let gpu = GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)");
+    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
     let mut graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
     let mut live = Live::new(root().join("graphs"), false);
     live.set_size(64, 48);
@@ -96,7 +90,8 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
 
     // A broken shader: the error is reported, the last good pipeline keeps rendering.
     std::fs::write(dir.join("render/tonemap.wgsl"), original.replace("fn aces(", "fn aces( this is not wgsl")).unwrap();
-    live.reload_shaders(&gpu);
+    live.reload_shaders();
+    settle(&mut live, &gpu);
     let err = live.shader_error.clone().expect("the compile error is kept");
     assert!(err.contains("tonemap.wgsl"), "{err}");
     assert!(matches!(live.state("tonemap"), NodeState::Failed(ref m) if m.contains("last good pipeline kept")));

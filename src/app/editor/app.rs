@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use egui::{Color32, Key, KeyboardShortcut, Modifiers, RichText};
 
 use super::canvas::{Action, Canvas, ERROR_COLOR, node_menu};
+use super::cost;
 use super::files::{FileWatch, Recovery, find_recovery};
 use super::inspector::Inspector;
 use super::live::Live;
@@ -86,40 +87,53 @@ pub struct EditorApp {
     inspector: Inspector,
     pub files: FileWatch,
     gpu: Option<Arc<GpuContext>>,
-    render_state: Option<egui_wgpu::RenderState>,
+    /// What cost estimates are checked against: the device's limits and the memory budget.
+    limits: Option<cost::Limits>,
+    /// Calls for a repaint when the evaluation worker finishes.
+    waker: super::live::Waker,
+    /// The refusals already reported in the status bar.
+    reported_refusals: std::collections::BTreeMap<String, String>,
     dialog: Option<Dialog>,
     options: Options,
     /// Time spent in each UI frame (layout, evaluation, canvas), newest last.
     pub frame_times: FrameTimes,
     /// Whole frames as eframe measures them (UI, tessellation, painting), in a window.
     pub window_frames: FrameTimes,
-    eval_count: u64,
     title: String,
     quitting: bool,
     last_frame: Option<Instant>,
 }
 
 impl EditorApp {
-    /// Creates the editor on eframe's wgpu device (shared with the engine), opening `path`.
+    /// Creates the editor, opening `path`. The engine opens a device of its own on the
+    /// window's adapter: the window paints on its device while the engine's worker submits.
     pub fn new(cc: &eframe::CreationContext<'_>, path: Option<PathBuf>, options: Options) -> Self {
-        let render_state = cc.wgpu_render_state.clone();
-        let gpu = render_state
-            .as_ref()
-            .map(|rs| Arc::new(GpuContext::from_device(rs.device.clone(), rs.queue.clone(), &rs.adapter)));
+        let mut engine_error = None;
+        let gpu = cc.wgpu_render_state.as_ref().and_then(|rs| match GpuContext::from_adapter(&rs.adapter) {
+            Ok(g) => Some(Arc::new(g)),
+            Err(e) => {
+                engine_error = Some(format!("{e:#}"));
+                None
+            }
+        });
+        let egui_ctx = cc.egui_ctx.clone();
+        let waker: super::live::Waker = Arc::new(move || egui_ctx.request_repaint());
+        let limits = gpu.as_deref().map(cost::Limits::for_gpu);
         let mut app = EditorApp {
             state: EditorState::default(),
-            live: Live::new(PathBuf::from("."), options.watch_files),
+            live: new_live(PathBuf::from("."), options.watch_files, &waker),
+            limits,
+            waker,
+            reported_refusals: Default::default(),
             canvas: Canvas::new(),
             viewport: Viewport::new(),
             inspector: Inspector { file_dialogs: options.file_dialogs },
             files: FileWatch::default(),
             gpu,
-            render_state,
             dialog: None,
             options,
             frame_times: FrameTimes::default(),
             window_frames: FrameTimes::default(),
-            eval_count: 0,
             title: String::new(),
             quitting: false,
             last_frame: None,
@@ -129,7 +143,7 @@ impl EditorApp {
             Some(p) => {
                 // A new graph that will be saved there.
                 app.state.path = Some(p.clone());
-                app.live = Live::new(base_dir(Some(&p)), app.options.watch_files);
+                app.live = new_live(base_dir(Some(&p)), app.options.watch_files, &app.waker);
                 app.state.info(format!("{} does not exist yet; it is created on save", p.display()));
             }
             None => {
@@ -141,10 +155,13 @@ impl EditorApp {
         if let Some(gpu) = &app.gpu {
             app.state.info(format!("rendering on {}", gpu.adapter_name()));
         }
+        if let Some(e) = engine_error {
+            app.state.error(format!("cannot open a device for the engine: {e}"));
+        }
         app
     }
 
-    /// The GPU the nodes render with (the window's).
+    /// The GPU the nodes render with (a device of its own on the window's adapter).
     pub fn gpu(&self) -> Option<&GpuContext> {
         self.gpu.as_deref()
     }
@@ -165,7 +182,7 @@ impl EditorApp {
                 state.info(format!("opened {}", path.display()));
                 let rec = find_recovery(Some(path), &state.graph);
                 self.state = state;
-                self.live = Live::new(base_dir(Some(path)), self.options.watch_files);
+                self.live = new_live(base_dir(Some(path)), self.options.watch_files, &self.waker);
                 self.canvas.reset();
                 self.files.track(Some(path));
                 if let Some(rec) = rec {
@@ -178,7 +195,7 @@ impl EditorApp {
 
     fn new_graph(&mut self) {
         self.state = EditorState::default();
-        self.live = Live::new(PathBuf::from("."), self.options.watch_files);
+        self.live = new_live(PathBuf::from("."), self.options.watch_files, &self.waker);
         self.canvas.reset();
         self.files.track(None);
     }
@@ -338,6 +355,10 @@ impl EditorApp {
         if shortcut(Modifiers::NONE, Key::F) {
             self.canvas.request_fit();
         }
+        if self.live.busy().is_some() && shortcut(Modifiers::NONE, Key::Escape) {
+            self.live.cancel();
+            self.state.info("evaluation cancelled: the viewport shows the last finished frame");
+        }
         if shortcut(Modifiers::NONE, Key::Delete) || shortcut(Modifiers::NONE, Key::Backspace) {
             self.state.delete_selected();
         }
@@ -485,6 +506,18 @@ impl EditorApp {
         });
     }
 
+    /// Says in the status bar when a change was refused by its cost (once per refusal).
+    fn report_refusals(&mut self) {
+        if self.live.refused != self.reported_refusals {
+            for (id, why) in &self.live.refused {
+                if self.reported_refusals.get(id) != Some(why) {
+                    self.state.error(format!("{id}: {why}"));
+                }
+            }
+            self.reported_refusals = self.live.refused.clone();
+        }
+    }
+
     fn status_bar(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             if let Some((median, p95, _)) = self.window_frames.stats() {
@@ -507,6 +540,19 @@ impl EditorApp {
                 .small()
                 .monospace(),
             );
+            if let Some(b) = self.live.busy() {
+                let node = b.node.as_deref().unwrap_or("");
+                ui.label(
+                    RichText::new(format!(
+                        "rendering {node} {:.0}%, {:.1} s",
+                        b.fraction * 100.0,
+                        b.elapsed.as_secs_f64()
+                    ))
+                    .small()
+                    .monospace(),
+                )
+                .on_hover_text("the evaluation runs on its own thread; Esc cancels it");
+            }
             ui.separator();
             if let Some(m) = self.state.last_message() {
                 let color = if m.level == Level::Error { ERROR_COLOR } else { ui.visuals().text_color() };
@@ -625,6 +671,13 @@ impl EditorApp {
     }
 }
 
+/// A live evaluation that asks the window for a repaint when its worker finishes.
+fn new_live(base: PathBuf, watch_files: bool, waker: &super::live::Waker) -> Live {
+    let mut live = Live::new(base, watch_files);
+    live.set_waker(waker.clone());
+    live
+}
+
 fn base_dir(path: Option<&Path>) -> PathBuf {
     path.and_then(Path::parent)
         .filter(|p| !p.as_os_str().is_empty())
@@ -649,11 +702,16 @@ impl eframe::App for EditorApp {
         }
         self.shortcuts(&ctx);
 
-        self.live.sync(&self.state.graph, self.state.revision, self.state.inspected.as_ref());
-        let summary = self.live.evaluate(self.gpu.as_deref());
-        if summary.ran > 0 {
-            self.eval_count += 1;
-        }
+        self.live.sync_with(
+            &self.state.graph,
+            self.state.revision,
+            self.state.inspected.as_ref(),
+            self.limits.as_ref(),
+        );
+        self.report_refusals();
+        // A drag holds its value until it rests or is let go (see `live::SETTLE`).
+        self.live.gesture = ctx.input(|i| i.pointer.any_down());
+        self.live.pump(self.gpu.as_ref());
         self.canvas.sync(&self.state.graph, self.state.revision);
         let synced = (self.state.revision, self.state.inspected.clone(), self.live.camera.clone());
 
@@ -668,14 +726,7 @@ impl eframe::App for EditorApp {
         egui::Panel::right("side").resizable(true).default_size(420.0).min_size(280.0).show(ui, |ui| {
             let h = (ui.available_height() * 0.5).max(200.0);
             ui.allocate_ui(egui::vec2(ui.available_width(), h), |ui| {
-                self.viewport.show(
-                    ui,
-                    &mut self.state,
-                    &mut self.live,
-                    self.gpu.as_ref(),
-                    self.render_state.as_ref(),
-                    self.eval_count,
-                );
+                self.viewport.show(ui, &mut self.state, &mut self.live);
             });
             ui.separator();
             egui::ScrollArea::vertical().show(ui, |ui| self.inspector.show(ui, &mut self.state, &self.live));
@@ -714,8 +765,11 @@ impl eframe::App for EditorApp {
         }
         // An edit made this frame is evaluated in the next one: ask for it now.
         let changed = synced != (self.state.revision, self.state.inspected.clone(), self.live.camera.clone());
-        if self.live.animating || changed {
+        if self.live.playing || changed {
             ctx.request_repaint();
+        } else if self.live.animating {
+            // The worker wakes the window when it finishes; until then, show its progress.
+            ctx.request_repaint_after(Duration::from_millis(30));
         } else {
             // Poll files (autosave, disk changes, shader edits) now and then.
             ctx.request_repaint_after(Duration::from_millis(500));

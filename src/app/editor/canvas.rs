@@ -79,6 +79,10 @@ impl SnarlPin for TypedPin {
     }
 }
 
+/// The smallest zoom framing picks: node titles stay readable (13-point text at 0.7 is about
+/// 9 pixels), and a larger graph is panned instead of shrunk. Ctrl+scroll zooms out further.
+pub const MIN_FIT_ZOOM: f32 = 0.7;
+
 pub struct Canvas {
     snarl: Snarl<String>,
     ids: HashMap<String, NodeId>,
@@ -199,7 +203,8 @@ impl Canvas {
         self.insert_hint.is_some()
     }
 
-    /// Frames all nodes in the view (once their sizes are known).
+    /// Frames all nodes in the view (once their sizes are known), at a zoom no smaller than
+    /// [`MIN_FIT_ZOOM`].
     pub fn request_fit(&mut self) {
         self.fit_pending = true;
     }
@@ -218,8 +223,17 @@ impl Canvas {
         }
         let bb = bb.expand(30.0);
         let area = self.canvas_rect.shrink(10.0);
-        let s = (area.width() / bb.width()).min(area.height() / bb.height()).clamp(0.2, 1.0);
-        Some(TSTransform::new(area.center().to_vec2() - bb.center().to_vec2() * s, s))
+        let s = (area.width() / bb.width()).min(area.height() / bb.height()).clamp(MIN_FIT_ZOOM, 1.0);
+        // Centred along an axis where the graph fits; else its start (top, left) is shown and
+        // the user pans to the rest.
+        let place = |lo: f32, hi: f32, a_lo: f32, a_hi: f32| {
+            if (hi - lo) * s <= a_hi - a_lo { (a_lo + a_hi) * 0.5 - (lo + hi) * 0.5 * s } else { a_lo - lo * s }
+        };
+        let t = egui::vec2(
+            place(bb.min.x, bb.max.x, area.min.x, area.max.x),
+            place(bb.min.y, bb.max.y, area.min.y, area.max.y),
+        );
+        Some(TSTransform::new(t, s))
     }
 
     /// A point in graph space for new nodes: `screen` if it is on the canvas, else the
@@ -490,9 +504,8 @@ impl Viewer<'_> {
         let Some((_, p)) = p else { return String::new() };
         let mut text =
             format!("{}: {}{}\n{}", p.name, p.ty, if input && p.required { " (required)" } else { "" }, p.doc);
-        let value = if input { self.live.input(port) } else { self.live.output(port) };
-        match value {
-            Some(v) => text.push_str(&format!("\nvalue: {}", v.summary())),
+        match self.live.summary(port, input) {
+            Some(v) => text.push_str(&format!("\nvalue: {v}")),
             None => match self.state(&port.node) {
                 NodeState::Pending(m) => text.push_str(&format!("\nresource: {m}")),
                 NodeState::Failed(_) | NodeState::Blocked(_) => text.push_str("\nno value (the node has an error)"),
@@ -674,6 +687,14 @@ impl SnarlViewer<String> for Viewer<'_> {
                     ui.add(egui::Label::new(RichText::new(m).small().color(PENDING_COLOR)).wrap());
                 }
                 _ => {}
+            }
+            // The node the worker runs now, and how far it is.
+            if let Some(b) = self.live.busy().filter(|b| b.node.as_deref() == Some(id.as_str())) {
+                ui.add(
+                    egui::ProgressBar::new(b.fraction)
+                        .desired_width(min_width.max(120.0))
+                        .text(RichText::new(format!("running {:.0}%", b.fraction * 100.0)).small()),
+                );
             }
             for w in self.live.warnings(&id) {
                 ui.add(egui::Label::new(RichText::new(format!("warning: {w}")).small().color(PENDING_COLOR)).wrap());

@@ -59,6 +59,12 @@ impl Inspector {
             }
             _ => {}
         }
+        // What its parameters will allocate, estimated before it runs (see `cost`).
+        if let Some(e) = live.estimates.get(&id) {
+            let refused = live.refused.contains_key(&id);
+            let text = RichText::new(format!("estimated memory: {}", e.detail)).small();
+            ui.add(egui::Label::new(if refused { text.color(ERROR_COLOR) } else { text }).wrap());
+        }
         if let Some((t, _)) = live.timing(&id) {
             ui.label(
                 RichText::new(format!("last run {:.2} ms, {} runs", t.as_secs_f64() * 1e3, live.runs(&id))).small(),
@@ -97,9 +103,8 @@ impl Inspector {
                     ui.colored_label(port_color(p.ty), if input { "▶" } else { "◀" });
                     ui.label(format!("{} ({})", p.name, p.ty)).on_hover_text(p.doc);
                     let port = crate::core::graph::PortRef { node: id.clone(), port: p.name.into() };
-                    let v = if input { live.input(&port) } else { live.output(&port) };
-                    if let Some(v) = v {
-                        ui.label(RichText::new(v.summary()).small().weak());
+                    if let Some(v) = live.summary(&port, input) {
+                        ui.label(RichText::new(v).small().weak());
                     }
                 });
             }

@@ -4,10 +4,12 @@
 //! The logic lives in plain Rust types that tests drive without a window:
 //! [`document`] (operations on a [`Graph`](crate::core::graph::Graph)), [`history`] (undo),
 //! [`state::EditorState`] (document, file, selection, clipboard, messages) and
-//! [`live::Live`] (evaluation). [`app::EditorApp`] draws them and turns input into calls.
+//! [`live::Live`] (evaluation, on a worker thread) and [`cost`] (estimates before evaluation).
+//! [`app::EditorApp`] draws them and turns input into calls.
 
 pub mod app;
 pub mod canvas;
+pub mod cost;
 pub mod document;
 pub mod files;
 pub mod history;
@@ -32,7 +34,8 @@ pub fn run(graph: Option<PathBuf>, backend: Backend) -> anyhow::Result<()> {
         Backend::Vulkan => wgpu::Backends::VULKAN,
         Backend::Gl => wgpu::Backends::GL,
     };
-    // One device for the window and the engine: ask for what the nodes need.
+    // The engine opens its own device on this adapter (see `EditorApp::new`); the window asks
+    // for the same features and limits.
     setup.device_descriptor = Arc::new(GpuContext::device_descriptor);
     let mut native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_title("werkstatt").with_inner_size([1440.0, 900.0]),

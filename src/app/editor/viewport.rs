@@ -1,62 +1,26 @@
 //! The viewport: the viewed texture (the graph's Preview, its first output, or any
-//! inspected texture port) shown live through egui-wgpu. The engine renders on the window's
-//! own device, so the texture is only converted for display on the GPU (any float format to
-//! gamma-encoded Rgba8Unorm, which is what egui samples) and registered with egui's
-//! renderer; nothing is copied to the CPU.
-
-use std::sync::Arc;
+//! inspected texture port) shown live. The evaluation worker converts it for display on the
+//! engine's GPU (any float format to gamma-encoded Rgba8Unorm, which is what egui samples) and
+//! copies that to the CPU; the viewport hands the pixels to egui. The engine has a device of
+//! its own: on a software rasterizer a submit holds wgpu's queue for as long as the GPU work
+//! runs, and on a shared queue the window could not paint meanwhile. While an evaluation runs,
+//! the last finished picture stays, with its progress over it and a button to cancel.
 
 use egui::{Color32, RichText, Sense, Ui, Vec2};
 
 use super::live::{CameraOverride, Live, camera_for, viewed_port};
 use super::state::EditorState;
-use crate::gpu::{FullscreenPass, GpuContext, GpuImage};
-
-const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-
-/// The display conversion: a full-screen pass over shaders/render/display.wgsl.
-struct Converter {
-    pass: FullscreenPass,
-}
-
-impl Converter {
-    fn new() -> Converter {
-        Converter { pass: FullscreenPass::new("display.wgsl") }
-    }
-
-    /// The display mode for a source format, or why it cannot be shown.
-    fn mode(image: &GpuImage) -> Result<u32, String> {
-        use wgpu::TextureFormat as F;
-        if !image.texture.usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) {
-            return Err("this texture cannot be sampled, so it cannot be shown".into());
-        }
-        match image.format {
-            F::Rgba8Unorm | F::Bgra8Unorm => Ok(1),
-            F::R32Float | F::R16Float => Ok(2),
-            f if matches!(f.sample_type(None, None), Some(wgpu::TextureSampleType::Float { .. })) => Ok(0),
-            f => Err(format!("textures of format {f:?} cannot be shown")),
-        }
-    }
-
-    /// Converts and submits, so egui's renderer samples the result.
-    fn run(&mut self, gpu: &GpuContext, src: &GpuImage, dst: &GpuImage, mode: u32) -> anyhow::Result<()> {
-        gpu.checked("viewport display", || {
-            let r = self.pass.run(gpu, bytemuck::cast_slice(&[mode, 0u32, 0, 0]), &[src], dst);
-            gpu.flush();
-            r
-        })?
-    }
-}
+use crate::gpu::GpuImage;
 
 /// Render sizes offered in the viewport's toolbar.
 pub const SIZES: &[(u32, u32)] = &[(320, 240), (480, 360), (640, 480), (960, 720), (1280, 960)];
 
 pub struct Viewport {
-    converter: Option<Converter>,
+    /// The picture shown, on the engine's device (for tests that read it back).
     display: Option<GpuImage>,
-    texture_id: Option<egui::TextureId>,
-    /// The source last converted: its address and the evaluation count, to skip repeats.
-    last_source: Option<(usize, u64)>,
+    texture: Option<egui::TextureHandle>,
+    /// The stamp of the picture shown, to hand each new one to egui once.
+    last_stamp: Option<u64>,
     pub message: Option<String>,
 }
 
@@ -68,67 +32,80 @@ impl Default for Viewport {
 
 impl Viewport {
     pub fn new() -> Self {
-        Viewport { converter: None, display: None, texture_id: None, last_source: None, message: None }
+        Viewport { display: None, texture: None, last_stamp: None, message: None }
     }
 
-    /// The texture egui shows: the viewed port converted for display (None before the first).
+    /// The picture shown: the viewed port converted for display (None before the first).
     pub fn display(&self) -> Option<&GpuImage> {
         self.display.as_ref()
     }
 
-    /// Converts the viewed texture for display (when it changed) and registers it with egui.
-    fn update_texture(
-        &mut self,
-        gpu: &GpuContext,
-        render_state: &egui_wgpu::RenderState,
-        src: &GpuImage,
-        stamp: u64,
-    ) -> Result<(), String> {
-        let key = (src as *const GpuImage as usize, stamp);
-        if self.last_source == Some(key) && self.texture_id.is_some() {
-            return Ok(());
+    /// Hands a newly finished picture to egui (the previous one is let go).
+    fn update_texture(&mut self, ctx: &egui::Context, display: &super::live::Display) {
+        if self.last_stamp == Some(display.stamp) && self.texture.is_some() {
+            return;
         }
-        let mode = Converter::mode(src)?;
-        let converter = self.converter.get_or_insert_with(Converter::new);
-        let resized = self.display.as_ref().is_none_or(|d| (d.width, d.height) != (src.width, src.height));
-        if resized {
-            let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-            self.display = Some(GpuImage::new(gpu, "viewport", src.width, src.height, DISPLAY_FORMAT, usage));
+        let Some(pixels) = display.pixels.clone() else { return };
+        match &mut self.texture {
+            Some(t) => t.set(pixels, egui::TextureOptions::LINEAR),
+            None => self.texture = Some(ctx.load_texture("viewport", pixels, egui::TextureOptions::LINEAR)),
         }
-        let Some(display) = &self.display else { return Ok(()) };
-        converter.run(gpu, src, display, mode).map_err(|e| format!("{e:#}"))?;
-        let mut renderer = render_state.renderer.write();
-        match self.texture_id {
-            Some(id) if resized => {
-                renderer.update_egui_texture_from_wgpu_texture(&gpu.device, &display.view, wgpu::FilterMode::Linear, id)
-            }
-            Some(_) => {}
-            None => {
-                self.texture_id =
-                    Some(renderer.register_native_texture(&gpu.device, &display.view, wgpu::FilterMode::Linear));
-            }
+        self.display = display.image.as_ref().map(GpuImage::share);
+        self.last_stamp = Some(display.stamp);
+    }
+
+    /// Over the picture: the running evaluation's progress and a cancel button, or that the
+    /// user cancelled. Short evaluations (a playing animation's frames) show nothing.
+    fn progress(&mut self, ui: &mut Ui, live: &mut Live, rect: egui::Rect) {
+        let bar =
+            egui::Rect::from_min_size(rect.left_top() + Vec2::new(6.0, 6.0), Vec2::new(rect.width() - 12.0, 24.0));
+        if let Some(busy) = live.busy().filter(|b| b.elapsed.as_millis() >= 150 || b.cancelling) {
+            let text = match (&busy.node, busy.cancelling) {
+                (_, true) => "cancelling…".to_string(),
+                (Some(n), false) => format!("rendering… {:.0}% ({n})", busy.fraction * 100.0),
+                (None, false) => "rendering…".to_string(),
+            };
+            ui.scope_builder(egui::UiBuilder::new().max_rect(bar), |ui| {
+                egui::Frame::new().fill(Color32::from_black_alpha(170)).inner_margin(3.0).corner_radius(3.0).show(
+                    ui,
+                    |ui| {
+                        ui.horizontal(|ui| {
+                            ui.label(RichText::new(text).color(Color32::WHITE));
+                            if !busy.cancelling
+                                && ui.small_button("cancel").on_hover_text("stop the evaluation (Esc)").clicked()
+                            {
+                                live.cancel();
+                            }
+                        });
+                    },
+                );
+            });
+        } else if live.cancelled_by_user() {
+            ui.scope_builder(egui::UiBuilder::new().max_rect(bar), |ui| {
+                egui::Frame::new().fill(Color32::from_black_alpha(170)).inner_margin(3.0).corner_radius(3.0).show(
+                    ui,
+                    |ui| {
+                        ui.horizontal(|ui| {
+                            ui.label(RichText::new("cancelled: showing the last finished frame").color(Color32::WHITE));
+                            if ui.small_button("render").clicked() {
+                                live.resume();
+                            }
+                        });
+                    },
+                );
+            });
         }
-        self.last_source = Some(key);
-        Ok(())
     }
 
     /// Draws the viewport: toolbar (what is shown, size, frame, play), image, orbit controls.
-    pub fn show(
-        &mut self,
-        ui: &mut Ui,
-        state: &mut EditorState,
-        live: &mut Live,
-        gpu: Option<&Arc<GpuContext>>,
-        render_state: Option<&egui_wgpu::RenderState>,
-        eval_count: u64,
-    ) {
+    pub fn show(&mut self, ui: &mut Ui, state: &mut EditorState, live: &mut Live) {
         let viewed = viewed_port(&state.graph, state.inspected.as_ref());
         ui.horizontal(|ui| {
             match &viewed {
                 Some(p) => {
                     ui.label(RichText::new(format!("showing {p}")).strong());
-                    if let Some(v) = live.output(p) {
-                        ui.label(RichText::new(v.summary()).small().weak());
+                    if let Some(v) = live.summary(p, false) {
+                        ui.label(RichText::new(v).small().weak());
                     }
                 }
                 None => {
@@ -160,35 +137,29 @@ impl Viewport {
         });
 
         let Some(port) = viewed else { return };
-        let value = live.output(&port);
-        let image = value.and_then(|v| v.as_texture());
-        let shown = match (image, gpu, render_state) {
-            (Some(img), Some(gpu), Some(rs)) => match self.update_texture(gpu, rs, img, eval_count) {
-                Ok(()) => {
-                    self.texture_id.zip(self.display.as_ref().map(|d| Vec2::new(d.width as f32, d.height as f32)))
-                }
-                Err(e) => {
-                    self.message = Some(e);
-                    None
-                }
-            },
-            (Some(_), _, _) => {
-                self.message = Some("no GPU display: the window has no wgpu renderer".into());
-                None
+        // The last finished picture of this port, while the next one is made.
+        let display = live.display().filter(|d| d.port == port);
+        let shown = match display.filter(|d| d.pixels.is_some()) {
+            Some(d) => {
+                self.update_texture(ui.ctx(), d);
+                self.texture.as_ref().map(|t| (t.id(), t.size_vec2()))
             }
-            (None, _, _) => {
-                self.message = Some(match live.state(&port.node) {
-                    super::live::NodeState::Failed(m) => format!("{}: {m}", port.node),
-                    super::live::NodeState::Pending(m) => format!("{}: {m}", port.node),
-                    super::live::NodeState::Blocked(m) => format!("{}: {m}", port.node),
-                    _ => match value {
-                        Some(v) => format!("{port} = {} ({})", v.summary(), v.type_name()),
+            None => {
+                self.message = Some(match (live.state(&port.node), display.and_then(|d| d.error.clone())) {
+                    (_, Some(e)) => e,
+                    (super::live::NodeState::Failed(m), _) => format!("{}: {m}", port.node),
+                    (super::live::NodeState::Pending(m), _) => format!("{}: {m}", port.node),
+                    (super::live::NodeState::Blocked(m), _) => format!("{}: {m}", port.node),
+                    _ => match live.summary(&port, false) {
+                        Some(v) => format!("{port} = {v}"),
+                        None if live.busy().is_some() => "rendering…".into(),
                         None => format!("{port} has no value yet"),
                     },
                 });
                 None
             }
         };
+        let has_value = live.summary(&port, false).is_some();
         let avail = ui.available_size();
         let response = match shown {
             Some((id, size)) => {
@@ -205,8 +176,7 @@ impl Viewport {
                 ui.painter().rect_filled(rect, 4.0, Color32::from_gray(25));
                 if let Some(m) = &self.message {
                     // A value (a Watch node's number) is news, anything else a problem.
-                    let color =
-                        if value.is_some() { ui.visuals().strong_text_color() } else { super::canvas::ERROR_COLOR };
+                    let color = if has_value { ui.visuals().strong_text_color() } else { super::canvas::ERROR_COLOR };
                     ui.painter().text(
                         rect.center(),
                         egui::Align2::CENTER_CENTER,
@@ -218,6 +188,7 @@ impl Viewport {
                 response
             }
         };
+        self.progress(ui, live, response.rect);
         // Orbit controls: drag turns, wheel zooms, double-click resets to the graph's camera.
         let camera = live
             .camera
