@@ -262,12 +262,15 @@ pub struct Panel {
     pub patches_u: usize,
     pub patches_v: usize,
     pub patches: Vec<BezierPatch>,
+    /// Whether the normal is -(∂u x ∂v): the side the input surface's normals face, so that
+    /// "up" (η = +1, the weft) is on the surface's front.
+    pub flip: bool,
 }
 
 impl Panel {
     pub fn new(grid: &ControlGrid) -> Panel {
         let (patches_u, patches_v) = grid.patches();
-        Panel { patches_u, patches_v, patches: grid.bezier_patches(MU) }
+        Panel { patches_u, patches_v, patches: grid.bezier_patches(MU), flip: false }
     }
 
     pub fn patch(&self, pi: usize, pj: usize) -> &BezierPatch {
@@ -292,6 +295,7 @@ impl Panel {
         } else if t == 1.0 && pj + 1 < self.patches_v {
             dv = 0.5 * (dv + self.patch(pi, pj + 1).derivatives(s, 0.0).1);
         }
-        Frame::from_derivatives(du, dv)
+        let f = Frame::from_derivatives(du, dv);
+        if self.flip { Frame { t: f.t, n: -f.n, b: -f.b } } else { f }
     }
 }

@@ -22,6 +22,8 @@ pub struct PieceGrid {
     pub grid: ControlGrid,
     /// Per patch (row by row): whether all its corners lie in the piece.
     pub inside: Vec<bool>,
+    /// Whether the surface's normals face -(∂u x ∂v) of the grid (see `Panel::flip`).
+    pub flipped: bool,
 }
 
 pub fn resample(mesh: &Mesh, patch_size: f64) -> anyhow::Result<Vec<PieceGrid>> {
@@ -53,12 +55,24 @@ pub fn resample(mesh: &Mesh, patch_size: f64) -> anyhow::Result<Vec<PieceGrid>> 
         let locator = Locator::new(mesh, tris, lo, hi);
         let mut points = Vec::with_capacity((cu + 1) * (cv + 1));
         let mut corner_inside = Vec::with_capacity((cu + 1) * (cv + 1));
+        let mut normals = Vec::with_capacity((cu + 1) * (cv + 1));
         for j in 0..=cv {
             for i in 0..=cu {
                 let uv = lo + ext * DVec2::new(i as f64 / cu as f64, j as f64 / cv as f64);
-                let (p, inside) = locator.point(uv);
+                let (p, n, inside) = locator.point(uv);
                 points.push(p);
+                normals.push(n);
                 corner_inside.push(inside);
+            }
+        }
+        // Orientation: the grid's ∂u x ∂v against the surface's normals, summed over the grid.
+        let at_p = |i: usize, j: usize| points[j * (cu + 1) + i];
+        let mut facing = 0.0;
+        for j in 0..=cv {
+            for i in 0..=cu {
+                let du = at_p((i + 1).min(cu), j) - at_p(i.saturating_sub(1), j);
+                let dv = at_p(i, (j + 1).min(cv)) - at_p(i, j.saturating_sub(1));
+                facing += du.cross(dv).dot(normals[j * (cu + 1) + i]);
             }
         }
         let at = |i: usize, j: usize| corner_inside[j * (cu + 1) + i];
@@ -66,7 +80,7 @@ pub fn resample(mesh: &Mesh, patch_size: f64) -> anyhow::Result<Vec<PieceGrid>> 
             .flat_map(|j| (0..cu).map(move |i| (i, j)))
             .map(|(i, j)| at(i, j) && at(i + 1, j) && at(i, j + 1) && at(i + 1, j + 1))
             .collect();
-        out.push(PieceGrid { piece, grid: ControlGrid::new(cu + 1, cv + 1, points)?, inside });
+        out.push(PieceGrid { piece, grid: ControlGrid::new(cu + 1, cv + 1, points)?, inside, flipped: facing < 0.0 });
     }
     anyhow::ensure!(!out.is_empty(), "the surface has no pattern piece with a UV area");
     Ok(out)
@@ -139,23 +153,33 @@ impl<'a> Locator<'a> {
         Some([1.0 - b1 - b2, b1, b2])
     }
 
-    fn eval(&self, k: usize, b: [f64; 3]) -> DVec3 {
+    /// The position and normal at barycentrics `b` of triangle `k` (the face normal where the
+    /// mesh has no vertex normals).
+    fn eval(&self, k: usize, b: [f64; 3]) -> (DVec3, DVec3) {
         let p = self.tris[k].map(|i| self.mesh.positions[i as usize].as_dvec3());
-        b[0] * p[0] + b[1] * p[1] + b[2] * p[2]
+        let n = match self.mesh.normals.len() == self.mesh.positions.len() {
+            true => {
+                let n = self.tris[k].map(|i| self.mesh.normals[i as usize].as_dvec3());
+                b[0] * n[0] + b[1] * n[1] + b[2] * n[2]
+            }
+            false => (p[1] - p[0]).cross(p[2] - p[0]),
+        };
+        (b[0] * p[0] + b[1] * p[1] + b[2] * p[2], n)
     }
 
     /// The surface point at `uv` and whether `uv` lies in the piece; outside, the point of the
     /// nearest triangle (barycentrics clamped).
-    fn point(&self, uv: DVec2) -> (DVec3, bool) {
+    fn point(&self, uv: DVec2) -> (DVec3, DVec3, bool) {
         const EPS: f64 = 1e-9;
         let c = ((uv - self.lo) / self.cell).floor();
         let (i, j) = (c.x.clamp(0.0, (self.n - 1) as f64) as usize, c.y.clamp(0.0, (self.n - 1) as f64) as usize);
         for &k in &self.buckets[j * self.n + i] {
             if let Some(b) = self.bary(k, uv).filter(|b| b.iter().all(|&x| x >= -EPS)) {
-                return (self.eval(k, b), true);
+                let (p, n) = self.eval(k, b);
+                return (p, n, true);
             }
         }
-        let mut best = (f64::MAX, DVec3::ZERO);
+        let mut best = (f64::MAX, (DVec3::ZERO, DVec3::Y));
         for k in 0..self.tris.len() {
             let Some(b) = self.bary(k, uv) else { continue };
             let mut c = b.map(|x| x.max(0.0));
@@ -168,6 +192,6 @@ impl<'a> Locator<'a> {
                 best = (d, self.eval(k, c));
             }
         }
-        (best.1, false)
+        (best.1.0, best.1.1, false)
     }
 }

@@ -204,6 +204,20 @@ impl Woven<'_> {
         Ok(out)
     }
 
+    /// The triangles one patch makes at level `l` (before degenerate ones are dropped).
+    pub fn patch_triangles(&self, l: f64) -> usize {
+        let st = LodState::at(l, self.morph);
+        match st.scale {
+            Scale::Panel => 2 * st.panel_res() * st.panel_res(),
+            Scale::Yarn | Scale::Fibre => {
+                let (sa, sr) = LodState::tube_res(st.grid);
+                let segments = along_points(sa, self.yarn.nodes).len() - 1;
+                let fibres = if st.scale == Scale::Fibre { self.yarn.fibres } else { 1 };
+                2 * self.yarn.nodes * segments * sr * 2 * fibres
+            }
+        }
+    }
+
     /// The level of the neighbour across an edge, if there is one.
     fn neighbour(&self, levels: &[Option<f64>], pi: isize, pj: isize) -> Option<f64> {
         let (pu, pv) = (self.panel.patches_u as isize, self.panel.patches_v as isize);

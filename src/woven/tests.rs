@@ -429,6 +429,7 @@ fn triangle_counts_follow_the_papers_pattern() {
     for (l, per_patch) in [(7.0, 8192), (9.0, 32768), (7.5, 8192), (3.0, 2 * 8 * 8)] {
         let t = w.tessellate(&[Some(l); 4]).unwrap();
         assert_eq!(t.triangles(), 4 * per_patch, "L = {l}");
+        assert_eq!(w.patch_triangles(l), per_patch);
     }
     assert!(w.tessellate(&[Some(14.5); 4]).unwrap_err().to_string().contains("outside"));
 }
