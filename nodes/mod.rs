@@ -19,6 +19,7 @@ pub mod occlusion;
 pub mod render;
 pub mod tessellation;
 pub mod warp;
+pub mod woven;
 
 use crate::core::node::prelude::*;
 
@@ -32,6 +33,7 @@ pub static ALL: &[&NodeSpec] = &[
     &mesh::geometry::TRANSFORM_MESH,
     &mesh::avatar::AVATAR,
     &tessellation::tessellate::TESSELLATE,
+    &woven::woven_cloth::WOVEN_CLOTH,
     &cloth::node::CLOTH_SIM,
     &mesh::mesh_sequence::MESH_SEQUENCE,
     &mesh::live_link::LIVE_LINK,

@@ -35,6 +35,7 @@ pub mod occlusion;
 pub mod render;
 pub mod tessellation;
 pub mod warp;
+pub mod woven;
 
 #[path = "../nodes/mod.rs"]
 pub mod nodes;

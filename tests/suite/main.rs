@@ -36,6 +36,7 @@ mod shadow;
 mod ssao;
 mod tessellation;
 mod warping;
+mod woven;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be
 /// built at all, and one in tests/suite/ only when it is declared above.

@@ -5,3 +5,4 @@ pub mod attached;
 pub mod mesh;
 pub mod pn_pixels;
 pub mod tessellated;
+pub mod woven;
