@@ -142,7 +142,7 @@ fn add_connect_edit_undo_redo_and_save() {
     let original = std::fs::read_to_string(&path).unwrap();
     let mut h = editor(&path);
     assert!(!h.state().state.is_dirty());
-    assert!(h.state().gpu().is_some(), "the engine shares the window's wgpu device");
+    assert!(h.state().gpu().is_some(), "the engine opened a device on the window's adapter");
 
     // Add a Preview node from the Add menu, through its search field.
     h.get_by_role_and_label(Role::Button, "Add").click();
@@ -711,13 +711,22 @@ fn a_slider_drag_is_one_undo_step_and_only_dependents_rerun() {
     // The inspector's exposure slider is the lowest slider (the frame slider is above it).
     let slider = h.get_all_by_role(Role::Slider).map(|n| n.rect()).max_by(|a, b| a.top().total_cmp(&b.top())).unwrap();
     let a = slider.center();
+    let t = Instant::now();
     drag(&mut h, a, a + Vec2::new(slider.width() * 0.3, 0.0));
+    let dragged = t.elapsed();
     settle(&mut h);
     let exposure = h.state().state.graph.param("tonemap", "exposure").and_then(|v| v.as_f64()).unwrap();
     assert!(exposure > 1.0, "the drag raised the exposure: {exposure}");
     assert_eq!(h.state().state.history.len(), steps + 1, "the whole drag is one undo step");
     assert_eq!(runs(&h, "light"), light, "upstream nodes did not re-run");
     assert!(runs(&h, "tonemap") > tm, "the tone mapper re-ran");
+    // A value held by the drag is evaluated when it rests (250 ms) or is let go: a drag that
+    // never rested that long evaluates its final value only, not the ones on the way.
+    if dragged < werkstatt::app::editor::live::SETTLE {
+        assert_eq!(runs(&h, "tonemap"), tm + 1, "only the released value was evaluated");
+    } else {
+        eprintln!("the drag took {dragged:?} (a loaded machine): intermediate values may have rested");
+    }
     h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
     settle(&mut h);
     assert_eq!(h.state().state.graph.nodes["tonemap"].params.get("exposure"), None);
@@ -892,6 +901,7 @@ fn a_slow_node_keeps_the_ui_responsive_and_cancels() {
     // What the UI thread spends on a frame (immune to a loaded machine), and no frame waits for
     // the evaluation (it would take seconds).
     assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread during a slow evaluation");
+    assert!(wp < 33.0, "UI frames took p95 {wp:.1} ms during a slow evaluation");
     assert!(wx < 1000.0, "a UI frame took {wx:.0} ms: it waited for the evaluation");
     assert!(frames.len() >= 15, "only {} UI frames in 1.5 s", frames.len());
 
@@ -956,13 +966,25 @@ fn a_change_past_the_limits_is_refused_before_any_work() {
     let mut h = editor(&path);
     let gpu_created = h.state().gpu().unwrap().created();
     let pems_runs = h.state().live.runs("pems");
+    let before = rss_mib();
     set_param(&mut h, "median_cut", "count", ParamValue::Int(2200));
     // The window answers at once: the refusal is decided before the worker gets the graph.
     let t = Instant::now();
     h.step();
     let first = t.elapsed();
+    let mut peak = rss_mib();
+    for _ in 0..50 {
+        h.step();
+        peak = peak.max(rss_mib());
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
     settle(&mut h);
-    eprintln!("figure: the frame after the change to 2200 lights took {:.1} ms", first.as_secs_f64() * 1e3);
+    eprintln!(
+        "figure: the frame after the change to 2200 lights took {:.1} ms; resident memory {before:.1} MiB before, \
+         {peak:.1} MiB peak, {:.1} MiB after (the whole test process)",
+        first.as_secs_f64() * 1e3,
+        rss_mib()
+    );
     let state = |h: &Harness<'_, EditorApp>, id: &str| h.state().live.state(id);
     let werkstatt::app::editor::live::NodeState::Failed(why) = state(&h, "pems") else {
         panic!("pems is refused: {:?}", state(&h, "pems"))
@@ -976,7 +998,9 @@ fn a_change_past_the_limits_is_refused_before_any_work() {
     assert!(h.state().live.runs("pems") <= pems_runs, "no PEM was built");
     let created = h.state().gpu().unwrap().created().since(gpu_created);
     assert!(created.textures < 50, "{} textures were created for a refused change", created.textures);
-    assert!(h.query_by_label_contains("pems: refused before any work").is_some(), "the status bar says so");
+    let said = h.state().state.last_message().map(|m| m.text.clone()).unwrap_or_default();
+    assert!(said.contains(": refused before any work"), "the status bar says so: {said}");
+    assert!(h.query_by_label(&said).is_some(), "the message is shown");
     // The inspector shows the estimate of the selected node.
     let pems = header_point(&h, "pems");
     click_at(&mut h, pems);
@@ -1086,7 +1110,10 @@ fn playback_keeps_the_ui_frames_short() {
          p95 {wp:.1} ms, max {wx:.1} ms; UI thread CPU median {cm:.1} ms, p95 {cp:.1} ms",
         frames.len()
     );
+    // The UI thread's own cost, and the wall time: a UI that waits for the GPU costs little CPU
+    // but long frames (the commit before this work: p95 2.2 s of wall time, 6.8 ms of CPU).
     assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread while playing");
+    assert!(wp < 33.0, "UI frames took p95 {wp:.1} ms while playing");
     h.get_by_label("⏸ pause").click();
     settle(&mut h);
 }

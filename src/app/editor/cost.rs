@@ -194,8 +194,13 @@ mod tests {
         let small = Limits { budget: 16 << 20, ..limits() };
         assert!(refusals(&estimate(&default_graph(), &small), &small).contains_key("pems"));
         g.nodes.get_mut("median_cut").unwrap().params.insert("count".into(), ParamValue::Int(1000));
-        let tiny = Limits { max_texture_2d: 2048, ..limits() };
+        // 1000 tiles of 64 on a 32 x 32 grid: 2048².
+        let tiny = Limits { max_texture_2d: 1024, ..limits() };
         let r = refusals(&estimate(&g, &tiny), &tiny);
-        assert!(r["shadow_atlas"].contains("exceeds the adapter's 2048 texels"), "{}", r["shadow_atlas"]);
+        assert!(
+            r["shadow_atlas"].contains("a 2048x2048 atlas (1000 tiles of 64) exceeds the adapter's 1024 texels"),
+            "{}",
+            r["shadow_atlas"]
+        );
     }
 }

@@ -384,7 +384,7 @@ struct Worker {
 impl Drop for Worker {
     fn drop(&mut self) {
         // Closing the channel ends the worker after its evaluation (cancelled by `Live`'s drop);
-        // wait a little so it does not outlive the window's device by much.
+        // wait a little so it does not outlive the window by much.
         self.requests = None;
         let _ = self.exited.recv_timeout(Duration::from_secs(2));
     }
