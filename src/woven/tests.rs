@@ -433,3 +433,50 @@ fn triangle_counts_follow_the_papers_pattern() {
     }
     assert!(w.tessellate(&[Some(14.5); 4]).unwrap_err().to_string().contains("outside"));
 }
+
+/// The notes' B5.1 figures: how far the Bézier patch is from the subdivision surface (three
+/// refinement steps) and how much the normal turns across a patch edge (the patches are C0).
+#[test]
+fn patch_deviation_from_the_subdivision_surface_is_small() {
+    let n = 7;
+    let h = |x: f64, y: f64| 0.4 * (0.9 * x).sin() * (0.7 * y).cos();
+    let pts: Vec<DVec3> =
+        (0..n * n).map(|k| ((k % n) as f64, (k / n) as f64)).map(|(x, y)| DVec3::new(x, h(x, y), y)).collect();
+    // Three tensor-product refinement steps: rows, then columns.
+    let (mut rows, mut m) = (pts.chunks(n).map(|r| r.to_vec()).collect::<Vec<_>>(), n);
+    for _ in 0..3 {
+        let refined_rows: Vec<Vec<DVec3>> = rows.iter().map(|r| refine(r, MU)).collect();
+        let w = refined_rows[0].len();
+        let cols: Vec<Vec<DVec3>> =
+            (0..w).map(|i| refine(&refined_rows.iter().map(|r| r[i]).collect::<Vec<_>>(), MU)).collect();
+        m = cols[0].len();
+        rows = (0..m).map(|j| cols.iter().map(|c| c[j]).collect()).collect();
+    }
+    assert_eq!(m, 27 * (n - 1) + 1);
+    let panel = Panel::new(&ControlGrid::new(n, n, pts).unwrap());
+    let (mut worst, mut sum, mut count) = (0.0f64, 0.0, 0.0);
+    // Interior patches only: the refinement's own boundary ghosts differ from the grid's.
+    for (pi, pj) in [(2, 2), (3, 2), (2, 3), (3, 3)] {
+        for b in 0..=27 {
+            for a in 0..=27 {
+                let want = rows[27 * pj + b][27 * pi + a];
+                let d = panel.position(pi, pj, a as f64 / 27.0, b as f64 / 27.0).distance(want);
+                worst = worst.max(d);
+                sum += d * d;
+                count += 1.0;
+            }
+        }
+    }
+    let rms = (sum / count).sqrt();
+    // The normal jump across the edge between patches (2,2) and (3,2), unshared frames.
+    let mut jump: f64 = 0.0;
+    for k in 0..=20 {
+        let t = k as f64 / 20.0;
+        let (l, r) = (panel.patch(2, 2).derivatives(1.0, t), panel.patch(3, 2).derivatives(0.0, t));
+        let (nl, nr) = (l.0.cross(l.1).normalize(), r.0.cross(r.1).normalize());
+        jump = jump.max(nl.dot(nr).clamp(-1.0, 1.0).acos().to_degrees());
+    }
+    eprintln!("patch vs 3 refinement steps: max {worst:.2e}, rms {rms:.2e} (patch size 1); normal jump {jump:.3} deg");
+    // Refinement points of level 1 are hit exactly; the rest stays within a small fraction.
+    assert!(worst < 2.5e-3 && rms < 1e-3 && jump < 0.5, "max {worst}, rms {rms}, jump {jump}");
+}
