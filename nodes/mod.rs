@@ -8,6 +8,7 @@
 /// Cloth nodes: the simulator (`src/cloth/`) as a node. (Declared here, not in a
 /// `nodes/cloth/mod.rs`: that path was the simulator's before it moved to `src/cloth/`.)
 pub mod cloth {
+    pub mod garment;
     pub mod node;
 }
 pub mod compare;
@@ -33,6 +34,7 @@ pub static ALL: &[&NodeSpec] = &[
     &mesh::avatar::AVATAR,
     &tessellation::tessellate::TESSELLATE,
     &cloth::node::CLOTH_SIM,
+    &cloth::garment::GARMENT,
     &mesh::mesh_sequence::MESH_SEQUENCE,
     &mesh::live_link::LIVE_LINK,
     &render::scene::MATERIAL,
