@@ -167,8 +167,9 @@ mod tests {
         assert!(q[CURVE_POINTS / 2].length() < 0.5);
         // Large arc, counter-clockwise: three quarters of the circle around (1, 1).
         let l = arc(DVec2::X, DVec2::Y, 1.0, true, true).unwrap();
+        // 64 chords of 4.2 degrees fall short of the arc by (dθ)²/24 of its length: 1.1e-3.
         let len = polyline_length(&l);
-        assert!((len - 1.5 * std::f64::consts::PI).abs() < 1e-3, "{len}");
+        assert!((len - 1.5 * std::f64::consts::PI).abs() < 1.2e-3, "{len}");
         // A radius too small is scaled up to half the chord: a half circle.
         let h = arc(DVec2::ZERO, DVec2::new(2.0, 0.0), 0.1, false, true).unwrap();
         assert!((polyline_length(&h) - std::f64::consts::PI).abs() < 1e-3);

@@ -245,7 +245,7 @@ fn cut_edges(segments: &[Vec<DVec2>], cuts: &[f64]) -> Result<Vec<Edge>, String>
         return Err("needs at least two cuts".into());
     }
     for w in cuts.windows(2) {
-        if !(w[0] < w[1]) {
+        if w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less) {
             return Err(format!("cuts must increase: {} then {}", w[0], w[1]));
         }
     }

@@ -194,7 +194,7 @@ impl Pattern {
             }
             let area = panel.signed_area();
             let (pts, owner) = panel.outline();
-            if pts.len() < 3 || !(area.abs() > 1e-6) {
+            if pts.len() < 3 || area.is_nan() || area.abs() <= 1e-6 {
                 return Err(empty(format!("its outline encloses no area ({area:.3} cm²)")));
             }
             for (i, e) in panel.edges.iter().enumerate() {
