@@ -382,3 +382,20 @@ pub(crate) fn mirror_panel(panel: &mut Panel) {
     }
     panel.placement.rotation *= DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0));
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn euler_angles_compose_as_rz_ry_rx() {
+        // pygarment's euler_xyz_to_R: Rz(z) Ry(y) Rx(x). With x = 90 and y = 90 degrees, +y goes
+        // to +z under Rx, then +z to +x under Ry; the opposite order would give +z.
+        let r = euler_xyz_degrees(DVec3::new(90.0, 90.0, 0.0));
+        assert!((r * DVec3::Y).distance(DVec3::X) < 1e-12, "{}", r * DVec3::Y);
+        let r = euler_xyz_degrees(DVec3::new(0.0, 90.0, 90.0));
+        // Ry(90) takes +x to -z; Rz leaves z alone.
+        assert!((r * DVec3::X).distance(-DVec3::Z) < 1e-12, "{}", r * DVec3::X);
+        assert!((r * DVec3::Z).distance(DVec3::Y) < 1e-12, "{}", r * DVec3::Z);
+    }
+}
