@@ -8,6 +8,7 @@
 /// Cloth nodes: the simulator (`src/cloth/`) as a node. (Declared here, not in a
 /// `nodes/cloth/mod.rs`: that path was the simulator's before it moved to `src/cloth/`.)
 pub mod cloth {
+    pub mod garment;
     pub mod node;
 }
 pub mod compare;
@@ -35,6 +36,7 @@ pub static ALL: &[&NodeSpec] = &[
     &tessellation::tessellate::TESSELLATE,
     &woven::woven_cloth::WOVEN_CLOTH,
     &cloth::node::CLOTH_SIM,
+    &cloth::garment::GARMENT,
     &mesh::mesh_sequence::MESH_SEQUENCE,
     &mesh::live_link::LIVE_LINK,
     &render::scene::MATERIAL,

@@ -10,7 +10,8 @@
 //! - [`mesh`] and [`color`]: the geometry and colour encodings every layer shares;
 //! - [`render`]: the scene that flows between render nodes, and the scene drawer with its item
 //!   kinds ([`render::draw`]);
-//! - one module per technique: [`cloth`] (the cloth simulator), [`warp`] (deferred warping),
+//! - one module per technique: [`cloth`] (the cloth simulator), [`garment`] (sewing patterns
+//!   from GarmentCode and FreeSewing files, sewn into cloth), [`warp`] (deferred warping),
 //!   [`cuboid`] (the cuboid scene graph), [`tessellation`], [`ibl`] (image-based lighting,
 //!   shadows), [`occlusion`] (SSAO and its ray-traced reference), [`avatar`] (a skinned, posed,
 //!   dressed MakeHuman body);
@@ -25,6 +26,7 @@ pub mod cloth;
 pub mod color;
 pub mod core;
 pub mod cuboid;
+pub mod garment;
 pub mod gpu;
 pub mod ibl;
 pub mod io;

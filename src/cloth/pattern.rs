@@ -134,6 +134,21 @@ impl PatternMesh {
     /// Triangulates every piece with roughly equilateral triangles of edge
     /// `edge_length` cm, packs the UV atlas and pairs the seam vertices.
     pub fn build(pieces: Vec<Piece>, seams: Vec<Seam>, edge_length: f32) -> Result<Self, PatternError> {
+        Self::check(&pieces, &seams, edge_length)?;
+        let segments = segment_counts(&pieces, &seams, edge_length);
+        Self::build_segmented(pieces, seams, edge_length, segments)
+    }
+
+    /// Like [`PatternMesh::build`], but every outline edge is one boundary segment: for
+    /// outlines that are already sampled at the target edge length (curved edges resampled by
+    /// arc length, `crate::garment`). Sewn outline edges pair one-to-one.
+    pub fn build_sampled(pieces: Vec<Piece>, seams: Vec<Seam>, edge_length: f32) -> Result<Self, PatternError> {
+        Self::check(&pieces, &seams, edge_length)?;
+        let segments = pieces.iter().map(|p| vec![1; p.outline.len()]).collect();
+        Self::build_segmented(pieces, seams, edge_length, segments)
+    }
+
+    fn check(pieces: &[Piece], seams: &[Seam], edge_length: f32) -> Result<(), PatternError> {
         if pieces.is_empty() {
             return Err(PatternError::NoPieces);
         }
@@ -146,8 +161,15 @@ impl PatternMesh {
                 return Err(PatternError::BadSeam(i));
             }
         }
-        let segments = segment_counts(&pieces, &seams, edge_length);
+        Ok(())
+    }
 
+    fn build_segmented(
+        pieces: Vec<Piece>,
+        seams: Vec<Seam>,
+        edge_length: f32,
+        segments: Vec<Vec<usize>>,
+    ) -> Result<Self, PatternError> {
         let mut mesh = PatternMesh {
             pieces: Vec::new(),
             seams: seams.clone(),

@@ -345,6 +345,11 @@ impl Cloth {
         self.body.as_mut()
     }
 
+    /// Changes gravity (m/s²), e.g. off while a garment is sewn, on once it is closed.
+    pub fn set_gravity(&mut self, gravity: Vec3) {
+        self.params.gravity = gravity;
+    }
+
     /// Turns self-collision on or off.
     pub fn set_self_collision(&mut self, on: bool) {
         self.params.self_collision = on;

@@ -67,6 +67,10 @@ fn fixture_params(kind: &str) -> Params {
         "PlacementFile" => vec![("path", data("assets/placements/buttons.csv"))],
         "MeshSequence" => vec![("path", data("tests/data/sequence"))],
         "ClothSim" => vec![("triangles", ParamValue::Int(200))],
+        "Garment" => vec![
+            ("pattern", data("assets/patterns/garmentcode/shirt_mean_specification.json")),
+            ("edge_length", ParamValue::Float(6.0)),
+        ],
         "Material" => vec![("texture_path", data("docs/default.png")), ("gloss_map_path", data("docs/default.png"))],
         "MatrixTexture" => vec![("resolution", ParamValue::Int(64))],
         "EnvironmentMap" => vec![("path", data("assets/hdri/forest.hdr")), ("size", ParamValue::Int(8))],

@@ -1,0 +1,143 @@
+//! The `Garment` node: a sewing pattern from a file (`crate::garment`), sewn and draped by the
+//! cloth simulator on an optional moving body.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::{DVec3, Vec2, Vec3};
+
+use crate::cloth::BodyMesh;
+use crate::core::node::prelude::*;
+use crate::garment::drape::{Drape, DrapeParams};
+use crate::garment::{Fit, Pattern, Sewn, freesewing, garmentcode};
+use crate::mesh::Mesh;
+
+pub static GARMENT: NodeSpec = NodeSpec {
+    kind: "Garment",
+    category: Category::Simulation,
+    doc: "A garment sewn from a sewing pattern: GarmentCode v2 JSON, or a FreeSewing SVG through a RON sidecar that names its seams and places its parts (docs/garments.md). Panels are triangulated at the target edge length with equal vertex counts on stitched edges, placed in 3D, sewn by seam constraints that close over the first frames with gravity off, then draped (XPBD, 60 steps per second) against the body input, which moves every frame. UVs are the packed panel coordinates; piece ids follow the file's panel order; stitches are the Surface's seams.",
+    inputs: &[PortSpec::optional(
+        "body",
+        PortType::Mesh,
+        "The body to collide with (Avatar's collision output): the same vertices and triangles every frame.",
+    )],
+    outputs: &[
+        PortSpec::output("surface", PortType::Surface, "The garment at the current time."),
+        PortSpec::output("seam_gap", PortType::Scalar, "The largest distance between two sewn vertices (metres)."),
+        PortSpec::output("max_strain", PortType::Scalar, "The largest edge strain this frame."),
+    ],
+    params: &[
+        ParamSpec::new(
+            "pattern",
+            ParamKind::Path { default: "", extensions: &["json", "ron"] },
+            "A GarmentCode specification (.json) or a FreeSewing sidecar (.ron, naming its SVG).",
+        ),
+        ParamSpec::new(
+            "edge_length",
+            ParamKind::Float { default: 1.0, min: 0.2, max: 20.0 },
+            "Target triangle edge length (cm).",
+        ),
+        ParamSpec::new(
+            "scale",
+            ParamKind::Float { default: 0.969, min: 0.01, max: 100.0 },
+            "Scales the pattern's placement (not its panels) about the origin; the default fits GarmentCode's 172 cm body to MakeHuman's 166.6 cm.",
+        ),
+        ParamSpec::new(
+            "offset",
+            ParamKind::Vec3 { default: [0.0, 0.0, 3.0] },
+            "Moves the placement (cm, after scaling); the default centres GarmentCode's panels on MakeHuman's chest.",
+        ),
+        ParamSpec::new(
+            "sewing_frames",
+            ParamKind::Int { default: 30, min: 0, max: 100_000 },
+            "Frames (of 1/60 s) with gravity off at the start while the seams close.",
+        ),
+        ParamSpec::new(
+            "warmup",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 600.0 },
+            "Seconds simulated before frame 0, against the body as it is at the first evaluated frame.",
+        ),
+        ParamSpec::new("self_collision", ParamKind::Bool { default: false }, "Cloth-cloth contacts (slower)."),
+    ],
+    capabilities: Capabilities::NONE,
+    create: || Box::new(GarmentNode::default()),
+};
+
+/// Reads either format by extension.
+fn load_pattern(path: &Path) -> anyhow::Result<Pattern> {
+    let is_ron = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ron"));
+    Ok(if is_ron { freesewing::load(path)? } else { garmentcode::load(path)? })
+}
+
+#[derive(Default)]
+struct GarmentNode {
+    /// The drape, what it was built from, and its step count.
+    state: Option<(Drape, String, u64)>,
+    sewn: Option<(String, Arc<Sewn>)>,
+}
+
+impl Node for GarmentNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        if cx.str("pattern").is_empty() {
+            return Err(NodeError::msg("parameter \"pattern\" is empty: name a .json or .ron pattern"));
+        }
+        let pattern = cx.load(&cx.path("pattern"), load_pattern)?;
+        let o = cx.vec3("offset");
+        let fit = Fit { scale: DVec3::splat(cx.f64("scale")), offset: DVec3::new(o.x as f64, o.y as f64, o.z as f64) };
+        let edge = cx.f64("edge_length");
+        let sew_key = format!("{:p} {edge} {fit:?}", Arc::as_ptr(&pattern));
+        if self.sewn.as_ref().is_none_or(|(k, _)| *k != sew_key) {
+            let sewn = pattern.sew(edge, fit).map_err(|e| NodeError::msg(e.to_string()))?;
+            self.sewn = Some((sew_key.clone(), Arc::new(sewn)));
+        }
+        let sewn = self.sewn.as_ref().expect("set above").1.clone();
+        for w in &sewn.warnings {
+            cx.warn(w.clone());
+        }
+
+        let body: Option<Arc<Mesh>> = cx.optional("body");
+        let body_n = body.as_ref().map(|b| b.positions.len());
+        let params = DrapeParams {
+            sim: crate::cloth::SimParams { self_collision: cx.bool("self_collision"), ..DrapeParams::default().sim },
+            sewing_frames: cx.int("sewing_frames") as u64,
+        };
+        let key = format!("{sew_key} {body_n:?} {params:?}");
+        let time = cx.time();
+        let target = ((cx.f64("warmup") + time.seconds()) * 60.0).round().max(0.0) as u64;
+        let rebuild = self.state.as_ref().is_none_or(|(_, k, step)| *k != key || *step > target);
+        if rebuild {
+            let body_mesh = body.as_ref().map(|b| {
+                let tris = b.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+                BodyMesh::new(b.positions.clone(), tris)
+            });
+            self.state = Some((Drape::new(&sewn, &params, body_mesh), key, 0));
+        }
+        let (drape, _, step) = self.state.as_mut().expect("built above");
+        while *step < target {
+            drape.step(body.as_ref().map(|b| b.positions.as_slice()));
+            *step += 1;
+        }
+        let cloth = &drape.cloth;
+        if cloth.positions().iter().any(|p| !p.is_finite()) {
+            return Err(NodeError::msg(format!("the simulation diverged (non-finite positions) at step {step}")));
+        }
+        let frame = cloth.surface();
+        let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
+        let mut mesh = Mesh::from_parts(
+            v3(&frame.positions),
+            Some(v3(&frame.normals)),
+            frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
+            frame.indices,
+            frame.piece_ids,
+        )
+        .map_err(|e| NodeError::msg(format!("the garment at step {step}: {e:#}")))?;
+        mesh.seams = cloth.pattern().seam_pairs().to_vec();
+        cx.count("triangles", mesh.triangle_count());
+        cx.count("panels", sewn.piece_names.len());
+        cx.count("stitches", pattern.stitches.len());
+        cx.set("seam_gap", drape.max_seam_gap() as f64);
+        cx.set("max_strain", cloth.max_strain() as f64);
+        cx.set("surface", Arc::new(mesh));
+        Ok(())
+    }
+}
