@@ -1013,8 +1013,8 @@ fn a_change_past_the_limits_is_refused_before_any_work() {
 }
 
 /// A PEM build of 600 lights cancelled a quarter in: (resident MiB before, at the peak, after;
-/// pooled textures held and in use after; PEMs runs before and after).
-fn cancelled_build(name: &str) -> (f64, f64, f64, (usize, usize), (u64, u64)) {
+/// pooled textures held and in use after; PEMs runs before and after; textures the build made).
+fn cancelled_build(name: &str) -> (f64, f64, f64, (usize, usize), (u64, u64), u64) {
     use werkstatt::core::param::ParamValue;
     let dir = temp_dir(name);
     let path = copy_default(&dir);
@@ -1024,6 +1024,7 @@ fn cancelled_build(name: &str) -> (f64, f64, f64, (usize, usize), (u64, u64)) {
     }
     let before = rss_mib();
     let runs_before = h.state().live.runs("pems");
+    let created_before = h.state().gpu().unwrap().created();
     // 600 PEMs fit the budget (about 600 MiB): the build starts; cancel it a quarter in.
     set_param(&mut h, "median_cut", "count", ParamValue::Int(600));
     let mut peak = before;
@@ -1052,7 +1053,8 @@ fn cancelled_build(name: &str) -> (f64, f64, f64, (usize, usize), (u64, u64)) {
         m.hblkhd >> 20
     );
     let pool = h.state().gpu().unwrap().pool_counts();
-    (before, peak, after, pool, (runs_before, h.state().live.runs("pems")))
+    let made = h.state().gpu().unwrap().created().since(created_before).textures;
+    (before, peak, after, pool, (runs_before, h.state().live.runs("pems")), made)
 }
 
 /// After a PEM build cancelled part-way, nothing of it is kept: the pool holds no texture
@@ -1062,8 +1064,10 @@ fn a_cancelled_build_keeps_nothing_of_it() {
     if !in_own_process("a_cancelled_build_keeps_nothing_of_it") {
         return;
     }
-    let (before, peak, _, (held, in_use), (runs_before, runs_after)) = cancelled_build("memory");
-    assert!(peak > before + 50.0, "the build allocated (peak {peak:.1} MiB): the test measures something");
+    let (_, _, _, (held, in_use), (runs_before, runs_after), made) = cancelled_build("memory");
+    // Resident memory cannot show it: the PEM builds are compute dispatches recorded faster than
+    // lavapipe runs them, so a quarter in little has executed yet.
+    assert!(made >= 100, "the build made {made} textures before the cancel: the test measures something");
     assert_eq!(held, in_use, "the pool gave back every texture nobody uses");
     assert_eq!(runs_after, runs_before, "a cancelled run does not count");
 }
@@ -1077,7 +1081,7 @@ fn memory_after_a_cancelled_build_is_within_10_percent() {
     if !in_own_process("memory_after_a_cancelled_build_is_within_10_percent") {
         return;
     }
-    let (before, _, after, _, _) = cancelled_build("memory-10");
+    let (before, _, after, _, _, _) = cancelled_build("memory-10");
     assert!(after < before * 1.1, "after the cancel {after:.1} MiB, before {before:.1} MiB");
 }
 
