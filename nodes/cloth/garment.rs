@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::DVec3;
 
 use crate::cloth::BodyMesh;
 use crate::core::node::prelude::*;
@@ -121,17 +121,8 @@ impl Node for GarmentNode {
         if cloth.positions().iter().any(|p| !p.is_finite()) {
             return Err(NodeError::msg(format!("the simulation diverged (non-finite positions) at step {step}")));
         }
-        let frame = cloth.surface();
-        let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
-        let mut mesh = Mesh::from_parts(
-            v3(&frame.positions),
-            Some(v3(&frame.normals)),
-            frame.uvs.iter().map(|t| Vec2::from_array(*t)).collect(),
-            frame.indices,
-            frame.piece_ids,
-        )
-        .map_err(|e| NodeError::msg(format!("the garment at step {step}: {e:#}")))?;
-        mesh.seams = cloth.pattern().seam_pairs().to_vec();
+        let mesh = super::node::surface_mesh(cloth)
+            .map_err(|e| NodeError::msg(format!("the garment at step {step}: {e:#}")))?;
         cx.count("triangles", mesh.triangle_count());
         cx.count("panels", sewn.piece_names.len());
         cx.count("stitches", pattern.stitches.len());

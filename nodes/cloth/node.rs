@@ -121,7 +121,7 @@ fn preset_of(kind: PresetKind, triangles: usize, seed: u64, wind_speed: f32) -> 
 }
 
 /// The cloth's current state as a Surface mesh (pieces and seams from its pattern).
-fn surface_mesh(cloth: &Cloth) -> anyhow::Result<Mesh> {
+pub(super) fn surface_mesh(cloth: &Cloth) -> anyhow::Result<Mesh> {
     let frame = cloth.surface();
     let v3 = |a: &[[f32; 3]]| a.iter().map(|p| Vec3::from_array(*p)).collect::<Vec<_>>();
     let mut mesh = Mesh::from_parts(
