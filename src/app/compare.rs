@@ -1,5 +1,6 @@
 //! Comparing outputs with references: images (8-bit PNG and float EXR) by a per-pixel
-//! threshold with a budget of failing pixels and PSNR, geometry and other text files number by
+//! threshold with a budget of failing pixels, PSNR and structural similarity (SSIM: PSNR
+//! averages a small lost detail away, SSIM sees the missing structure), geometry and other text files number by
 //! number, values with an absolute tolerance. `werkstatt test` and the golden-image tests of
 //! the test suite both use these.
 
@@ -17,12 +18,22 @@ pub struct ImageTolerance {
     /// Lowest accepted PSNR in dB, over RGB and, separately, over alpha. The peak is 255 for
     /// PNG and the reference's largest colour value (at least 1) for EXR.
     pub min_psnr: f64,
+    /// Lowest accepted mean SSIM (8x8 windows, the worst of R, G and B; 1 is identical).
+    pub min_ssim: f64,
+}
+
+impl ImageTolerance {
+    /// The SSIM bound of the defaults: rounding noise stays far above it, a lost edge or
+    /// texture falls below. SSIM barely sees soft shading: the default graph without its
+    /// shadows still scores 0.998, which the pixel budget catches (tests/suite/regression.rs).
+    pub const MIN_SSIM: f64 = 0.98;
 }
 
 impl Default for ImageTolerance {
-    /// The golden images' tolerance: 0.5% of the pixels off by more than 3 levels, 40 dB.
+    /// The golden images' tolerance: 0.5% of the pixels off by more than 3 levels, 40 dB,
+    /// SSIM 0.98.
     fn default() -> Self {
-        ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0 }
+        ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0, min_ssim: Self::MIN_SSIM }
     }
 }
 
@@ -31,10 +42,15 @@ impl Default for ImageTolerance {
 pub struct ImageDiff {
     pub psnr: f64,
     pub psnr_alpha: f64,
+    /// Mean SSIM of the colour channels (the worst channel), 1 for identical images.
+    pub ssim: f64,
     pub failing: usize,
     pub pixels: usize,
-    /// Differences x8 (in 8-bit levels), an alpha difference as a blue tint; opaque.
+    /// Differences scaled so that the largest is white (see `diff_scale`), an alpha
+    /// difference as a blue tint; opaque.
     pub diff: image::RgbaImage,
+    /// The factor the diff image's 8-bit levels were multiplied by (1 to 255).
+    pub diff_scale: f64,
 }
 
 impl ImageDiff {
@@ -45,12 +61,18 @@ impl ImageDiff {
     /// Why the difference exceeds `tol`, or None when it is within it.
     pub fn verdict(&self, tol: &ImageTolerance) -> Option<String> {
         let share = self.failing_share();
-        (self.psnr < tol.min_psnr || self.psnr_alpha < tol.min_psnr || share > tol.max_failing).then(|| {
+        let failed = self.psnr < tol.min_psnr
+            || self.psnr_alpha < tol.min_psnr
+            || self.ssim < tol.min_ssim
+            || share > tol.max_failing;
+        failed.then(|| {
             format!(
-                "PSNR {:.1} dB, alpha {:.1} dB (min {}), {:.2}% of pixels differ by more than {} (max {:.2}%)",
+                "PSNR {:.1} dB, alpha {:.1} dB (min {}), SSIM {:.4} (min {}), {:.2}% of pixels differ by more than {} (max {:.2}%)",
                 self.psnr,
                 self.psnr_alpha,
                 tol.min_psnr,
+                self.ssim,
+                tol.min_ssim,
                 share * 100.0,
                 tol.threshold,
                 tol.max_failing * 100.0
@@ -60,7 +82,10 @@ impl ImageDiff {
 
     /// A one-line summary of the metrics.
     pub fn summary(&self) -> String {
-        format!("PSNR {:.1} dB, {} of {} pixels over the threshold", self.psnr, self.failing, self.pixels)
+        format!(
+            "PSNR {:.1} dB, SSIM {:.4}, {} of {} pixels over the threshold",
+            self.psnr, self.ssim, self.failing, self.pixels
+        )
     }
 }
 
@@ -76,33 +101,68 @@ pub fn compare_channels(
 ) -> ImageDiff {
     assert_eq!(reference.len(), current.len(), "compare_channels needs images of one size");
     let (mut sq, mut sq_alpha, mut failing) = (0f64, 0f64, 0usize);
-    let mut diff = image::RgbaImage::new(width, height);
-    let to_levels = 255.0 / peak;
-    let byte = |d: f64| (d * to_levels * 8.0).round().clamp(0.0, 255.0) as u8;
-    for ((a, e), d) in current.chunks_exact(4).zip(reference.chunks_exact(4)).zip(diff.pixels_mut()) {
+    // Per pixel: the colour differences and the alpha difference, for the diff image.
+    let mut deltas = Vec::with_capacity(reference.len());
+    for (a, e) in current.chunks_exact(4).zip(reference.chunks_exact(4)) {
         let mut worst = 0f64;
+        let mut pixel = [0f64; 4];
         for c in 0..4 {
             // NaN compares as a maximal difference rather than slipping through.
             let delta = (a[c] as f64 - e[c] as f64).abs();
             let delta = if delta.is_nan() { f64::INFINITY } else { delta };
             if c < 3 {
                 sq += delta.min(peak).powi(2);
-                d[c] = byte(delta);
             } else {
                 sq_alpha += delta.min(peak).powi(2);
             }
+            pixel[c] = delta.min(peak);
             worst = worst.max(delta);
         }
-        d[2] = d[2].max(byte((a[3] as f64 - e[3] as f64).abs()));
-        d[3] = 255;
+        deltas.push(pixel);
         if worst > threshold {
             failing += 1;
         }
     }
+    // The diff image is scaled so that its largest difference is white: a small regression is
+    // as visible as a large one (the factor is reported beside it).
+    let to_levels = 255.0 / peak;
+    let largest = deltas.iter().flatten().fold(0f64, |m, &d| m.max(d)) * to_levels;
+    let diff_scale = if largest > 0.0 { (255.0 / largest).clamp(1.0, 255.0) } else { 1.0 };
+    let byte = |d: f64| (d * to_levels * diff_scale).round().clamp(0.0, 255.0) as u8;
+    let mut diff = image::RgbaImage::new(width, height);
+    for (d, p) in diff.pixels_mut().zip(&deltas) {
+        *d = image::Rgba([byte(p[0]), byte(p[1]), byte(p[2]).max(byte(p[3])), 255]);
+    }
     let pixels = (width * height) as usize;
     let n = pixels.max(1) as f64;
     let psnr_of = |mse: f64| if mse == 0.0 { f64::INFINITY } else { 10.0 * (peak * peak / mse).log10() };
-    ImageDiff { psnr: psnr_of(sq / (n * 3.0)), psnr_alpha: psnr_of(sq_alpha / n), failing, pixels, diff }
+    ImageDiff {
+        psnr: psnr_of(sq / (n * 3.0)),
+        psnr_alpha: psnr_of(sq_alpha / n),
+        ssim: ssim(reference, current, (width, height), peak),
+        failing,
+        pixels,
+        diff,
+        diff_scale,
+    }
+}
+
+/// Mean SSIM of the colour channels of two RGBA images on a scale of `peak`, quantized to 8
+/// bits (image-compare's MSSIM: 8x8 windows, the worst of R, G and B).
+fn ssim(reference: &[f32], current: &[f32], (width, height): (u32, u32), peak: f64) -> f64 {
+    let rgb8 = |px: &[f32]| {
+        let bytes = px
+            .chunks_exact(4)
+            .flat_map(|p| p[..3].iter().map(|&v| (v as f64 / peak * 255.0).round().clamp(0.0, 255.0) as u8))
+            .collect();
+        image::RgbImage::from_raw(width, height, bytes).expect("sized by the caller")
+    };
+    if reference == current {
+        return 1.0;
+    }
+    image_compare::rgb_similarity_structure(&image_compare::Algorithm::MSSIMSimple, &rgb8(reference), &rgb8(current))
+        // Only a size mismatch fails, and the callers compare images of one size.
+        .map_or(0.0, |s| s.score)
 }
 
 /// Compares two 8-bit images (levels 0-255).
@@ -174,10 +234,38 @@ mod tests {
         b.put_pixel(1, 1, image::Rgba([14, 10, 10, 255]));
         let d = compare_rgba8(&a, &b, 3.0);
         assert_eq!(d.failing, 1);
-        assert_eq!(d.diff.get_pixel(1, 1)[0], 32);
+        // Auto-scaled: the largest difference (4 levels) is white.
+        assert_eq!((d.diff.get_pixel(1, 1)[0], d.diff_scale), (255, 255.0 / 4.0));
         assert_eq!(d.diff.get_pixel(0, 0)[0], 0);
         assert!(d.verdict(&ImageTolerance::default()).is_some(), "1 of 8 pixels is over the 0.5% budget");
         assert_eq!(compare_rgba8(&a, &b, 4.0).failing, 0);
+    }
+
+    #[test]
+    fn ssim_keeps_rounding_and_catches_lost_structure() {
+        // A shaded ramp with a dark band across it, as a shadow on a lit surface.
+        let lit = image::RgbaImage::from_fn(48, 36, |x, y| {
+            let v = (60 + 3 * x + y) as u8;
+            image::Rgba(if (14..22).contains(&y) && x > 8 { [v / 3, v / 3, v / 3, 255] } else { [v, v, v, 255] })
+        });
+        let same = compare_rgba8(&lit, &lit, 3.0);
+        assert_eq!(same.ssim, 1.0);
+        assert_eq!(same.diff_scale, 1.0);
+        // One level of rounding on every other pixel: still the same picture.
+        let rounded = image::RgbaImage::from_fn(48, 36, |x, y| {
+            let mut p = *lit.get_pixel(x, y);
+            p[0] = p[0].saturating_add(((x + y) % 2) as u8);
+            p
+        });
+        assert!(compare_rgba8(&lit, &rounded, 3.0).ssim > ImageTolerance::MIN_SSIM);
+        let unshadowed = image::RgbaImage::from_fn(48, 36, |x, y| {
+            let v = (60 + 3 * x + y) as u8;
+            image::Rgba([v, v, v, 255])
+        });
+        let lost = compare_rgba8(&lit, &unshadowed, 3.0);
+        assert!(lost.ssim < ImageTolerance::MIN_SSIM, "SSIM {}", lost.ssim);
+        let ssim_only = ImageTolerance { threshold: 255.0, max_failing: 1.0, min_psnr: 0.0, ..Default::default() };
+        assert!(lost.verdict(&ssim_only).unwrap().contains("SSIM"));
     }
 
     #[test]

@@ -144,7 +144,8 @@ pub fn encode(px: &Pixels, enc: Encoding) -> image::RgbaImage {
 /// pixels off by more than 3 levels, 40 dB overall). A wrong shading model, a missing object
 /// or a wrong G-buffer channel moves far more. After a Mesa upgrade that exceeds it, look at
 /// the diff image before re-blessing.
-pub const STRICT: ImageTolerance = ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0 };
+pub const STRICT: ImageTolerance =
+    ImageTolerance { threshold: 3.0, max_failing: 0.005, min_psnr: 40.0, min_ssim: ImageTolerance::MIN_SSIM };
 
 /// Compares `actual` with `tests/golden/NAME.png` (`werkstatt::app::compare`, as `werkstatt test`
 /// does). With `WERKSTATT_BLESS=1` the reference is (re)written instead. On failure a diff

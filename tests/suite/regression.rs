@@ -97,6 +97,60 @@ fn a_changed_parameter_fails_with_a_diff_image_and_a_junit_failure_and_bless_acc
     assert!(!r.regressed(), "after --bless the changed outputs are the references: {}", failures(&r));
 }
 
+/// Deleting the default graph's shadow link loses every shadow: the project's own regression
+/// case for default.ron fails on it, at the manifest's tolerances and at the defaults (by the
+/// pixel budget: soft shadows cost little PSNR and almost no SSIM, 42.6 dB and 0.9988 here).
+/// The report names the overrides and that the graph changed since the bless.
+#[test]
+fn losing_every_shadow_of_the_default_graph_fails_its_regression_case() {
+    let dir = out_dir("regression-shadows");
+    let manifest = regress::Manifest::load(&root().join("tests/references/manifest.ron")).unwrap();
+    let case = &manifest.cases["default"];
+    let graph = dir.join("default.ron");
+    // A copy outside graphs/: its relative asset paths made absolute.
+    let original = std::fs::read_to_string(root().join("graphs/default.ron"))
+        .unwrap()
+        .replace("\"../assets/", &format!("\"{}/", root().join("assets").display()));
+    let link = "(\"shadow_atlas.shadows\", \"light.shadows\"),";
+    assert!(original.contains(link), "graphs/default.ron feeds the light its shadows");
+    std::fs::write(&graph, &original).unwrap();
+    let mut opts = TestOptions::new(vec![graph.clone()], dir.join("out"));
+    opts.references = dir.join("references");
+    opts.sets = case.sets.clone();
+    std::fs::create_dir_all(&opts.references).unwrap();
+    let write_manifest = |tolerance: &str| {
+        let (w, h) = manifest.size;
+        let text = format!("(size: ({w}, {h}), tolerance: ({tolerance}slowdown: 1e9))");
+        std::fs::write(opts.references.join("manifest.ron"), text).unwrap();
+    };
+    let t = manifest.tolerance.image;
+    write_manifest(&format!(
+        "image: (threshold: {}, max_failing: {}, min_psnr: {}, min_ssim: {}), ",
+        t.threshold, t.max_failing, t.min_psnr, t.min_ssim
+    ));
+    opts.bless = true;
+    run(&opts);
+    opts.bless = false;
+    let same = run(&opts);
+    assert!(!same.regressed(), "{}", failures(&same));
+    assert_eq!(same.cases[0].graph_changed, Some(false));
+
+    std::fs::write(&graph, original.replace(link, "")).unwrap();
+    let check = |r: &TestRun| {
+        let c = &r.cases[0];
+        assert_eq!(c.status, Status::Failed, "{}", failures(r));
+        assert_eq!(c.graph_changed, Some(true));
+        assert_eq!(c.sets, case.sets);
+        let image = c.outputs.iter().find(|o| o.name.ends_with(".png") && !o.passed).expect("a failing image");
+        assert!(image.detail.contains("SSIM") && image.detail.contains("% of pixels"), "{}", image.detail);
+        let junit = std::fs::read_to_string(opts.out_dir.join("junit.xml")).unwrap();
+        assert!(junit.contains("changed since the last bless") && junit.contains(&case.sets[0]), "{junit}");
+    };
+    check(&run(&opts));
+    write_manifest("");
+    check(&run(&opts));
+}
+
 #[test]
 fn a_missing_reference_is_a_clear_error() {
     let dir = out_dir("regression-missing");

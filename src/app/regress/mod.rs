@@ -50,7 +50,7 @@ impl Default for Tolerances {
     fn default() -> Self {
         Tolerances {
             image: ImageTolerance::default(),
-            exr: ImageTolerance { threshold: 0.01, max_failing: 0.005, min_psnr: 40.0 },
+            exr: ImageTolerance { threshold: 0.01, ..ImageTolerance::default() },
             text: 1e-4,
             value: 1e-6,
             slowdown: 2.0,
@@ -444,6 +444,9 @@ pub struct OutputResult {
     /// Views for the report, relative to the run's folder: reference, current, diff (PNG).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub images: Option<[String; 3]>,
+    /// The factor the diff view's levels were multiplied by (it is scaled to its maximum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diff_scale: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -451,6 +454,13 @@ pub struct CaseResult {
     pub name: String,
     pub graph: String,
     pub variant: Vec<String>,
+    /// Every `--set` override the case rendered with (the manifest's, then the variant's).
+    #[serde(default)]
+    pub sets: Vec<String>,
+    /// Whether the graph file's bytes differ from those at the last `--bless`; None when the
+    /// reference does not record them (blessed before the hash was kept) or was not read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph_changed: Option<bool>,
     pub status: Status,
     /// Why the case failed or errored (one line per problem).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -511,6 +521,15 @@ pub struct Reference {
     pub values: BTreeMap<String, Vec<f64>>,
     /// The frames' wall time when blessed, ms (compared, never failing).
     pub render_ms: f64,
+    /// FNV-1a of the graph file's bytes when blessed (hex), so that a report can say the
+    /// graph changed since (files the graph loads are not included).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph_hash: Option<String>,
+}
+
+/// The hash `reference.ron` records of a graph file, or None when it cannot be read.
+fn graph_hash(graph: &Path) -> Option<String> {
+    std::fs::read(graph).ok().map(|bytes| format!("{:016x}", crate::core::hash::fnv1a(&bytes)))
 }
 
 /// Runs this shard's cases, writes `results.json`, `junit.xml` and `report.html` into
@@ -556,6 +575,8 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
         name: case.name.clone(),
         graph: case.graph.display().to_string(),
         variant: case.variant.clone(),
+        sets: case.sets.clone(),
+        graph_changed: None,
         status: Status::Passed,
         message: None,
         outputs: Vec::new(),
@@ -609,6 +630,7 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", reference_file.display())),
     };
     result.reference_ms = Some(reference.render_ms);
+    result.graph_changed = reference.graph_hash.map(|h| graph_hash(&case.graph) != Some(h));
     result.slow = result.render_ms > reference.render_ms * case.tolerance.slowdown;
     if result.slow && opts.fail_on_slowdown {
         result.outputs.push(fail(
@@ -643,6 +665,7 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
                     passed: true,
                     detail: format!("{:?}", cur.unwrap_or(&Vec::new())),
                     images: None,
+                    diff_scale: None,
                 },
                 Err(why) => fail(&name, why),
             },
@@ -659,7 +682,7 @@ fn run_case(case: &Case, opts: &TestOptions, gpu: &GpuContext) -> anyhow::Result
 }
 
 fn fail(name: &str, detail: String) -> OutputResult {
-    OutputResult { name: name.to_string(), passed: false, detail, images: None }
+    OutputResult { name: name.to_string(), passed: false, detail, images: None, diff_scale: None }
 }
 
 /// Compares one output file with its reference; a failing image gets its reference, current
@@ -697,7 +720,13 @@ fn compare_file(
                 (compare::compare_rgba32f(&reference.to_rgba32f(), &current.to_rgba32f(), tol.exr.threshold), &tol.exr)
             };
             let Some(why) = diff.verdict(t) else {
-                return Ok(OutputResult { name: name.into(), passed: true, detail: diff.summary(), images: None });
+                return Ok(OutputResult {
+                    name: name.into(),
+                    passed: true,
+                    detail: diff.summary(),
+                    images: None,
+                    diff_scale: None,
+                });
             };
             let write = |file: &str, img: &image::RgbaImage| -> anyhow::Result<()> {
                 let mut bytes = std::io::Cursor::new(Vec::new());
@@ -727,8 +756,9 @@ fn compare_file(
             Ok(OutputResult {
                 name: name.into(),
                 passed: false,
-                detail: format!("{why}; diff image {}", rel(&view("diff"))),
+                detail: format!("{why}; diff image {} (levels x{:.1})", rel(&view("diff")), diff.diff_scale),
                 images: Some([rel(&view("reference")), rel(&current_view), rel(&view("diff"))]),
+                diff_scale: Some(diff.diff_scale),
             })
         }
         _ => {
@@ -740,7 +770,13 @@ fn compare_file(
                 _ => Err(format!("the bytes differ ({} bytes, the reference {})", current.len(), reference.len())),
             };
             Ok(match verdict {
-                Ok(()) => OutputResult { name: name.into(), passed: true, detail: "same".into(), images: None },
+                Ok(()) => OutputResult {
+                    name: name.into(),
+                    passed: true,
+                    detail: "same".into(),
+                    images: None,
+                    diff_scale: None,
+                },
                 Err(why) => fail(name, why),
             })
         }
@@ -768,6 +804,7 @@ fn bless(case: &Case, out: &Path, stats: &render::Stats, render_ms: f64) -> anyh
         files: stats.files.clone(),
         values: stats.values.clone(),
         render_ms: (render_ms * 10.0).round() / 10.0,
+        graph_hash: graph_hash(&case.graph),
     };
     let text = ron::ser::to_string_pretty(&reference, ron::ser::PrettyConfig::default())? + "\n";
     crate::io::atomic::write_atomic(&dir.join(REFERENCE), text.as_bytes())

@@ -84,6 +84,12 @@ pub fn junit(run: &TestRun) -> String {
             Status::Passed | Status::Blessed => String::new(),
         };
         let mut out = String::new();
+        if !c.sets.is_empty() {
+            let _ = writeln!(out, "sets: {}", c.sets.join(" "));
+        }
+        if c.graph_changed == Some(true) {
+            let _ = writeln!(out, "graph: {} changed since the last bless", c.graph);
+        }
         for o in &c.outputs {
             let _ = writeln!(out, "{}: {} {}", o.name, if o.passed { "ok" } else { "FAILED" }, o.detail);
         }
@@ -123,7 +129,7 @@ pub fn html(run: &TestRun, dir: &Path) -> String {
     );
     let _ = writeln!(h, "<p>{}</p>", escape(&run.summary()));
     h.push_str(
-        "<table><tr><th>case</th><th>status</th><th>render ms</th><th>reference ms</th><th>compare ms</th></tr>\n",
+        "<table><tr><th>case</th><th>status</th><th>overrides (--set)</th><th>graph since bless</th><th>render ms</th><th>reference ms</th><th>compare ms</th></tr>\n",
     );
     for c in &run.cases {
         let status = status_name(&c.status);
@@ -131,11 +137,13 @@ pub fn html(run: &TestRun, dir: &Path) -> String {
         let slow = if c.slow { " <span class=\"slow\">slower</span>" } else { "" };
         let _ = writeln!(
             h,
-            "<tr><td><a href=\"#{id}\">{name}</a></td><td class=\"{status}\">{status}</td><td>{:.1}{slow}</td><td>{reference}</td><td>{:.1}</td></tr>",
+            "<tr><td><a href=\"#{id}\">{name}</a></td><td class=\"{status}\">{status}</td><td>{sets}</td><td>{changed}</td><td>{:.1}{slow}</td><td>{reference}</td><td>{:.1}</td></tr>",
             c.render_ms,
             c.compare_ms,
             id = anchor(&c.name),
-            name = escape(&c.name)
+            name = escape(&c.name),
+            sets = escape(&c.sets.join(" ")),
+            changed = graph_state(c)
         );
     }
     h.push_str("</table>\n");
@@ -144,6 +152,15 @@ pub fn html(run: &TestRun, dir: &Path) -> String {
     }
     h.push_str("</body></html>\n");
     h
+}
+
+/// Whether the graph changed since the bless, for the HTML table.
+fn graph_state(c: &CaseResult) -> &'static str {
+    match c.graph_changed {
+        Some(true) => "<span class=\"slow\">changed</span>",
+        Some(false) => "same",
+        None => "",
+    }
 }
 
 fn status_name(s: &Status) -> &'static str {
@@ -170,9 +187,10 @@ fn section(h: &mut String, c: &CaseResult, dir: &Path) {
     );
     let _ = writeln!(
         h,
-        "<p>graph {}{}</p>",
+        "<p>graph {} {}{}</p>",
         escape(&c.graph),
-        if c.variant.is_empty() { String::new() } else { format!(", variant {}", escape(&c.variant.join(" "))) }
+        graph_state(c),
+        if c.sets.is_empty() { String::new() } else { format!(", --set {}", escape(&c.sets.join(" "))) }
     );
     if let Some(r) = c.reference_ms.filter(|_| c.slow) {
         let _ = writeln!(h, "<p class=\"slow\">render {:.1} ms against {r:.1} ms at the last bless</p>", c.render_ms);
@@ -183,7 +201,8 @@ fn section(h: &mut String, c: &CaseResult, dir: &Path) {
     for o in c.outputs.iter().filter(|o| !o.passed) {
         let Some(images) = &o.images else { continue };
         let _ = writeln!(h, "<h3>{}</h3><div>", escape(&o.name));
-        for (label, path) in ["reference", "current", "diff (x8)"].iter().zip(images) {
+        let diff = format!("diff (levels x{:.1}: the largest is white)", o.diff_scale.unwrap_or(1.0));
+        for (label, path) in ["reference", "current", diff.as_str()].iter().zip(images) {
             let src = match std::fs::read(dir.join(path)) {
                 Ok(bytes) => format!("data:image/png;base64,{}", base64::encode(bytes)),
                 Err(_) => escape(path),
