@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use glam::{DVec3, EulerRot, Mat4, Quat};
+use glam::DVec3;
 
 use crate::core::node::prelude::*;
 use crate::cuboid::{Cuboid, CuboidGrid, NormalMethod, Transform, compose, unit_corner};
@@ -99,12 +99,7 @@ struct CuboidNode;
 impl Node for CuboidNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let (lo, hi) = content_box(cx)?;
-        let r = cx.vec3("rotate");
-        let rotation = Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
-        let model = Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate")).as_dmat4();
-        if model.determinant().abs() < 1e-12 {
-            return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
-        }
+        let model = crate::nodes::mesh::geometry::model_matrix(cx)?.as_dmat4();
         let corners = std::array::from_fn(|i| {
             model.transform_point3(lo + unit_corner(i) * (hi - lo)) + cx.vec3(OFFSETS[i]).as_dvec3()
         });

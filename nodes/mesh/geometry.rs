@@ -310,16 +310,23 @@ pub const ROTATE: ParamSpec =
 pub const SCALE: ParamSpec =
     ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis (applied first).");
 
-/// The model matrix of the `translate`, `rotate`, `scale` parameters: scale, then rotate XYZ
-/// in degrees, then translate; an error where a scale component is 0.
+/// The model matrix of the `translate`, `rotate`, `scale` parameters (see [`trs_matrix`]).
 pub fn model_matrix(cx: &EvalCx<'_>) -> Result<glam::Mat4, NodeError> {
-    let r = cx.vec3("rotate");
-    let rotation = glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
-    let m = glam::Mat4::from_scale_rotation_translation(cx.vec3("scale"), rotation, cx.vec3("translate"));
-    if m.determinant().abs() < 1e-12 {
-        return Err(NodeError::msg("the transform is degenerate (a scale component is 0)"));
+    trs_matrix(cx.vec3("translate"), cx.vec3("rotate"), cx.vec3("scale"))
+}
+
+/// Scale, then rotate about X, Y, Z in degrees, then translate. A scale component that is 0 or
+/// not finite is an error that names the scale; a tiny one is not (millimetres to metres).
+pub fn trs_matrix(translate: glam::Vec3, rotate: glam::Vec3, scale: glam::Vec3) -> Result<glam::Mat4, NodeError> {
+    if !scale.is_finite() || scale.cmpeq(glam::Vec3::ZERO).any() {
+        return Err(NodeError::msg(format!(
+            "the transform is degenerate: scale [{}, {}, {}] has a component that is 0 or not finite",
+            scale.x, scale.y, scale.z
+        )));
     }
-    Ok(m)
+    let r = rotate;
+    let rotation = glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());
+    Ok(glam::Mat4::from_scale_rotation_translation(scale, rotation, translate))
 }
 
 /// `mesh` with positions moved by `m`, normals by its inverse transpose and tangents by its
@@ -342,5 +349,19 @@ impl Node for TransformMeshNode {
         let out = transform_mesh(&mesh, model_matrix(cx)?);
         cx.set("mesh", Arc::new(out));
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod transform_tests {
+    use glam::Vec3;
+
+    #[test]
+    fn a_tiny_scale_is_a_transform_and_a_zero_one_names_its_value() {
+        let tiny = super::trs_matrix(Vec3::ZERO, Vec3::ZERO, Vec3::splat(1e-4)).unwrap();
+        assert!((tiny.transform_point3(Vec3::X) - Vec3::new(1e-4, 0.0, 0.0)).length() < 1e-9);
+        let err = super::trs_matrix(Vec3::ZERO, Vec3::ZERO, Vec3::new(1.0, 0.0, 2.0)).unwrap_err();
+        assert!(matches!(&err, super::NodeError::Failed(m) if m.contains("scale [1, 0, 2]")), "{err:?}");
+        assert!(super::trs_matrix(Vec3::ZERO, Vec3::ZERO, Vec3::new(1.0, f32::NAN, 1.0)).is_err());
     }
 }

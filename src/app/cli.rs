@@ -46,9 +46,15 @@ enum Command {
         /// and box-filter the written images down to it.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
         ssaa: u32,
-        /// Override a parameter: node.param=value (repeatable).
+        /// Override a parameter: node.param=value (repeatable). Several values sweep:
+        /// node.param=a,b,c or a range a..b:n renders every combination into its own folder
+        /// under --out, named by its values.
         #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
         sets: Vec<String>,
+        /// With a sweep: also write contact_sheet.png into --out, every variant's image
+        /// labelled with its parameter values.
+        #[arg(long)]
+        contact_sheet: bool,
         /// Also write a texture output: node.port (repeatable), e.g. gbuffer.normal.
         #[arg(long = "dump", value_name = "NODE.PORT")]
         dumps: Vec<String>,
@@ -426,18 +432,23 @@ fn check(graphs: &[PathBuf], json: bool) -> ExitCode {
     for path in graphs {
         match Graph::load(path) {
             Ok(g) => {
-                if !json {
+                let base = path.parent().unwrap_or(std::path::Path::new(""));
+                let source = std::fs::read_to_string(path).unwrap_or_default();
+                let missing = g.missing_files(base);
+                if missing.is_empty() && !json {
                     println!("ok: {} ({} nodes, {} links)", path.display(), g.nodes.len(), g.links.len());
                 }
-                let base = path.parent().unwrap_or(std::path::Path::new(""));
-                for w in g.warnings(base) {
+                failed += usize::from(!missing.is_empty());
+                let warnings = g.warnings();
+                let levels = missing.iter().map(|w| ("error", w)).chain(warnings.iter().map(|w| ("warning", w)));
+                for (level, w) in levels {
+                    let (line, col) = w.line_col(&source);
                     if json {
-                        let (line, col) = std::fs::read_to_string(path).map(|s| w.line_col(&s)).unwrap_or((1, 1));
                         let problem =
                             serde_json::json!({ "node": w.node, "port": null, "message": w.message, "help": w.help });
-                        print_json(path, line, col, "warning", problem);
+                        print_json(path, line, col, level, problem);
                     } else {
-                        eprintln!("{}: warning: {w}", path.display());
+                        eprintln!("{}:{line}:{col}: {level}: {w}", path.display());
                     }
                 }
             }
@@ -497,7 +508,20 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Render { graph, frames, fps, size, out, ssaa, sets, dumps, dump_format, pending_timeout, backend } => {
+        Command::Render {
+            graph,
+            frames,
+            fps,
+            size,
+            out,
+            ssaa,
+            sets,
+            contact_sheet,
+            dumps,
+            dump_format,
+            pending_timeout,
+            backend,
+        } => {
             use crate::core::param::Choice as _;
             let dump_format = dump_format.map(|name| {
                 let i =
@@ -534,18 +558,36 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 command: std::env::args().collect(),
                 pending_timeout,
             };
-            // Validate before touching the GPU, so a bad graph fails fast and clearly.
-            let prepared = crate::app::render::load_with_overrides(&opts.graph_path, &opts.sets)
-                .and_then(|g| Ok((g, GpuContext::headless(pick_backend(backend)?)?)));
-            let (loaded, gpu) = prepared.inspect_err(|e| crate::app::render::record_failure(&opts, e))?;
-            let stats = crate::app::render::render_graph(&opts, &loaded, &gpu)?;
-            eprintln!(
-                "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
-                stats.frames.len(),
-                stats.adapter,
-                stats.files.len(),
-                out.display()
-            );
+            // Validate every variant before touching the GPU, so a bad graph fails fast and
+            // clearly.
+            let variants = crate::app::render::plan_sweep(&opts)?;
+            let sweep = crate::app::sweep::Sweep::parse(&opts.sets)?;
+            if contact_sheet && sweep.axes.is_empty() {
+                anyhow::bail!("--contact-sheet needs a sweep: a --set with two or more values (a,b,c or a..b:n)");
+            }
+            let gpu = GpuContext::headless(pick_backend(backend)?).inspect_err(|e| {
+                for (_, o, _) in &variants {
+                    crate::app::render::record_failure(o, e);
+                }
+            })?;
+            let mut runs = Vec::new();
+            for (variant, o, loaded) in variants {
+                let stats = crate::app::render::render_graph(&o, &loaded, &gpu)?;
+                eprintln!(
+                    "rendered {} frame(s) on {}: {} file(s) and stats.json in {}",
+                    stats.frames.len(),
+                    stats.adapter,
+                    stats.files.len(),
+                    o.out_dir.display()
+                );
+                runs.push((variant, o, stats));
+            }
+            if contact_sheet {
+                let columns = sweep.axes.last().map_or(1, |(_, values)| values.len());
+                for path in crate::app::render::write_contact_sheets(&out, &runs, columns)? {
+                    eprintln!("contact sheet: {}", path.display());
+                }
+            }
             Ok(ExitCode::SUCCESS)
         }
         #[cfg(feature = "editor")]

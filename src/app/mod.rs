@@ -6,11 +6,13 @@ mod bench;
 mod bench_all;
 pub mod cli;
 pub mod compare;
+pub mod contact_sheet;
 pub mod docs;
 #[cfg(feature = "editor")]
 pub mod editor;
 pub mod regress;
 pub mod render;
+pub mod sweep;
 
 // The idle-overhead bench's graph, which the tests also use.
 pub use bench::chain_graph;

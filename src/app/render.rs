@@ -17,6 +17,7 @@ use crate::core::resources::Resources;
 use crate::gpu::{self, GpuContext};
 use crate::io::image::ImageFormat;
 
+#[derive(Clone)]
 pub struct RenderOptions {
     pub graph_path: PathBuf,
     /// Inclusive frame range.
@@ -136,12 +137,14 @@ pub fn record_failure(opts: &RenderOptions, error: &anyhow::Error) {
 /// How long batch rendering waits for one frame's pending nodes before failing, by default.
 pub const PENDING_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
 
-/// Loads the graph and applies `--set` overrides, re-validating afterwards.
+/// Loads the graph and applies `--set` overrides, re-validating afterwards; files the graph
+/// names must exist (see [`check_files`]).
 pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph> {
     let mut graph = Graph::load(path).map_err(|e| anyhow::anyhow!("{e}"))?;
     for s in sets {
         graph.set_from_cli(s)?;
     }
+    check_files(&graph, path)?;
     Ok(graph)
 }
 
@@ -150,6 +153,85 @@ pub fn load_with_overrides(path: &Path, sets: &[String]) -> anyhow::Result<Graph
 pub fn render(opts: &RenderOptions, gpu: &GpuContext) -> anyhow::Result<Stats> {
     let graph = load_with_overrides(&opts.graph_path, &opts.sets).inspect_err(|e| record_failure(opts, e))?;
     render_graph(opts, &graph, gpu)
+}
+
+/// The variants of a sweep, each with its options (its own folder under `opts.out_dir`, named
+/// by its assignments) and its graph with the overrides applied. Every variant is loaded and
+/// validated here, so a bad value fails before anything renders.
+pub fn plan_sweep(opts: &RenderOptions) -> anyhow::Result<Vec<(Vec<String>, RenderOptions, Graph)>> {
+    let sweep = crate::app::sweep::Sweep::parse(&opts.sets)?;
+    sweep
+        .variants()
+        .into_iter()
+        .map(|variant| {
+            let mut o = opts.clone();
+            o.sets = sweep.fixed.iter().chain(&variant).cloned().collect();
+            if !sweep.axes.is_empty() {
+                o.out_dir = opts.out_dir.join(crate::app::sweep::variant_name(&variant));
+            }
+            let graph = load_with_overrides(&o.graph_path, &o.sets)
+                .map_err(|e| if variant.is_empty() { e } else { e.context(format!("variant {}", variant.join(" "))) })
+                .inspect_err(|e| record_failure(&o, e))?;
+            Ok((variant, o, graph))
+        })
+        .collect()
+}
+
+/// Fails, naming every missing file with its line and column and a did-you-mean, when a path
+/// parameter names a file that does not exist: before the GPU starts rather than seconds in.
+pub fn check_files(graph: &Graph, graph_path: &Path) -> anyhow::Result<()> {
+    let missing = graph.missing_files(graph_path.parent().unwrap_or(Path::new("")));
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let source = std::fs::read_to_string(graph_path).unwrap_or_default();
+    let lines: Vec<String> = missing
+        .iter()
+        .map(|w| {
+            let (line, col) = w.line_col(&source);
+            format!("{}:{line}:{col}: {w}", graph_path.display())
+        })
+        .collect();
+    bail!("{}", lines.join("\n"))
+}
+
+/// Writes the contact sheets of a rendered sweep into `out`: for every PNG a variant wrote,
+/// `contact_sheet.png` (or `contact_sheet_<file>.png` when each variant wrote several), the
+/// variants in rows of the last axis's values, each labelled with its assignments. Returns
+/// the files written.
+pub fn write_contact_sheets(
+    out: &Path,
+    runs: &[(Vec<String>, RenderOptions, Stats)],
+    columns: usize,
+) -> anyhow::Result<Vec<PathBuf>> {
+    use crate::app::contact_sheet::{Cell, montage};
+    let Some((_, _, first)) = runs.first() else { return Ok(Vec::new()) };
+    let pngs: Vec<&String> = first.files.iter().filter(|f| f.ends_with(".png")).collect();
+    let mut written = Vec::new();
+    for png in &pngs {
+        let mut cells = Vec::new();
+        for (variant, o, _) in runs {
+            let path = o.out_dir.join(png);
+            let image = image::open(&path).with_context(|| format!("cannot read {}", path.display()))?.to_rgba8();
+            let mut label = variant.clone();
+            if pngs.len() > 1 {
+                label.push((*png).clone());
+            }
+            cells.push(Cell { image, label });
+        }
+        let name = if pngs.len() == 1 {
+            "contact_sheet.png".to_string()
+        } else {
+            format!("contact_sheet_{}.png", png.trim_end_matches(".png"))
+        };
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        montage(&cells, columns).write_to(&mut bytes, image::ImageFormat::Png)?;
+        let path = out.join(name);
+        crate::io::atomic::write_atomic(&path, bytes.get_ref())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        written.push(path);
+    }
+    Ok(written)
 }
 
 /// Renders the frames of a loaded graph (`opts.sets` already applied). On failure stats.json

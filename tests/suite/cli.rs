@@ -198,6 +198,50 @@ fn render_writes_frames_and_stats() {
     std::fs::remove_dir_all(out).unwrap();
 }
 
+/// `render --set a..b:n --contact-sheet`: a folder per value, each a full render, and a
+/// labelled montage whose cells brighten with the swept light.
+#[test]
+fn render_sweeps_into_folders_and_writes_a_contact_sheet() {
+    let out = temp("sweep");
+    let out_arg = out.to_str().unwrap();
+    let args = ["render", "graphs/spot.ron", "--size", "64x48", "--out", out_arg];
+    let (code, _, err) =
+        werkstatt(&[&args[..], &["--set", "light.sun_intensity=0.5..2:3", "--contact-sheet"]].concat());
+    assert_eq!(code, 0, "{err}");
+    let mut means = Vec::new();
+    for value in ["0.5", "1.25", "2"] {
+        let dir = out.join(format!("light.sun_intensity={value}"));
+        let stats = read_stats(&dir);
+        assert_eq!(stats["sets"][0].as_str(), Some(format!("light.sun_intensity={value}").as_str()));
+        let png = image::open(dir.join("preview_0000.png")).unwrap().to_rgba8();
+        means.push(png.pixels().map(|p| p[0] as f64 + p[1] as f64 + p[2] as f64).sum::<f64>());
+    }
+    assert!(means[0] < means[1] && means[1] < means[2], "brighter with the sun: {means:?}");
+    let sheet = image::open(out.join("contact_sheet.png")).unwrap().to_rgba8();
+    assert_eq!(sheet.width(), 6 + 3 * (96 + 6), "three cells in a row (64 px images in 96 px cells for their labels)");
+    assert!(sheet.height() > 48 + 8, "room for a label under the images");
+    assert!(err.contains("contact sheet: "), "{err}");
+
+    // No sweep, no sheet; a bad value fails before anything renders.
+    let (code, _, err) = werkstatt(&[&args[..], &["--contact-sheet"]].concat());
+    assert_ne!(code, 0);
+    assert!(err.contains("--contact-sheet needs a sweep"), "{err}");
+    let bad = temp("sweep-bad");
+    let (code, _, err) = werkstatt(&[
+        "render",
+        "graphs/spot.ron",
+        "--size",
+        "64x48",
+        "--out",
+        bad.to_str().unwrap(),
+        "--set",
+        "light.sun_intensity=1,oops",
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("oops"), "{err}");
+    assert!(!bad.join("light.sun_intensity=1/preview_0000.png").exists(), "nothing renders before every variant loads");
+}
+
 /// A temporary folder named after the test, emptied first.
 fn temp(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("werkstatt-cli-{name}-{}", std::process::id()));
@@ -477,18 +521,26 @@ const MISSING_MESH: &str = r#"(version: 1, nodes: {
     "export": (kind: "ExportGeometry"),
 }, links: [("m.mesh", "draw.mesh"), ("draw.scene", "export.scene")])"#;
 
+/// A misspelt file fails `check` and `render` at once, at its line and column, with the
+/// closest name in its folder.
 #[test]
-fn a_missing_file_is_a_warning_in_check_and_named_at_render() {
+fn a_missing_file_is_an_error_in_check_and_render_with_a_did_you_mean() {
     let (dir, graph) = graph_file("missing-file", MISSING_MESH);
+    std::fs::write(dir.join("garment.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
     let (code, _, err) = werkstatt(&["check", graph.to_str().unwrap()]);
-    assert_eq!(code, 0, "files may appear later, so check only warns: {err}");
+    assert_eq!(code, 1, "{err}");
     let missing = dir.join("garmnet.obj");
-    let warning = format!("warning: node \"m\" (MeshFile): parameter \"path\": no such file: {}", missing.display());
-    assert!(err.contains(&warning), "{err}");
+    let error = format!(
+        "{}:2:5: error: node \"m\" (MeshFile): parameter \"path\": no such file: {}; did you mean \"garment.obj\"?",
+        graph.display(),
+        missing.display()
+    );
+    assert!(err.contains(&error), "expected {error} in:\n{err}");
     let out = dir.join("out");
     let (code, _, err) = werkstatt(&["render", graph.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 1);
-    assert!(err.contains(&format!("no such file: {}", missing.display())), "{err}");
+    assert!(err.contains(&error.replace(": error:", ":")), "{err}");
+    assert!(!out.join("export_0000.obj").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
 

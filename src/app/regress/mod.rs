@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::app::compare::{self, ImageTolerance};
 use crate::app::render::{self, RenderOptions};
+use crate::app::sweep::{Sweep, parse_axis, product, sanitize};
 use crate::gpu::GpuContext;
 
 pub mod report;
@@ -227,12 +228,7 @@ pub fn plan(opts: &TestOptions) -> anyhow::Result<Vec<Case>> {
             bail!("{}: no such graph or folder", g.display());
         }
     }
-    let mut axes_cli = Vec::new();
-    let mut fixed_cli = Vec::new();
-    for s in &opts.sets {
-        let axis = parse_axis(s)?;
-        if axis.1.len() > 1 { axes_cli.push(axis) } else { fixed_cli.push(assignment(&axis.0, &axis.1[0])) }
-    }
+    let Sweep { fixed: fixed_cli, axes: mut axes_cli } = Sweep::parse(&opts.sets)?;
     if let Some(path) = &opts.sweep_file {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
         let list: Vec<String> =
@@ -320,67 +316,6 @@ fn clean(path: &Path) -> PathBuf {
 
 fn stem(path: &Path) -> String {
     path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
-}
-
-/// A case name usable as a folder name on every system.
-fn sanitize(name: &str) -> String {
-    name.chars().map(|c| if c.is_ascii_alphanumeric() || "._=+,@-".contains(c) { c } else { '_' }).collect()
-}
-
-fn assignment(target: &str, value: &str) -> String {
-    format!("{target}={value}")
-}
-
-/// `node.param=a,b,c` into the target and its values. Commas inside brackets do not split,
-/// so vectors are written `[0,0,1],[1,0,0]` (brackets dropped).
-pub fn parse_axis(text: &str) -> anyhow::Result<(String, Vec<String>)> {
-    let (target, values) = text
-        .split_once('=')
-        .filter(|(t, _)| t.contains('.'))
-        .with_context(|| format!("--set \"{text}\": expected node.param=value or node.param=a,b,c"))?;
-    let mut out = Vec::new();
-    let (mut depth, mut current) = (0i32, String::new());
-    for c in values.chars() {
-        match c {
-            '[' => depth += 1,
-            ']' => depth -= 1,
-            ',' if depth == 0 => {
-                out.push(std::mem::take(&mut current).trim().to_string());
-                continue;
-            }
-            _ => {}
-        }
-        current.push(c);
-    }
-    out.push(current.trim().to_string());
-    let out: Vec<String> =
-        out.into_iter().map(|v| v.trim_start_matches('[').trim_end_matches(']').to_string()).collect();
-    if depth != 0 || out.iter().any(String::is_empty) {
-        bail!("--set \"{text}\": a value is empty or a bracket is not closed");
-    }
-    let unique: BTreeSet<&String> = out.iter().collect();
-    if unique.len() != out.len() {
-        bail!("--set \"{text}\": a value is repeated, so two variants would have one name");
-    }
-    Ok((target.trim().to_string(), out))
-}
-
-/// Every combination of the axes' values, the first axis slowest; one empty variant for no axes.
-fn product(axes: &[(String, Vec<String>)]) -> Vec<Vec<String>> {
-    let mut out = vec![Vec::new()];
-    for (target, values) in axes {
-        out = out
-            .into_iter()
-            .flat_map(|prefix: Vec<String>| {
-                values.iter().map(move |v| {
-                    let mut p = prefix.clone();
-                    p.push(assignment(target, v));
-                    p
-                })
-            })
-            .collect();
-    }
-    out
 }
 
 /// The shard of this run: `--shard I/N`, else Slurm's array variables
@@ -875,26 +810,6 @@ fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sweep_axes_multiply_in_order_and_keep_vectors_whole() {
-        let a = parse_axis("camera.target=[0,0,0],[1,2,3]").unwrap();
-        assert_eq!(a, ("camera.target".to_string(), vec!["0,0,0".to_string(), "1,2,3".to_string()]));
-        let b = parse_axis("light.count=4,8").unwrap();
-        let p = product(&[b, a]);
-        assert_eq!(
-            p,
-            [
-                ["light.count=4", "camera.target=0,0,0"],
-                ["light.count=4", "camera.target=1,2,3"],
-                ["light.count=8", "camera.target=0,0,0"],
-                ["light.count=8", "camera.target=1,2,3"],
-            ]
-        );
-        assert!(parse_axis("x.y=1,,2").is_err());
-        assert!(parse_axis("x.y=1,1").is_err());
-        assert!(parse_axis("xy=1").is_err());
-    }
 
     #[test]
     fn shard_comes_from_the_flag_slurm_or_kubernetes() {

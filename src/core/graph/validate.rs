@@ -203,10 +203,11 @@ impl Graph {
         }
     }
 
-    /// What `check` warns about but does not fail on: files a path parameter names that do
-    /// not exist (yet: a simulator may write them later), and nodes that cannot finish a batch
-    /// render. Paths are resolved against `base_dir`, the graph's folder, as rendering does.
-    pub fn warnings(&self, base_dir: &Path) -> Vec<Warning> {
+    /// Files that path parameters name and that do not exist, resolved against `base_dir`
+    /// (the graph's folder, as rendering does): `check` and `render` fail on them before any
+    /// work. A sequence pattern (frame_%04d.obj, frame_####.obj, frame_*.obj) needs its
+    /// folder. The help suggests the closest name in that folder.
+    pub fn missing_files(&self, base_dir: &Path) -> Vec<Warning> {
         let mut out = Vec::new();
         for (id, node) in &self.nodes {
             let Some(spec) = spec::find(&node.kind) else { continue };
@@ -216,7 +217,6 @@ impl Graph {
                     continue;
                 }
                 let path = base_dir.join(text);
-                // A sequence pattern (frame_%04d.obj, frame_####.obj, frame_*.obj) names its folder.
                 let is_pattern = crate::core::resources::is_file_pattern(text);
                 let must_exist = if is_pattern { path.parent().unwrap_or(base_dir) } else { &path };
                 if !must_exist.exists() {
@@ -225,10 +225,19 @@ impl Graph {
                         node: id.clone(),
                         kind: spec.kind,
                         message: format!("parameter \"{}\": no such file: {}", p.name, must_exist.display()),
-                        help: None,
+                        help: closest_file(must_exist, text),
                     });
                 }
             }
+        }
+        out
+    }
+
+    /// What `check` warns about but does not fail on: nodes that cannot finish a batch render.
+    pub fn warnings(&self) -> Vec<Warning> {
+        let mut out = Vec::new();
+        for (id, node) in &self.nodes {
+            let Some(spec) = spec::find(&node.kind) else { continue };
             if spec.has(Capabilities::EXTERNAL_SOURCE) {
                 out.push(Warning {
                     place: Place::Node(id.clone()),
@@ -283,5 +292,30 @@ impl Graph {
             }
         }
         None
+    }
+}
+
+/// "did you mean ...?" for a missing file: the closest name in the nearest folder that exists,
+/// written as the parameter would be (`written` with its last part replaced).
+fn closest_file(missing: &Path, written: &str) -> Option<String> {
+    let mut missing = missing.to_path_buf();
+    let mut written = written.trim_end_matches('/').to_string();
+    // Walk up to the first folder that exists; the name below it is what was misspelt.
+    loop {
+        let (Some(parent), Some(name)) = (missing.parent(), missing.file_name()) else { return None };
+        if parent.as_os_str().is_empty() || parent.is_dir() {
+            let folder = if parent.as_os_str().is_empty() { Path::new(".") } else { parent };
+            let mut names: Vec<String> = std::fs::read_dir(folder)
+                .ok()?
+                .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+                .collect();
+            // Sorted, so that of two equally close names the same one is suggested every time.
+            names.sort();
+            let best = spec::closest(&name.to_string_lossy(), names.iter().map(String::as_str))?;
+            let prefix = written.rfind('/').map_or("", |i| &written[..=i]);
+            return Some(format!("did you mean \"{prefix}{best}\"?"));
+        }
+        missing = parent.to_path_buf();
+        written = written.rfind('/').map_or(String::new(), |i| written[..i].to_string());
     }
 }
