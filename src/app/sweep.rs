@@ -157,7 +157,7 @@ mod tests {
         assert_eq!(v, ["0.1", "0.3", "0.5", "0.7", "0.9"]);
         let (_, v) = parse_axis("light.count=1..4:4,16").unwrap();
         assert_eq!(v, ["1", "2", "3", "4", "16"]);
-        assert!(parse_axis("x.y=0..1:1").unwrap_err().to_string().contains("count"));
+        assert!(format!("{:#}", parse_axis("x.y=0..1:1").unwrap_err()).contains("count"));
         assert!(format!("{:#}", parse_axis("x.y=a..1:3").unwrap_err()).contains("two finite numbers"));
         // A time of day is not a range.
         assert_eq!(parse_axis("x.y=12:30").unwrap().1, ["12:30"]);

@@ -531,7 +531,7 @@ fn a_missing_file_is_an_error_in_check_and_render_with_a_did_you_mean() {
     assert_eq!(code, 1, "{err}");
     let missing = dir.join("garmnet.obj");
     let error = format!(
-        "{}:2:5: error: node \"m\" (MeshFile): parameter \"path\": no such file: {}; did you mean \"garment.obj\"?",
+        "{}:2:38: error: node \"m\" (MeshFile): parameter \"path\": no such file: {}; did you mean \"garment.obj\"?",
         graph.display(),
         missing.display()
     );
