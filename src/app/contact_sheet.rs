@@ -47,7 +47,7 @@ pub fn montage(cells: &[Cell], columns: usize) -> RgbaImage {
     sheet
 }
 
-/// Lines of at most `chars` characters, broken at `+`, `=`, `,` or anywhere when a word is
+/// Lines of at most `chars` characters, broken after `+`, `=`, `,`, then `.`, or anywhere when a word is
 /// longer than a line.
 fn wrap(lines: &[String], chars: usize) -> Vec<String> {
     let chars = chars.max(1);
@@ -56,7 +56,9 @@ fn wrap(lines: &[String], chars: usize) -> Vec<String> {
         let mut rest: &str = line;
         while rest.chars().count() > chars {
             let head: String = rest.chars().take(chars).collect();
-            let cut = head.rfind(['+', '=', ',', ' ']).map_or(head.len(), |i| i + 1);
+            // After an assignment's parts first; after a dot (a node's name) only failing that,
+            // so that numbers stay whole.
+            let cut = head.rfind(['+', '=', ',', ' ']).or_else(|| head.rfind('.')).map_or(head.len(), |i| i + 1);
             out.push(rest[..cut].to_string());
             rest = &rest[cut..];
         }
