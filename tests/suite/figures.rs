@@ -21,6 +21,16 @@ fn cloth_only_graph(name: &str, out: &std::path::Path) -> std::path::PathBuf {
         g.links.push(Link { from: port("cloth.surface"), to: port("draw_cloth.mesh") });
     }
     g.links.push(Link { from: port("draw_cloth.scene"), to: port("scene.a") });
+    // Saved outside graphs/: the files it names, relative to graphs/, made absolute.
+    for node in g.nodes.values_mut() {
+        for value in node.params.values_mut() {
+            if let werkstatt::core::param::ParamValue::Str(text) = value
+                && text.starts_with("../")
+            {
+                *text = root().join("graphs").join(&*text).display().to_string();
+            }
+        }
+    }
     let path = out.join(format!("{name}_cloth_only.ron"));
     g.save(&path).unwrap();
     path
