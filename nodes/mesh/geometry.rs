@@ -251,7 +251,11 @@ pub static MESH_FILE: NodeSpec = NodeSpec {
             ParamKind::Path { default: "", extensions: &["obj", "gltf", "glb"] },
             "The file, relative to the graph's folder.",
         ),
-        ParamSpec::new("normalize", ParamKind::Bool { default: true }, "Centre the mesh and scale it to unit height."),
+        ParamSpec::new(
+            "normalize",
+            ParamKind::Bool { default: false },
+            "Centre the mesh and scale it to unit height. Off: the file's units, so meshes from one tool (a body and its garment) line up.",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(MeshFileNode),

@@ -186,7 +186,11 @@ pub static MERGE: NodeSpec = NodeSpec {
         PortSpec::optional("d", PortType::Scene, "Scene d."),
     ],
     outputs: &[PortSpec::output("scene", PortType::Scene, "All items, in input order.")],
-    params: &[],
+    params: &[ParamSpec::new(
+        "check_units",
+        ParamKind::Bool { default: true },
+        "Warn when the inputs' largest meshes (200 triangles or more, not attachments) differ in size by more than 10x: a body and a garment in different units. Off for scenes that mean it (a small collider under a large cloth).",
+    )],
     capabilities: Capabilities::NONE,
     create: || Box::new(MergeNode),
 };
@@ -195,12 +199,67 @@ struct MergeNode;
 impl Node for MergeNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let mut items = Vec::new();
+        // The largest mesh of each input, for the units check below.
+        let mut sizes = Vec::new();
         for port in ["a", "b", "c", "d"] {
             if let Some(s) = cx.optional::<Arc<Vec<DrawItem>>>(port) {
                 items.extend(s.iter().cloned());
+                if let Some(size) = s.iter().filter_map(mesh_size).reduce(f32::max) {
+                    sizes.push((port, size));
+                }
             }
+        }
+        if let Some(warning) = units_mismatch(&sizes).filter(|_| cx.bool("check_units")) {
+            cx.warn(warning);
         }
         cx.set("scene", Arc::new(items));
         Ok(())
+    }
+}
+
+/// The world-space diagonal of an item's mesh, for items that are whole objects: coarse meshes
+/// of at least 200 triangles (not attachments, floors or markers).
+fn mesh_size(item: &DrawItem) -> Option<f32> {
+    if item.detail || item.mesh.triangle_count() < 200 {
+        return None;
+    }
+    let (lo, hi) = item.mesh.bounds();
+    let corners = (0..8).map(|i| {
+        let pick = |bit: usize, axis: usize| if i >> bit & 1 == 1 { hi[axis] } else { lo[axis] };
+        item.model.transform_point3(glam::Vec3::new(pick(0, 0), pick(1, 1), pick(2, 2)))
+    });
+    let (wlo, whi) =
+        corners.fold((glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)), |(a, b), p| (a.min(p), b.max(p)));
+    Some((whi - wlo).length()).filter(|d| d.is_finite() && *d > 0.0)
+}
+
+/// A warning when the inputs' largest meshes differ in size by more than 10x: a body and a
+/// garment from files in different units, or one normalized and the other not.
+fn units_mismatch(sizes: &[(&str, f32)]) -> Option<String> {
+    let small = sizes.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let large = sizes.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (large.1 > 10.0 * small.1).then(|| {
+        format!(
+            "the meshes of input \"{}\" ({:.3} across) and input \"{}\" ({:.3} across) differ in size by {:.0}x: \
+             files in different units, or one MeshFile normalized and the other not? (MeshFile keeps the file's units \
+             unless normalize is on)",
+            small.0,
+            small.1,
+            large.0,
+            large.1,
+            large.1 / small.1
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn inputs_ten_times_apart_in_size_are_named() {
+        assert_eq!(super::units_mismatch(&[("a", 1.8), ("b", 1.2)]), None);
+        let w = super::units_mismatch(&[("a", 1.8), ("b", 0.17)]).unwrap();
+        assert!(w.contains("input \"b\" (0.170 across)") && w.contains("input \"a\" (1.800 across)"), "{w}");
+        assert!(w.contains("11x"), "{w}");
+        assert_eq!(super::units_mismatch(&[("a", 1.0)]), None);
     }
 }

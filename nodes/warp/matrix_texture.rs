@@ -53,6 +53,11 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
             "Flip t_v on pattern pieces whose UVs are mirrored ((t_u x n) . t_v < 0), so attachments there are not mirrored.",
         ),
         ParamSpec::new(
+            "mirrored_ok",
+            ParamKind::Bool { default: false },
+            "The mirrored UVs are known and harmless (no attachment that reads backwards lands there): no warning about them.",
+        ),
+        ParamSpec::new(
             "translate",
             ParamKind::Vec3 { default: [0.0, 0.0, 0.0] },
             "The surface's model transform, as on the Draw that shows it (applied last).",
@@ -242,7 +247,7 @@ impl Node for MatrixTextureNode {
         let hands = handedness(&mesh, resolution);
         let flip = cx.bool("flip_left_handed");
         let left: Vec<&PieceHandedness> = hands.iter().filter(|h| h.left_texels >= 0.5).collect();
-        if !left.is_empty() {
+        if !left.is_empty() && !cx.bool("mirrored_ok") {
             let list: Vec<String> = left
                 .iter()
                 .map(|h| format!("piece {}: {:.0} of {:.0}", h.piece, h.left_texels, h.left_texels + h.right_texels))
@@ -255,7 +260,11 @@ impl Node for MatrixTextureNode {
             cx.warn(if flip {
                 format!("{what}; t_v is flipped on the pieces where they are the majority")
             } else {
-                format!("{what}: attachments there are mirrored; set flip_left_handed to flip t_v on those pieces")
+                format!(
+                    "{what}: attachments placed there (buttons, decals, stickers, fur) come out mirrored, so text and \
+                     logos read backwards; where none lands it does not matter: set mirrored_ok to silence this, or \
+                     flip_left_handed to flip t_v on those pieces"
+                )
             });
         }
         let flipped: Vec<u32> = if flip {

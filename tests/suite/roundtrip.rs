@@ -82,7 +82,7 @@ fn migrations_upgrade_old_versions_in_order() {
         Migration { from: 1, note: "Constant is now Number", apply: rename_kind },
         Migration { from: 2, note: "canvas units halved", apply: double_pos },
     ];
-    let mut g = Graph::new();
+    let mut g = Graph { version: 1, ..Graph::new() };
     g.nodes.insert(
         "c".into(),
         werkstatt::core::graph::NodeDoc { kind: "Constant".into(), pos: [1.0, 2.0], params: Default::default() },
@@ -92,6 +92,25 @@ fn migrations_upgrade_old_versions_in_order() {
     assert_eq!((g.version, g.nodes["c"].kind.as_str(), g.nodes["c"].pos), (3, "Number", [2.0, 4.0]));
     let mut old = Graph { version: 0, ..Graph::new() };
     assert!(migrate(&mut old, 3, &table).unwrap_err().to_string().contains("no migration from version 0"));
+}
+
+/// Version 2 changed MeshFile's `normalize` default to false: a version-1 file that relied on
+/// the old default opens with `normalize: true` written out, a new one keeps file units.
+#[test]
+fn version_1_mesh_files_keep_their_normalization() {
+    use werkstatt::core::param::ParamValue;
+    let text = |version: u32| {
+        format!(r#"(version: {version}, nodes: {{"m": (kind: "MeshFile", params: {{"path": "x.obj"}})}}, links: [])"#)
+    };
+    let path = std::path::Path::new("inline.ron");
+    let old = Graph::load_str(&text(1), path).unwrap();
+    assert_eq!(old.version, werkstatt::core::graph::CURRENT_VERSION);
+    assert_eq!(old.nodes["m"].params.get("normalize"), Some(&ParamValue::Bool(true)));
+    let new = Graph::load_str(&text(2), path).unwrap();
+    assert_eq!(new.nodes["m"].params.get("normalize"), None, "the default applies: file units");
+    let spec = werkstatt::core::spec::find("MeshFile").unwrap();
+    let normalize = spec.params.iter().find(|p| p.name == "normalize").unwrap();
+    assert_eq!(normalize.kind.default_value(), ParamValue::Bool(false));
 }
 
 #[test]

@@ -742,19 +742,23 @@ fn matrix_output(ev: &werkstatt::core::eval::Evaluator, node: &str) -> Arc<werks
     }
 }
 
-/// A mirrored UV island is counted and warned on the node; `flip_left_handed` makes its frames
-/// right-handed.
+/// A mirrored UV island is counted and warned on the node, with what it affects and how to
+/// silence it; `flip_left_handed` makes its frames right-handed, `mirrored_ok` quiets it.
 #[test]
 fn a_left_handed_island_is_warned_and_can_be_flipped() {
-    for flip in [false, true] {
-        let g = graph(&format!(
+    let mirrored = |flip: bool, ok: bool| {
+        graph(&format!(
             r#"(version: 1, nodes: {{
                 "m": (kind: "MeshFile", params: {{"path": "tests/data/mirrored_piece.obj", "normalize": false}}),
-                "mt": (kind: "MatrixTexture", params: {{"resolution": 64, "flip_left_handed": {flip}}}),
+                "mt": (kind: "MatrixTexture", params: {{"resolution": 64, "flip_left_handed": {flip}, "mirrored_ok": {ok}}}),
                 "out": (kind: "Watch"),
             }}, links: [("m.surface", "mt.surface"), ("mt.min_resolution", "out.value")])"#
-        ));
-        let ev = common::run_graph(&g, 8, 8);
+        ))
+    };
+    let quiet = common::run_graph(&mirrored(false, true), 8, 8);
+    assert!(quiet.report("mt").unwrap().warnings.is_empty(), "mirrored_ok silences the warning");
+    for flip in [false, true] {
+        let ev = common::run_graph(&mirrored(flip, false), 8, 8);
         let warnings = ev.report("mt").unwrap().warnings.to_vec();
         // Piece 1 covers a quarter of UV space: 1024 of 4096 texels.
         assert!(
@@ -763,6 +767,12 @@ fn a_left_handed_island_is_warned_and_can_be_flipped() {
                 .any(|w| w.contains("about 1024 texels have left-handed") && w.contains("piece 1: 1024 of 1024")),
             "{warnings:?}"
         );
+        if !flip {
+            assert!(
+                warnings.iter().any(|w| w.contains("read backwards") && w.contains("set mirrored_ok")),
+                "the warning says what it affects and how to silence it: {warnings:?}"
+            );
+        }
         let texels = read_matrix(common::gpu(), &matrix_output(&ev, "mt")).unwrap();
         let (mut right, mut left) = (0, 0);
         for t in texels.frames.iter().filter(|t| t.n.length_squared() > 0.25) {

@@ -7,7 +7,7 @@ use crate::core::param::ParamValue;
 use crate::core::spec;
 
 /// The file format version this build writes.
-pub const CURRENT_VERSION: u32 = 1;
+pub const CURRENT_VERSION: u32 = 2;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Graph {
