@@ -300,9 +300,9 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                         crate::io::image::write_image(&opts.out_dir.join(&name), &px, *format)?;
                         stats.files.push(name);
                     }
-                    Product::Geometry { mesh, format } => {
+                    Product::Geometry { mesh, parts, format } => {
                         let name = name(format.name());
-                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, *format)?;
+                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, parts, *format)?;
                         stats.files.push(name);
                     }
                     Product::Value(v) => stats.values.entry(id.clone()).or_default().push(*v),
