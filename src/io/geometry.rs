@@ -14,6 +14,8 @@ crate::choice!(
         Obj = "obj",
         Ply = "ply",
         Glb = "glb",
+        /// A cache of the rendered frame range in one file (`crate::io::usda`).
+        Usda = "usda",
     }
 );
 
@@ -35,6 +37,8 @@ pub fn write_geometry(path: &Path, mesh: &Mesh, parts: &[GeometryPart], format: 
         GeometryFormat::Obj => write_obj(path, mesh),
         GeometryFormat::Ply => write_ply(path, mesh),
         GeometryFormat::Glb => write_glb(path, mesh, parts),
+        // One frame on its own; the batch runner collects a range into one cache instead.
+        GeometryFormat::Usda => crate::io::usda::write_usda(path, 24.0, &[(0, mesh)]),
     }
 }
 

@@ -97,3 +97,107 @@ fn glb_export_holds_the_obj_geometry_with_a_material_per_item() {
         started.elapsed().as_secs_f64() * 1e3
     );
 }
+
+/// A cloth in motion exported over frames 0-3 as OBJ per frame and as one USD cache: the cache
+/// has a time code per frame at the graph's rate and, at each, every vertex and triangle of
+/// that frame's OBJ.
+#[test]
+fn usda_cache_holds_each_frame_of_the_obj_sequence() {
+    let dir = out_dir("formats-usda");
+    let graph = dir.join("cache.ron");
+    std::fs::write(
+        &graph,
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"triangles": 200, "warmup": 0.0}),
+            "draw": (kind: "Draw", params: {}),
+            "obj": (kind: "ExportGeometry", params: {"format": "obj"}),
+            "usd": (kind: "ExportGeometry", params: {"format": "usda"}),
+        }, links: [("cloth.surface", "draw.mesh"), ("draw.scene", "obj.scene"), ("draw.scene", "usd.scene")])"#,
+    )
+    .unwrap();
+    let stats = render_graph(&graph, &dir, (0, 3), (16, 16), &[], &[]).unwrap();
+    assert!(stats.files.contains(&"usd.usda".to_string()), "{:?}", stats.files);
+    let path = dir.join("usd.usda");
+    let stage = werkstatt::io::usda::read_usda(&path).unwrap();
+    assert_eq!((stage.time_codes_per_second, stage.start, stage.end), (30.0, 0.0, 3.0));
+    assert_eq!(stage.meshes.len(), 1);
+    let samples = &stage.meshes[0].samples;
+    assert_eq!(samples.iter().map(|s| s.0).collect::<Vec<_>>(), [0.0, 1.0, 2.0, 3.0], "one sample per frame");
+    for (t, s) in samples {
+        let (positions, indices) = read_obj(&dir.join(format!("obj_{:04}.obj", *t as i64)));
+        let ours: Vec<[f32; 3]> = s.positions.iter().map(|p| p.to_array()).collect();
+        assert!(ours == positions, "frame {t}: the cache's points differ from the OBJ's");
+        assert_eq!(s.indices, indices, "frame {t}");
+        assert_eq!(s.normals.len(), ours.len());
+    }
+    assert_ne!(samples[0].1.positions, samples[3].1.positions, "the cloth moves");
+    eprintln!("usda cache: 4 frames, {} bytes", std::fs::metadata(&path).unwrap().len());
+}
+
+/// Every way of cutting or damaging a file: `read` returns an error naming the file (or, for a
+/// damage that leaves a valid file, a result), and never panics.
+fn corruption_loop(good: &Path, read: impl Fn(&Path) -> anyhow::Result<()>) {
+    let bytes = std::fs::read(good).unwrap();
+    let bad = good.with_file_name(format!("damaged.{}", good.extension().unwrap().to_str().unwrap()));
+    let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    let mut failures = 0;
+    for case in 0..120 {
+        let mut b = bytes.clone();
+        if case < 60 {
+            b.truncate((next() % bytes.len() as u64) as usize);
+        } else {
+            for _ in 0..1 + case % 4 {
+                let i = (next() % b.len() as u64) as usize;
+                b[i] = next() as u8;
+            }
+        }
+        std::fs::write(&bad, &b).unwrap();
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read(&bad)));
+        match result {
+            Err(_) => panic!("case {case}: reading {} panicked", bad.display()),
+            Ok(Err(e)) => {
+                failures += 1;
+                let e = format!("{e:#}");
+                assert!(e.contains("damaged."), "case {case}: the error does not name the file: {e}");
+            }
+            // A cut that only took trailing white space leaves the file whole.
+            Ok(Ok(())) => assert!(
+                case >= 60 || b.trim_ascii_end() == bytes.trim_ascii_end(),
+                "case {case}: a file cut at {} of {} bytes read without an error",
+                b.len(),
+                bytes.len()
+            ),
+        }
+    }
+    assert!(failures >= 60, "only {failures} of 120 damaged files were refused");
+}
+
+#[test]
+fn damaged_usda_and_glb_files_fail_with_the_file_named() {
+    let dir = out_dir("formats-damaged");
+    let graph = dir.join("small.ron");
+    std::fs::write(
+        &graph,
+        r#"(version: 1, nodes: {
+            "plane": (kind: "Primitive", params: {"shape": "plane", "segments_u": 3, "segments_v": 3}),
+            "draw": (kind: "Draw", params: {}),
+            "glb": (kind: "ExportGeometry", params: {"format": "glb"}),
+            "usd": (kind: "ExportGeometry", params: {"format": "usda"}),
+        }, links: [("plane.mesh", "draw.mesh"), ("draw.scene", "glb.scene"), ("draw.scene", "usd.scene")])"#,
+    )
+    .unwrap();
+    render_graph(&graph, &dir, (0, 0), (8, 8), &[], &[]).unwrap();
+    // The project's own readers take the good files.
+    let mesh = werkstatt::mesh::load_mesh_file(&dir.join("glb_0000.glb")).unwrap();
+    assert_eq!(mesh.triangle_count(), 18);
+    let stage = werkstatt::io::usda::read_usda(&dir.join("usd.usda")).unwrap();
+    assert_eq!(stage.meshes[0].samples[0].1.indices.len(), 3 * 18);
+    corruption_loop(&dir.join("glb_0000.glb"), |p| werkstatt::mesh::load_mesh_file(p).map(|_| ()));
+    corruption_loop(&dir.join("usd.usda"), |p| werkstatt::io::usda::read_usda(p).map(|_| ()));
+}
