@@ -132,6 +132,27 @@ fn usda_cache_holds_each_frame_of_the_obj_sequence() {
     }
     assert_ne!(samples[0].1.positions, samples[3].1.positions, "the cloth moves");
     eprintln!("usda cache: 4 frames, {} bytes", std::fs::metadata(&path).unwrap().len());
+
+    // Played back by MeshSequence at the cache's own rate (the node's fps is ignored) and
+    // exported again: each frame is the original frame's OBJ, vertex for vertex.
+    let play = dir.join("play");
+    std::fs::create_dir_all(&play).unwrap();
+    let replay = play.join("replay.ron");
+    std::fs::write(
+        &replay,
+        r#"(version: 1, nodes: {
+            "seq": (kind: "MeshSequence", params: {"path": "../usd.usda", "fps": 7.0}),
+            "draw": (kind: "Draw", params: {}),
+            "obj": (kind: "ExportGeometry", params: {"format": "obj"}),
+        }, links: [("seq.surface", "draw.mesh"), ("draw.scene", "obj.scene")])"#,
+    )
+    .unwrap();
+    render_graph(&replay, &play, (0, 3), (16, 16), &[], &[]).unwrap();
+    for f in 0..=3 {
+        let name = format!("obj_{f:04}.obj");
+        let (original, replayed) = (read_obj(&dir.join(&name)), read_obj(&play.join(&name)));
+        assert!(original == replayed, "frame {f}: MeshSequence plays other geometry than the cache holds");
+    }
 }
 
 /// Every way of cutting or damaging a file: `read` returns an error naming the file (or, for a
