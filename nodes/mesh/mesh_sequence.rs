@@ -1,11 +1,13 @@
 //! Simulator input from files: an OBJ frame sequence (`frame_0001.obj`, ...) that another
-//! simulator exported, played back against the frame time with linear interpolation.
+//! simulator exported, or a USD ASCII mesh cache (.usda), played back against the frame time
+//! with linear interpolation.
 //!
 //! Every frame file loads through the lazy resource system on a worker thread; the node
 //! holds the (at most two) files the current time needs, prefetches the next one and lets
 //! the resource system forget the others, so memory stays bounded however long the
 //! sequence is. All frames must share one topology (vertices, triangles, UVs, pieces); a
-//! frame that does not is an error naming its file.
+//! frame that does not is an error naming its file. A .usda cache is one text file holding
+//! every frame, so it is parsed whole, once, and all its frames are held.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -21,7 +23,7 @@ use crate::mesh::{self, Mesh};
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
     category: Category::Simulation,
-    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads; only the files around the current time are held in memory.",
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) or a USD ASCII mesh cache (.usda, its time codes as frame numbers at its timeCodesPerSecond) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads; only the files around the current time are held in memory.",
     inputs: &[],
     outputs: &[PortSpec::output(
         "surface",
@@ -31,13 +33,13 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "path",
-            ParamKind::Path { default: "", extensions: &["obj"] },
-            "A folder holding one sequence, or a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame); relative to the graph's folder.",
+            ParamKind::Path { default: "", extensions: &["obj", "usda"] },
+            "A folder holding one sequence, a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame), or a .usda cache with one Mesh prim that has per-vertex primvars:st; relative to the graph's folder.",
         ),
         ParamSpec::new(
             "fps",
             ParamKind::Float { default: 24.0, min: 1e-3, max: 1e4 },
-            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0.",
+            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0. A .usda cache uses its own timeCodesPerSecond instead.",
         ),
         ParamSpec::new(
             "start_frame",
@@ -62,7 +64,21 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
 /// The frame files of one sequence, sorted by frame number.
 #[derive(Debug)]
 pub struct SequenceIndex {
+    /// Frame numbers and files (for a .usda cache: labels `cache.usda@time`).
     pub frames: Vec<(i64, PathBuf)>,
+    /// A .usda cache's frames, parsed with the index (one per entry of `frames`).
+    pub cached: Option<CachedFrames>,
+    /// A .usda cache's timeCodesPerSecond, which replaces the node's `fps`.
+    pub fps: Option<f64>,
+}
+
+/// Frames parsed together with their index.
+pub struct CachedFrames(pub Vec<Arc<SeqFrame>>);
+
+impl std::fmt::Debug for CachedFrames {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} frames", self.0.len())
+    }
 }
 
 /// One loaded frame: the complete surface and its topology signature.
@@ -196,7 +212,7 @@ impl Node for MeshSequenceNode {
             start as f64
         } else {
             let t = cx.time();
-            start as f64 + t.frame as f64 * cx.f64("fps") / t.fps
+            start as f64 + t.frame as f64 * index.fps.unwrap_or_else(|| cx.f64("fps")) / t.fps
         };
         let (mut a, mut b, mut w) = bracket(&numbers, s, mode);
         if !cx.bool("interpolate") || w < 1e-6 {
@@ -218,28 +234,15 @@ impl Node for MeshSequenceNode {
         }
         .map(|i| index.frames[i].1.clone());
         let (pa, pb) = (index.frames[a].1.clone(), index.frames[b].1.clone());
-        let mut wanted = vec![pa.clone(), pb.clone()];
-        if self.reference.is_none() {
-            wanted.push(first.clone());
-        }
-        wanted.extend(next.clone());
-        // Let go of what this time does not need before loading (bounded memory while scrubbing).
-        self.held.retain(|p| wanted.contains(p) || !cx.release::<SeqFrame>(p));
-        for p in &wanted {
-            if !self.held.contains(p) {
-                self.held.push(p.clone());
+        let (fa, fb) = match &index.cached {
+            Some(cached) => {
+                if self.reference.is_none() {
+                    self.reference = Some((first.clone(), cached.0[0].topology.clone()));
+                }
+                (cached.0[a].clone(), cached.0[b].clone())
             }
-        }
-        if let Some(p) = &next {
-            cx.prefetch(p, load_frame);
-        }
-        // Request all before waiting on any, so they load in parallel.
-        let reference = self.reference.is_none().then(|| cx.load(&first, load_frame));
-        let (fa, fb) = (cx.load(&pa, load_frame), cx.load(&pb, load_frame));
-        if let Some(r) = reference {
-            self.reference = Some((first.clone(), r?.topology.clone()));
-        }
-        let (fa, fb) = (fa?, fb?);
+            None => self.load_pair(cx, &first, [pa.as_path(), pb.as_path()], next)?,
+        };
         let (ref_path, ref_topology) = self.reference.as_ref().expect("set above");
         for (frame, path) in [(&fa, &pa), (&fb, &pb)] {
             if let Some(why) = frame.topology.difference(ref_topology) {
@@ -261,10 +264,48 @@ impl Node for MeshSequenceNode {
     }
 }
 
+impl MeshSequenceNode {
+    /// Loads frame files `pa` and `pb` (and the first, the reference topology, once) through
+    /// the lazy resources, prefetches `next` and releases the files no longer needed.
+    fn load_pair(
+        &mut self,
+        cx: &mut EvalCx<'_>,
+        first: &Path,
+        [pa, pb]: [&Path; 2],
+        next: Option<PathBuf>,
+    ) -> Result<(Arc<SeqFrame>, Arc<SeqFrame>), NodeError> {
+        let mut wanted = vec![pa.to_path_buf(), pb.to_path_buf()];
+        if self.reference.is_none() {
+            wanted.push(first.to_path_buf());
+        }
+        wanted.extend(next.clone());
+        // Let go of what this time does not need before loading (bounded memory while scrubbing).
+        self.held.retain(|p| wanted.contains(p) || !cx.release::<SeqFrame>(p));
+        for p in &wanted {
+            if !self.held.contains(p) {
+                self.held.push(p.clone());
+            }
+        }
+        if let Some(p) = &next {
+            cx.prefetch(p, load_frame);
+        }
+        // Request all before waiting on any, so they load in parallel.
+        let reference = self.reference.is_none().then(|| cx.load(first, load_frame));
+        let (fa, fb) = (cx.load(pa, load_frame), cx.load(pb, load_frame));
+        if let Some(r) = reference {
+            self.reference = Some((first.to_path_buf(), r?.topology.clone()));
+        }
+        Ok((fa?, fb?))
+    }
+}
+
 /// Lists the frame files of a sequence: `path` is a folder (all its OBJ files whose names
 /// end in a number, which must share one prefix) or a pattern whose file name holds
 /// `%d`, `%0Nd`, a run of `#` or one `*` where the frame number goes.
 pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("usda")) {
+        return load_usda_index(path);
+    }
     let (dir, prefix, suffix) = if path.is_dir() {
         (path.to_path_buf(), None, None)
     } else {
@@ -320,7 +361,32 @@ pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
         bail!("{} and {} have the same frame number {}", w[0].1.display(), w[1].1.display(), w[0].0);
     }
-    Ok(SequenceIndex { frames })
+    Ok(SequenceIndex { frames, cached: None, fps: None })
+}
+
+/// A .usda cache as a sequence: its one Mesh prim's samples, time codes as frame numbers.
+fn load_usda_index(path: &Path) -> anyhow::Result<SequenceIndex> {
+    let stage = crate::io::usda::read_usda(path)?;
+    if stage.meshes.len() > 1 {
+        bail!("{}: holds {} Mesh prims; MeshSequence plays one", path.display(), stage.meshes.len());
+    }
+    let prim = &stage.meshes[0];
+    let (mut frames, mut cached) = (Vec::new(), Vec::new());
+    for (t, s) in &prim.samples {
+        let at = || format!("{}: {} at time {t}", path.display(), prim.path);
+        if t.fract() != 0.0 || t.abs() > 1e15 {
+            bail!("{}: the time code is not a whole frame number", at());
+        }
+        if s.uvs.is_empty() {
+            bail!("{}: no per-vertex primvars:st, which a Surface needs as pattern coordinates", at());
+        }
+        let normals = (!s.normals.is_empty()).then(|| s.normals.clone());
+        let mesh = Mesh::from_parts(s.positions.clone(), normals, s.uvs.clone(), s.indices.clone(), Vec::new())
+            .with_context(at)?;
+        frames.push((*t as i64, PathBuf::from(format!("{}@{t}", path.display()))));
+        cached.push(Arc::new(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) }));
+    }
+    Ok(SequenceIndex { frames, cached: Some(CachedFrames(cached)), fps: Some(stage.time_codes_per_second) })
 }
 
 /// The text before and after the frame-number placeholder of a file-name pattern.

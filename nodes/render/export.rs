@@ -1,11 +1,11 @@
-//! Exports warped detail geometry (and plain meshes) as OBJ or PLY, computed by the same
+//! Exports warped detail geometry (and plain meshes) as OBJ, PLY or binary glTF, computed by the same
 //! warp code as rendering (shaders/warp/warp.wgsl, run as a compute pass): "the geometry can be
 //! post-processed or even exported without rendering output" (paper section 6).
 
 use std::sync::Arc;
 
 use crate::core::node::prelude::*;
-use crate::io::geometry::GeometryFormat;
+use crate::io::geometry::{GeometryFormat, GeometryPart};
 use crate::mesh::Mesh;
 use crate::render::draw::kind::{ExportCx, ExportDevice};
 use crate::render::scene::DrawItem;
@@ -14,14 +14,14 @@ use crate::warp::gpu::{GpuWarper, WarpDevice};
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
     category: Category::Output,
-    doc: "Writes a scene's geometry as it renders (attachments warped, tessellations refined, items under cuboid grids deformed by eq. 3.4) as <out>/<node id>_<frame>.obj or .ply; outlier vertices' triangles are left out, as rendering discards them. A kind of item that cannot be exported (per-pixel PN depth) is an error.",
+    doc: "Writes a scene's geometry as it renders (attachments warped, tessellations refined, items under cuboid grids deformed by eq. 3.4) as <out>/<node id>_<frame>.obj, .ply or .glb (binary glTF: attachments realized, one material per scene item with its base colour and glossiness as roughness), or the whole rendered frame range as one USD ASCII cache <out>/<node id>.usda (points and normals time-sampled per frame); outlier vertices' triangles are left out, as rendering discards them. A kind of item that cannot be exported (per-pixel PN depth) is an error.",
     inputs: &[PortSpec::required("scene", PortType::Scene, "What to export.")],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The exported geometry as one mesh.")],
     params: &[
         ParamSpec::new(
             "format",
             ParamKind::Choice { default: "obj", options: GeometryFormat::OPTIONS },
-            "File format (PLY is binary little-endian).",
+            "File format (PLY is binary little-endian; GLB is binary glTF 2.0 with materials; USDA is one animated cache of the frame range).",
         ),
         ParamSpec::new(
             "warp",
@@ -41,8 +41,9 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
 #[derive(Default)]
 struct ExportNode {
     warper: GpuWarper,
-    /// The last export, the `mesh` output on frames a fixed-frame export skips.
-    last: Option<Arc<Mesh>>,
+    /// The last export and its material parts, the `mesh` output on frames a fixed-frame
+    /// export skips.
+    last: Option<(Arc<Mesh>, Arc<[GeometryPart]>)>,
 }
 
 impl Node for ExportNode {
@@ -55,7 +56,7 @@ impl Node for ExportNode {
         // A fixed-frame export skips the warp on other frames (the batch runner warns when
         // its frame is outside the rendered range); `mesh` is then the last export, or the
         // scene of this frame before the first one.
-        let mesh = match &self.last {
+        let (mesh, parts) = match &self.last {
             Some(last) if !export => last.clone(),
             _ => {
                 let device = match WarpDevice::resolve(cx.choice("warp"), gpu) {
@@ -63,13 +64,14 @@ impl Node for ExportNode {
                     _ => ExportDevice::Gpu,
                 };
                 let mut export = ExportCx { gpu, device, warper: &mut self.warper };
-                Arc::new(crate::render::draw::export::flatten(&mut export, &items)?)
+                let (mesh, parts) = crate::render::draw::export::flatten_parts(&mut export, &items)?;
+                (Arc::new(mesh), parts.into())
             }
         };
         if export {
             cx.count("triangles", mesh.triangle_count());
-            cx.emit(Product::Geometry { mesh: mesh.clone(), format: cx.choice("format") });
-            self.last = Some(mesh.clone());
+            cx.emit(Product::Geometry { mesh: mesh.clone(), parts: parts.clone(), format: cx.choice("format") });
+            self.last = Some((mesh.clone(), parts));
         }
         cx.set("mesh", mesh);
         Ok(())

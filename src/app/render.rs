@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
@@ -15,6 +16,7 @@ use crate::core::param::Choice as _;
 use crate::core::port::Value;
 use crate::core::resources::Resources;
 use crate::gpu::{self, GpuContext};
+use crate::io::geometry::GeometryFormat;
 use crate::io::image::ImageFormat;
 
 #[derive(Clone)]
@@ -307,6 +309,8 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
         );
         bar
     });
+    // USD exports of each node: one cache file for the frame range, written after the last frame.
+    let mut caches: BTreeMap<String, Vec<(i64, Arc<crate::mesh::Mesh>)>> = BTreeMap::new();
     for frame in first..=last {
         let time = FrameTime { frame, fps: opts.fps };
         let start = Instant::now();
@@ -382,9 +386,12 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                         crate::io::image::write_image(&opts.out_dir.join(&name), &px, *format)?;
                         stats.files.push(name);
                     }
-                    Product::Geometry { mesh, format } => {
+                    Product::Geometry { mesh, format: GeometryFormat::Usda, .. } => {
+                        caches.entry(id.clone()).or_default().push((frame, mesh.clone()));
+                    }
+                    Product::Geometry { mesh, parts, format } => {
                         let name = name(format.name());
-                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, *format)?;
+                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, parts, *format)?;
                         stats.files.push(name);
                     }
                     Product::Value(v) => stats.values.entry(id.clone()).or_default().push(*v),
@@ -416,6 +423,12 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
     }
     if let Some(b) = &bar {
         b.finish_and_clear();
+    }
+    for (id, frames) in caches {
+        let name = format!("{id}.usda");
+        let frames: Vec<(i64, &crate::mesh::Mesh)> = frames.iter().map(|(f, m)| (*f, &**m)).collect();
+        crate::io::usda::write_usda(&opts.out_dir.join(&name), opts.fps, &frames)?;
+        stats.files.push(name);
     }
     Ok(())
 }

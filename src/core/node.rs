@@ -243,6 +243,8 @@ pub enum Product {
     },
     Geometry {
         mesh: Arc<Mesh>,
+        /// The materials of its triangles (written by formats that have materials).
+        parts: Arc<[crate::io::geometry::GeometryPart]>,
         format: GeometryFormat,
     },
     /// A number for `stats.json` (`values`).

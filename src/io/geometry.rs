@@ -1,4 +1,5 @@
-//! Writing geometry files: OBJ (text) and PLY (binary little-endian), atomically.
+//! Writing geometry files: OBJ (text), PLY (binary little-endian) and binary glTF (.glb, with a
+//! material per part), atomically.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -12,15 +13,142 @@ crate::choice!(
     pub enum GeometryFormat {
         Obj = "obj",
         Ply = "ply",
+        Glb = "glb",
+        /// A cache of the rendered frame range in one file (`crate::io::usda`).
+        Usda = "usda",
     }
 );
 
-/// Writes `mesh` to `path` in `format`.
-pub fn write_geometry(path: &Path, mesh: &Mesh, format: GeometryFormat) -> anyhow::Result<()> {
+/// A run of an export's triangles drawn with one material: the material of the scene item they
+/// came from. glTF writes one primitive with its own material per part; OBJ and PLY ignore them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GeometryPart {
+    /// Triangle indices (not index-buffer offsets) into the exported mesh.
+    pub triangles: std::ops::Range<usize>,
+    /// Linear RGB.
+    pub base_color: glam::Vec3,
+    /// 0 = rough, 1 = mirror-like (the renderer's glossiness).
+    pub glossiness: f32,
+}
+
+/// Writes `mesh` to `path` in `format`; `parts` give the materials of its triangles.
+pub fn write_geometry(path: &Path, mesh: &Mesh, parts: &[GeometryPart], format: GeometryFormat) -> anyhow::Result<()> {
     match format {
         GeometryFormat::Obj => write_obj(path, mesh),
         GeometryFormat::Ply => write_ply(path, mesh),
+        GeometryFormat::Glb => write_glb(path, mesh, parts),
+        // One frame on its own; the batch runner collects a range into one cache instead.
+        GeometryFormat::Usda => crate::io::usda::write_usda(path, 24.0, &[(0, mesh)]),
     }
+}
+
+/// Writes binary glTF 2.0: one buffer (positions, then normals and UVs where every vertex has
+/// one, then u32 indices), one mesh with a primitive per part sharing the vertex accessors, and
+/// a metallic-roughness material per part (base colour, metallic 0, roughness 1 - glossiness,
+/// double-sided: cloth is seen from both sides). Positions are world space, Y up, as rendered.
+/// Parts that do not cover the triangles exactly are an error (one default-grey part is used
+/// when `parts` is empty).
+pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Result<()> {
+    use serde_json::json;
+    let (n, triangles) = (mesh.positions.len(), mesh.triangle_count());
+    let fallback = [GeometryPart { triangles: 0..triangles, base_color: glam::Vec3::splat(0.8), glossiness: 0.2 }];
+    let parts = if parts.is_empty() { &fallback[..] } else { parts };
+    let contiguous = parts.windows(2).all(|w| w[0].triangles.end == w[1].triangles.start);
+    if !contiguous || parts[0].triangles.start != 0 || parts[parts.len() - 1].triangles.end != triangles {
+        anyhow::bail!("cannot write {}: the material parts do not cover the {triangles} triangles", path.display());
+    }
+    if mesh.indices.iter().any(|&i| i as usize >= n) {
+        anyhow::bail!("cannot write {}: an index is past the {n} vertices", path.display());
+    }
+    let with_normals = n > 0 && mesh.normals.len() == n;
+    let with_uvs = n > 0 && mesh.uvs.len() == n;
+    let (lo, hi) = mesh
+        .positions
+        .iter()
+        .fold((glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut offset = 0usize;
+    let mut vertex_attribute = |views: &mut Vec<_>, accessors: &mut Vec<_>, width: usize, kind: &str| {
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * width * n, "target": 34962}));
+        let mut a = json!({"bufferView": views.len() - 1, "componentType": 5126, "count": n, "type": kind});
+        if kind == "VEC3" && accessors.is_empty() {
+            // glTF requires the bounds of POSITION.
+            a["min"] = json!(lo.to_array());
+            a["max"] = json!(hi.to_array());
+        }
+        accessors.push(a);
+        offset += 4 * width * n;
+        accessors.len() - 1
+    };
+    let mut attributes = serde_json::Map::new();
+    attributes.insert("POSITION".into(), vertex_attribute(&mut views, &mut accessors, 3, "VEC3").into());
+    if with_normals {
+        attributes.insert("NORMAL".into(), vertex_attribute(&mut views, &mut accessors, 3, "VEC3").into());
+    }
+    if with_uvs {
+        attributes.insert("TEXCOORD_0".into(), vertex_attribute(&mut views, &mut accessors, 2, "VEC2").into());
+    }
+    let index_view = views.len();
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12 * triangles, "target": 34963}));
+    let total = offset + 12 * triangles;
+    let mut primitives = Vec::new();
+    let mut materials = Vec::new();
+    for (k, part) in parts.iter().enumerate() {
+        let c = part.base_color;
+        materials.push(json!({
+            "name": format!("part_{k}"),
+            "pbrMetallicRoughness": {"baseColorFactor": [c.x, c.y, c.z, 1.0], "metallicFactor": 0.0,
+                "roughnessFactor": (1.0 - part.glossiness).clamp(0.0, 1.0)},
+            "doubleSided": true,
+        }));
+        if part.triangles.is_empty() {
+            continue;
+        }
+        accessors.push(json!({"bufferView": index_view, "byteOffset": 12 * part.triangles.start,
+            "componentType": 5125, "count": 3 * part.triangles.len(), "type": "SCALAR"}));
+        primitives.push(json!({"attributes": attributes, "indices": accessors.len() - 1, "material": k, "mode": 4}));
+    }
+    let doc = json!({
+        "asset": {"version": "2.0", "generator": "werkstatt"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "werkstatt", "mesh": 0}],
+        "meshes": [{"name": "werkstatt", "primitives": primitives}],
+        "materials": materials,
+        "buffers": [{"byteLength": total}],
+        "bufferViews": views,
+        "accessors": accessors,
+    });
+    let mut json = serde_json::to_vec(&doc)?;
+    // Chunks are 4-byte aligned: JSON padded with spaces; the binary chunk is whole floats.
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let length = 12 + 8 + json.len() + 8 + total;
+    let length = u32::try_from(length)
+        .map_err(|_| anyhow::anyhow!("cannot write {}: {length} bytes is past glTF's 4 GiB", path.display()))?;
+    crate::io::atomic::write_atomic_with(path, |out| {
+        out.write_all(b"glTF")?;
+        out.write_all(&2u32.to_le_bytes())?;
+        out.write_all(&length.to_le_bytes())?;
+        out.write_all(&(json.len() as u32).to_le_bytes())?;
+        out.write_all(b"JSON")?;
+        out.write_all(&json)?;
+        out.write_all(&(total as u32).to_le_bytes())?;
+        out.write_all(b"BIN\0")?;
+        let floats = |out: &mut std::io::BufWriter<std::fs::File>, v: &[f32]| -> std::io::Result<()> {
+            v.iter().try_for_each(|f| out.write_all(&f.to_le_bytes()))
+        };
+        floats(out, bytemuck::cast_slice(&mesh.positions))?;
+        if with_normals {
+            floats(out, bytemuck::cast_slice(&mesh.normals))?;
+        }
+        if with_uvs {
+            // The mesh's v runs down from the top of the image, as glTF's does.
+            floats(out, bytemuck::cast_slice(&mesh.uvs))?;
+        }
+        mesh.indices[..3 * triangles].iter().try_for_each(|i| out.write_all(&i.to_le_bytes()))
+    })
+    .with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Writes OBJ: positions, UVs (v up), normals and triangles; a Surface's pattern pieces as

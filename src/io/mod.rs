@@ -1,5 +1,7 @@
-//! Writing files: atomically, images (PNG, EXR) and geometry (OBJ, PLY).
+//! Writing files: atomically, images (PNG, EXR) and geometry (OBJ, PLY, glTF, USD ASCII); reading
+//! USD ASCII caches.
 
 pub mod atomic;
 pub mod geometry;
 pub mod image;
+pub mod usda;

@@ -18,6 +18,7 @@ mod editor_shaders;
 mod evaluation;
 mod export_kinds;
 mod figures;
+mod formats;
 mod garment;
 mod gl_backend;
 mod gpu_engine;

@@ -4,6 +4,7 @@
 use glam::{DVec3, Mat3, Vec3};
 
 use crate::cuboid::{CuboidGrid, fast_path};
+use crate::io::geometry::GeometryPart;
 use crate::mesh::{Mesh, has_area};
 use crate::render::scene::DrawItem;
 
@@ -12,7 +13,15 @@ use super::kind::{ExportCx, Exported};
 /// One mesh of everything the scene draws; triangles without area (collapsed by the transform,
 /// or touching an outlier vertex of an attachment) are left out.
 pub fn flatten(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<Mesh> {
+    flatten_parts(cx, items).map(|(mesh, _)| mesh)
+}
+
+/// [`flatten`], with the triangles of each item that has any as a part carrying its material
+/// (for formats with materials: glTF).
+pub fn flatten_parts(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<(Mesh, Vec<GeometryPart>)> {
     let mut parts = Vec::with_capacity(items.len());
+    let mut materials = Vec::with_capacity(items.len());
+    let mut triangles = 0;
     for (i, item) in items.iter().enumerate() {
         let exported =
             item.kind.export(cx, item).map_err(|e| e.context(format!("exporting item {i} ({})", item.kind.name())))?;
@@ -23,12 +32,19 @@ pub fn flatten(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<Mesh
                 place(&mesh, model, grid.as_deref())
             }
         });
+        let count = parts.last().map_or(0, Mesh::triangle_count);
+        if count > 0 {
+            let m = &item.material;
+            let range = triangles..triangles + count;
+            materials.push(GeometryPart { triangles: range, base_color: m.base_color, glossiness: m.glossiness });
+        }
+        triangles += count;
     }
     if parts.iter().all(|p| p.indices.is_empty()) {
         anyhow::bail!("nothing to export: the scene has no visible triangles");
     }
     if parts.len() == 1 {
-        return Ok(parts.pop().expect("one part"));
+        return Ok((parts.pop().expect("one part"), materials));
     }
     let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for p in parts {
@@ -38,7 +54,7 @@ pub fn flatten(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<Mesh
         uvs.extend_from_slice(&p.uvs);
         indices.extend(p.indices.iter().map(|i| i + base));
     }
-    Ok(Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices))
+    Ok((Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices), materials))
 }
 
 /// `mesh` placed as the vertex stages place it: `model`, then `grid` (eq. 3.4, in f64, and
