@@ -114,7 +114,7 @@ fn no_module_imports_one_that_imports_it_back() {
 }
 
 /// The technique folders of `src/`: algorithms the nodes run, below the node library.
-const TECHNIQUES: [&str; 6] = ["cloth", "warp", "cuboid", "tessellation", "ibl", "occlusion"];
+const TECHNIQUES: [&str; 7] = ["btf", "cloth", "warp", "cuboid", "tessellation", "ibl", "occlusion"];
 
 #[test]
 fn no_technique_imports_a_node() {

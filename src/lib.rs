@@ -22,6 +22,7 @@
 
 pub mod app;
 pub mod avatar;
+pub mod btf;
 pub mod cloth;
 pub mod color;
 pub mod core;

@@ -1,4 +1,4 @@
-//! The command line: render, test, report, edit, check, fmt, nodes, info, bench.
+//! The command line: render, test, report, edit, check, fmt, nodes, info, bench, btf.
 
 use std::io::IsTerminal as _;
 use std::path::PathBuf;
@@ -159,6 +159,39 @@ enum Command {
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
+    },
+    /// Bidirectional texture functions (docs/btf.md).
+    Btf {
+        #[command(subcommand)]
+        what: BtfWhat,
+    },
+}
+
+#[derive(Subcommand)]
+enum BtfWhat {
+    /// Compress a BTF file per view slot (PCA, eq. 1) and print its sizes and errors.
+    Compress {
+        /// A BTF file (docs/btf.md, "File format").
+        file: PathBuf,
+        /// Components kept per view slot.
+        #[arg(short, long, default_value_t = 16)]
+        components: usize,
+        /// Decompose the light images as they are (eq. 1 literally) instead of around their mean.
+        #[arg(long)]
+        no_centre: bool,
+    },
+    /// Write the analytic Lambertian BTF (rho / pi cos theta_i, a checkerboard albedo): an input
+    /// to try the tools on.
+    Lambertian {
+        /// Where the BTF file goes.
+        #[arg(long)]
+        out: PathBuf,
+        /// Texels per side.
+        #[arg(long, default_value_t = 32)]
+        size: usize,
+        /// All 81 directions of the paper's sampling instead of the 19 of the test tier.
+        #[arg(long)]
+        full: bool,
     },
 }
 
@@ -689,6 +722,55 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     f.float32_filterable
                 );
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Btf { what: BtfWhat::Compress { file, components, no_centre } } => {
+            use crate::btf::pca::{Centring, compress};
+            anyhow::ensure!(components > 0, "--components must be at least 1");
+            let start = std::time::Instant::now();
+            let btf = crate::btf::container::load(&file)?;
+            let loaded = start.elapsed();
+            let centring = if no_centre { Centring::None } else { Centring::Mean };
+            let packed = compress(&btf, components, centring);
+            let compressed = start.elapsed() - loaded;
+            let r = packed.report(&btf);
+            let n = btf.sampling.len();
+            let mib = |b: usize| b as f64 / (1 << 20) as f64;
+            println!(
+                "{}: {}x{} texels, {n} views x {n} lights, c = {components}, {centring:?} centring",
+                file.display(),
+                btf.width,
+                btf.height
+            );
+            println!("load {:.2} s, compress {:.2} s", loaded.as_secs_f64(), compressed.as_secs_f64());
+            println!(
+                "size (f16): {:.2} MiB raw -> {:.2} MiB compressed, ratio {:.1}",
+                mib(r.raw_bytes),
+                mib(r.compressed_bytes),
+                r.raw_bytes as f64 / r.compressed_bytes.max(1) as f64
+            );
+            println!("relative Frobenius error {:.3e}", r.relative_error);
+            println!(
+                "8-bit RGB error length (exposure {:.3}: p99.5 -> 255): mean {:.3}, p99 {:.3}, max {:.3}",
+                r.exposure, r.error8_mean, r.error8_p99, r.error8_max
+            );
+            let captured = |s: &crate::btf::pca::SlotPca| {
+                let total: f64 = s.eigenvalues.iter().sum();
+                if total > 0.0 { s.eigenvalues.iter().take(components).sum::<f64>() / total } else { 1.0 }
+            };
+            let worst = packed.slots.iter().map(captured).fold(1.0, f64::min);
+            println!("captured eigenvalue energy: worst slot {worst:.6}");
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Btf { what: BtfWhat::Lambertian { out, size, full } } => {
+            use crate::btf::directions::Sampling;
+            anyhow::ensure!((1..=1024).contains(&size), "--size must be 1..1024, not {size}");
+            let sampling = if full { Sampling::h2() } else { Sampling::h2_tests() };
+            let check = |x: usize, y: usize| {
+                if (x * 8 / size + y * 8 / size).is_multiple_of(2) { [0.8, 0.3, 0.2] } else { [0.2, 0.3, 0.7] }
+            };
+            crate::btf::container::save(&crate::btf::Btf::lambertian(sampling, size, size, check), &out)?;
+            println!("wrote {}", out.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::All { json, preset, budget_s, only, backend } } => {

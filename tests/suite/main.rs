@@ -7,6 +7,7 @@
 mod common;
 
 mod avatar;
+mod btf;
 mod cli;
 mod cloth;
 mod cloth_collision;
