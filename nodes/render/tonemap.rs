@@ -29,11 +29,6 @@ pub static TONEMAP: NodeSpec = NodeSpec {
     ],
     params: &[
         ParamSpec::new(
-            "exposure",
-            ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 },
-            "Exposure in stops (multiplies by 2^exposure); with auto_exposure, a correction on top of it.",
-        ),
-        ParamSpec::new(
             "auto_exposure",
             ParamKind::Bool { default: false },
             "Scale the image so that its log-average luminance exp(mean(ln(1e-4 + L))) equals key (reads the image back to the CPU once per evaluation).",
@@ -42,6 +37,11 @@ pub static TONEMAP: NodeSpec = NodeSpec {
             "key",
             ParamKind::Float { default: 0.18, min: 0.001, max: 10.0 },
             "The log-average luminance auto_exposure aims for: 0.18 middle grey; lower for a low-key, higher for a high-key picture.",
+        ),
+        ParamSpec::new(
+            "exposure",
+            ParamKind::Float { default: 0.0, min: -20.0, max: 20.0 },
+            "Exposure in stops (multiplies by 2^exposure); with auto_exposure, a correction on top of it.",
         ),
         ParamSpec::new(
             "operator",
