@@ -83,7 +83,7 @@ fn faces_pass(
     if gpu.info.backend != wgpu::Backend::Gl {
         let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
         group0.extend_from_slice(binds);
-        let store = store_level(dst, level);
+        let store = level_layers(dst, level, dst.texture.depth_or_array_layers());
         let group1 = [Bind::StorageTexture(&store, CUBE_FORMAT, wgpu::TextureViewDimension::D2Array)];
         return compute.dispatch(gpu, &[&group0, &group1], [size.div_ceil(8), size.div_ceil(8), 6]);
     }
@@ -96,26 +96,16 @@ fn faces_pass(
     Ok(())
 }
 
-/// The six faces of mip `level` of a cube map, as a 2D array.
-fn faces_of_level(cube: &GpuImage, level: u32) -> wgpu::TextureView {
+/// Mip `level` of the first `layers` layers of a cube map's texture, as a 2D array: its six
+/// faces for reading, or every layer for storing (GL binds images by whole levels, and its cube
+/// maps carry a spare layer, see `GpuImage::create`).
+fn level_layers(cube: &GpuImage, level: u32, layers: u32) -> wgpu::TextureView {
     cube.view_of(crate::gpu::texture::ViewSel {
         dimension: wgpu::TextureViewDimension::D2Array,
         base_mip: level,
         mips: 1,
         base_layer: 0,
-        layers: 6,
-    })
-}
-
-/// Mip `level` of every layer of a cube map's texture, for storing into its faces: GL binds
-/// images by whole levels (and its cube maps carry a spare layer, see `GpuImage::create`).
-fn store_level(cube: &GpuImage, level: u32) -> wgpu::TextureView {
-    cube.view_of(crate::gpu::texture::ViewSel {
-        dimension: wgpu::TextureViewDimension::D2Array,
-        base_mip: level,
-        mips: 1,
-        base_layer: 0,
-        layers: cube.texture.depth_or_array_layers(),
+        layers,
     })
 }
 
@@ -304,7 +294,7 @@ impl CubePasses {
             weights[i] = v / total;
         }
         for mip in 1..cube.desc.mips {
-            let source = faces_of_level(cube, mip - 1);
+            let source = level_layers(cube, mip - 1, 6);
             let params = FilterParams { face: 0, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
             let sample_type = cube.desc.sample_type(false);
             let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type)];
@@ -429,7 +419,7 @@ impl CubePasses {
         region: u32,
         dst: &GpuImage,
     ) -> anyhow::Result<()> {
-        let source = faces_of_level(src, 0);
+        let source = level_layers(src, 0, 6);
         let params = FilterParams { face: 0, src_size: src.width, region, pad: 0, weights: [0.0; 28] };
         let sample_type = src.desc.sample_type(false);
         let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type), Bind::Texture(regions)];
