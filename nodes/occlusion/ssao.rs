@@ -14,7 +14,8 @@ pub static SSAO: NodeSpec = NodeSpec {
     doc: "Local screen-space ambient occlusion from the G-buffer: the visibility factor v in [0, 1] (1 = unoccluded). \
 mode sphere is the dissertation's depth-only SSAO (§4.2.2): `samples` points in a sphere of `radius` (world units) around the pixel's point, \
 uniform in radius (so denser toward the centre), each occluded when the G-buffer's depth where it projects is in front of it by more than \
-0.02 radius and less than 2 radii; v = clamp(2 (1 - occluded fraction), 0, 1), so an open plane gives 1, a 90-degree concave edge 1/2, a corner 1/4, \
+0.02 radius and less than 2 radii (a sample that projects off screen is replaced by its mirror image through the point, with the opposite outcome: \
+exact on a plane, so open floor stays 1 up to the screen's borders); v = clamp(2 (1 - occluded fraction), 0, 1), so an open plane gives 1, a 90-degree concave edge 1/2, a corner 1/4, \
 convex surfaces 1 (clamped). mode horizon is normal-aware and cosine-weighted (GTAO): per pixel two slices, samples/4 depth taps per side of each, \
 the horizons within the radius, visibility integrated analytically per slice (plane 1, edge 1/2, corner 1/4). Both rotate their kernel per pixel \
 with a 4x4 interleaved pattern and then filter each 4x4 tile edge-aware (neighbours within 0.1 radius of the pixel's tangent plane, weighted by (n.n')^4). \

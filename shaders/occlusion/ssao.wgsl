@@ -108,13 +108,36 @@ fn finish(v: f32) -> vec4<f32> {
     return output(strengthen(v));
 }
 
+const OPEN: u32 = 0u;
+const OCCLUDED: u32 = 1u;
+// On the surface within the bias: undecided, not counted (symmetric, so a plane still
+// occludes exactly half of the decided samples).
+const UNDECIDED: u32 = 2u;
+const OFF_SCREEN: u32 = 3u;
+
+// A sphere sample at view-space `q`: occluded when the G-buffer's depth where it projects is
+// in front of it by more than the bias and by less than the range.
+fn sample_state(q: vec3<f32>, bias: f32) -> u32 {
+    let sp = vec2<i32>(floor(to_pixel(q)));
+    if !inside(sp) || q.z >= 0.0 {
+        return OFF_SCREEN;
+    }
+    let scene = depth_at(sp);
+    let diff = -q.z - scene;
+    if scene > 0.0 && abs(diff) <= bias {
+        return UNDECIDED;
+    }
+    return select(OPEN, OCCLUDED, scene > 0.0 && diff > 0.0 && diff < u.range);
+}
+
 // Depth-only sphere sampling. N samples fill a sphere of radius R around the pixel's point;
 // sample k of the pixel with pattern value b (0..15) takes direction 16k + b of a spherical
 // Fibonacci set of 16N directions and radius R t, t = fract((k + 0.5) / phi + (b + 0.5) / 16)
 // (uniform in radius: the volume density falls as 1/r^2, denser toward the centre). A sample
 // is occluded when the G-buffer's depth where it projects is in front of it by more than the
-// bias and by less than the range; samples off screen, and samples within the bias of the
-// surface in front or behind (undecided), are not counted. With f the occluded
+// bias and by less than the range; samples within the bias of the surface in front or behind
+// (undecided) are not counted; a sample off screen is replaced by its mirror image through the
+// point, with the opposite outcome (not counted when that one is off screen too). With f the occluded
 // fraction, v = clamp(2 (1 - f), 0, 1): a plane occludes half the sphere and gives 1.
 @fragment
 fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
@@ -140,22 +163,21 @@ fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         let s = sqrt(max(1.0 - z * z, 0.0));
         let phi = i * GOLDEN_ANGLE;
         let t = fract((f32(k) + 0.5) * INV_PHI + (f32(b) + 0.5) / 16.0);
-        let sample_pos = p + vec3<f32>(s * cos(phi), s * sin(phi), z) * (radius * t);
-        let sp = vec2<i32>(floor(to_pixel(sample_pos)));
-        if !inside(sp) || sample_pos.z >= 0.0 {
-            continue;
+        let offset = vec3<f32>(s * cos(phi), s * sin(phi), z) * (radius * t);
+        var state = sample_state(p + offset, bias);
+        if state == OFF_SCREEN {
+            // Near the borders half of the sphere projects off screen, and which half is not
+            // symmetric about the surface: skipping those samples darkens a band there. The
+            // sample mirrored through p stands in for it, with the opposite outcome (exact
+            // on a plane, where exactly one of a mirrored pair lies below the surface).
+            let mirrored = sample_state(p - offset, bias);
+            state = select(mirrored, 1u - mirrored, mirrored <= OCCLUDED);
         }
-        let scene = depth_at(sp);
-        let diff = -sample_pos.z - scene;
-        if scene > 0.0 && abs(diff) <= bias {
-            // On the surface within the bias: undecided, not counted (symmetric, so a plane
-            // still occludes exactly half of the decided samples).
+        if state > OCCLUDED {
             continue;
         }
         counted += 1.0;
-        if scene > 0.0 && diff > 0.0 && diff < u.range {
-            occluded += 1.0;
-        }
+        occluded += f32(state);
     }
     if counted == 0.0 {
         return output(1.0);

@@ -142,6 +142,36 @@ fn an_open_plane_is_unoccluded_in_both_modes() {
     }
 }
 
+/// Issue 34: the open floor stays unoccluded up to the screen's left and right borders, where
+/// half of a sample sphere projects off screen (a band of 0.9 there before the fix).
+#[test]
+fn an_open_plane_stays_unoccluded_at_the_screen_borders() {
+    for ssao in variants() {
+        let ssao = format!(r#"{ssao}, "radius": 0.25"#);
+        let g = graph(&[FLOOR], "", "", &[], r#""distance": 4.0, "pitch": 25.0, "yaw": 20.0"#, &ssao, None);
+        let ev = run_graph(&g, SIZE.0, SIZE.1);
+        let values = channel0(&ev, "ssao", "occlusion");
+        let all = world_positions(&ev, 0);
+        let band = SIZE.0 as usize / 10;
+        let at_border: Vec<Option<Vec3>> = all
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let x = i % SIZE.0 as usize;
+                if x < band || x >= SIZE.0 as usize - band { *p } else { None }
+            })
+            .collect();
+        let (mean, _, n) = stats(&values, &at_border, |_| true);
+        let low = values.iter().zip(&at_border).filter(|(v, p)| p.is_some() && **v < 0.95).count();
+        eprintln!("borders {ssao}: mean {mean:.4}, {low} of {n} below 0.95");
+        assert!(n > 1000);
+        assert!(
+            mean > 0.98 && low * 50 < n,
+            "{ssao}: the open floor at the borders: mean {mean}, {low} of {n} pixels below 0.95"
+        );
+    }
+}
+
 /// The floor and the wall x = 0 seen from the open quarter space (x > 0, y > 0).
 /// Edges and corners use a radius of 0.6 (the planes are 8 wide): 64 pixels at 320 x 240.
 fn edge_values(ssao: &str) -> (f32, f32, usize) {
