@@ -116,7 +116,9 @@ struct ShadowUniform {
     jitter: f32,
     /// 1 when shadows are on.
     enabled: f32,
-    /// atlas width, height (texels), normal offset (world), depth bias.
+    /// Each light's normal offset (world units).
+    normal_offset: [f32; PEMS_PER_PASS],
+    /// atlas width, height (texels), unused, depth bias.
     bias: [f32; 4],
     eye: [f32; 4],
     forward: [f32; 4],
@@ -131,10 +133,11 @@ impl ShadowUniform {
             u.to_atlas[k] = l.to_atlas.to_cols_array_2d();
             let [x, y, tw, th] = l.rect.map(|v| v as f32);
             u.rect[k] = [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h];
+            u.normal_offset[k] = l.normal_offset;
         }
         let p = &a.params;
         (u.min_variance, u.bleed_reduction, u.jitter, u.enabled) = (p.min_variance, p.bleed_reduction, p.jitter, 1.0);
-        u.bias = [w, h, p.normal_offset, p.depth_bias];
+        u.bias = [w, h, 0.0, p.depth_bias];
         let forward = g.view.inv_view.transform_vector3(glam::Vec3::NEG_Z).normalize();
         u.eye = g.view.eye.extend(1.0).to_array();
         u.forward = forward.extend(0.0).to_array();

@@ -11,6 +11,9 @@
 //! - **Frustum**: orthographic along -direction, fitted to the bounding sphere (centre c,
 //!   radius R) of the drawn items' transformed mesh bounds: the inner square spans [-R, R]
 //!   across, depth [0, 1] spans 2R (near plane R in front of c, far plane R behind it).
+//!   With a camera linked (issue 34), the inner square is instead the smallest one around the
+//!   visible receivers, the scene's box clipped to the view frustum (src/ibl/shadow_fit.rs),
+//!   centred on whole texels; the depth range stays 2R, so every caster is in it.
 //! - **Drawing**: `SceneDrawer::depth_tiles`, one instanced draw per batch of <= 64 lights,
 //!   then a moments pass writes (c, c^2) of the centred depth c = d - 1/2 (Rg16Float) and a separable Gaussian blurs each
 //!   tile; more than 64 lights draw batch by batch into a batch texture whose tiles are
@@ -33,8 +36,11 @@ use glam::{Mat4, Vec3, Vec4};
 use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
 use crate::ibl::gpu::Lights;
+use crate::ibl::shadow_fit::{
+    allocate_and_pack, box_corners, fit_to_receivers, frustum_corners, intersection_points, pack_tiles,
+};
 use crate::render::draw::{MAX_TILES, SceneDrawer, Tile};
-use crate::render::scene::DrawItem;
+use crate::render::scene::{Camera, DrawItem, View, scene_box};
 
 /// The reference occluder-receiver distance of the blur rule, as a fraction of the scene's
 /// bounding radius.
@@ -47,13 +53,19 @@ pub static SHADOW_ATLAS: NodeSpec = NodeSpec {
     category: Category::Lighting,
     doc: "Variance shadow maps of many directional lights (one per median-cut region) in one atlas texture (Fig. 4.11), for IblShading's \
 visibility term (eq. 3.43). Per light an orthographic view along -direction fitted to the bounding sphere (c, R) of the drawn items; \
-the inner tile (tile minus `guard` texels per side) spans [-R, R], the guard band holds real geometry. Depth drawn with one instanced \
+the inner tile (tile minus `guard` texels per side) spans [-R, R], the guard band holds real geometry. With a camera linked, each \
+inner tile spans only the visible receivers (the scene's box clipped to the view frustum; depth still 2R), so a 64-texel tile shows contact shadows. Depth drawn with one instanced \
 draw per batch of 64 lights, moments (c, c^2) of the centred depth c = d - 1/2 in Rg16Float (finer half floats near the scene), then a separable Gaussian per tile whose sigma models an area light of \
 the region's solid angle Omega: theta = acos(1 - Omega / 2pi), sigma = blur_scale tan(theta) 0.25 R / texel, clamped to 3 sigma <= guard; \
 taps are clamped to the tile, so no blur reads another tile. Memory: atlas texels x 4 bytes (Table 5.1: N x res^2 x 4 B).",
     inputs: &[
         PortSpec::required("scene", PortType::Scene, "The occluders (coarse items only unless coarse_only is off)."),
         PortSpec::required("lights", PortType::Lights, "Directional lights (MedianCut), one tile each."),
+        PortSpec::optional(
+            "camera",
+            PortType::Camera,
+            "When linked (and fit_to_view is on), each tile spans only the receivers the camera sees: the scene's box clipped to the view frustum, so its texels are spent where they show; casters keep the whole scene's depth range.",
+        ),
     ],
     outputs: &[
         PortSpec::output("shadows", PortType::ShadowAtlas, "The atlas with each light's matrices and tile."),
@@ -68,7 +80,7 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
         ParamSpec::new(
             "tile_size",
             ParamKind::Int { default: 128, min: 16, max: 1024 },
-            "Tile width and height in texels (guard band included).",
+            "Tile width and height in texels (guard band included); with sizes by_penumbra, the atlas holds the memory of N such tiles.",
         ),
         ParamSpec::new(
             "guard",
@@ -79,6 +91,16 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
             "coarse_only",
             ParamKind::Bool { default: true },
             "Draw only coarse items (the simulation surface), not detail attachments (the dissertation).",
+        ),
+        ParamSpec::new(
+            "sizes",
+            ParamKind::Choice { default: "by_penumbra", options: TileSizes::OPTIONS },
+            "by_penumbra: tile sizes in proportion to the texels each light's penumbra needs (2 per sigma), within the memory of uniform tiles (at most 64 lights; more get uniform tiles); uniform: every tile tile_size (the dissertation).",
+        ),
+        ParamSpec::new(
+            "fit_to_view",
+            ParamKind::Bool { default: true },
+            "With a camera linked, fit each tile to the visible receivers; off: to the scene's bounding sphere (the dissertation).",
         ),
         ParamSpec::new(
             "blur_scale",
@@ -115,7 +137,21 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
     create: || Box::new(ShadowAtlasNode::default()),
 };
 
-pub use crate::ibl::shadow::{ShadowAtlas, ShadowLight, VsmParams};
+pub use crate::ibl::shadow::{ShadowAtlas, ShadowLight, VsmParams, light_view_proj};
+
+crate::choice!(
+    /// How tile sizes are chosen.
+    pub enum TileSizes {
+        /// In proportion to the texels each light's penumbra needs, within the memory of
+        /// uniform tiles: a sun's sharp shadow gets a large tile, a wide sky region a small one.
+        ByPenumbra = "by_penumbra",
+        /// Every tile `tile_size` (the dissertation's layout).
+        Uniform = "uniform",
+    }
+);
+
+/// Texels per sigma of a penumbra that a tile sized by penumbra aims at.
+pub const TEXELS_PER_SIGMA: f32 = 2.0;
 
 /// The geometry settings of an atlas (the node's parameters without the lookup ones).
 #[derive(Clone, Copy, Debug)]
@@ -125,31 +161,18 @@ pub struct AtlasSettings {
     pub guard: Option<u32>,
     pub coarse_only: bool,
     pub blur_scale: f32,
+    pub sizes: TileSizes,
+    /// The inverse view-projection of the camera the tiles are fitted to (None: every tile
+    /// spans the scene's bounding sphere, the dissertation's layout).
+    pub fit_view: Option<Mat4>,
 }
 
 /// The bounding sphere (centre, radius) of the items' transformed mesh bounds.
 pub fn bounding_sphere(items: &[DrawItem]) -> (Vec3, f32) {
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for item in items {
-        let (a, b) = item.mesh.bounds();
-        if a.x > b.x {
-            continue;
-        }
-        for k in 0..8 {
-            let corner = Vec3::new(
-                if k & 1 == 0 { a.x } else { b.x },
-                if k & 2 == 0 { a.y } else { b.y },
-                if k & 4 == 0 { a.z } else { b.z },
-            );
-            let w = item.model.transform_point3(corner);
-            lo = lo.min(w);
-            hi = hi.max(w);
-        }
+    match scene_box(items.iter()) {
+        Some((lo, hi)) => ((lo + hi) / 2.0, ((hi - lo).length() / 2.0).max(1e-4)),
+        None => (Vec3::ZERO, 1.0),
     }
-    if lo.x > hi.x {
-        return (Vec3::ZERO, 1.0);
-    }
-    ((lo + hi) / 2.0, ((hi - lo).length() / 2.0).max(1e-4))
 }
 
 /// The angular radius of a cone of solid angle `omega`.
@@ -161,16 +184,6 @@ pub fn cone_angle(omega: f32) -> f32 {
 pub fn blur_sigma(omega: f32, radius: f32, texel_world: f32, blur_scale: f32) -> f32 {
     let theta = cone_angle(omega).min(1.4);
     blur_scale * theta.tan() * REFERENCE_DISTANCE * radius / texel_world
-}
-
-/// The orthographic view of a light along -`direction` fitted to the sphere (c, r), its
-/// inner square [-r, r] mapped to the tile minus `guard` texels per side.
-pub fn light_view_proj(direction: Vec3, center: Vec3, radius: f32, tile: u32, guard: u32) -> Mat4 {
-    let l = direction.normalize_or(Vec3::Y);
-    let up = if l.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
-    let view = Mat4::look_at_rh(center + l * 2.0 * radius, center, up);
-    let ext = radius * tile as f32 / (tile - 2 * guard).max(1) as f32;
-    Mat4::orthographic_rh(-ext, ext, -ext, ext, radius, 3.0 * radius) * view
 }
 
 /// The map from a light's clip space to atlas coordinates of the tile `rect` (texels) in a
@@ -195,9 +208,11 @@ pub fn grid(n: usize) -> (u32, u32) {
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct BlurUniform {
-    /// x: tile size, y: columns, z: tiles in this texture, w: direction (0 horizontal, 1 vertical).
-    layout: [f32; 4],
+    /// Each tile's texels: x0, y0, x1, y1 (exclusive).
+    rect: [[f32; 4]; MAX_TILES],
     sigma: [[f32; 4]; MAX_TILES / 4],
+    /// x: tiles in this texture, y: direction (0 horizontal, 1 vertical).
+    info: [f32; 4],
 }
 
 /// The passes of an atlas, kept between frames.
@@ -223,30 +238,23 @@ fn moments_format(gpu: &GpuContext) -> wgpu::TextureFormat {
 }
 
 impl AtlasBuilder {
-    /// The separable per-tile Gaussian (shaders/ibl/vsm_blur.wgsl) of `src`, a grid of `tile`-texel
-    /// tiles, `columns` wide, tile j blurred with `sigmas[j]` (texels; at most 64 tiles), taps
-    /// clamped to the tile. Slots past the last tile become far (0.5, 0.25: centred depth 1/2). Returns a new texture
-    /// of the atlas format.
-    pub fn blur(
-        &mut self,
-        gpu: &GpuContext,
-        src: &GpuImage,
-        tile: u32,
-        columns: u32,
-        sigmas: &[f32],
-    ) -> anyhow::Result<GpuImage> {
-        anyhow::ensure!(sigmas.len() <= MAX_TILES, "one blur covers at most {MAX_TILES} tiles");
+    /// The separable per-tile Gaussian (shaders/ibl/vsm_blur.wgsl) of `src`: tile j, its texels
+    /// `tiles[j].0` (x, y, width, height), blurred with sigma `tiles[j].1` (texels; at most 64
+    /// tiles), taps clamped to the tile. Texels in no tile become far (0.5, 0.25: centred
+    /// depth 1/2). Returns a new texture of the atlas format.
+    pub fn blur(&mut self, gpu: &GpuContext, src: &GpuImage, tiles: &[([u32; 4], f32)]) -> anyhow::Result<GpuImage> {
+        anyhow::ensure!(tiles.len() <= MAX_TILES, "one blur covers at most {MAX_TILES} tiles");
         let format = moments_format(gpu);
-        let mut sigma = [[0.0f32; 4]; MAX_TILES / 4];
-        for (j, s) in sigmas.iter().enumerate() {
-            sigma[j / 4][j % 4] = *s;
+        let mut u: BlurUniform = bytemuck::Zeroable::zeroed();
+        for (j, ([x, y, w, h], sigma)) in tiles.iter().enumerate() {
+            u.rect[j] = [*x as f32, *y as f32, (x + w) as f32, (y + h) as f32];
+            u.sigma[j / 4][j % 4] = *sigma;
         }
-        let uniform = |dir: f32| BlurUniform { layout: [tile as f32, columns as f32, sigmas.len() as f32, dir], sigma };
         let mut input = src;
         let mut outputs = Vec::new();
         for dir in [0.0, 1.0] {
             let out = GpuImage::target(gpu, "vsm blur", src.width, src.height, format);
-            let u = uniform(dir);
+            u.info = [tiles.len() as f32, dir, 0.0, 0.0];
             self.blur.draw(
                 gpu,
                 &[Bind::Uniform(bytemuck::bytes_of(&u)), Bind::Texture(input)],
@@ -272,51 +280,102 @@ impl AtlasBuilder {
         anyhow::ensure!((1..=MAX_LIGHTS).contains(&n), "the atlas holds 1 to {MAX_LIGHTS} lights, not {n}");
         let t = s.tile_size.max(16);
         let (center, radius) = bounding_sphere(items);
-        // The guard fits the widest blur among the lights that carry at least the mean
-        // energy: median-cut regions over dark parts of a map are huge (and their sigmas with
-        // them) but carry little light; they get the guard's clamp.
+        // Receivers: the scene's box clipped to the camera's frustum, when fitting to a view.
+        let receivers = match (s.fit_view, scene_box(items.iter())) {
+            (Some(inv_view_proj), Some((lo, hi))) => {
+                intersection_points(&frustum_corners(inv_view_proj), &box_corners(lo, hi))
+            }
+            _ => Vec::new(),
+        };
+        // Each light's inner half width (world units) and its penumbra's sigma (world units).
+        let halves: Vec<f32> = lights
+            .lights
+            .iter()
+            .map(|l| fit_to_receivers(l.direction, center, radius, &receivers, t, 0).map_or(radius, |(_, half)| half))
+            .collect();
+        // Median-cut regions over dark parts of a map are huge (and their sigmas with them)
+        // but carry little light: no light is blurred wider than the widest among those that
+        // carry at least the mean energy.
         let mean_energy = lights.lights.iter().map(|l| l.energy).sum::<f32>() / n as f32;
-        let max_sigma = |texel: f32| {
-            lights
-                .lights
-                .iter()
-                .filter(|l| l.energy >= mean_energy)
-                .map(|l| blur_sigma(l.solid_angle, radius, texel, s.blur_scale))
-                .fold(0.0, f32::max)
-        };
-        let guard = match s.guard {
-            Some(g) => g.min(t / 4),
-            None => ((3.0 * max_sigma(2.0 * radius / t as f32)).ceil() as u32).min(t / 8),
-        };
-        let texel_world = 2.0 * radius / (t - 2 * guard) as f32;
-        let (columns, rows) = grid(n);
-        let (width, height) = (columns * t, rows * t);
+        let rule: Vec<f32> =
+            lights.lights.iter().map(|l| blur_sigma(l.solid_angle, radius, 1.0, s.blur_scale)).collect();
+        let widest = lights
+            .lights
+            .iter()
+            .zip(&rule)
+            .filter(|(l, _)| l.energy >= mean_energy)
+            .map(|(_, s)| *s)
+            .fold(0.0, f32::max);
+        let sigma_world: Vec<f32> = rule.iter().map(|s| s.min(widest)).collect();
+        let single = n <= MAX_TILES;
         let max_dim = gpu.limits.max_texture_dimension_2d;
+        let by_penumbra = single && s.sizes == TileSizes::ByPenumbra;
+        let (sizes, origins, width, height) = if by_penumbra {
+            // Texels enough to resolve each penumbra (TEXELS_PER_SIGMA across its sigma) plus
+            // its guard, scaled to today's memory (n tiles of tile_size).
+            let wants: Vec<f32> = halves
+                .iter()
+                .zip(&sigma_world)
+                .map(|(half, sigma)| 2.0 * half * TEXELS_PER_SIGMA / sigma + 6.0 * TEXELS_PER_SIGMA)
+                .collect();
+            // No tile below half of tile_size: the blur rule takes a median-cut region's
+            // whole solid angle for its light's extent, which is far too wide for a region
+            // whose light comes from a small bright part, and an occluder must stay several
+            // texels wide in every tile.
+            allocate_and_pack(&wants, n as u64 * t as u64 * t as u64, t / 2, max_dim.min(1024))
+        } else if single {
+            let (origins, width, height) = pack_tiles(&vec![t; n]);
+            (vec![t; n], origins, width, height)
+        } else {
+            let (columns, rows) = grid(n);
+            let origins = (0..n as u32).map(|i| [(i % columns) * t, (i / columns) * t]).collect();
+            (vec![t; n], origins, columns * t, rows * t)
+        };
+        // Uniform tiles share one guard, for the widest blur; tiles sized by penumbra have
+        // their own. Either is at most an eighth of the tile.
+        let uniform_guard =
+            halves.iter().zip(&sigma_world).map(|(half, sigma)| sigma * t as f32 / (2.0 * half)).fold(0.0, f32::max);
+        let guards: Vec<u32> = sizes
+            .iter()
+            .zip(halves.iter().zip(&sigma_world))
+            .map(|(&size, (half, sigma))| match s.guard {
+                Some(g) => g.min(size / 4),
+                None if by_penumbra => ((3.0 * sigma * size as f32 / (2.0 * half)).ceil() as u32).min(size / 8),
+                None => ((3.0 * uniform_guard).ceil() as u32).min(size / 8),
+            })
+            .collect();
         anyhow::ensure!(
             width <= max_dim && height <= max_dim,
             "a {width}x{height} atlas ({n} tiles of {t}) exceeds the device's {max_dim} texels"
         );
         let format = moments_format(gpu);
-        let shadow_lights: Vec<ShadowLight> = lights
-            .lights
-            .iter()
-            .enumerate()
-            .map(|(i, l)| {
-                let rect = [(i as u32 % columns) * t, (i as u32 / columns) * t, t, t];
-                let view_proj = light_view_proj(l.direction, center, radius, t, guard);
-                let sigma = blur_sigma(l.solid_angle, radius, texel_world, s.blur_scale).min(guard as f32 / 3.0);
-                let direction = l.direction.normalize_or(Vec3::Y);
+        let mut shadow_lights: Vec<ShadowLight> = (0..n)
+            .map(|i| {
+                let (l, size, guard) = (&lights.lights[i], sizes[i], guards[i]);
+                let rect = [origins[i][0], origins[i][1], size, size];
+                let (view_proj, half) = fit_to_receivers(l.direction, center, radius, &receivers, size, guard)
+                    .unwrap_or_else(|| (light_view_proj(l.direction, center, radius, size, guard), radius));
+                let texel_world = 2.0 * half / (size - 2 * guard) as f32;
+                let sigma = (sigma_world[i] / texel_world).min(guard as f32 / 3.0);
                 ShadowLight {
-                    direction,
+                    direction: l.direction.normalize_or(Vec3::Y),
                     view_proj,
                     to_atlas: clip_to_atlas(rect, width, height) * view_proj,
                     rect,
                     sigma,
+                    texel_world,
+                    normal_offset: 0.0,
                 }
             })
             .collect();
+        // The lookup offset is the finest tile's texels for every light: a coarse tile's
+        // texel can be as large as the gap between an occluder and its receiver (the
+        // blurred moments of a plane are symmetric about it, so coarse tiles need no more).
+        let finest = shadow_lights.iter().map(|l| l.texel_world).fold(f32::MAX, f32::min);
+        for l in &mut shadow_lights {
+            l.normal_offset = params.normal_offset * finest;
+        }
 
-        let single = n <= MAX_TILES;
         let make_atlas = |gpu: &GpuContext| {
             let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::TEXTURE_BINDING
@@ -337,14 +396,16 @@ impl AtlasBuilder {
         };
         let mut atlas: Option<GpuImage> = None;
         for batch in shadow_lights.chunks(MAX_TILES) {
-            // A batch texture laid out like the atlas (one batch) or 8 columns wide.
-            let bc = if single { columns } else { 8 };
-            let (bw, bh) = (bc * t, (batch.len() as u32).div_ceil(bc) * t);
-            let tiles: Vec<Tile> = batch
-                .iter()
-                .enumerate()
-                .map(|(j, l)| Tile { view_proj: l.view_proj, rect: [(j as u32 % bc) * t, (j as u32 / bc) * t, t, t] })
-                .collect();
+            // One batch is drawn in place; batches of many lights (uniform tiles of t) into a
+            // texture 8 tiles wide, whose tiles are then copied into the atlas.
+            let (bw, bh, rects): (u32, u32, Vec<[u32; 4]>) = if single {
+                (width, height, batch.iter().map(|l| l.rect).collect())
+            } else {
+                let rects = (0..batch.len() as u32).map(|j| [(j % 8) * t, (j / 8) * t, t, t]).collect();
+                (8 * t, (batch.len() as u32).div_ceil(8) * t, rects)
+            };
+            let tiles: Vec<Tile> =
+                batch.iter().zip(&rects).map(|(l, rect)| Tile { view_proj: l.view_proj, rect: *rect }).collect();
             let depth = self.drawer.depth_tiles(gpu, items, &tiles, bw, bh)?;
             let moments = GpuImage::target(gpu, "vsm moments", bw, bh, format);
             let depth_as_float = Bind::View(
@@ -353,20 +414,19 @@ impl AtlasBuilder {
                 wgpu::TextureSampleType::Float { filterable: false },
             );
             self.moments.draw(gpu, &[Bind::Uniform(&[0u8; 16]), depth_as_float], &[&moments.view], &[format])?;
-            let sigmas: Vec<f32> = batch.iter().map(|l| l.sigma).collect();
-            let blurred = self.blur(gpu, &moments, t, bc, &sigmas)?;
+            let blur_tiles: Vec<([u32; 4], f32)> = rects.iter().zip(batch).map(|(r, l)| (*r, l.sigma)).collect();
+            let blurred = self.blur(gpu, &moments, &blur_tiles)?;
             if single {
                 atlas = Some(blurred);
             } else {
                 let atlas = atlas.get_or_insert_with(|| make_atlas(gpu));
                 gpu.record(|enc| {
-                    for (j, l) in batch.iter().enumerate() {
-                        let src = [(j as u32 % bc) * t, (j as u32 / bc) * t];
+                    for (rect, l) in rects.iter().zip(batch) {
                         enc.copy_texture_to_texture(
                             wgpu::TexelCopyTextureInfo {
                                 texture: &blurred.texture,
                                 mip_level: 0,
-                                origin: wgpu::Origin3d { x: src[0], y: src[1], z: 0 },
+                                origin: wgpu::Origin3d { x: rect[0], y: rect[1], z: 0 },
                                 aspect: wgpu::TextureAspect::All,
                             },
                             wgpu::TexelCopyTextureInfo {
@@ -385,14 +445,13 @@ impl AtlasBuilder {
         let bytes = width as u64 * height as u64 * format.block_copy_size(None).unwrap_or(4) as u64;
         Ok(ShadowAtlas {
             atlas,
+            texel_world: shadow_lights.iter().map(|l| l.texel_world).fold(0.0, f32::max),
+            guard: guards.iter().copied().max().unwrap_or(0),
             lights: shadow_lights,
             tile_size: t,
-            guard,
-            columns,
             center,
             radius,
-            texel_world,
-            params: VsmParams { normal_offset: params.normal_offset * texel_world, ..params },
+            params,
             bytes,
         })
     }
@@ -416,6 +475,13 @@ impl Node for ShadowAtlasNode {
             guard: (guard >= 0).then_some(guard as u32),
             coarse_only,
             blur_scale: cx.f32("blur_scale"),
+            sizes: cx.choice("sizes"),
+            fit_view: match cx.optional::<Camera>("camera") {
+                Some(camera) if cx.bool("fit_to_view") => {
+                    Some(View::new(&camera, cx.settings.width, cx.settings.height).inv_view_proj)
+                }
+                _ => None,
+            },
         };
         let params = VsmParams {
             min_variance: cx.f32("min_variance"),

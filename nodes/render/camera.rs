@@ -10,20 +10,7 @@ use crate::render::scene::{Camera, DrawItem};
 /// World bounds of a scene's plain items (model matrix applied to their box corners);
 /// attached detail lies on a surface that is itself drawn, so it is left out. None when empty.
 pub fn scene_bounds(items: &[DrawItem]) -> Option<(Vec3, Vec3)> {
-    let mut bounds: Option<(Vec3, Vec3)> = None;
-    for item in items.iter().filter(|i| i.kind.places_mesh()) {
-        let (lo, hi) = item.mesh.bounds();
-        for i in 0..8 {
-            let corner = Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
-            let p = item.model.transform_point3(corner);
-            bounds = Some(bounds.map_or((p, p), |(a, b)| (a.min(p), b.max(p))));
-        }
-    }
-    bounds
+    crate::render::scene::scene_box(items.iter().filter(|i| i.kind.places_mesh()))
 }
 
 pub static ORBIT_CAMERA: NodeSpec = NodeSpec {

@@ -43,7 +43,9 @@ struct Shadow {
     jitter: f32,
     // 1 when shadows are on.
     enabled: f32,
-    // x, y: atlas size (texels), z: normal offset (world), w: depth bias.
+    // Each light's lookup offset along the normal (world units: its tile's texels).
+    normal_offset: array<vec4<f32>, 2>,
+    // x, y: atlas size (texels), z: unused, w: depth bias.
     bias: vec4<f32>,
     eye: vec4<f32>,
     forward: vec4<f32>,
@@ -80,12 +82,12 @@ fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
     return vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65535.0;
 }
 
-// VIS_k of the pass's light k at world position p (pixel px for the jitter).
-fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
+// VIS_k of the pass's light k at world position p with normal n (pixel px for the jitter).
+fn visibility(k: u32, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -> f32 {
     if shadow.enabled < 0.5 {
         return 1.0;
     }
-    let c = shadow.to_atlas[k] * vec4<f32>(p, 1.0);
+    let c = shadow.to_atlas[k] * vec4<f32>(p + n * shadow.normal_offset[k / 4u][k % 4u], 1.0);
     var uv = c.xy;
     if shadow.jitter > 0.0 {
         // A 4x4 tiled hash per light (Fig. 4.13): a different pattern for each light.
@@ -110,11 +112,11 @@ fn visibility(k: u32, p: vec3<f32>, px: vec2<i32>) -> f32 {
 // Light k's term: its PEM's radiance times its visibility. The shadow lookup is skipped where
 // the PEM is black along the lobe (most of many small regions for glossy pixels); the term is
 // then zero either way.
-fn lit(k: u32, radiance: vec3<f32>, p: vec3<f32>, px: vec2<i32>) -> vec3<f32> {
+fn lit(k: u32, radiance: vec3<f32>, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -> vec3<f32> {
     if all(radiance == vec3<f32>(0.0)) {
         return radiance;
     }
-    return visibility(k, p, px) * radiance;
+    return visibility(k, p, n, px) * radiance;
 }
 
 @fragment
@@ -153,18 +155,18 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     } else {
         let count = u32(ibl.size.z);
         // World position: depth is the linear view depth along the camera's forward axis.
-        let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz)) + n * shadow.bias.z;
+        let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz));
         // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
         // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
         // switch in a loop (8x the lookups).
-        if count > 0u { sum += lit(0u, lookup(pem0, sample_dir, level), p, px); }
-        if count > 1u { sum += lit(1u, lookup(pem1, sample_dir, level), p, px); }
-        if count > 2u { sum += lit(2u, lookup(pem2, sample_dir, level), p, px); }
-        if count > 3u { sum += lit(3u, lookup(pem3, sample_dir, level), p, px); }
-        if count > 4u { sum += lit(4u, lookup(pem4, sample_dir, level), p, px); }
-        if count > 5u { sum += lit(5u, lookup(pem5, sample_dir, level), p, px); }
-        if count > 6u { sum += lit(6u, lookup(pem6, sample_dir, level), p, px); }
-        if count > 7u { sum += lit(7u, lookup(pem7, sample_dir, level), p, px); }
+        if count > 0u { sum += lit(0u, lookup(pem0, sample_dir, level), p, n, px); }
+        if count > 1u { sum += lit(1u, lookup(pem1, sample_dir, level), p, n, px); }
+        if count > 2u { sum += lit(2u, lookup(pem2, sample_dir, level), p, n, px); }
+        if count > 3u { sum += lit(3u, lookup(pem3, sample_dir, level), p, n, px); }
+        if count > 4u { sum += lit(4u, lookup(pem4, sample_dir, level), p, n, px); }
+        if count > 5u { sum += lit(5u, lookup(pem5, sample_dir, level), p, n, px); }
+        if count > 6u { sum += lit(6u, lookup(pem6, sample_dir, level), p, n, px); }
+        if count > 7u { sum += lit(7u, lookup(pem7, sample_dir, level), p, n, px); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }

@@ -1,14 +1,17 @@
 // The separable Gaussian of the shadow atlas (nodes/ibl/shadow_atlas.rs): per tile its own sigma
 // (an area light of the region's solid angle), taps clamped to the tile, guard band included,
 // so no tile reads another. Weights are normalised by their sum: a constant tile stays exact.
+// Tiles may differ in size (shadow_fit.rs pack_tiles), so each texel finds its tile's rectangle.
 
 // #include "fullscreen.wgsl"
 
 struct Blur {
-    // x: tile size (texels), y: columns of tiles, z: tiles in this texture, w: 0 horizontal, 1 vertical.
-    grid: vec4<f32>,
+    // Each tile's texels: x0, y0, x1, y1 (exclusive).
+    rect: array<vec4<f32>, 64>,
     // Sigma (texels) per tile, 4 per entry.
     sigma: array<vec4<f32>, 16>,
+    // x: tiles in this texture, y: 0 horizontal, 1 vertical.
+    info: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> blur: Blur;
@@ -17,21 +20,27 @@ struct Blur {
 @fragment
 fn fs_blur(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
-    let t = i32(blur.grid.x);
-    let tile = px / t;
-    let j = tile.y * i32(blur.grid.y) + tile.x;
-    if j >= i32(blur.grid.z) {
+    let p = vec2<f32>(px) + 0.5;
+    var j = -1;
+    for (var k = 0; k < i32(blur.info.x); k++) {
+        let r = blur.rect[k];
+        if p.x > r.x && p.y > r.y && p.x < r.z && p.y < r.w {
+            j = k;
+            break;
+        }
+    }
+    if j < 0 {
         // No tile: far (centred depth 1/2, shaders/ibl/vsm.wgsl).
         return vec4<f32>(0.5, 0.25, 0.0, 0.0);
     }
     let sigma = blur.sigma[j / 4][j % 4];
-    let r = min(i32(ceil(3.0 * sigma)), t);
+    let lo = vec2<i32>(blur.rect[j].xy);
+    let hi = vec2<i32>(blur.rect[j].zw) - 1;
+    let r = min(i32(ceil(3.0 * sigma)), hi.x - lo.x + 1);
     if r <= 0 || sigma <= 0.0 {
         return textureLoad(moments, px, 0);
     }
-    let lo = tile * t;
-    let hi = lo + vec2<i32>(t - 1);
-    let dir = select(vec2<i32>(1, 0), vec2<i32>(0, 1), blur.grid.w > 0.5);
+    let dir = select(vec2<i32>(1, 0), vec2<i32>(0, 1), blur.info.y > 0.5);
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
     for (var k = -r; k <= r; k++) {

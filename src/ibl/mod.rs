@@ -10,3 +10,4 @@ pub mod median_cut;
 pub mod pem;
 pub mod reference;
 pub mod shadow;
+pub mod shadow_fit;

@@ -18,6 +18,10 @@ pub struct ShadowLight {
     pub rect: [u32; 4],
     /// The blur's standard deviation in texels.
     pub sigma: f32,
+    /// World size of one of the tile's texels.
+    pub texel_world: f32,
+    /// The lookup point's offset along the normal, world units (VsmParams::normal_offset texels).
+    pub normal_offset: f32,
 }
 
 /// Lookup settings carried with the atlas.
@@ -27,7 +31,7 @@ pub struct VsmParams {
     pub bleed_reduction: f32,
     /// Jitter radius in texels (0 = off).
     pub jitter: f32,
-    /// World units along the normal.
+    /// Texels of each light's tile along the normal (ShadowLight::normal_offset in world units).
     pub normal_offset: f32,
     /// Depth units (0..1 spans 2R).
     pub depth_bias: f32,
@@ -38,14 +42,29 @@ pub struct ShadowAtlas {
     /// Rg16Float moments (c, c^2) of the centred depth c = d - 1/2, blurred per tile.
     pub atlas: GpuImage,
     pub lights: Vec<ShadowLight>,
+    /// The tile_size parameter (tiles sized by penumbra differ; see each light's rect).
     pub tile_size: u32,
+    /// The widest guard band.
     pub guard: u32,
-    pub columns: u32,
     /// Bounding sphere of the occluders.
     pub center: Vec3,
     pub radius: f32,
-    /// World size of one texel.
+    /// World size of the coarsest light's texel (the normal offset's unit).
     pub texel_world: f32,
     pub params: VsmParams,
     pub bytes: u64,
+}
+
+/// A light's view: looking along -`direction` at the sphere (c, r) from 2r away.
+pub fn light_view(direction: Vec3, center: Vec3, radius: f32) -> Mat4 {
+    let l = direction.normalize_or(Vec3::Y);
+    let up = if l.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+    Mat4::look_at_rh(center + l * 2.0 * radius, center, up)
+}
+
+/// The orthographic view of a light along -`direction` fitted to the sphere (c, r), its
+/// inner square [-r, r] mapped to the tile minus `guard` texels per side.
+pub fn light_view_proj(direction: Vec3, center: Vec3, radius: f32, tile: u32, guard: u32) -> Mat4 {
+    let ext = radius * tile as f32 / (tile - 2 * guard).max(1) as f32;
+    Mat4::orthographic_rh(-ext, ext, -ext, ext, radius, 3.0 * radius) * light_view(direction, center, radius)
 }

@@ -187,6 +187,23 @@ impl GBuffer {
     }
 }
 
+/// The box (lo, hi) around the items' transformed mesh bounds (model matrix applied to their
+/// box corners); None without geometry.
+pub fn scene_box<'a>(items: impl IntoIterator<Item = &'a DrawItem>) -> Option<(Vec3, Vec3)> {
+    let mut bounds: Option<(Vec3, Vec3)> = None;
+    for item in items {
+        let (lo, hi) = item.mesh.bounds();
+        if lo.x > hi.x {
+            continue;
+        }
+        for corner in crate::ibl::shadow_fit::box_corners(lo, hi) {
+            let p = item.model.transform_point3(corner);
+            bounds = Some(bounds.map_or((p, p), |(a, b)| (a.min(p), b.max(p))));
+        }
+    }
+    bounds
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

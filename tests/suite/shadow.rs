@@ -24,7 +24,7 @@ use werkstatt::core::port::Value;
 use werkstatt::gpu::{GpuImage, read_back};
 use werkstatt::ibl::gpu::Lights;
 use werkstatt::ibl::median_cut::RegionLight;
-use werkstatt::nodes::ibl::shadow_atlas::{AtlasBuilder, AtlasSettings, VsmParams};
+use werkstatt::nodes::ibl::shadow_atlas::{AtlasBuilder, AtlasSettings, TileSizes, VsmParams};
 use werkstatt::render::scene::{DrawItem, Material};
 
 /// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
@@ -344,8 +344,8 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
         }
     }
     let src = GpuImage::upload(gpu, "tiles", w, h, wgpu::TextureFormat::Rgba32Float, 16, bytemuck::cast_slice(&texels));
-    let sigmas = [5.0f32; 5];
-    let out = read_back(gpu, &builder.blur(gpu, &src, t, columns, &sigmas).unwrap()).unwrap();
+    let tiles: Vec<([u32; 4], f32)> = (0..5).map(|j| ([(j % columns) * t, (j / columns) * t, t, t], 5.0)).collect();
+    let out = read_back(gpu, &builder.blur(gpu, &src, &tiles).unwrap()).unwrap();
     for y in 0..h {
         for x in 0..w {
             let j = (y / t) * columns + x / t;
@@ -373,7 +373,14 @@ fn atlas_tiles_do_not_overlap_and_no_blur_reads_another_tile() {
         regions: None,
         preview: None,
     };
-    let settings = AtlasSettings { tile_size: 32, guard: None, coarse_only: true, blur_scale: 1.0 };
+    let settings = AtlasSettings {
+        tile_size: 32,
+        guard: None,
+        coarse_only: true,
+        blur_scale: 1.0,
+        sizes: TileSizes::Uniform,
+        fit_view: None,
+    };
     let params =
         VsmParams { min_variance: 1e-5, bleed_reduction: 0.3, jitter: 0.0, normal_offset: 1.0, depth_bias: 0.002 };
     let atlas = builder.build(gpu, &items, &lights, &settings, params).unwrap();
