@@ -43,6 +43,7 @@ def main():
     ap.add_argument("--direct-only", action="store_true", help="no indirect bounces (max_bounces 0)")
     ap.add_argument("--out", default=None, help="output file name in DIR (default cycles.exr, cycles_direct.exr)")
     ap.add_argument("--half", action="store_true", help="half-float EXR (for committed references)")
+    ap.add_argument("--no-ids", action="store_true", help="skip cycles_ids.exr (the item per pixel, as Cycles sees it)")
     ap.add_argument("--threads", type=int, default=0, help="render threads (0: all cores)")
     args = ap.parse_args()
     # This file is named cycles.py: keep its folder off the module path, or Blender's own
@@ -110,6 +111,30 @@ def make_material(bpy, mat, item, folder):
     else:
         bsdf.inputs["Color"].default_value = base
     nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+
+
+def render_ids(bpy, scene, meshes, world, folder, scene_info):
+    """DIR/cycles_ids.exr: every item emits (index + 1, 0, 0), the world is black, one sample at
+    each pixel's centre: which item Cycles sees at each pixel (0: none), for `werkstatt
+    fidelity compare` to check the ids against."""
+    for obj in meshes:
+        for slot in obj.material_slots:
+            index = int(slot.material.name.split(".")[0][5:])
+            nt = slot.material.node_tree
+            nt.nodes.clear()
+            out = nt.nodes.new("ShaderNodeOutputMaterial")
+            em = nt.nodes.new("ShaderNodeEmission")
+            em.inputs["Color"].default_value = (index + 1.0, 0.0, 0.0, 1.0)
+            em.inputs["Strength"].default_value = 1.0
+            nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    for node in world.node_tree.nodes:
+        if node.bl_idname == "ShaderNodeBackground":
+            node.inputs["Strength"].default_value = 0.0
+    scene.cycles.samples = 1
+    scene.cycles.max_bounces = 0
+    scene.render.image_settings.color_depth = "32"
+    scene.render.filepath = os.path.join(folder, "cycles_ids.exr")
+    bpy.ops.render.render(write_still=True)
 
 
 def render(args):
@@ -246,10 +271,13 @@ def render(args):
     settings.color_depth = "16" if args.half else "32"
     settings.exr_codec = "ZIP"
     name = args.out or ("cycles_direct.exr" if args.direct_only else "cycles.exr")
-    scene.render.filepath = os.path.join(folder, name)
+    out_path = os.path.join(folder, name)
+    scene.render.filepath = out_path
     t1 = time.time()
     bpy.ops.render.render(write_still=True)
     t2 = time.time()
+    if not args.no_ids:
+        render_ids(bpy, scene, meshes, world, folder, scene_info)
     report = {
         "file": name,
         "samples": args.samples,
@@ -260,11 +288,12 @@ def render(args):
         "import_bounds_error": bounds_error,
         "camera_check_max_px": worst,
         "camera_check_points": len(scene_info["check_points"]),
+        "ids_file": None if args.no_ids else "cycles_ids.exr",
     }
     with open(os.path.join(folder, os.path.splitext(name)[0] + ".json"), "w") as f:
         json.dump(report, f, indent=2)
     print(
-        f"cycles.py: wrote {scene.render.filepath} ({args.samples} samples, {t2 - t1:.1f} s); "
+        f"cycles.py: wrote {out_path} ({args.samples} samples, {t2 - t1:.1f} s); "
         f"camera check: {len(scene_info['check_points'])} projected points agree within {worst:.2e} px"
     )
     return 0

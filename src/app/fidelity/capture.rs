@@ -259,11 +259,39 @@ pub fn capture(opts: &ExportOptions, gpu: &GpuContext) -> anyhow::Result<Capture
         items: infos,
         regions,
         far_margin: 1.5,
+        ids_gbuffer_mismatch: None,
         check_points,
     };
     let mut ids = ids;
     ids.regions = region_masks(&scene, &mesh, &ids);
+    let mut scene = scene;
+    if let Some(Value::GBuffer(g)) = evaluator.output(&gbuffer, "gbuffer") {
+        scene.ids_gbuffer_mismatch = Some(mismatch(&crate::gpu::read_back(gpu, &g.depth)?, &ids, &view));
+    }
     Ok(Capture { scene, image, ids, mesh, parts, textures })
+}
+
+/// The fraction of pixels where the ray-cast ids and the G-buffer disagree: one hit something
+/// and the other nothing, or their view depths differ by more than 1%.
+fn mismatch(depth: &Pixels, ids: &PixelIds, view: &View) -> f32 {
+    let forward = -view.inv_view.z_axis.truncate().normalize();
+    let n = ids.id.len();
+    if depth.rgba.len() != 4 * n {
+        return 1.0;
+    }
+    let bad = (0..n)
+        .filter(|&i| {
+            let gpu = depth.rgba[4 * i];
+            match ids.id[i] >= 0 {
+                false => gpu > 0.0,
+                true => {
+                    let ray = (ids.position[i] - view.eye).dot(forward);
+                    gpu <= 0.0 || (gpu - ray).abs() > 0.01 * ray
+                }
+            }
+        })
+        .count();
+    bad as f32 / n.max(1) as f32
 }
 
 fn camera_info(c: &Camera) -> CameraInfo {

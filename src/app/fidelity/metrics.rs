@@ -60,6 +60,10 @@ pub struct Metrics {
     pub edge_pixels: usize,
     pub edge_dark_cycles: f64,
     pub edge_dark_werkstatt: f64,
+    /// The fraction of pixels where the ids disagree with werkstatt's G-buffer and with
+    /// Cycles' own ids render (cycles_ids.exr), where known.
+    pub ids_gbuffer_mismatch: Option<f32>,
+    pub ids_cycles_mismatch: Option<f32>,
 }
 
 fn rgb(px: &Pixels, i: usize) -> Vec3 {
@@ -179,14 +183,12 @@ pub fn measure(scene: &SceneInfo, ids: &PixelIds, w: &Pixels, c: &Pixels) -> any
         edge_pixels: edge.len(),
         edge_dark_cycles: dark(c),
         edge_dark_werkstatt: dark(w),
+        ids_gbuffer_mismatch: None,
+        ids_cycles_mismatch: None,
     })
 }
 
 impl Metrics {
-    fn background_pixels(&self) -> String {
-        "-".into()
-    }
-
     /// The metrics as Markdown tables.
     pub fn table(&self) -> String {
         let mut s = String::new();
@@ -201,12 +203,7 @@ impl Metrics {
             "| item | pixels | relative MAE | mean Cycles | mean werkstatt | brightest pixel Cycles / werkstatt (distance) |"
         );
         let _ = writeln!(s, "|---|---|---|---|---|---|");
-        let _ = writeln!(
-            s,
-            "| background (probe) | {} | {:.1}% | | | |",
-            self.background_pixels(),
-            100.0 * self.background_rel_mae
-        );
+        let _ = writeln!(s, "| background (probe) | - | {:.1}% | | | |", 100.0 * self.background_rel_mae);
         for it in &self.items {
             let _ = writeln!(
                 s,
@@ -238,6 +235,13 @@ impl Metrics {
             self.edge_pixels,
             100.0 * self.edge_dark_cycles,
             100.0 * self.edge_dark_werkstatt
+        );
+        let pct = |v: Option<f32>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
+        let _ = writeln!(
+            s,
+            "\nids disagree with werkstatt's G-buffer on {} of the pixels, with Cycles' ids on {}",
+            pct(self.ids_gbuffer_mismatch),
+            pct(self.ids_cycles_mismatch)
         );
         s
     }
@@ -272,7 +276,16 @@ pub fn compare_dir(dir: &Path, cycles: &str) -> anyhow::Result<Metrics> {
     let ids = read_ids(dir)?;
     let w = read_exr(&dir.join("werkstatt.exr"))?;
     let c = read_exr(&dir.join(cycles))?;
-    let m = measure(&scene, &ids, &w, &c)?;
+    let mut m = measure(&scene, &ids, &w, &c)?;
+    m.ids_gbuffer_mismatch = scene.ids_gbuffer_mismatch;
+    let cycles_ids = dir.join("cycles_ids.exr");
+    if cycles_ids.exists() {
+        let ci = read_exr(&cycles_ids)?;
+        if ci.rgba.len() == 4 * ids.id.len() {
+            let bad = ids.id.iter().enumerate().filter(|&(i, &id)| (ci.rgba[4 * i].round() as i32 - 1) != id).count();
+            m.ids_cycles_mismatch = Some(bad as f32 / ids.id.len().max(1) as f32);
+        }
+    }
     let (width, height) = (w.width, w.height);
     let mut sheet = Pixels { width: 3 * width, height, rgba: vec![0.0; (12 * width * height) as usize], is_ldr: false };
     for y in 0..height as usize {

@@ -108,6 +108,10 @@ pub struct SceneInfo {
     /// centre, horizontally.
     pub regions: Vec<Region>,
     pub far_margin: f32,
+    /// The fraction of pixels where the ids and werkstatt's G-buffer disagree (hit or not, or
+    /// depth off by more than 1%): triangle edges the rasterizer and the rays decide apart.
+    #[serde(default)]
+    pub ids_gbuffer_mismatch: Option<f32>,
     pub check_points: Vec<CheckPoint>,
 }
 
