@@ -22,8 +22,9 @@ glossy filter.
 
 Materials: glossiness 0 is a Diffuse BSDF (Lambert) with the albedo; glossiness g > 0 is a
 multiscatter GGX Glossy BSDF with the albedo as its colour and roughness sqrt(alpha), alpha =
-sqrt(2 / (s + 2)) for werkstatt's Phong exponent s = 1 / (1 - g) (Walter et al.'s Phong-to-
-microfacet relation; g = 1 is a mirror). Textures multiply the base colour as werkstatt's
+sqrt(2 / (4 s + 2)) for werkstatt's Phong exponent s = 1 / (1 - g): werkstatt's lobe is cos^s
+about the reflection, about a Blinn-Phong cos^(4 s) about the normal, and Blinn-Phong n is
+Beckmann/GGX alpha^2 = 2 / (n + 2) (Walter et al. 2007); g = 1 is a mirror. Textures multiply the base colour as werkstatt's
 G-buffer does (texture at uv * uv_scale, bilinear, repeating; Blender's v is 1 - glTF's, so the
 scale is taken about v = 1).
 """
@@ -44,6 +45,12 @@ def main():
     ap.add_argument("--out", default=None, help="output file name in DIR (default cycles.exr, cycles_direct.exr)")
     ap.add_argument("--half", action="store_true", help="half-float EXR (for committed references)")
     ap.add_argument("--no-ids", action="store_true", help="skip cycles_ids.exr (the item per pixel, as Cycles sees it)")
+    ap.add_argument(
+        "--only",
+        default=None,
+        help="render only this item (by name), the others transparent to every ray: with the floor, "
+        "a check of the probe against the analytic open-floor value (scene.json open_floor_level)",
+    )
     ap.add_argument("--threads", type=int, default=0, help="render threads (0: all cores)")
     args = ap.parse_args()
     # This file is named cycles.py: keep its folder off the module path, or Blender's own
@@ -72,15 +79,24 @@ def phong_to_roughness(g):
     if g >= 1.0:
         return 0.0
     s = 1.0 / (1.0 - g)
-    alpha = math.sqrt(2.0 / (s + 2.0))
+    # A Phong lobe cos^s about the reflection is a Blinn-Phong lobe cos^(4s) about the normal
+    # in half-vector terms (the reflection turns twice as far as the half vector), and
+    # Blinn-Phong n matches Beckmann/GGX alpha^2 = 2 / (n + 2) (Walter et al. 2007).
+    alpha = math.sqrt(2.0 / (4.0 * s + 2.0))
     return math.sqrt(alpha)
 
 
-def make_material(bpy, mat, item, folder):
-    mat.use_nodes = True
+def make_material(bpy, mat, item, folder, hidden=False):
+    if mat.node_tree is None:
+        mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
+    if hidden:
+        clear = nt.nodes.new("ShaderNodeBsdfTransparent")
+        clear.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        nt.links.new(clear.outputs["BSDF"], out.inputs["Surface"])
+        return
     g = float(item["glossiness"])
     if g > 0.0:
         bsdf = nt.nodes.new("ShaderNodeBsdfGlossy")
@@ -159,7 +175,8 @@ def render(args):
             name = slot.material.name.split(".")[0]
             if not name.startswith("part_"):
                 raise SystemExit(f"cycles.py: unexpected material {slot.material.name}")
-            make_material(bpy, slot.material, items[int(name[5:])], folder)
+            item = items[int(name[5:])]
+            make_material(bpy, slot.material, item, folder, hidden=args.only is not None and item["name"] != args.only)
         # Smooth shading with the file's normals, as the G-buffer interpolates them.
         for poly in obj.data.polygons:
             poly.use_smooth = True
@@ -218,7 +235,8 @@ def render(args):
     env = scene_info.get("environment")
     world = bpy.data.worlds.new("probe")
     scene.world = world
-    world.use_nodes = True
+    if world.node_tree is None:
+        world.use_nodes = True
     nt = world.node_tree
     nt.nodes.clear()
     wout = nt.nodes.new("ShaderNodeOutputWorld")
@@ -270,7 +288,12 @@ def render(args):
     settings.color_mode = "RGBA"
     settings.color_depth = "16" if args.half else "32"
     settings.exr_codec = "ZIP"
-    name = args.out or ("cycles_direct.exr" if args.direct_only else "cycles.exr")
+    if args.only is not None and args.only not in {i["name"] for i in scene_info["items"]}:
+        raise SystemExit(f"cycles.py: --only {args.only}: no such item")
+    default_name = "cycles_direct.exr" if args.direct_only else "cycles.exr"
+    if args.only is not None:
+        default_name = f"cycles_only_{args.only}.exr"
+    name = args.out or default_name
     out_path = os.path.join(folder, name)
     scene.render.filepath = out_path
     t1 = time.time()

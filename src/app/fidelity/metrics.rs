@@ -60,6 +60,10 @@ pub struct Metrics {
     pub edge_pixels: usize,
     pub edge_dark_cycles: f64,
     pub edge_dark_werkstatt: f64,
+    /// The fraction of the same pixels where werkstatt's shading, over its far floor's mean, is
+    /// below 0.95 of Cycles' over Cycles' far floor's mean (pixel by pixel: what werkstatt
+    /// darkens that the path tracer does not).
+    pub edge_below_cycles: f64,
     /// The fraction of pixels where the ids disagree with werkstatt's G-buffer and with
     /// Cycles' own ids render (cycles_ids.exr), where known.
     pub ids_gbuffer_mismatch: Option<f32>,
@@ -183,7 +187,10 @@ pub fn measure(scene: &SceneInfo, ids: &PixelIds, w: &Pixels, c: &Pixels) -> any
         edge_pixels: edge.len(),
         edge_dark_cycles: dark(c),
         edge_dark_werkstatt: dark(w),
-        ids_gbuffer_mismatch: None,
+        edge_below_cycles: edge.iter().filter(|&&i| shading(w, i) / far_w < 0.95 * shading(c, i) / far_c).count()
+            as f64
+            / edge.len().max(1) as f64,
+        ids_gbuffer_mismatch: scene.ids_gbuffer_mismatch,
         ids_cycles_mismatch: None,
     })
 }
@@ -236,6 +243,12 @@ impl Metrics {
             100.0 * self.edge_dark_cycles,
             100.0 * self.edge_dark_werkstatt
         );
+        let _ = writeln!(
+            s,
+            "| open floor at the edges below 0.95 of Cycles, pixel by pixel (each over its far floor) | {} | | {:.1}% |",
+            self.edge_pixels,
+            100.0 * self.edge_below_cycles
+        );
         let pct = |v: Option<f32>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
         let _ = writeln!(
             s,
@@ -277,7 +290,6 @@ pub fn compare_dir(dir: &Path, cycles: &str) -> anyhow::Result<Metrics> {
     let w = read_exr(&dir.join("werkstatt.exr"))?;
     let c = read_exr(&dir.join(cycles))?;
     let mut m = measure(&scene, &ids, &w, &c)?;
-    m.ids_gbuffer_mismatch = scene.ids_gbuffer_mismatch;
     let cycles_ids = dir.join("cycles_ids.exr");
     if cycles_ids.exists() {
         let ci = read_exr(&cycles_ids)?;
@@ -301,4 +313,82 @@ pub fn compare_dir(dir: &Path, cycles: &str) -> anyhow::Result<Metrics> {
     crate::io::image::tonemap_for_png(&mut sheet);
     crate::io::image::write_png(&dir.join("compare.png"), &sheet)?;
     Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::app::fidelity::scene::{CameraInfo, ItemInfo, Region};
+
+    fn item(index: usize, name: &str) -> ItemInfo {
+        ItemInfo {
+            index,
+            name: name.into(),
+            base_color: [0.5; 3],
+            glossiness: 0.0,
+            texture: None,
+            uv_scale: 1.0,
+            triangles: [0, 0],
+            bounds_min: [0.0; 3],
+            bounds_max: [0.0; 3],
+        }
+    }
+
+    #[test]
+    fn relative_errors_and_region_ratios_follow_their_definitions() {
+        // Four pixels: two floor pixels (one far, one under the ball), one ball pixel, one
+        // background pixel.
+        let scene = SceneInfo {
+            conventions: String::new(),
+            graph: String::new(),
+            sets: Vec::new(),
+            unlinks: Vec::new(),
+            frame: 0,
+            fps: 30.0,
+            width: 4,
+            height: 1,
+            camera: CameraInfo {
+                eye: [0.0; 3],
+                target: [0.0, 0.0, -1.0],
+                up: [0.0, 1.0, 0.0],
+                fov_y_degrees: 40.0,
+                near: 0.1,
+                far: 10.0,
+            },
+            environment: None,
+            sun: None,
+            floor_item: Some(0),
+            floor_y: Some(0.0),
+            open_floor_level: None,
+            items: vec![item(0, "floor"), item(1, "ball")],
+            regions: vec![Region { name: "under ball".into(), item: 1, kind: "under".into() }],
+            far_margin: 1.5,
+            ids_gbuffer_mismatch: None,
+            check_points: Vec::new(),
+        };
+        let ids = PixelIds {
+            width: 4,
+            height: 1,
+            id: vec![0, 0, 1, -1],
+            position: vec![Vec3::ZERO; 4],
+            albedo: vec![Vec3::splat(0.5); 4],
+            regions: vec![1 << FAR_BIT, 1, 0, 0],
+        };
+        let px = |v: [f32; 4]| Pixels {
+            width: 4,
+            height: 1,
+            rgba: v.iter().flat_map(|&x| [x, x, x, 1.0]).collect(),
+            is_ldr: false,
+        };
+        let c = px([1.0, 0.5, 2.0, 3.0]);
+        let w = px([1.0, 0.8, 1.0, 3.0]);
+        let m = measure(&scene, &ids, &w, &c).unwrap();
+        // |0| + |0.3| + |1| over 1 + 0.5 + 2 (per channel, three channels alike).
+        assert!((m.rel_mae - 1.3 / 3.5).abs() < 1e-6);
+        assert!((m.items[1].rel_mae - 0.5).abs() < 1e-6);
+        assert_eq!(m.far_floor_pixels, 1);
+        let under = &m.regions[0];
+        assert!((under.cycles - 0.5).abs() < 1e-6 && (under.werkstatt - 0.8).abs() < 1e-6);
+        assert_eq!(m.background_rel_mae, 0.0);
+    }
 }
