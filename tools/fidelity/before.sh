@@ -31,6 +31,10 @@ glossy_ball|glossy|$glossy
 "
 
 mkdir -p "$out"
+case "$out" in
+/*) abs=$out ;;
+*) abs=$(pwd)/$out ;;
+esac
 render_cycles() { # case flags
     dir="$out/cycles_$1"
     # shellcheck disable=SC2086
@@ -39,9 +43,9 @@ render_cycles() { # case flags
         "$py" tools/fidelity/cycles.py "$dir" --samples "$samples" >/dev/null 2>&1
         "$py" tools/fidelity/cycles.py "$dir" --samples "$samples" --direct-only --no-ids >/dev/null 2>&1
     else
-        echo "no bpy in $py: using the committed Cycles render tests/data/fidelity/default_$1/cycles.exr" >&2
         committed=tests/data/fidelity/default_lambert
         [ "$1" = glossy ] && committed=tests/data/fidelity/default_glossy_ball
+        echo "no bpy in $py: using the committed Cycles render $committed/cycles.exr" >&2
         cp "$committed/cycles.exr" "$dir/cycles.exr"
     fi
 }
@@ -54,10 +58,10 @@ echo "$variants" | while IFS='|' read -r name case flags; do
     # shellcheck disable=SC2086
     "$ws" fidelity export "$graph" $flags --out "$dir" >/dev/null
     echo "## $name ($flags)"
-    "$ws" fidelity compare "$dir" --cycles "$(pwd)/$out/cycles_$case/cycles.exr"
+    "$ws" fidelity compare "$dir" --cycles "$abs/cycles_$case/cycles.exr"
     if [ -f "$out/cycles_$case/cycles_direct.exr" ]; then
         echo "against Cycles direct light only:"
-        "$ws" fidelity compare "$dir" --cycles "$(pwd)/$out/cycles_$case/cycles_direct.exr" | head -1
+        "$ws" fidelity compare "$dir" --cycles "$abs/cycles_$case/cycles_direct.exr" | head -1
     fi
     echo
 done
