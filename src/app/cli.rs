@@ -160,6 +160,12 @@ enum Command {
         #[command(subcommand)]
         what: BenchWhat,
     },
+    /// The comparison against a path tracer (docs/fidelity.md): export a graph's view for
+    /// Blender Cycles (tools/fidelity/cycles.py), then measure the two images.
+    Fidelity {
+        #[command(subcommand)]
+        what: FidelityWhat,
+    },
     /// Bidirectional texture functions (docs/btf.md).
     Btf {
         #[command(subcommand)]
@@ -192,6 +198,44 @@ enum BtfWhat {
         /// All 81 directions of the paper's sampling instead of the 19 of the test tier.
         #[arg(long)]
         full: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum FidelityWhat {
+    /// Evaluate one frame of a graph and write, into --out: scene.glb (the G-buffer's scene as
+    /// drawn, a material per item), scene.json (camera, probe, materials, regions, check
+    /// points), texture_<i>.png, werkstatt.exr (the linear image entering Tonemap), ids.exr (item
+    /// per pixel and its world position) and albedo.exr.
+    Export {
+        /// The graph file (.ron).
+        graph: PathBuf,
+        /// Override a parameter: node.param=value (repeatable; one value each).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        sets: Vec<String>,
+        /// Disconnect an input: node.port (repeatable), e.g. light.shadows for IBL without
+        /// the shadow atlas.
+        #[arg(long = "unlink", value_name = "NODE.PORT")]
+        unlinks: Vec<String>,
+        #[arg(long, default_value_t = 0)]
+        frame: i64,
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        #[arg(long, default_value = "320x240")]
+        size: String,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Measure DIR/werkstatt.exr against the path tracer's DIR/cycles.exr: relative MAE overall
+    /// and per item, floor-region ratios, open floor at the screen's edges (Markdown tables;
+    /// also DIR/metrics.json).
+    Compare {
+        dir: PathBuf,
+        /// The path tracer's image, a file in DIR.
+        #[arg(long, default_value = "cycles.exr")]
+        cycles: String,
     },
 }
 
@@ -696,6 +740,22 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 Some(path) => crate::io::atomic::write_atomic(&path, text.as_bytes())?,
                 None => print!("{text}"),
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Fidelity { what: FidelityWhat::Export { graph, sets, unlinks, frame, fps, size, out, backend } } => {
+            let (width, height) = parse_size(&size)?;
+            let gpu = GpuContext::headless(pick_backend(backend)?)?;
+            let opts =
+                crate::app::fidelity::ExportOptions { graph_path: graph, sets, unlinks, frame, fps, width, height };
+            let cap = crate::app::fidelity::export(&opts, &gpu, &out)?;
+            let names: Vec<&str> = cap.scene.items.iter().map(|i| i.name.as_str()).collect();
+            println!("wrote {} ({} items: {})", out.display(), names.len(), names.join(", "));
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Fidelity { what: FidelityWhat::Compare { dir, cycles } } => {
+            let m = crate::app::fidelity::compare_dir(&dir, &cycles)?;
+            print!("{}", m.table());
+            crate::io::atomic::write_atomic(&dir.join("metrics.json"), serde_json::to_string_pretty(&m)?.as_bytes())?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Info { backend } => {

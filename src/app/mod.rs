@@ -10,6 +10,7 @@ pub mod contact_sheet;
 pub mod docs;
 #[cfg(feature = "editor")]
 pub mod editor;
+pub mod fidelity;
 pub mod regress;
 pub mod render;
 pub mod sweep;

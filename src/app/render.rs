@@ -316,9 +316,7 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
         let start = Instant::now();
         let created_before = gpu.created();
         let mut nodes = BTreeMap::new();
-        // Batch mode waits for loads: evaluate, wait for resources, repeat until settled.
-        loop {
-            let summary = evaluator.evaluate(time, Some(gpu), &resources, &settings);
+        settle(&mut evaluator, time, gpu, &resources, &settings, start, opts.pending_timeout, |evaluator| {
             for r in evaluator.reports() {
                 let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming {
                     cpu_ms: 0.0,
@@ -330,26 +328,7 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 t.ran |= r.ran;
                 t.counts = r.counts.iter().copied().collect();
             }
-            if summary.pending == 0 {
-                break;
-            }
-            if resources.in_flight() == 0 && summary.ran == 0 {
-                bail!("frame {frame}: {}", nothing_will_arrive(&evaluator));
-            }
-            // A node waiting on an external source (a live link with no sender) never settles.
-            if start.elapsed() > opts.pending_timeout {
-                bail!(
-                    "frame {frame}: still pending after {:.1} s (--pending-timeout): {}",
-                    opts.pending_timeout.as_secs_f64(),
-                    failures(&evaluator).join("; ")
-                );
-            }
-            // Bounded too: a loader that never returns fails the frame above instead of hanging.
-            resources.wait_idle_timeout(opts.pending_timeout.saturating_sub(start.elapsed()));
-            if resources.in_flight() == 0 {
-                std::thread::sleep(std::time::Duration::from_millis(1));
-            }
-        }
+        })?;
         for (node, ms) in gpu.collect_timings() {
             if let Some(t) = nodes.get_mut(&*node) {
                 *t.gpu_ms.get_or_insert(0.0) += ms;
@@ -431,6 +410,47 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
         stats.files.push(name);
     }
     Ok(())
+}
+
+/// Evaluates one frame the way batch rendering does: evaluate, wait for the resources, repeat
+/// until nothing is pending, so the result is deterministic. `after_pass` sees the evaluator
+/// after every pass (the runner sums node timings there). Fails when nothing will arrive (a
+/// live link without a sender) or after `timeout` from `start`.
+#[allow(clippy::too_many_arguments)]
+pub fn settle(
+    evaluator: &mut Evaluator,
+    time: FrameTime,
+    gpu: &GpuContext,
+    resources: &Resources,
+    settings: &FrameSettings,
+    start: Instant,
+    timeout: std::time::Duration,
+    mut after_pass: impl FnMut(&Evaluator),
+) -> anyhow::Result<()> {
+    let frame = time.frame;
+    loop {
+        let summary = evaluator.evaluate(time, Some(gpu), resources, settings);
+        after_pass(evaluator);
+        if summary.pending == 0 {
+            return Ok(());
+        }
+        if resources.in_flight() == 0 && summary.ran == 0 {
+            bail!("frame {frame}: {}", nothing_will_arrive(evaluator));
+        }
+        // A node waiting on an external source (a live link with no sender) never settles.
+        if start.elapsed() > timeout {
+            bail!(
+                "frame {frame}: still pending after {:.1} s (--pending-timeout): {}",
+                timeout.as_secs_f64(),
+                failures(evaluator).join("; ")
+            );
+        }
+        // Bounded too: a loader that never returns fails the frame above instead of hanging.
+        resources.wait_idle_timeout(timeout.saturating_sub(start.elapsed()));
+        if resources.in_flight() == 0 {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
 }
 
 /// Reads an image back at the output size: a supersampled frame-sized image is box-filtered

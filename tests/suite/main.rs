@@ -18,6 +18,7 @@ mod editor;
 mod editor_shaders;
 mod evaluation;
 mod export_kinds;
+mod fidelity;
 mod figures;
 mod formats;
 mod garment;

@@ -1,0 +1,107 @@
+//! werkstatt against Blender Cycles (issue 34, docs/fidelity.md), without Blender: the default
+//! graph's scene rendered by werkstatt at 320x240 and measured against the Cycles renders
+//! committed under tests/data/fidelity/ (made by `werkstatt fidelity export` and
+//! tools/fidelity/cycles.py, 1024 samples). The bounds are today's figures with a small margin,
+//! so a change that moves the image away from the path tracer fails here; tighten them as the
+//! renderer gets closer (the aims of issue 34: relative MAE 5% or less, each region ratio
+//! within 0.05 of Cycles, a glossy ball within 10%).
+
+use werkstatt::app::fidelity::metrics::read_exr;
+use werkstatt::app::fidelity::{ExportOptions, Metrics, SceneInfo, capture, measure};
+
+use crate::common::{gpu, root};
+
+/// Renders the committed case's graph (its --set overrides) and measures it against its
+/// Cycles image; checks first that the scene is the one Cycles rendered.
+fn measure_case(case: &str) -> Metrics {
+    let dir = root().join("tests/data/fidelity").join(case);
+    let committed = SceneInfo::load(&dir.join("scene.json")).unwrap();
+    let opts = ExportOptions {
+        graph_path: root().join(&committed.graph),
+        sets: committed.sets.clone(),
+        unlinks: committed.unlinks.clone(),
+        frame: committed.frame,
+        fps: committed.fps,
+        width: committed.width,
+        height: committed.height,
+    };
+    let cap = capture(&opts, gpu()).unwrap();
+    let scene = &cap.scene;
+    // A changed camera, item list or geometry makes the committed render stale: re-export and
+    // re-render (docs/fidelity.md) rather than compare different scenes.
+    assert_eq!(scene.camera, committed.camera, "{case}: the camera changed since the Cycles render");
+    let shape = |s: &SceneInfo| s.items.iter().map(|i| (i.name.clone(), i.triangles)).collect::<Vec<_>>();
+    assert_eq!(shape(scene), shape(&committed), "{case}: the scene's items changed since the Cycles render");
+    for (a, b) in scene.items.iter().zip(&committed.items) {
+        let close = |x: [f32; 3], y: [f32; 3]| x.iter().zip(&y).all(|(p, q)| (p - q).abs() < 1e-4);
+        assert!(
+            close(a.bounds_min, b.bounds_min) && close(a.bounds_max, b.bounds_max),
+            "{case}: item {} moved",
+            a.name
+        );
+        assert_eq!(
+            (a.base_color, a.glossiness),
+            (b.base_color, b.glossiness),
+            "{case}: item {} changed material",
+            a.name
+        );
+    }
+    assert!(
+        scene.ids_gbuffer_mismatch.unwrap() < 0.005,
+        "{case}: the ray-cast ids disagree with the G-buffer on {:.2}% of the pixels",
+        100.0 * scene.ids_gbuffer_mismatch.unwrap()
+    );
+    let cycles = read_exr(&dir.join("cycles.exr")).unwrap();
+    let m = measure(scene, &cap.ids, &cap.image, &cycles).unwrap();
+    println!("{case}:\n{}", m.table());
+    m
+}
+
+fn region<'a>(m: &'a Metrics, name: &str) -> &'a werkstatt::app::fidelity::metrics::RegionRatio {
+    m.regions.iter().find(|r| r.name == name).unwrap_or_else(|| panic!("no region {name}"))
+}
+
+fn item<'a>(m: &'a Metrics, name: &str) -> &'a werkstatt::app::fidelity::metrics::ItemError {
+    m.items.iter().find(|i| i.name == name).unwrap_or_else(|| panic!("no item {name}"))
+}
+
+#[test]
+fn the_default_scene_is_no_farther_from_cycles_than_today() {
+    let m = measure_case("default_lambert");
+    // The Cycles far floor is the probe's analytic open-floor value less what the objects
+    // hide of the sky: a check of the reference itself.
+    let analytic = m.open_floor_analytic.unwrap() as f64;
+    assert!((m.far_floor_cycles / analytic - 1.0).abs() < 0.05, "far floor {} against {analytic}", m.far_floor_cycles);
+    // Today (docs/fidelity.md, "before"): relative MAE 10.0%; the bounds leave one point.
+    assert!(m.rel_mae < 0.11, "relative MAE {:.1}% (today 10.0%)", 100.0 * m.rel_mae);
+    for (name, today) in [("torus", 0.162), ("floor", 0.092), ("ball", 0.095)] {
+        let e = item(&m, name).rel_mae;
+        assert!(e < today + 0.01, "{name}: relative MAE {:.1}% (today {:.1}%)", 100.0 * e, 100.0 * today);
+    }
+    // Region ratios: werkstatt's distance from Cycles, today's plus 0.02.
+    for (name, today) in [("under ball", 0.154), ("under torus", 0.129), ("shadow of torus", 0.117)] {
+        let r = region(&m, name);
+        let d = (r.werkstatt - r.cycles).abs();
+        assert!(
+            d < today + 0.02,
+            "{name}: werkstatt {:.3} against Cycles {:.3} (today {today} apart)",
+            r.werkstatt,
+            r.cycles
+        );
+    }
+    // SSAO's bands at the screen's left and right edges: open floor darker than Cycles' by
+    // more than 5%, pixel by pixel (each image over its far floor's mean). Today 19.5%; 3.1%
+    // without SSAO.
+    assert!(
+        m.edge_below_cycles < 0.21,
+        "open floor at the edges: {:.1}% below 0.95 of Cycles (today 19.5%)",
+        100.0 * m.edge_below_cycles
+    );
+}
+
+#[test]
+fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
+    let m = measure_case("default_glossy_ball");
+    let ball = item(&m, "ball");
+    assert!(ball.rel_mae < 0.29, "glossy ball: relative MAE {:.1}% (today 28.1%)", 100.0 * ball.rel_mae);
+}
