@@ -65,6 +65,7 @@ pub static ALL: &[&NodeSpec] = &[
     &ibl::ibl_shading::IBL_SHADING,
     &occlusion::ssao::SSAO,
     &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
+    &occlusion::bounce::BOUNCE,
     &occlusion::reference_occlusion::REFERENCE_OCCLUSION,
     &render::tonemap::TONEMAP,
     &core::delay::DELAY,

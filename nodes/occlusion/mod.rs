@@ -1,5 +1,7 @@
-//! Occlusion nodes (src/occlusion/): SSAO, the ray-traced reference, hybrid occlusion.
+//! Occlusion nodes (src/occlusion/): SSAO, the ray-traced reference, hybrid occlusion, and the
+//! screen-space bounce of diffuse light.
 
+pub mod bounce;
 pub mod hybrid_occlusion;
 pub mod reference_occlusion;
 pub mod ssao;

@@ -233,3 +233,14 @@ pub fn world_positions(ev: &werkstatt::core::eval::Evaluator, margin_percent: u3
 pub fn camera_toward_origin(eye: glam::Vec3, fov_y_degrees: f32, far: f32) -> werkstatt::render::scene::Camera {
     werkstatt::render::scene::Camera { eye, target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_degrees, near: 0.1, far }
 }
+
+/// Writes an equirectangular .hdr of `width` x `height` whose pixel (x, y) is `f(x, y)`
+/// (row 0 is straight up).
+pub fn write_probe(path: &std::path::Path, width: usize, height: usize, f: impl Fn(usize, usize) -> glam::Vec3) {
+    let pixels: Vec<image::Rgb<f32>> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| image::Rgb(f(x, y).to_array()))
+        .collect();
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, width, height).unwrap();
+}

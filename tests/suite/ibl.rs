@@ -20,16 +20,6 @@ use werkstatt::gpu::{GpuContext, GpuImage, read_back};
 use werkstatt::ibl::cube::{CubeImage, EquirectImage, cube_from_equirect};
 use werkstatt::ibl::gpu::{EnvMap, PemSet};
 
-/// Writes an equirectangular .hdr of `width` x `height` whose pixel (x, y) is `f(x, y)`.
-fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> Vec3) {
-    let pixels: Vec<image::Rgb<f32>> = (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
-        .map(|(x, y)| image::Rgb(f(x, y).to_array()))
-        .collect();
-    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, width, height).unwrap();
-}
-
 fn forest() -> PathBuf {
     root().join("assets/hdri/forest.hdr")
 }

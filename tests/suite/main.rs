@@ -7,6 +7,7 @@
 mod common;
 
 mod avatar;
+mod bounce;
 mod btf;
 mod cli;
 mod cloth;

@@ -27,12 +27,9 @@ use werkstatt::ibl::median_cut::RegionLight;
 use werkstatt::nodes::ibl::shadow_atlas::{AtlasBuilder, AtlasSettings, TileSizes, VsmParams};
 use werkstatt::render::scene::{DrawItem, Material};
 
-/// Writes an equirectangular .hdr whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
+/// A grey probe whose pixel (x, y) is `f(x, y)` (row 0 is straight up).
 fn write_probe(path: &Path, width: usize, height: usize, f: impl Fn(usize, usize) -> f32) {
-    let pixels: Vec<image::Rgb<f32>> =
-        (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| image::Rgb([f(x, y); 3])).collect();
-    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, width, height).unwrap();
+    crate::common::write_probe(path, width, height, |x, y| glam::Vec3::splat(f(x, y)));
 }
 
 /// A white environment (`cap_degrees` = 180) or a white cap of that many degrees around
