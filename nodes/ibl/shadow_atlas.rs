@@ -312,11 +312,12 @@ impl AtlasBuilder {
         let by_penumbra = single && s.sizes == TileSizes::ByPenumbra;
         let (sizes, origins, width, height) = if by_penumbra {
             // Texels enough to resolve each penumbra (TEXELS_PER_SIGMA across its sigma) plus
-            // its guard, scaled to today's memory (n tiles of tile_size).
-            let wants: Vec<f32> = halves
+            // its guard, scaled to the memory of n uniform tiles of tile_size.
+            // Wants are taken across the scene's sphere, not the view-fitted extent, so the
+            // layout (and the textures) stay the same while the camera moves.
+            let wants: Vec<f32> = sigma_world
                 .iter()
-                .zip(&sigma_world)
-                .map(|(half, sigma)| 2.0 * half * TEXELS_PER_SIGMA / sigma + 6.0 * TEXELS_PER_SIGMA)
+                .map(|sigma| 2.0 * radius * TEXELS_PER_SIGMA / sigma + 6.0 * TEXELS_PER_SIGMA)
                 .collect();
             // No tile below half of tile_size: the blur rule takes a median-cut region's
             // whole solid angle for its light's extent, which is far too wide for a region

@@ -34,34 +34,7 @@ struct Bounce {
 
 // #include "fullscreen.wgsl"
 
-const PI: f32 = 3.14159265;
-const GOLDEN_ANGLE: f32 = 2.39996323;
-const INV_PHI: f32 = 0.61803399;
-const BAYER: array<u32, 16> = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
-
-fn inside(p: vec2<i32>) -> bool {
-    let s = vec2<i32>(u.size.xy);
-    return p.x >= 0 && p.y >= 0 && p.x < s.x && p.y < s.y;
-}
-
-// The view-space point at pixel position `pix` (pixel units, y down) and linear depth d.
-fn view_pos(pix: vec2<f32>, d: f32) -> vec3<f32> {
-    let ndc = vec2<f32>(pix.x / u.size.x * 2.0 - 1.0, 1.0 - pix.y / u.size.y * 2.0);
-    let x = (ndc.x + u.proj[2][0]) * d / u.proj[0][0];
-    let y = (ndc.y + u.proj[2][1]) * d / u.proj[1][1];
-    return vec3<f32>(x, y, -d);
-}
-
-fn to_pixel(q: vec3<f32>) -> vec2<f32> {
-    let c = u.proj * vec4<f32>(q, 1.0);
-    let ndc = c.xy / c.w;
-    return vec2<f32>((ndc.x * 0.5 + 0.5) * u.size.x, (0.5 - ndc.y * 0.5) * u.size.y);
-}
-
-fn view_normal(p: vec2<i32>) -> vec3<f32> {
-    let n = textureLoad(g_normal, p, 0).xyz;
-    return normalize((u.view * vec4<f32>(n, 0.0)).xyz);
-}
+// #include "screen_space.wgsl"
 
 // An orthonormal basis (t, b) around the unit vector n.
 fn basis(n: vec3<f32>) -> mat3x3<f32> {
@@ -76,7 +49,7 @@ const STEPS: u32 = 8u;
 @fragment
 fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let q = vec2<i32>(frag.xy);
-    let d = textureLoad(g_depth, q, 0).r;
+    let d = depth_at(q);
     if d <= 0.0 {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
@@ -84,7 +57,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let n = view_normal(q);
     let frame = basis(n);
     let count = u32(u.samples);
-    let b = BAYER[u32(q.x & 3) + 4u * u32(q.y & 3)];
+    let b = pattern(q);
     let total = f32(count * 16u);
     let bias = 0.02 * u.radius;
     var e = vec3<f32>(0.0);
@@ -102,7 +75,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             if !inside(sp) || x.z >= 0.0 {
                 break;
             }
-            let sd = textureLoad(g_depth, sp, 0).r;
+            let sd = depth_at(sp);
             // The march passed behind the surface the camera sees there: that surface is the
             // sender, unless it lies more than a radius in front (the ray passes behind it).
             let behind = -x.z - sd;
@@ -123,7 +96,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 fn fs_resolve(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let q = vec2<i32>(frag.xy);
     let own = textureLoad(image, q, 0);
-    let d = textureLoad(g_depth, q, 0).r;
+    let d = depth_at(q);
     if d <= 0.0 {
         return own;
     }
@@ -138,7 +111,7 @@ fn fs_resolve(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             if !inside(o) {
                 continue;
             }
-            let od = textureLoad(g_depth, o, 0).r;
+            let od = depth_at(o);
             if od <= 0.0 {
                 continue;
             }

@@ -10,19 +10,10 @@
 
 use glam::{Mat4, Vec3, Vec4};
 
+pub use crate::render::scene::box_corners;
+
 /// A hexahedron's corners, corner k at (x, y, z) = (k & 1, k & 2, k & 4) of its unit cube.
 pub type Hexahedron = [Vec3; 8];
-
-/// The corners of the box (lo, hi).
-pub fn box_corners(lo: Vec3, hi: Vec3) -> Hexahedron {
-    std::array::from_fn(|k| {
-        Vec3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        )
-    })
-}
 
 /// The view frustum's corners in world space from the inverse of its view-projection
 /// (wgpu clip space: x, y in [-1, 1], depth in [0, 1]).

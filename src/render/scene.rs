@@ -187,6 +187,17 @@ impl GBuffer {
     }
 }
 
+/// The corners of the box (lo, hi), corner k at (x, y, z) = (k & 1, k & 2, k & 4) of the unit cube.
+pub fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
+    std::array::from_fn(|k| {
+        Vec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        )
+    })
+}
+
 /// The box (lo, hi) around the items' transformed mesh bounds (model matrix applied to their
 /// box corners); None without geometry.
 pub fn scene_box<'a>(items: impl IntoIterator<Item = &'a DrawItem>) -> Option<(Vec3, Vec3)> {
@@ -196,7 +207,7 @@ pub fn scene_box<'a>(items: impl IntoIterator<Item = &'a DrawItem>) -> Option<(V
         if lo.x > hi.x {
             continue;
         }
-        for corner in crate::ibl::shadow_fit::box_corners(lo, hi) {
+        for corner in box_corners(lo, hi) {
             let p = item.model.transform_point3(corner);
             bounds = Some(bounds.map_or((p, p), |(a, b)| (a.min(p), b.max(p))));
         }
