@@ -31,13 +31,13 @@
 
 use std::sync::Arc;
 
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuContext, GpuImage, TextureDesc};
 use crate::ibl::gpu::Lights;
 use crate::ibl::shadow_fit::{
-    allocate_and_pack, box_corners, fit_to_receivers, frustum_corners, intersection_points, pack_tiles,
+    allocate_and_pack, box_corners, frustum_corners, intersection_points, pack_tiles, receiver_square,
 };
 use crate::render::draw::{MAX_TILES, SceneDrawer, Tile};
 use crate::render::scene::{Camera, DrawItem, View, scene_box};
@@ -137,7 +137,7 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
     create: || Box::new(ShadowAtlasNode::default()),
 };
 
-pub use crate::ibl::shadow::{ShadowAtlas, ShadowLight, VsmParams, light_view_proj};
+pub use crate::ibl::shadow::{ShadowAtlas, ShadowLight, VsmParams, light_view_proj, tile_view_proj};
 
 crate::choice!(
     /// How tile sizes are chosen.
@@ -288,11 +288,12 @@ impl AtlasBuilder {
             _ => Vec::new(),
         };
         // Each light's inner half width (world units) and its penumbra's sigma (world units).
-        let halves: Vec<f32> = lights
+        let squares: Vec<(Vec2, f32)> = lights
             .lights
             .iter()
-            .map(|l| fit_to_receivers(l.direction, center, radius, &receivers, t, 0).map_or(radius, |(_, half)| half))
+            .map(|l| receiver_square(l.direction, center, radius, &receivers).unwrap_or((Vec2::ZERO, radius)))
             .collect();
+        let halves: Vec<f32> = squares.iter().map(|(_, half)| *half).collect();
         // Median-cut regions over dark parts of a map are huge (and their sigmas with them)
         // but carry little light: no light is blurred wider than the widest among those that
         // carry at least the mean energy.
@@ -354,9 +355,8 @@ impl AtlasBuilder {
             .map(|i| {
                 let (l, size, guard) = (&lights.lights[i], sizes[i], guards[i]);
                 let rect = [origins[i][0], origins[i][1], size, size];
-                let (view_proj, half) = fit_to_receivers(l.direction, center, radius, &receivers, size, guard)
-                    .unwrap_or_else(|| (light_view_proj(l.direction, center, radius, size, guard), radius));
-                let texel_world = 2.0 * half / (size - 2 * guard) as f32;
+                let view_proj = tile_view_proj(l.direction, center, radius, squares[i], size, guard);
+                let texel_world = 2.0 * halves[i] / (size - 2 * guard) as f32;
                 let sigma = (sigma_world[i] / texel_world).min(guard as f32 / 3.0);
                 ShadowLight {
                     direction: l.direction.normalize_or(Vec3::Y),

@@ -111,13 +111,7 @@ fn fs_resolve(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             if !inside(o) {
                 continue;
             }
-            let od = depth_at(o);
-            if od <= 0.0 {
-                continue;
-            }
-            let po = view_pos(vec2<f32>(o) + 0.5, od);
-            let plane = clamp(1.0 - abs(dot(po - p, n)) / u.plane_tolerance, 0.0, 1.0);
-            let w = plane * pow(clamp(dot(view_normal(o), n), 0.0, 1.0), 4.0);
+            let w = surface_similarity(p, n, o);
             sum += w * textureLoad(gathered, o, 0).rgb;
             weight += w;
         }

@@ -1,6 +1,6 @@
 // Screen-space helpers shared by ssao.wgsl and bounce.wgsl. The including shader declares a
-// uniform `u` with `proj` (view to clip), `view` (world to view) and `size` (xy: the G-buffer's
-// size in pixels), and the textures `g_depth` and `g_normal`.
+// uniform `u` with `proj` (view to clip), `view` (world to view), `size` (xy: the G-buffer's
+// size in pixels) and `plane_tolerance` (world units), and the textures `g_depth` and `g_normal`.
 
 const PI: f32 = 3.14159265;
 const GOLDEN_ANGLE: f32 = 2.39996323;
@@ -44,4 +44,18 @@ fn to_pixel(q: vec3<f32>) -> vec2<f32> {
 fn view_normal(p: vec2<i32>) -> vec3<f32> {
     let n = textureLoad(g_normal, p, 0).xyz;
     return normalize((u.view * vec4<f32>(n, 0.0)).xyz);
+}
+
+// How much G-buffer pixel `go` belongs to the surface of the point `p` with view normal `n`:
+// its point must lie within the plane tolerance of p's tangent plane (so slanted planes keep
+// their whole neighbourhood) and face the same way (weight (n . n_o)^4); 0 on background.
+fn surface_similarity(p: vec3<f32>, n: vec3<f32>, go: vec2<i32>) -> f32 {
+    let d = depth_at(go);
+    if d <= 0.0 {
+        return 0.0;
+    }
+    let po = view_pos(vec2<f32>(go) + 0.5, d);
+    let plane = clamp(1.0 - abs(dot(po - p, n)) / u.plane_tolerance, 0.0, 1.0);
+    let facing = pow(clamp(dot(view_normal(go), n), 0.0, 1.0), 4.0);
+    return plane * facing;
 }

@@ -238,19 +238,10 @@ fn fs_horizon(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     return finish(visibility / f32(slices));
 }
 
-// How much neighbour AO texel `o` belongs to the surface of the point `p` with normal `n`:
-// its point must lie within the plane tolerance of p's tangent plane (so slanted planes keep
-// their whole neighbourhood) and face the same way (weight (n . n_o)^4).
+// How much neighbour AO texel `o` belongs to the surface of the point `p` with normal `n`
+// (screen_space.wgsl, at the G-buffer pixel the texel stands for).
 fn similarity(p: vec3<f32>, n: vec3<f32>, o: vec2<i32>) -> f32 {
-    let go = gpixel(o);
-    let d = depth_at(go);
-    if d <= 0.0 {
-        return 0.0;
-    }
-    let po = view_pos(vec2<f32>(go) + 0.5, d);
-    let plane = clamp(1.0 - abs(dot(po - p, n)) / u.plane_tolerance, 0.0, 1.0);
-    let facing = pow(clamp(dot(view_normal(go), n), 0.0, 1.0), 4.0);
-    return plane * facing;
+    return surface_similarity(p, n, gpixel(o));
 }
 
 // The edge-aware filter over the 4x4 tile (offsets -2..1): exactly one pixel of each pattern

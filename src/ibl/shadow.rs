@@ -1,7 +1,7 @@
 //! The shadow atlas value that flows from `ShadowAtlas` (nodes/ibl/shadow_atlas.rs) to
 //! `IblShading`: here, below the port table, so the port types need no node module.
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 
 use crate::gpu::GpuImage;
 
@@ -65,6 +65,17 @@ pub fn light_view(direction: Vec3, center: Vec3, radius: f32) -> Mat4 {
 /// The orthographic view of a light along -`direction` fitted to the sphere (c, r), its
 /// inner square [-r, r] mapped to the tile minus `guard` texels per side.
 pub fn light_view_proj(direction: Vec3, center: Vec3, radius: f32, tile: u32, guard: u32) -> Mat4 {
-    let ext = radius * tile as f32 / (tile - 2 * guard).max(1) as f32;
-    Mat4::orthographic_rh(-ext, ext, -ext, ext, radius, 3.0 * radius) * light_view(direction, center, radius)
+    tile_view_proj(direction, center, radius, (Vec2::ZERO, radius), tile, guard)
+}
+
+/// The orthographic view of a light in the frame of [`light_view`] (depth 0..1 across the
+/// sphere (c, r)) whose inner square, centre `square.0` (light-view x, y) and half width
+/// `square.1`, maps to the tile minus `guard` texels per side. The centre is snapped to whole
+/// texels, so a moving camera with the same extent does not make the shadow's edges crawl.
+pub fn tile_view_proj(direction: Vec3, center: Vec3, radius: f32, square: (Vec2, f32), tile: u32, guard: u32) -> Mat4 {
+    let ext = square.1 * tile as f32 / (tile - 2 * guard).max(1) as f32;
+    let texel = 2.0 * ext / tile as f32;
+    let c = (square.0 / texel).round() * texel;
+    Mat4::orthographic_rh(c.x - ext, c.x + ext, c.y - ext, c.y + ext, radius, 3.0 * radius)
+        * light_view(direction, center, radius)
 }

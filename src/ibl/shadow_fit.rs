@@ -8,7 +8,9 @@
 //! the scene's bounding box: every face of each, clipped by the planes of both, leaves the
 //! vertices of the intersection polytope.
 
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec2, Vec3, Vec4};
+
+use crate::ibl::shadow::light_view;
 
 pub use crate::render::scene::box_corners;
 
@@ -85,23 +87,14 @@ pub fn intersection_points(a: &Hexahedron, b: &Hexahedron) -> Vec<Vec3> {
         .collect()
 }
 
-/// A light's orthographic view-projection (the frame of
-/// [`light_view_proj`](crate::ibl::shadow::light_view_proj): along -`direction`, depth 0..1
-/// across the scene's bounding sphere (c, r)) whose square inner tile covers `receivers`
-/// instead of the whole sphere, a `guard`-texel band around it. Returns it with the inner
-/// square's half width (world units), or None without receivers.
-pub fn fit_to_receivers(
-    direction: Vec3,
-    center: Vec3,
-    radius: f32,
-    receivers: &[Vec3],
-    tile: u32,
-    guard: u32,
-) -> Option<(Mat4, f32)> {
+/// The square (centre in light-view x, y; half width) around `receivers` seen along
+/// -`direction` in the frame of [`light_view`] for the sphere (c, r), for
+/// [`tile_view_proj`](crate::ibl::shadow::tile_view_proj); None without receivers.
+pub fn receiver_square(direction: Vec3, center: Vec3, radius: f32, receivers: &[Vec3]) -> Option<(Vec2, f32)> {
     if receivers.is_empty() {
         return None;
     }
-    let view = crate::ibl::shadow::light_view(direction, center, radius);
+    let view = light_view(direction, center, radius);
     let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
     for p in receivers {
         let q = view.transform_point3(*p);
@@ -111,14 +104,7 @@ pub fn fit_to_receivers(
     // Never wider than the sphere (the receivers lie in the scene's box, inside it), never
     // narrower than a thousandth of it.
     let half = ((hi.x - lo.x).max(hi.y - lo.y) / 2.0).clamp(1e-3 * radius, radius);
-    let (cx, cy) = ((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0);
-    let ext = half * tile as f32 / (tile - 2 * guard).max(1) as f32;
-    // Centre snapped to whole texels, so a moving camera with the same extent does not make
-    // the shadow's edges crawl.
-    let texel = 2.0 * ext / tile as f32;
-    let (cx, cy) = ((cx / texel).round() * texel, (cy / texel).round() * texel);
-    let proj = Mat4::orthographic_rh(cx - ext, cx + ext, cy - ext, cy + ext, radius, 3.0 * radius);
-    Some((proj * view, half))
+    Some(((lo.truncate() + hi.truncate()) / 2.0, half))
 }
 
 /// Tile sizes in texels (multiples of 8, from `min` (at least 16) to `max`) for lights that
@@ -266,7 +252,8 @@ mod tests {
         let (c, r) = (Vec3::ZERO, 4.0);
         let dir = Vec3::new(0.3, 0.9, 0.2).normalize();
         let receivers = [Vec3::new(0.5, 0.0, 0.5), Vec3::new(1.0, 0.0, 1.5), Vec3::new(0.2, 0.3, 1.0)];
-        let (vp, half) = fit_to_receivers(dir, c, r, &receivers, 64, 4).expect("receivers");
+        let square = receiver_square(dir, c, r, &receivers).expect("receivers");
+        let (vp, half) = (crate::ibl::shadow::tile_view_proj(dir, c, r, square, 64, 4), square.1);
         assert!(half < r / 2.0, "{half}");
         for p in receivers {
             let q = vp.project_point3(p);
@@ -280,7 +267,7 @@ mod tests {
         for p in [c + dir * r, c - dir * r, c] {
             assert!((vp.project_point3(p).z - whole.project_point3(p).z).abs() < 1e-5);
         }
-        assert!(fit_to_receivers(dir, c, r, &[], 64, 4).is_none());
+        assert!(receiver_square(dir, c, r, &[]).is_none());
     }
 
     #[test]
