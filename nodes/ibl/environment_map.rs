@@ -70,7 +70,7 @@ impl Node for EnvironmentMapNode {
         let texels = CubeImage { size: texels.size, texels: texels.texels.iter().map(|t| round_half(*t)).collect() };
         let cube = cube_target(gpu, "environment map", size as u32)?;
         self.passes.upload_level0(gpu, &texels, &cube);
-        self.passes.filter_chain(gpu, &cube, Kernel::None, &Footprint::whole(cube.width))?;
+        self.passes.filter_chain(gpu, &cube, Kernel::None, &Footprint::whole(cube.width), None)?;
         let preview = self.passes.preview(gpu, &cube, 0.0, 1.0)?;
         cx.set("preview", Arc::new(preview.share()));
         cx.set("environment", Arc::new(EnvMap { cube, texels: Arc::new(texels), preview, source: path }));

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use crate::core::node::prelude::*;
 use crate::gpu::{Bind, FullscreenPass, GpuImage, SamplerKind};
-use crate::ibl::gpu::{PemSet, cube_target};
+use crate::ibl::gpu::{PEMS_PER_PASS, PemSet, cube_target};
 use crate::ibl::pem::TABLE;
 use crate::nodes::ibl::shadow_atlas::ShadowAtlas;
 use crate::render::scene::GBuffer;
@@ -39,9 +39,6 @@ crate::choice!(
         Reference = "reference",
     }
 );
-
-/// PEMs bound per pass (shaders/ibl/ibl_shading.wgsl pem0..pem7); passes accumulate.
-pub const PEMS_PER_PASS: usize = 8;
 
 pub static IBL_SHADING: NodeSpec = NodeSpec {
     kind: "IblShading",
@@ -101,6 +98,9 @@ struct IblUniform {
     /// Face size of level 0.
     face_size: f32,
     levels: [f32; 36],
+    /// The diffuse end's face size, the handover level and exponent, 1 where it is used
+    /// (src/ibl/pem.rs Handover).
+    diffuse: [f32; 4],
 }
 
 /// shaders/ibl/ibl_shading.wgsl `Shadow`: the lights of one pass (world to atlas coordinates,
@@ -197,14 +197,19 @@ impl Node for IblShadingNode {
         let mut levels = [0.0f32; 36];
         levels[..TABLE].copy_from_slice(&pems.calibration.levels);
         let top = (pems.full.desc.mips - 1) as f32;
+        let diffuse = match pems.calibration.handover() {
+            Some(h) => [pems.full_diffuse.width as f32, h.level, h.exponent, 1.0],
+            None => [0.0; 4],
+        };
         let (w, h) = (g.width(), g.height());
-        let batches: Vec<&[GpuImage]> = match mode {
-            IblMode::Full => vec![&[]],
-            IblMode::Pems => pems.pems.chunks(PEMS_PER_PASS).collect(),
+        // Each pass's PEMs and their diffuse ends.
+        let batches: Vec<(&[GpuImage], &GpuImage)> = match mode {
+            IblMode::Full => vec![(&[], &pems.full_diffuse)],
+            IblMode::Pems => pems.pems.chunks(PEMS_PER_PASS).zip(&pems.diffuse).collect(),
         };
         let bg = cx.vec3("background_color");
         let mut previous: Option<GpuImage> = None;
-        for (i, batch) in batches.iter().enumerate() {
+        for (i, &(batch, diffuse_ends)) in batches.iter().enumerate() {
             let uniform = IblUniform {
                 inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
                 size: [w as f32, h as f32, batch.len() as f32, if i == 0 { 1.0 } else { 0.0 }],
@@ -214,6 +219,7 @@ impl Node for IblShadingNode {
                 full_map: if mode == IblMode::Full { 1.0 } else { 0.0 },
                 face_size: pems.full.width as f32,
                 levels,
+                diffuse,
             };
             let out = GpuImage::target(gpu, "ibl shading", w, h, gpu.formats().hdr);
             let mut binds = vec![
@@ -237,6 +243,7 @@ impl Node for IblShadingNode {
             binds.push(Bind::Texture(shadows.as_ref().map_or(&g.color, |s| &s.atlas)));
             binds.push(Bind::Uniform(bytemuck::bytes_of(&shadow)));
             binds.push(Bind::Sampler(SamplerKind::LinearClamp));
+            binds.push(Bind::Texture(diffuse_ends));
             pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
             previous = Some(out);
         }

@@ -4,7 +4,8 @@ use std::sync::Arc;
 
 use crate::core::node::prelude::*;
 use crate::gpu::GpuImage;
-use crate::ibl::gpu::{CubePasses, EnvMap, Footprint, Lights, PemSet, cube_target};
+use crate::ibl::gpu::{CubePasses, EnvMap, Footprint, Lights, PEMS_PER_PASS, PemSet, cube_target, diffuse_target};
+use crate::ibl::pem::DIFFUSE_SIZE;
 use crate::ibl::pem::{Kernel, calibration};
 
 pub static PEMS: NodeSpec = NodeSpec {
@@ -21,7 +22,7 @@ pub static PEMS: NodeSpec = NodeSpec {
         PortSpec::output(
             "memory_mb",
             PortType::Scalar,
-            "GPU memory of the PEMs in MiB: N x 6 x size^2 x texel bytes x 4/3.",
+            "GPU memory of the PEMs in MiB: N x 6 x size^2 x texel bytes x 4/3, plus their diffuse ends (N x 6 x 16^2 x texel bytes).",
         ),
     ],
     params: &[
@@ -84,18 +85,27 @@ impl Node for PemsNode {
                 wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 6 },
             )
         });
-        self.passes.filter_chain(gpu, &full, kernel, &Footprint::whole(size))?;
-        let mut pems = Vec::with_capacity(regions.lights.len());
-        for region in 0..regions.lights.len() {
+        let d = size.min(DIFFUSE_SIZE as u32);
+        let full_diffuse = diffuse_target(gpu, "diffuse end of the full map", d, 1);
+        self.passes.filter_chain(gpu, &full, kernel, &Footprint::whole(size), Some((&full_diffuse, 0)))?;
+        let count = regions.lights.len();
+        let diffuse: Vec<GpuImage> = (0..count.div_ceil(PEMS_PER_PASS))
+            .map(|b| {
+                diffuse_target(gpu, "diffuse ends of PEMs", d, (count - b * PEMS_PER_PASS).min(PEMS_PER_PASS) as u32)
+            })
+            .collect();
+        let mut pems = Vec::with_capacity(count);
+        for region in 0..count {
             // Hundreds of regions take minutes on a software rasterizer: report and answer a cancel.
             cx.progress(region, regions.lights.len())?;
             let pem = cube_target(gpu, "PEM", size)?;
             self.passes.mask(gpu, &env.cube, &ids, region as u32, &pem)?;
             let footprint = Footprint::of_region(&regions.ids, size as usize, region as u32);
-            self.passes.filter_chain(gpu, &pem, kernel, &footprint)?;
+            let slot = (&diffuse[region / PEMS_PER_PASS], (region % PEMS_PER_PASS) as u32);
+            self.passes.filter_chain(gpu, &pem, kernel, &footprint, Some(slot))?;
             pems.push(pem);
         }
-        let bytes = pem_bytes(&full) * pems.len() as u64;
+        let bytes = pem_bytes(&full) * pems.len() as u64 + diffuse.iter().map(array_bytes).sum::<u64>();
         let shown = match usize::try_from(cx.int("preview_region")) {
             Ok(i) => pems.get(i).ok_or_else(|| {
                 NodeError::msg(format!("preview_region {i} does not exist: there are {} regions", pems.len()))
@@ -106,9 +116,15 @@ impl Node for PemsNode {
         cx.set("preview", Arc::new(preview.share()));
         cx.set("memory_mb", bytes as f64 / (1u64 << 20) as f64);
         let calibration = calibration(kernel, size as usize);
-        cx.set("pems", Arc::new(PemSet { kernel, pems, full, calibration, preview, bytes }));
+        cx.set("pems", Arc::new(PemSet { kernel, pems, full, diffuse, full_diffuse, calibration, preview, bytes }));
         Ok(())
     }
+}
+
+/// Bytes of a one-mip texture array.
+fn array_bytes(t: &GpuImage) -> u64 {
+    let texel = t.format.block_copy_size(None).unwrap_or(8) as u64;
+    (t.width as u64).pow(2) * t.texture.depth_or_array_layers() as u64 * texel
 }
 
 /// Bytes of one cube map with its whole mip chain.

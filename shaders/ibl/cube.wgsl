@@ -41,33 +41,47 @@ fn texel_center(size: u32, i: u32) -> f32 {
 // every pass reads them with textureLoad, so no backend has to reinterpret a cube texture
 // as an array (OpenGL cannot), and CPU twins reproduce the lookups exactly.
 
-// Texel (x, y) of `face` at mip `level` (face size `size`); a coordinate one past the edge
-// continues onto the neighbouring face (CubeImage::tap).
-fn cube_tap(tex: texture_2d_array<f32>, size: u32, level: i32, face: u32, x: i32, y: i32) -> vec4<f32> {
+// The texel a tap (x, y) of `face` lands on, as (x, y, face), for a face `size` texels wide:
+// itself on the face; a coordinate one past the edge continues onto the neighbouring face
+// (CubeImage::tap).
+fn cube_wrap(size: u32, face: u32, x: i32, y: i32) -> vec3<i32> {
     let n = i32(size);
     if x >= 0 && x < n && y >= 0 && y < n {
-        return textureLoad(tex, vec2<i32>(x, y), i32(face), level);
+        return vec3<i32>(x, y, i32(face));
     }
     let centre = (2.0 * (vec2<f32>(f32(x), f32(y)) + vec2<f32>(0.5))) / f32(size) - vec2<f32>(1.0);
     let f = dir_to_face(face_dir(face, centre.x, centre.y));
     let t = clamp(vec2<i32>(floor((f.uv + vec2<f32>(1.0)) * 0.5 * f32(size))), vec2<i32>(0), vec2<i32>(n - 1));
-    return textureLoad(tex, t, i32(f.face), level);
+    return vec3<i32>(t, i32(f.face));
 }
 
-// Seamless bilinear lookup along `d` at mip `level` of face size `size`: taps off the face
-// come from the neighbouring face (CubeImage::sample).
-fn cube_bilinear_level(tex: texture_2d_array<f32>, size: u32, level: i32, d: vec3<f32>) -> vec4<f32> {
+// Seamless bilinear lookup along `d` at mip `level` (face size `size`) of the cube whose faces
+// are layers first..first+5: taps off the face come from the neighbouring face
+// (CubeImage::sample).
+fn cube_bilinear_layers(tex: texture_2d_array<f32>, size: u32, level: i32, first: u32, d: vec3<f32>) -> vec4<f32> {
     let f = dir_to_face(d);
-    let s = f32(size);
-    let p = (f.uv + vec2<f32>(1.0)) * 0.5 * s - vec2<f32>(0.5);
+    let p = (f.uv + vec2<f32>(1.0)) * 0.5 * f32(size) - vec2<f32>(0.5);
     let fl = floor(p);
     let t = p - fl;
     let x0 = i32(fl.x);
     let y0 = i32(fl.y);
-    let top = mix(cube_tap(tex, size, level, f.face, x0, y0), cube_tap(tex, size, level, f.face, x0 + 1, y0), t.x);
-    let bottom =
-        mix(cube_tap(tex, size, level, f.face, x0, y0 + 1), cube_tap(tex, size, level, f.face, x0 + 1, y0 + 1), t.x);
+    let top = mix(cube_tap(tex, size, level, first, f.face, x0, y0), cube_tap(tex, size, level, first, f.face, x0 + 1, y0), t.x);
+    let bottom = mix(
+        cube_tap(tex, size, level, first, f.face, x0, y0 + 1),
+        cube_tap(tex, size, level, first, f.face, x0 + 1, y0 + 1),
+        t.x,
+    );
     return mix(top, bottom, t.y);
+}
+
+fn cube_tap(tex: texture_2d_array<f32>, size: u32, level: i32, first: u32, face: u32, x: i32, y: i32) -> vec4<f32> {
+    let w = cube_wrap(size, face, x, y);
+    return textureLoad(tex, w.xy, w.z + i32(first), level);
+}
+
+// The same for a six-layer cube map (shaders/ibl/cube.wgsl's storage).
+fn cube_bilinear_level(tex: texture_2d_array<f32>, size: u32, level: i32, d: vec3<f32>) -> vec4<f32> {
+    return cube_bilinear_layers(tex, size, level, 0u, d);
 }
 
 // Level 0 of a view (the one-mip views the filters read).

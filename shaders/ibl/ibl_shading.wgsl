@@ -13,8 +13,6 @@
 @group(0) @binding(12) var pem6: texture_2d_array<f32>;
 @group(0) @binding(13) var pem7: texture_2d_array<f32>;
 
-// #include "cube.wgsl"
-
 fn lookup(tex: texture_2d_array<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
     return cube_trilinear(tex, u32(ibl.face_size), ibl.top_level, d, lod).rgb;
 }

@@ -5,6 +5,8 @@
 // per pass; passes accumulate through `previous`, so any number of regions works.
 // VIS_i is 1 without a shadow atlas; with one (nodes/ibl/shadow_atlas.rs), Chebyshev's upper
 // bound on the blurred moments of light i's tile, with light-bleeding reduction.
+// Below the chain's 8^2 level a lookup blends in the map's diffuse end (the cosine lobe at 16^2,
+// src/ibl/pem.rs Handover): a chain's own diffuse level is too coarse for bilinear lookups.
 // The pass is included by one of two files that declare the cube maps `env`, `pem0`..`pem7`
 // (bindings 5..13) and `lookup(cube, direction, lod)`: ibl_shading_hw.wgsl (hardware cube
 // sampling) and ibl_shading.wgsl (textureLoad, its reference twin).
@@ -23,6 +25,8 @@ struct Ibl {
     face_size: f32,
     // Mip level for s = 2^(i * 10 / 32), i = 0..32 (33 entries).
     levels: array<vec4<f32>, 9>,
+    // x: the diffuse ends' face size, y: the handover level, z: its exponent, w: 1 when used.
+    diffuse: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> ibl: Ibl;
@@ -53,8 +57,11 @@ struct Shadow {
 @group(0) @binding(15) var<uniform> shadow: Shadow;
 // Bilinear lookups of the shadow atlas's moments.
 @group(0) @binding(16) var samp: sampler;
+// The diffuse ends of the pass's PEMs (PEM k at layers 6k..6k+5), or of the full map.
+@group(0) @binding(17) var diffuse_ends: texture_2d_array<f32>;
 
 // #include "fullscreen.wgsl"
+// #include "cube.wgsl"
 
 fn table(i: u32) -> f32 {
     return ibl.levels[i / 4u][i % 4u];
@@ -72,6 +79,30 @@ fn level_for_glossiness(g: f32) -> f32 {
     let i = min(u32(floor(x)), 31u);
     let l = table(i) + (table(i + 1u) - table(i)) * (x - f32(i));
     return clamp(l, 0.0, ibl.top_level);
+}
+
+// The diffuse end's weight at glossiness g (Handover::diffuse_weight): from 1 at s = 1 to 0 at
+// the handover exponent, matching lobe volumes; 0 beyond.
+fn diffuse_weight(g: f32) -> f32 {
+    if ibl.diffuse.w < 0.5 || g >= 1.0 {
+        return 0.0;
+    }
+    let s = max(1.0 / (1.0 - max(g, 0.0)), 1.0);
+    if s >= ibl.diffuse.z {
+        return 0.0;
+    }
+    let chain = (1.0 / (s + 1.0) - 0.5) / (1.0 / (ibl.diffuse.z + 1.0) - 0.5);
+    return 1.0 - clamp(chain, 0.0, 1.0);
+}
+
+// PEM k's (or the full map's, k = 0) radiance along d: the chain's lookup blended with the
+// diffuse end by weight wd.
+fn with_diffuse(k: u32, chain: vec3<f32>, d: vec3<f32>, wd: f32) -> vec3<f32> {
+    if wd <= 0.0 {
+        return chain;
+    }
+    let end = cube_bilinear_layers(diffuse_ends, u32(ibl.diffuse.x), 0, 6u * k, d).rgb;
+    return mix(chain, end, wd);
 }
 
 fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
@@ -147,26 +178,29 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let r = reflect(ray, n);
     // Eq. 3.39: the sample vector blends from the normal (diffuse) to the mirror direction.
     let sample_dir = n * (1.0 - g) + r * g;
-    let level = level_for_glossiness(g);
+    let wd = diffuse_weight(g);
+    // Blending with the diffuse end, the chain is read at the handover level.
+    let level = select(level_for_glossiness(g), ibl.diffuse.y, wd > 0.0);
 
     var sum = vec3<f32>(0.0);
     if ibl.full_map > 0.5 {
-        sum = lookup(env, sample_dir, level);
+        sum = with_diffuse(0u, lookup(env, sample_dir, level), sample_dir, wd);
     } else {
         let count = u32(ibl.size.z);
         // World position: depth is the linear view depth along the camera's forward axis.
         let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz));
+        let d = sample_dir;
         // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
         // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
         // switch in a loop (8x the lookups).
-        if count > 0u { sum += lit(0u, lookup(pem0, sample_dir, level), p, n, px); }
-        if count > 1u { sum += lit(1u, lookup(pem1, sample_dir, level), p, n, px); }
-        if count > 2u { sum += lit(2u, lookup(pem2, sample_dir, level), p, n, px); }
-        if count > 3u { sum += lit(3u, lookup(pem3, sample_dir, level), p, n, px); }
-        if count > 4u { sum += lit(4u, lookup(pem4, sample_dir, level), p, n, px); }
-        if count > 5u { sum += lit(5u, lookup(pem5, sample_dir, level), p, n, px); }
-        if count > 6u { sum += lit(6u, lookup(pem6, sample_dir, level), p, n, px); }
-        if count > 7u { sum += lit(7u, lookup(pem7, sample_dir, level), p, n, px); }
+        if count > 0u { sum += lit(0u, with_diffuse(0u, lookup(pem0, d, level), d, wd), p, n, px); }
+        if count > 1u { sum += lit(1u, with_diffuse(1u, lookup(pem1, d, level), d, wd), p, n, px); }
+        if count > 2u { sum += lit(2u, with_diffuse(2u, lookup(pem2, d, level), d, wd), p, n, px); }
+        if count > 3u { sum += lit(3u, with_diffuse(3u, lookup(pem3, d, level), d, wd), p, n, px); }
+        if count > 4u { sum += lit(4u, with_diffuse(4u, lookup(pem4, d, level), d, wd), p, n, px); }
+        if count > 5u { sum += lit(5u, with_diffuse(5u, lookup(pem5, d, level), d, wd), p, n, px); }
+        if count > 6u { sum += lit(6u, with_diffuse(6u, lookup(pem6, d, level), d, wd), p, n, px); }
+        if count > 7u { sum += lit(7u, with_diffuse(7u, lookup(pem7, d, level), d, wd), p, n, px); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }

@@ -46,6 +46,11 @@ pub struct PemSet {
     pub pems: Vec<GpuImage>,
     /// The whole map filtered with the same kernel: what the PEMs sum to.
     pub full: GpuImage,
+    /// The diffuse ends ([`super::pem::diffuse_end`]) of the PEMs, one [`diffuse_target`] per
+    /// [`PEMS_PER_PASS`] PEMs (PEM k at layers 6 (k mod 8) ..), as IblShading binds them.
+    pub diffuse: Vec<GpuImage>,
+    /// The full map's diffuse end (six layers).
+    pub full_diffuse: GpuImage,
     pub calibration: Arc<Calibration>,
     /// A chosen PEM (or the sum) at a chosen level, as an equirectangular image.
     pub preview: GpuImage,
@@ -63,6 +68,16 @@ pub fn cube_target(gpu: &GpuContext, label: &str, size: u32) -> anyhow::Result<G
         | wgpu::TextureUsages::STORAGE_BINDING
         | wgpu::TextureUsages::COPY_DST;
     Ok(GpuImage::create(gpu, label, TextureDesc::array(size, size, 6, CUBE_FORMAT, usage).with_full_mips()))
+}
+
+/// PEMs per IblShading pass (its bindings pem0..pem7).
+pub const PEMS_PER_PASS: usize = 8;
+
+/// Diffuse ends ([`super::pem::diffuse_end`]) of `cubes` cube maps of face size `size`, one
+/// 2D array (cube k's faces at layers 6k..6k+5, one mip).
+pub fn diffuse_target(gpu: &GpuContext, label: &str, size: u32, cubes: u32) -> GpuImage {
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    GpuImage::create(gpu, label, TextureDesc::array(size, size, 6 * cubes, CUBE_FORMAT, usage))
 }
 
 /// The format of cube maps and PEMs (shaders/ibl/pem_filter.wgsl stores into it).
@@ -226,6 +241,8 @@ pub struct CubePasses {
     /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
     /// only on the geometry, and every PEM of a set shares it.
     norms: Option<GpuImage>,
+    /// fs_phong_norm's output for the diffuse end of one face size.
+    diffuse_norms: Option<GpuImage>,
     preview: FullscreenPass,
 }
 
@@ -243,6 +260,7 @@ impl Default for CubePasses {
             phong: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
             phong_norm: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong_norm"),
             norms: None,
+            diffuse_norms: None,
             preview: FullscreenPass::new("cube_preview.wgsl"),
         }
     }
@@ -276,17 +294,30 @@ impl CubePasses {
     }
 
     /// Fills levels 1.. of `cube` from level 0 with `kernel` (shaders/ibl/pem_filter.wgsl,
-    /// pem_phong.wgsl); level 0 is black outside `bounds`.
+    /// pem_phong.wgsl); level 0 is black outside `bounds`. With `diffuse` (a
+    /// [`diffuse_target`] and a cube index in it), also writes the map's diffuse end there.
     pub fn filter_chain(
         &mut self,
         gpu: &GpuContext,
         cube: &GpuImage,
         kernel: Kernel,
         footprint: &Footprint,
+        diffuse: Option<(&GpuImage, u32)>,
     ) -> anyhow::Result<()> {
-        if kernel == Kernel::Phong {
-            return self.phong_chain(gpu, cube, footprint);
+        let plain =
+            if kernel == Kernel::Phong || diffuse.is_some() { Some(self.plain_chain(gpu, cube)?) } else { None };
+        match &plain {
+            Some(plain) if kernel == Kernel::Phong => self.phong_levels(gpu, cube, plain, footprint)?,
+            _ => self.kernel_levels(gpu, cube, kernel)?,
         }
+        if let (Some((dst, index)), Some(plain)) = (diffuse, &plain) {
+            self.diffuse_end(gpu, plain, footprint, dst, index)?;
+        }
+        Ok(())
+    }
+
+    /// Levels 1.. of `cube` with a 5x5 kernel, each from the one before.
+    fn kernel_levels(&mut self, gpu: &GpuContext, cube: &GpuImage, kernel: Kernel) -> anyhow::Result<()> {
         let w = super::pem::weights(kernel);
         let total: f32 = w.iter().flatten().sum();
         let mut weights = [0.0f32; 28];
@@ -303,9 +334,8 @@ impl CubePasses {
         Ok(())
     }
 
-    /// The Phong prefilter (src/ibl/pem.rs phong_level): a plain chain of level 0 in a pooled
-    /// cube, then every level of `cube` integrated from it.
-    fn phong_chain(&mut self, gpu: &GpuContext, cube: &GpuImage, footprint: &Footprint) -> anyhow::Result<()> {
+    /// A plain (2x2 box) mip chain of `cube`'s level 0, in a pooled cube.
+    fn plain_chain(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<GpuImage> {
         let plain = gpu.acquire("plain mip chain", cube.desc);
         gpu.record(|enc| {
             enc.copy_texture_to_texture(
@@ -314,26 +344,37 @@ impl CubePasses {
                 wgpu::Extent3d { width: cube.width, height: cube.width, depth_or_array_layers: 6 },
             )
         });
-        self.filter_chain(gpu, &plain, Kernel::None, footprint)?;
+        self.kernel_levels(gpu, &plain, Kernel::None)?;
+        Ok(plain)
+    }
+
+    /// One mip of a cube's texture as a six-layer array view.
+    fn mip_view(cube: &GpuImage, mip: u32) -> wgpu::TextureView {
+        cube.view_of(crate::gpu::texture::ViewSel {
+            dimension: wgpu::TextureViewDimension::D2Array,
+            base_mip: mip,
+            mips: 1,
+            base_layer: 0,
+            layers: 6,
+        })
+    }
+
+    /// The Phong prefilter (src/ibl/pem.rs phong_level): every level of `cube` integrated from
+    /// the plain chain.
+    fn phong_levels(
+        &mut self,
+        gpu: &GpuContext,
+        cube: &GpuImage,
+        plain: &GpuImage,
+        footprint: &Footprint,
+    ) -> anyhow::Result<()> {
         let norms = self.phong_norms(gpu, cube)?;
         let size = cube.width as usize;
         let sample_type = plain.desc.sample_type(false);
         for mip in 1..cube.desc.mips {
             let source = super::pem::phong_source(mip as usize) as u32;
-            let view = plain.view_of(crate::gpu::texture::ViewSel {
-                dimension: wgpu::TextureViewDimension::D2Array,
-                base_mip: source,
-                mips: 1,
-                base_layer: 0,
-                layers: 6,
-            });
-            let norm_view = norms.view_of(crate::gpu::texture::ViewSel {
-                dimension: wgpu::TextureViewDimension::D2Array,
-                base_mip: mip,
-                mips: 1,
-                base_layer: 0,
-                layers: 6,
-            });
+            let view = Self::mip_view(plain, source);
+            let norm_view = Self::mip_view(&norms, mip);
             let (dst, src) = (cube.width >> mip, cube.width >> source);
             let exponent = super::pem::phong_exponent(size, mip as usize);
             let full_sphere = u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE);
@@ -366,44 +407,110 @@ impl CubePasses {
         Ok(())
     }
 
+    /// The diffuse end (src/ibl/pem.rs diffuse_end): the cosine lobe summed over the whole
+    /// sphere of the plain chain's level of the target's face size, into cube `index` of `dst`.
+    fn diffuse_end(
+        &mut self,
+        gpu: &GpuContext,
+        plain: &GpuImage,
+        footprint: &Footprint,
+        dst: &GpuImage,
+        index: u32,
+    ) -> anyhow::Result<()> {
+        let d = dst.width;
+        let source = (plain.width / d).ilog2();
+        let norms = match self.diffuse_norms.as_ref().filter(|n| n.width == d) {
+            Some(n) => n.share(),
+            None => {
+                let norms = self.norm_target(gpu, "diffuse end normalization", d, 1);
+                self.norm_pass(gpu, &norms, 0, d, 1.0)?;
+                self.diffuse_norms = Some(norms.share());
+                norms
+            }
+        };
+        let view = Self::mip_view(plain, source);
+        let norm_view = Self::mip_view(&norms, 0);
+        for face in 0..6 {
+            let params = PhongParams {
+                face,
+                dst_size: d,
+                src_size: d,
+                full_sphere: 1,
+                exponent: 1.0,
+                window: 0,
+                pad: [0.0; 2],
+                bounds: bounds_at_level(&footprint.faces, source, plain.width),
+                cone: NO_CONE,
+            };
+            self.phong.draw(
+                gpu,
+                &[
+                    Bind::Uniform(bytemuck::bytes_of(&params)),
+                    Bind::View(&view, wgpu::TextureViewDimension::D2Array, plain.desc.sample_type(false)),
+                    Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
+                ],
+                &[&dst.layer_view(6 * index + face, 0)],
+                &[dst.format],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// A six-layer texture for Phong normalizations (one float channel, as precise as the
+    /// device renders: linear depth's format, R32Float or 16-bit floats on llvmpipe's GL).
+    fn norm_target(&self, gpu: &GpuContext, label: &str, size: u32, mips: u32) -> GpuImage {
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let desc = TextureDesc::array(size, size, 6, gpu.formats().linear_depth, usage).with_mips(mips);
+        GpuImage::create(gpu, label, desc)
+    }
+
+    /// fs_phong_norm into mip `mip` (face size `size`) of `norms`: the whole-sphere weights'
+    /// sum at exponent `exponent` over a source of the same face size.
+    fn norm_pass(
+        &mut self,
+        gpu: &GpuContext,
+        norms: &GpuImage,
+        mip: u32,
+        size: u32,
+        exponent: f32,
+    ) -> anyhow::Result<()> {
+        for face in 0..6 {
+            let params = PhongParams {
+                face,
+                dst_size: size,
+                src_size: size,
+                full_sphere: 1,
+                exponent,
+                window: 0,
+                pad: [0.0; 2],
+                bounds: Footprint::whole(size).faces,
+                cone: NO_CONE,
+            };
+            self.phong_norm.draw(
+                gpu,
+                &[Bind::Uniform(bytemuck::bytes_of(&params))],
+                &[&norms.layer_view(face, mip)],
+                &[norms.format],
+            )?;
+        }
+        Ok(())
+    }
+
     /// The Phong weights' sum per texel of every whole-sphere level of a face-size
     /// `cube.width` chain (fs_phong_norm), computed once per size.
     fn phong_norms(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<GpuImage> {
         if let Some(norms) = self.norms.as_ref().filter(|n| n.width == cube.width) {
             return Ok(norms.share());
         }
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        // One float channel, as precise as the device renders (linear depth's format: R32Float,
-        // or 16-bit floats on llvmpipe's GL).
-        let desc =
-            TextureDesc::array(cube.width, cube.width, 6, gpu.formats().linear_depth, usage).with_mips(cube.desc.mips);
-        let norms = GpuImage::create(gpu, "Phong normalization", desc);
+        let norms = self.norm_target(gpu, "Phong normalization", cube.width, cube.desc.mips);
         let size = cube.width as usize;
         for mip in 1..cube.desc.mips {
-            let source = super::pem::phong_source(mip as usize) as u32;
-            let (dst, src) = (cube.width >> mip, cube.width >> source);
+            let dst = cube.width >> mip;
+            // Whole-sphere levels read their own level of the plain chain (phong_source).
             if dst as usize > super::pem::PHONG_FULL_SPHERE_SIZE {
                 continue;
             }
-            for face in 0..6 {
-                let params = PhongParams {
-                    face,
-                    dst_size: dst,
-                    src_size: src,
-                    full_sphere: 1,
-                    exponent: super::pem::phong_exponent(size, mip as usize),
-                    window: 0,
-                    pad: [0.0; 2],
-                    bounds: Footprint::whole(src).faces,
-                    cone: NO_CONE,
-                };
-                self.phong_norm.draw(
-                    gpu,
-                    &[Bind::Uniform(bytemuck::bytes_of(&params))],
-                    &[&norms.layer_view(face, mip)],
-                    &[norms.format],
-                )?;
-            }
+            self.norm_pass(gpu, &norms, mip, dst, super::pem::phong_exponent(size, mip as usize))?;
         }
         self.norms = Some(norms.share());
         Ok(norms)

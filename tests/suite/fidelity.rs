@@ -73,15 +73,24 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
     let analytic = m.open_floor_analytic.unwrap() as f64;
     assert!((m.far_floor_cycles / analytic - 1.0).abs() < 0.05, "far floor {} against {analytic}", m.far_floor_cycles);
     // Today (docs/fidelity.md, "after"; 10.0% before the shadow atlas fitted its tiles to the
-    // view and sized them by penumbra and SSAO mirrored off-screen samples): relative MAE
-    // 8.0%; the bounds leave one point.
-    assert!(m.rel_mae < 0.09, "relative MAE {:.1}% (today 8.0%)", 100.0 * m.rel_mae);
-    for (name, today) in [("torus", 0.161), ("floor", 0.067), ("ball", 0.095)] {
+    // view and sized them by penumbra and SSAO mirrored off-screen samples, 8.0% before the
+    // PEMs' diffuse ends): relative MAE 7.0%; the bounds leave one point (8.0% fails).
+    assert!(m.rel_mae < 0.08, "relative MAE {:.1}% (today 7.0%)", 100.0 * m.rel_mae);
+    for (name, today) in [("torus", 0.138), ("floor", 0.056), ("ball", 0.108)] {
         let e = item(&m, name).rel_mae;
         assert!(e < today + 0.01, "{name}: relative MAE {:.1}% (today {:.1}%)", 100.0 * e, 100.0 * today);
     }
+    // The open floor: the diffuse ends give it the probe's irradiance (3.8% under the
+    // analytic value before, with IBL alone); Cycles' far floor still has a little occlusion.
+    let floor = m.far_floor_werkstatt / m.far_floor_cycles;
+    assert!(
+        (floor - 1.0).abs() < 0.01,
+        "far floor: werkstatt {:.4} against Cycles {:.4}",
+        m.far_floor_werkstatt,
+        m.far_floor_cycles
+    );
     // Region ratios: werkstatt's distance from Cycles, today's plus 0.02.
-    for (name, today) in [("under ball", 0.091), ("under torus", 0.044), ("shadow of torus", 0.061)] {
+    for (name, today) in [("under ball", 0.080), ("under torus", 0.025), ("shadow of torus", 0.054)] {
         let r = region(&m, name);
         let d = (r.werkstatt - r.cycles).abs();
         assert!(
@@ -93,10 +102,10 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
     }
     // SSAO's bands at the screen's left and right edges: open floor darker than Cycles' by
     // more than 5%, pixel by pixel (each image over its far floor's mean). 19.5% before SSAO
-    // mirrored its off-screen samples (3.1% without SSAO); today 3.5%.
+    // mirrored its off-screen samples (3.1% without SSAO); today 3.0%.
     assert!(
         m.edge_below_cycles < 0.05,
-        "open floor at the edges: {:.1}% below 0.95 of Cycles (today 3.5%)",
+        "open floor at the edges: {:.1}% below 0.95 of Cycles (today 3.0%)",
         100.0 * m.edge_below_cycles
     );
 }

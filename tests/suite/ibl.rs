@@ -142,8 +142,8 @@ fn the_pems_partition_the_map_at_level_0_and_sum_to_the_filtered_map_at_every_le
     assert_eq!(pems.pems.len(), 5);
     assert_eq!(pems.full.desc.mips, 6, "32 -> 1 is six levels");
     assert_pems_sum_to_the_filtered_map(&env, &pems);
-    // The memory output counts N cubes with their mip chains.
-    let expected = 5 * 6 * 8 * (32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) as u64;
+    // The memory output counts N cubes with their mip chains and their 16^2 diffuse ends.
+    let expected = 5 * 6 * 8 * (32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1 + 16 * 16) as u64;
     assert_eq!(pems.bytes, expected);
 }
 
@@ -172,6 +172,25 @@ fn assert_pems_sum_to_the_filtered_map(env: &EnvMap, pems: &PemSet) {
                 assert!(err <= tol, "level {mip}, texel {i}: PEMs sum to {sum:?}, filtered map {want:?}");
             }
         }
+    }
+    // The diffuse ends too: PEM k's faces are layers 6 (k mod 8).. of its pass's array.
+    let full = read_level(gpu, &pems.full_diffuse, 0);
+    let mut sum = vec![Vec4::ZERO; full.texels.len()];
+    for (k, _) in pems.pems.iter().enumerate() {
+        let array = &pems.diffuse[k / 8];
+        for face in 0..6 {
+            let layer = read_back_layer(gpu, array, (6 * (k % 8) + face) as u32, 0).unwrap();
+            for (i, t) in layer.rgba.chunks_exact(4).enumerate() {
+                sum[face * full.size * full.size + i] += Vec4::from_slice(t);
+            }
+        }
+    }
+    for (i, (got, want)) in sum.iter().zip(&full.texels).enumerate() {
+        let err = (got.truncate() - want.truncate()).abs().max_element();
+        assert!(
+            err <= want.max_element() * 2f32.powi(-8) + 1e-6,
+            "diffuse end, texel {i}: PEMs sum to {got:?}, full map {want:?}"
+        );
     }
 }
 
@@ -257,13 +276,6 @@ fn rays_and_normals(ev: &Evaluator) -> Vec<Option<(Vec3, Vec3)>> {
         .collect()
 }
 
-/// Trilinear lookup in read-back levels, as the sampler does (within a face).
-fn trilinear(levels: &[CubeImage], d: Vec3, level: f32) -> Vec3 {
-    let l0 = (level.floor() as usize).min(levels.len() - 1);
-    let l1 = (l0 + 1).min(levels.len() - 1);
-    levels[l0].sample(d).truncate().lerp(levels[l1].sample(d).truncate(), level - l0 as f32)
-}
-
 /// The fraction of covered pixels whose shading is within `tol` (relative) of `expect`.
 fn agreement(ev: &Evaluator, albedo: f32, expect: impl Fn(Vec3, Vec3) -> Vec3, tol: f32) -> f32 {
     let img = image_of(ev);
@@ -283,23 +295,20 @@ fn agreement(ev: &Evaluator, albedo: f32, expect: impl Fn(Vec3, Vec3) -> Vec3, t
 
 #[test]
 fn glossiness_0_looks_up_along_the_normal_and_1_returns_the_map_along_the_reflection() {
-    let gpu = gpu();
+    use werkstatt::ibl::pem::{Kernel, diffuse_end, filter_chain};
     let diffuse = run_graph(&sphere_graph(&forest(), 32, 4, &[0.0], 1.0, r#""mode": "full""#, ""), 64, 64);
-    let pems = pems_of(&diffuse);
-    let levels: Vec<CubeImage> = (0..pems.full.desc.mips).map(|m| read_level(gpu, &pems.full, m)).collect();
-    let l = pems.calibration.level_for_glossiness(0.0);
+    let env = env_of(&diffuse);
     let reflect_first = {
         let mirror = run_graph(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
         let env = env_of(&mirror);
         agreement(&mirror, 1.0, |ray, n| env.texels.sample(ray.reflect(n)).truncate(), 0.02)
     };
     assert!(reflect_first > 0.97, "g = 1: {reflect_first} of the pixels match the map along the reflection");
-    // At the coarse levels of diffuse lookups (2x2 and 1x1 faces) the sampler blends cube
-    // corners from three faces where the twin takes the nearest texel: 5% tolerance.
-    let along_normal = agreement(&diffuse, 1.0, |_, n| trilinear(&levels, n, l), 0.05);
-    // Texels next to a cube edge are filtered across the seam by the sampler, not by the twin.
+    // g = 0 is the diffuse end alone (the cosine lobe at 16^2), looked up along the normal.
+    let end = diffuse_end(&filter_chain(&env.texels, Kernel::None));
+    let along_normal = agreement(&diffuse, 1.0, |_, n| end.sample(n).truncate(), 0.01);
     assert!(along_normal > 0.97, "g = 0: {along_normal} of the pixels match a lookup along the normal");
-    let wrong = agreement(&diffuse, 1.0, |ray, n| trilinear(&levels, ray.reflect(n), l), 0.05);
+    let wrong = agreement(&diffuse, 1.0, |ray, n| end.sample(ray.reflect(n)).truncate(), 0.01);
     assert!(wrong < 0.8, "the reflection direction matches as well ({wrong}): the test cannot tell them apart");
 
     let mirror = run_graph(&sphere_graph(&forest(), 32, 4, &[1.0], 1.0, r#""mode": "full""#, ""), 64, 64);
@@ -427,7 +436,7 @@ fn shaded_spheres_match_the_monte_carlo_reference_of_eq_3_42() {
 #[test]
 fn the_gpu_filters_match_their_cpu_twins() {
     use werkstatt::core::param::Choice;
-    use werkstatt::ibl::pem::{Kernel, filter_chain};
+    use werkstatt::ibl::pem::{Kernel, diffuse_end, filter_chain};
     for kernel in [Kernel::SqrtCosine, Kernel::Phong] {
         let graph = sphere_graph(&forest(), 32, 3, &[0.5], 1.0, "", &format!(r#""kernel": "{}""#, kernel.name()));
         let ev = run_graph(&graph, 16, 16);
@@ -447,6 +456,16 @@ fn the_gpu_filters_match_their_cpu_twins() {
             // Half-float storage at every level (2^-11 each), GPU float math.
             assert!(worst < 1e-2, "{kernel:?} level {mip}: GPU and CPU differ by {worst} (relative)");
         }
+        let want = diffuse_end(&filter_chain(&env.texels, Kernel::None));
+        let got = read_level(gpu(), &pems.full_diffuse, 0);
+        assert_eq!(got.size, want.size);
+        let worst = got
+            .texels
+            .iter()
+            .zip(&want.texels)
+            .map(|(g, w)| (g.truncate() - w.truncate()).abs().max_element() / w.truncate().max_element())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-2, "{kernel:?} diffuse end: GPU and CPU differ by {worst} (relative)");
     }
 }
 

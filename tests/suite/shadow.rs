@@ -125,7 +125,8 @@ const FLOOR_LINKS: &str =
 #[test]
 fn without_shadows_ibl_shading_is_bit_for_bit_what_it_was() {
     // old.exr: this graph rendered at 64 x 48 without an atlas (re-rendered when cube maps
-    // became six-layer arrays; VIS_i = 1 multiplies exactly, so it is the pre-visibility output).
+    // became six-layer arrays and when the PEMs got diffuse ends; VIS_i = 1 multiplies exactly,
+    // so it is the pre-visibility output).
     let dir = root().join("tests/data/ibl_unshadowed");
     let out = out_dir("shadow_unshadowed");
     render_graph(&dir.join("graph.ron"), &out, (0, 0), (64, 48), &[], &[]).unwrap();
