@@ -55,28 +55,52 @@ fn cube_wrap(size: u32, face: u32, x: i32, y: i32) -> vec3<i32> {
     return vec3<i32>(t, i32(f.face));
 }
 
-// Seamless bilinear lookup along `d` at mip `level` (face size `size`) of the cube whose faces
-// are layers first..first+5: taps off the face come from the neighbouring face
-// (CubeImage::sample).
-fn cube_bilinear_layers(tex: texture_2d_array<f32>, size: u32, level: i32, first: u32, d: vec3<f32>) -> vec4<f32> {
+// The four texels (x, y, face) of a seamless bilinear lookup along a direction in a cube of
+// face size `size`, and the weights between them: shared by every cube read along it.
+struct CubeTaps {
+    t00: vec3<i32>,
+    t10: vec3<i32>,
+    t01: vec3<i32>,
+    t11: vec3<i32>,
+    weight: vec2<f32>,
+};
+
+fn cube_taps(size: u32, d: vec3<f32>) -> CubeTaps {
     let f = dir_to_face(d);
     let p = (f.uv + vec2<f32>(1.0)) * 0.5 * f32(size) - vec2<f32>(0.5);
     let fl = floor(p);
-    let t = p - fl;
     let x0 = i32(fl.x);
     let y0 = i32(fl.y);
-    let top = mix(cube_tap(tex, size, level, first, f.face, x0, y0), cube_tap(tex, size, level, first, f.face, x0 + 1, y0), t.x);
-    let bottom = mix(
-        cube_tap(tex, size, level, first, f.face, x0, y0 + 1),
-        cube_tap(tex, size, level, first, f.face, x0 + 1, y0 + 1),
-        t.x,
+    return CubeTaps(
+        cube_wrap(size, f.face, x0, y0),
+        cube_wrap(size, f.face, x0 + 1, y0),
+        cube_wrap(size, f.face, x0, y0 + 1),
+        cube_wrap(size, f.face, x0 + 1, y0 + 1),
+        p - fl,
     );
-    return mix(top, bottom, t.y);
 }
 
-fn cube_tap(tex: texture_2d_array<f32>, size: u32, level: i32, first: u32, face: u32, x: i32, y: i32) -> vec4<f32> {
-    let w = cube_wrap(size, face, x, y);
-    return textureLoad(tex, w.xy, w.z + i32(first), level);
+// The bilinear lookup of `taps` at mip `level` of the cube whose faces are layers
+// first..first+5 (CubeImage::sample).
+fn cube_gather(tex: texture_2d_array<f32>, level: i32, first: u32, taps: CubeTaps) -> vec4<f32> {
+    let l = i32(first);
+    let top = mix(
+        textureLoad(tex, taps.t00.xy, taps.t00.z + l, level),
+        textureLoad(tex, taps.t10.xy, taps.t10.z + l, level),
+        taps.weight.x,
+    );
+    let bottom = mix(
+        textureLoad(tex, taps.t01.xy, taps.t01.z + l, level),
+        textureLoad(tex, taps.t11.xy, taps.t11.z + l, level),
+        taps.weight.x,
+    );
+    return mix(top, bottom, taps.weight.y);
+}
+
+// Seamless bilinear lookup along `d` at mip `level` (face size `size`) of the cube whose faces
+// are layers first..first+5: taps off the face come from the neighbouring face.
+fn cube_bilinear_layers(tex: texture_2d_array<f32>, size: u32, level: i32, first: u32, d: vec3<f32>) -> vec4<f32> {
+    return cube_gather(tex, level, first, cube_taps(size, d));
 }
 
 // The same for a six-layer cube map (shaders/ibl/cube.wgsl's storage).

@@ -95,14 +95,13 @@ fn diffuse_weight(g: f32) -> f32 {
     return 1.0 - clamp(chain, 0.0, 1.0);
 }
 
-// PEM k's (or the full map's, k = 0) radiance along d: the chain's lookup blended with the
-// diffuse end by weight wd.
-fn with_diffuse(k: u32, chain: vec3<f32>, d: vec3<f32>, wd: f32) -> vec3<f32> {
+// PEM k's (or the full map's, k = 0) radiance: the chain's lookup blended with the diffuse
+// end (read at `taps`, the same texels for every PEM) by weight wd.
+fn with_diffuse(k: u32, chain: vec3<f32>, taps: CubeTaps, wd: f32) -> vec3<f32> {
     if wd <= 0.0 {
         return chain;
     }
-    let end = cube_bilinear_layers(diffuse_ends, u32(ibl.diffuse.x), 0, 6u * k, d).rgb;
-    return mix(chain, end, wd);
+    return mix(chain, cube_gather(diffuse_ends, 0, 6u * k, taps).rgb, wd);
 }
 
 fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
@@ -181,10 +180,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let wd = diffuse_weight(g);
     // Blending with the diffuse end, the chain is read at the handover level.
     let level = select(level_for_glossiness(g), ibl.diffuse.y, wd > 0.0);
+    var taps: CubeTaps;
+    if wd > 0.0 {
+        taps = cube_taps(u32(ibl.diffuse.x), sample_dir);
+    }
 
     var sum = vec3<f32>(0.0);
     if ibl.full_map > 0.5 {
-        sum = with_diffuse(0u, lookup(env, sample_dir, level), sample_dir, wd);
+        sum = with_diffuse(0u, lookup(env, sample_dir, level), taps, wd);
     } else {
         let count = u32(ibl.size.z);
         // World position: depth is the linear view depth along the camera's forward axis.
@@ -193,14 +196,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
         // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
         // switch in a loop (8x the lookups).
-        if count > 0u { sum += lit(0u, with_diffuse(0u, lookup(pem0, d, level), d, wd), p, n, px); }
-        if count > 1u { sum += lit(1u, with_diffuse(1u, lookup(pem1, d, level), d, wd), p, n, px); }
-        if count > 2u { sum += lit(2u, with_diffuse(2u, lookup(pem2, d, level), d, wd), p, n, px); }
-        if count > 3u { sum += lit(3u, with_diffuse(3u, lookup(pem3, d, level), d, wd), p, n, px); }
-        if count > 4u { sum += lit(4u, with_diffuse(4u, lookup(pem4, d, level), d, wd), p, n, px); }
-        if count > 5u { sum += lit(5u, with_diffuse(5u, lookup(pem5, d, level), d, wd), p, n, px); }
-        if count > 6u { sum += lit(6u, with_diffuse(6u, lookup(pem6, d, level), d, wd), p, n, px); }
-        if count > 7u { sum += lit(7u, with_diffuse(7u, lookup(pem7, d, level), d, wd), p, n, px); }
+        if count > 0u { sum += lit(0u, with_diffuse(0u, lookup(pem0, d, level), taps, wd), p, n, px); }
+        if count > 1u { sum += lit(1u, with_diffuse(1u, lookup(pem1, d, level), taps, wd), p, n, px); }
+        if count > 2u { sum += lit(2u, with_diffuse(2u, lookup(pem2, d, level), taps, wd), p, n, px); }
+        if count > 3u { sum += lit(3u, with_diffuse(3u, lookup(pem3, d, level), taps, wd), p, n, px); }
+        if count > 4u { sum += lit(4u, with_diffuse(4u, lookup(pem4, d, level), taps, wd), p, n, px); }
+        if count > 5u { sum += lit(5u, with_diffuse(5u, lookup(pem5, d, level), taps, wd), p, n, px); }
+        if count > 6u { sum += lit(6u, with_diffuse(6u, lookup(pem6, d, level), taps, wd), p, n, px); }
+        if count > 7u { sum += lit(7u, with_diffuse(7u, lookup(pem7, d, level), taps, wd), p, n, px); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }
