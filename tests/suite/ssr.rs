@@ -17,6 +17,11 @@ const RADIUS: f32 = 0.3;
 const SPHERE_ALBEDO: f32 = 0.8;
 
 fn graph(probe: &std::path::Path, floor: bool, glossiness: f32) -> Graph {
+    graph_lit_by(probe, floor, glossiness, "light.image")
+}
+
+/// `graph` with `image` (a texture output) as the node's lit image.
+fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &str) -> Graph {
     let floor_nodes = if floor {
         r#""plane": (kind: "Primitive", params: { "shape": "plane", "size": 8.0, "segments_u": 1, "segments_v": 1 }),
         "white": (kind: "Material", params: { "base_color": [0.5, 0.5, 0.5], "glossiness": 0.0 }),
@@ -50,7 +55,7 @@ fn graph(probe: &std::path::Path, floor: bool, glossiness: f32) -> Graph {
         ("all.scene", "gbuffer.scene"), ("camera.camera", "gbuffer.camera"),
         ("environment.environment", "cut.environment"), ("environment.environment", "pems.environment"),
         ("cut.lights", "pems.lights"), ("pems.pems", "light.pems"), ("gbuffer.gbuffer", "light.gbuffer"),
-        ("gbuffer.gbuffer", "ssr.gbuffer"), ("light.image", "ssr.image"), ("environment.environment", "ssr.environment"),
+        ("gbuffer.gbuffer", "ssr.gbuffer"), ("{image}", "ssr.image"), ("environment.environment", "ssr.environment"),
         ("ssr.image", "out.image"),
     ])"#,
         CENTRE.x, CENTRE.y, CENTRE.z
@@ -126,4 +131,21 @@ fn escaped_rays_and_low_glossiness_keep_the_image() {
     // Glossiness at the threshold (0.3): nothing changes, floor or sphere.
     let ev = run_graph(&graph(&probe, true, 0.3), SIZE.0, SIZE.1);
     assert_eq!(rgb(&ev, "light"), rgb(&ev, "ssr"), "glossiness 0.3 changed the image");
+}
+
+#[test]
+fn an_image_of_another_size_than_the_gbuffer_is_refused() {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    // The probe's preview (64x32) as the lit image of a 160x120 G-buffer.
+    let graph = graph_lit_by(&probe("ssr_size"), true, 0.95, "environment.preview");
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { width: SIZE.0, height: SIZE.1, base_dir: root(), frames: None };
+    while ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings).pending > 0 {
+        wait_idle(&res);
+    }
+    match &ev.report("ssr").unwrap().status {
+        NodeStatus::Failed(m) => assert!(m.contains("\"image\" is 64x32") && m.contains("160x120"), "{m}"),
+        other => panic!("a 64x32 image on a 160x120 G-buffer was accepted: {other:?}"),
+    }
 }
