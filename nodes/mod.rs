@@ -66,6 +66,7 @@ pub static ALL: &[&NodeSpec] = &[
     &occlusion::ssao::SSAO,
     &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
     &occlusion::bounce::BOUNCE,
+    &occlusion::ssr::SCREEN_SPACE_REFLECTIONS,
     &occlusion::reference_occlusion::REFERENCE_OCCLUSION,
     &render::tonemap::TONEMAP,
     &core::delay::DELAY,

@@ -41,6 +41,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("ibl/ibl_shading_common.wgsl", include_str!("../../shaders/ibl/ibl_shading_common.wgsl")),
     ("occlusion/ssao.wgsl", include_str!("../../shaders/occlusion/ssao.wgsl")),
     ("occlusion/bounce.wgsl", include_str!("../../shaders/occlusion/bounce.wgsl")),
+    ("occlusion/ssr.wgsl", include_str!("../../shaders/occlusion/ssr.wgsl")),
     ("occlusion/screen_space.wgsl", include_str!("../../shaders/occlusion/screen_space.wgsl")),
     ("ibl/vsm.wgsl", include_str!("../../shaders/ibl/vsm.wgsl")),
     ("ibl/vsm_blur.wgsl", include_str!("../../shaders/ibl/vsm_blur.wgsl")),

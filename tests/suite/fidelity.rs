@@ -14,10 +14,15 @@ use crate::common::{gpu, root};
 /// Renders the committed case's graph (its --set overrides) and measures it against its
 /// Cycles image; checks first that the scene is the one Cycles rendered.
 fn measure_case(case: &str) -> Metrics {
+    measure_graph(case, None)
+}
+
+/// `measure_case` with another graph (the case's scene with other nodes after the lighting).
+fn measure_graph(case: &str, graph: Option<&str>) -> Metrics {
     let dir = root().join("tests/data/fidelity").join(case);
     let committed = SceneInfo::load(&dir.join("scene.json")).unwrap();
     let opts = ExportOptions {
-        graph_path: root().join(&committed.graph),
+        graph_path: root().join(graph.unwrap_or(&committed.graph)),
         sets: committed.sets.clone(),
         unlinks: committed.unlinks.clone(),
         frame: committed.frame,
@@ -115,4 +120,16 @@ fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
     let m = measure_case("default_glossy_ball");
     let ball = item(&m, "ball");
     assert!(ball.rel_mae < 0.29, "glossy ball: relative MAE {:.1}% (today 28.1%)", 100.0 * ball.rel_mae);
+}
+
+/// graphs/ssr.ron: the default graph with ScreenSpaceReflections after HybridOcclusion. The
+/// glossy ball reflects the lit floor where IblShading alone shows the probe's dark ground
+/// (docs/fidelity.md); Lambertian surfaces are left exactly as they were.
+#[test]
+fn screen_space_reflections_bring_the_glossy_ball_closer_to_cycles() {
+    let m = measure_graph("default_glossy_ball", Some("graphs/ssr.ron"));
+    let ball = item(&m, "ball");
+    assert!(ball.rel_mae < 0.175, "glossy ball with SSR: relative MAE {:.1}% (today 16.4%)", 100.0 * ball.rel_mae);
+    let (with, without) = (measure_graph("default_lambert", Some("graphs/ssr.ron")), measure_case("default_lambert"));
+    assert_eq!(with.rel_mae, without.rel_mae, "SSR changed the Lambertian scene");
 }

@@ -39,6 +39,7 @@ mod roundtrip;
 mod scene_drawer;
 mod shadow;
 mod ssao;
+mod ssr;
 mod tessellation;
 mod warping;
 mod woven;

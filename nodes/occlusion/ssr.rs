@@ -1,0 +1,159 @@
+//! `ScreenSpaceReflections`: glossy reflections of what the screen shows, falling back to the
+//! environment where a ray leaves the screen or finds nothing (issue 34,
+//! shaders/occlusion/ssr.wgsl). IblShading reflects the probe only, so a glossy ball above a
+//! lit floor reflects the probe's dark ground; this node swaps in the floor's radiance from
+//! the lit image for the part of the lobe that hits it.
+
+use std::sync::Arc;
+
+use crate::core::node::prelude::*;
+use crate::gpu::{Bind, FullscreenPass, GpuImage};
+use crate::ibl::gpu::EnvMap;
+use crate::render::scene::GBuffer;
+
+pub static SCREEN_SPACE_REFLECTIONS: NodeSpec = NodeSpec {
+    kind: "ScreenSpaceReflections",
+    category: Category::Lighting,
+    doc: "Glossy reflections of the scene in screen space, with the environment where a ray finds nothing (issue 34). IblShading \
+reflects only the probe (albedo x sum VIS_i PEM_i along r' = n(1-g) + r g), so a glossy ball above a lit floor shows the probe's dark ground. \
+Per pixel of glossiness g above `threshold`, `samples` directions of IblShading's Phong lobe cos^s about r' (s = 1/(1-g)) are marched against \
+the G-buffer's depth in 16 steps up to `max_distance` (world units, spaced quadratically) with 4 bisections; a ray that crosses a visible \
+surface facing it (by less than `thickness` plus the step's depth) takes that surface's radiance L_k from the lit image. A ray that leaves the \
+screen meets the tangent plane of the edge pixel it left through (a floor cut by the screen's edge goes on as a floor) and takes that pixel's \
+radiance, with a weight that falls linearly to 0 at `extend` screen heights beyond the screen; hits also fade out over the last fifth of \
+`max_distance`. Each ray's weight h_k (1 for on-screen hits) says how much of it hit; the rest escapes, weighed by the environment's radiance \
+E_k along it (a texel of its box mip chain at the level of the ray's share of the lobe): out = image x m + albedo x (1/K) sum h_k L_k, m = sum (1 - h_k) lum(E_k) / \
+sum lum(E_k), the share of the lobe's environment light that still arrives. So IblShading's result, shadows and occlusion included, is kept \
+for the escaped directions and returned exactly where every ray escapes. The lobe is rotated per pixel with a 4x4 interleaved pattern and the \
+result averaged over each 4x4 tile, edge-aware; it fades in over glossiness threshold..threshold + 0.1 (pixels at or below the threshold are \
+unchanged). Surfaces hidden from the camera are not reflected (a ray passing behind one goes on). Deterministic: no time-based noise.",
+    inputs: &[
+        PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer (depth, normals, albedo, glossiness in alpha)."),
+        PortSpec::required(
+            "image",
+            PortType::Texture,
+            "The lit image (linear radiance, the G-buffer's size): what rays hit, and what the reflections go into.",
+        ),
+        PortSpec::required(
+            "environment",
+            PortType::Environment,
+            "The environment map IblShading's PEMs come from: weighs the escaped directions.",
+        ),
+    ],
+    outputs: &[PortSpec::output("image", PortType::Texture, "The image with screen-space reflections.")],
+    params: &[
+        ParamSpec::new(
+            "samples",
+            ParamKind::Int { default: 8, min: 1, max: 64 },
+            "Rays per pixel (a 4x4 tile uses 16 times as many directions).",
+        ),
+        ParamSpec::new(
+            "threshold",
+            ParamKind::Float { default: 0.3, min: 0.0, max: 1.0 },
+            "Glossiness at or below which a pixel is left as it is; reflections fade in over the next 0.1.",
+        ),
+        ParamSpec::new(
+            "max_distance",
+            ParamKind::Float { default: 4.0, min: 1e-3, max: 1e4 },
+            "How far a ray is marched, world units.",
+        ),
+        ParamSpec::new(
+            "thickness",
+            ParamKind::Float { default: 0.3, min: 0.0, max: 1e4 },
+            "How far behind the visible surface a ray may cross it and still hit it, world units (plus the step's depth).",
+        ),
+        ParamSpec::new(
+            "extend",
+            ParamKind::Float { default: 4.0, min: 0.0, max: 100.0 },
+            "How far beyond the screen the edge pixels' tangent planes reach, in screen heights (0: a ray leaving the screen escapes).",
+        ),
+    ],
+    capabilities: Capabilities::NONE,
+    create: || Box::new(SsrNode::default()),
+};
+
+/// shaders/occlusion/ssr.wgsl `Ssr`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct SsrUniform {
+    proj: [[f32; 4]; 4],
+    view: [[f32; 4]; 4],
+    size: [f32; 4],
+    max_distance: f32,
+    thickness: f32,
+    samples: f32,
+    threshold: f32,
+    plane_tolerance: f32,
+    /// Pixels.
+    extend: f32,
+    _pad: [f32; 2],
+    /// March steps, bisections, resolve taps.
+    loops: [u32; 4],
+}
+
+struct Passes {
+    gather: FullscreenPass,
+    resolve: FullscreenPass,
+}
+
+#[derive(Default)]
+struct SsrNode {
+    passes: Option<Passes>,
+}
+
+impl Node for SsrNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let g: Arc<GBuffer> = cx.input("gbuffer")?;
+        let image: Arc<GpuImage> = cx.input("image")?;
+        let env: Arc<EnvMap> = cx.input("environment")?;
+        if (image.width, image.height) != (g.width(), g.height()) {
+            return Err(NodeError::msg(format!(
+                "input \"image\" is {}x{} but the G-buffer {}x{}",
+                image.width,
+                image.height,
+                g.width(),
+                g.height()
+            )));
+        }
+        let max_distance = cx.f32("max_distance");
+        let u = SsrUniform {
+            proj: g.view.proj.to_cols_array_2d(),
+            view: g.view.view.to_cols_array_2d(),
+            size: [g.width() as f32, g.height() as f32, env.cube.width as f32, (env.cube.desc.mips - 1) as f32],
+            max_distance,
+            thickness: cx.f32("thickness"),
+            samples: cx.int("samples").clamp(1, 64) as f32,
+            threshold: cx.f32("threshold"),
+            // The resolve averages over one surface: points within 5% of the march's reach of
+            // the tangent plane.
+            plane_tolerance: 0.05 * max_distance,
+            extend: cx.f32("extend") * g.height() as f32,
+            _pad: [0.0; 2],
+            loops: [16, 4, 16, 0],
+        };
+        let passes = self.passes.get_or_insert_with(|| Passes {
+            gather: FullscreenPass::new("ssr.wgsl").with_fragment_entry("fs_gather"),
+            resolve: FullscreenPass::new("ssr.wgsl").with_fragment_entry("fs_resolve"),
+        });
+        let format = gpu.formats().hdr;
+        let gathered = GpuImage::target(gpu, "ssr gathered", g.width(), g.height(), format);
+        let out = GpuImage::target(gpu, "ssr", g.width(), g.height(), format);
+        // The gather pass reads `image` in place of its own (not yet written) output.
+        for (pass, input, target) in [(&mut passes.gather, &*image, &gathered), (&mut passes.resolve, &gathered, &out)]
+        {
+            let binds = [
+                Bind::Uniform(bytemuck::bytes_of(&u)),
+                Bind::Texture(&g.depth),
+                Bind::Texture(&g.normal),
+                Bind::Texture(&g.color),
+                Bind::Texture(&image),
+                Bind::Texture(input),
+                Bind::Texture(&env.cube),
+            ];
+            pass.draw(gpu, &binds, &[&target.view], &[format]).map_err(|e| NodeError::msg(e.to_string()))?;
+        }
+        cx.set("image", Arc::new(out));
+        Ok(())
+    }
+}

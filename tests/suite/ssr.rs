@@ -1,0 +1,151 @@
+//! `ScreenSpaceReflections` (issue 34): a glossy white sphere above a lit white floor under a
+//! probe whose sky is bright and whose ground is dark. IblShading alone makes the sphere's
+//! lower part reflect the probe's dark ground; with the node it reflects the floor, about
+//! albedo x the floor's radiance. Where every ray leaves the screen (the sphere alone) the
+//! environment fallback returns IblShading's image; at or below the glossiness threshold the
+//! image is unchanged.
+
+use glam::Vec3;
+use werkstatt::core::graph::Graph;
+use werkstatt::core::port::Value;
+
+use crate::common::*;
+
+const SIZE: (u32, u32) = (160, 120);
+const CENTRE: Vec3 = Vec3::new(0.0, 0.5, 0.0);
+const RADIUS: f32 = 0.3;
+const SPHERE_ALBEDO: f32 = 0.8;
+
+fn graph(probe: &std::path::Path, floor: bool, glossiness: f32) -> Graph {
+    graph_lit_by(probe, floor, glossiness, "light.image")
+}
+
+/// `graph` with `image` (a texture output) as the node's lit image.
+fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &str) -> Graph {
+    let floor_nodes = if floor {
+        r#""plane": (kind: "Primitive", params: { "shape": "plane", "size": 8.0, "segments_u": 1, "segments_v": 1 }),
+        "white": (kind: "Material", params: { "base_color": [0.5, 0.5, 0.5], "glossiness": 0.0 }),
+        "floor": (kind: "Draw"),"#
+    } else {
+        ""
+    };
+    let floor_links = if floor {
+        r#"("plane.mesh", "floor.mesh"), ("white.material", "floor.material"), ("floor.scene", "all.b"),"#
+    } else {
+        ""
+    };
+    let text = format!(
+        r#"(version: 2, nodes: {{
+        "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": {RADIUS:?} }}),
+        "glossy": (kind: "Material", params: {{ "base_color": [{SPHERE_ALBEDO:?}, {SPHERE_ALBEDO:?}, {SPHERE_ALBEDO:?}], "glossiness": {glossiness:?} }}),
+        "ball": (kind: "Draw", params: {{ "translate": [{}, {}, {}] }}),
+        {floor_nodes}
+        "all": (kind: "Merge"),
+        "camera": (kind: "OrbitCamera", params: {{ "distance": 3.0, "pitch": 10.0, "yaw": 0.0, "target": [0.0, 0.4, 0.0] }}),
+        "gbuffer": (kind: "GBufferPass"),
+        "environment": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": 32 }}),
+        "cut": (kind: "MedianCut", params: {{ "count": 1 }}),
+        "pems": (kind: "Pems"),
+        "light": (kind: "IblShading", params: {{ "mode": "full" }}),
+        "ssr": (kind: "ScreenSpaceReflections"),
+        "out": (kind: "Preview"),
+    }}, links: [
+        ("sphere.mesh", "ball.mesh"), ("glossy.material", "ball.material"), ("ball.scene", "all.a"),
+        {floor_links}
+        ("all.scene", "gbuffer.scene"), ("camera.camera", "gbuffer.camera"),
+        ("environment.environment", "cut.environment"), ("environment.environment", "pems.environment"),
+        ("cut.lights", "pems.lights"), ("pems.pems", "light.pems"), ("gbuffer.gbuffer", "light.gbuffer"),
+        ("gbuffer.gbuffer", "ssr.gbuffer"), ("{image}", "ssr.image"), ("environment.environment", "ssr.environment"),
+        ("ssr.image", "out.image"),
+    ])"#,
+        CENTRE.x, CENTRE.y, CENTRE.z
+    );
+    Graph::load_str(&text, "ssr-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+/// Sky 1 above the horizon, ground 0.05 below.
+fn probe(name: &str) -> std::path::PathBuf {
+    let path = out_dir(name).join("probe.hdr");
+    write_probe(&path, 32, 16, |_, y| if y < 8 { Vec3::ONE } else { Vec3::splat(0.05) });
+    path
+}
+
+fn rgb(ev: &werkstatt::core::eval::Evaluator, node: &str) -> Vec<Vec3> {
+    let value = ev.output(node, "image").and_then(Value::as_texture).expect("a texture");
+    werkstatt::gpu::read_back(gpu(), value).unwrap().rgba.chunks_exact(4).map(|c| Vec3::new(c[0], c[1], c[2])).collect()
+}
+
+fn eye(ev: &werkstatt::core::eval::Evaluator) -> Vec3 {
+    match ev.output("gbuffer", "gbuffer") {
+        Some(Value::GBuffer(g)) => g.view.eye,
+        _ => panic!("no G-buffer"),
+    }
+}
+
+fn mean(v: impl Iterator<Item = Vec3>) -> Vec3 {
+    let (sum, n) = v.fold((Vec3::ZERO, 0), |(s, n), x| (s + x, n + 1));
+    sum / n.max(1) as f32
+}
+
+#[test]
+fn a_glossy_sphere_reflects_the_lit_floor_below_it() {
+    let ev = run_graph(&graph(&probe("ssr_floor"), true, 0.95), SIZE.0, SIZE.1);
+    let (eye, pos) = (eye(&ev), world_positions(&ev, 5));
+    let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
+    // The sphere's points whose mirror direction points well down (at the floor), away from
+    // the silhouette (whose 4x4 tile mixes in the floor).
+    let down = |p: Vec3| {
+        let n = (p - CENTRE).normalize();
+        let v = (p - eye).normalize();
+        (p - CENTRE).length() < RADIUS * 1.05 && (v - 2.0 * v.dot(n) * n).y < -0.5 && -v.dot(n) > 0.4
+    };
+    let sphere: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(down)).collect();
+    let floor: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(|p| p.y.abs() < 1e-3)).collect();
+    assert!(sphere.len() > 30 && floor.len() > 1000, "{} sphere, {} floor pixels", sphere.len(), floor.len());
+    let floor_radiance = mean(floor.iter().map(|&i| lit[i]));
+    let floor_out = mean(floor.iter().map(|&i| out[i]));
+    let (before, after) = (mean(sphere.iter().map(|&i| lit[i])), mean(sphere.iter().map(|&i| out[i])));
+    let expected = SPHERE_ALBEDO * floor_radiance;
+    eprintln!("floor {floor_radiance}; lower sphere: without {before}, with {after}, albedo x floor {expected}");
+    assert_eq!(floor_radiance, floor_out, "the floor (glossiness 0) changed");
+    assert!(before.x < 0.3 * expected.x, "without reflections the sphere should show the dark ground: {before}");
+    assert!(
+        after.x > 0.9 * expected.x && after.x < 1.05 * expected.x,
+        "the sphere's lower part should reflect the floor: {after} against {expected}"
+    );
+    assert!(out.iter().all(|c| c.is_finite()), "non-finite output");
+}
+
+#[test]
+fn escaped_rays_and_low_glossiness_keep_the_image() {
+    let probe = probe("ssr_open");
+    // The sphere alone: every ray leaves for the background, the environment answers them all.
+    let ev = run_graph(&graph(&probe, false, 0.95), SIZE.0, SIZE.1);
+    let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
+    let worst = lit
+        .iter()
+        .zip(&out)
+        .map(|(a, b)| ((*b - *a).abs() / a.max(Vec3::splat(1e-3))).max_element())
+        .fold(0.0, f32::max);
+    assert!(worst < 0.01, "an open scene changed by {:.3}%", 100.0 * worst);
+    // Glossiness at the threshold (0.3): nothing changes, floor or sphere.
+    let ev = run_graph(&graph(&probe, true, 0.3), SIZE.0, SIZE.1);
+    assert_eq!(rgb(&ev, "light"), rgb(&ev, "ssr"), "glossiness 0.3 changed the image");
+}
+
+#[test]
+fn an_image_of_another_size_than_the_gbuffer_is_refused() {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    // The probe's preview (64x32) as the lit image of a 160x120 G-buffer.
+    let graph = graph_lit_by(&probe("ssr_size"), true, 0.95, "environment.preview");
+    let mut ev = Evaluator::new(&graph, &[]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { width: SIZE.0, height: SIZE.1, base_dir: root(), frames: None };
+    while ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings).pending > 0 {
+        wait_idle(&res);
+    }
+    match &ev.report("ssr").unwrap().status {
+        NodeStatus::Failed(m) => assert!(m.contains("\"image\" is 64x32") && m.contains("160x120"), "{m}"),
+        other => panic!("a 64x32 image on a 160x120 G-buffer was accepted: {other:?}"),
+    }
+}
