@@ -56,10 +56,34 @@ pub struct NodeTiming {
     pub counts: BTreeMap<&'static str, u64>,
 }
 
+/// Where a frame's time went, in the order it is spent; the parts sum to the frame's
+/// `total_ms`.
+#[derive(Serialize, Debug, Default, Clone, Copy)]
+pub struct FramePhases {
+    /// Evaluating the graph: the nodes' CPU work (each node's `cpu_ms` is part of it),
+    /// recording and submitting GPU commands, the evaluator's bookkeeping.
+    pub evaluate_ms: f64,
+    /// Waiting for background loads (files, caches) to arrive.
+    pub loads_ms: f64,
+    /// Waiting for the GPU to finish the frame and reading its timestamps back (where the
+    /// adapter has none, that wait falls into `readback_ms`).
+    pub gpu_wait_ms: f64,
+    /// Reading output images back from the GPU, box-filtering supersampled ones.
+    pub readback_ms: f64,
+    /// Encoding and writing the output files.
+    pub write_ms: f64,
+    /// Everything else: warnings, statistics, the progress bar.
+    pub other_ms: f64,
+}
+
 #[derive(Serialize, Debug)]
 pub struct FrameStats {
     pub frame: i64,
+    /// From the frame's start until the GPU finished it (evaluate + loads + gpu_wait).
     pub wall_ms: f64,
+    /// The whole frame, its files written.
+    pub total_ms: f64,
+    pub phases: FramePhases,
     pub nodes: BTreeMap<String, NodeTiming>,
     /// GPU textures and buffers created during the frame (evaluation and writing outputs);
     /// a steady animation creates none after its first frame.
@@ -316,25 +340,34 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
         let start = Instant::now();
         let created_before = gpu.created();
         let mut nodes = BTreeMap::new();
-        settle(&mut evaluator, time, gpu, &resources, &settings, start, opts.pending_timeout, |evaluator| {
-            for r in evaluator.reports() {
-                let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming {
-                    cpu_ms: 0.0,
-                    gpu_ms: None,
-                    ran: false,
-                    counts: BTreeMap::new(),
-                });
-                t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
-                t.ran |= r.ran;
-                t.counts = r.counts.iter().copied().collect();
-            }
-        })?;
+        let loads =
+            settle(&mut evaluator, time, gpu, &resources, &settings, start, opts.pending_timeout, |evaluator| {
+                for r in evaluator.reports() {
+                    let t = nodes.entry(r.id.to_string()).or_insert(NodeTiming {
+                        cpu_ms: 0.0,
+                        gpu_ms: None,
+                        ran: false,
+                        counts: BTreeMap::new(),
+                    });
+                    t.cpu_ms += r.cpu.as_secs_f64() * 1e3;
+                    t.ran |= r.ran;
+                    t.counts = r.counts.iter().copied().collect();
+                }
+            })?;
+        let settled = start.elapsed();
         for (node, ms) in gpu.collect_timings() {
             if let Some(t) = nodes.get_mut(&*node) {
                 *t.gpu_ms.get_or_insert(0.0) += ms;
             }
         }
-        let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let wall = start.elapsed();
+        let wall_ms = ms(wall);
+        let mut phases = FramePhases {
+            evaluate_ms: ms(settled.saturating_sub(loads)),
+            loads_ms: ms(loads),
+            gpu_wait_ms: ms(wall - settled),
+            ..FramePhases::default()
+        };
         let failures = failures(&evaluator);
         if !failures.is_empty() {
             if let Some(b) = &bar {
@@ -342,7 +375,8 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
             }
             // Keep the statistics of the frames that worked: CI wants them most when a frame fails.
             let gpu_created = gpu.created().since(created_before);
-            stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
+            let total_ms = phases.close(start);
+            stats.frames.push(FrameStats { frame, wall_ms, total_ms, phases, nodes, gpu_created });
             bail!("frame {frame}: {}", failures.join("\n  "));
         }
         for r in evaluator.reports() {
@@ -361,8 +395,10 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 match product {
                     Product::Image { image, format } => {
                         let name = name(format.name());
-                        let px = resolve(gpu, image, opts)?;
-                        crate::io::image::write_image(&opts.out_dir.join(&name), &px, *format)?;
+                        let px = timed(&mut phases.readback_ms, || resolve(gpu, image, opts))?;
+                        timed(&mut phases.write_ms, || {
+                            crate::io::image::write_image(&opts.out_dir.join(&name), &px, *format)
+                        })?;
                         stats.files.push(name);
                     }
                     Product::Geometry { mesh, format: GeometryFormat::Usda, .. } => {
@@ -370,7 +406,9 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                     }
                     Product::Geometry { mesh, parts, format } => {
                         let name = name(format.name());
-                        crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, parts, *format)?;
+                        timed(&mut phases.write_ms, || {
+                            crate::io::geometry::write_geometry(&opts.out_dir.join(&name), mesh, parts, *format)
+                        })?;
                         stats.files.push(name);
                     }
                     Product::Value(v) => stats.values.entry(id.clone()).or_default().push(*v),
@@ -387,15 +425,18 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
                 _ => ImageFormat::Exr,
             });
             let name = format!("{}.{}_{frame:04}.{}", d.node, d.port, format.name());
-            let mut px = resolve(gpu, img, opts)?;
-            if format == ImageFormat::Png {
-                crate::io::image::tonemap_for_png(&mut px);
-            }
-            crate::io::image::write_image(&opts.out_dir.join(&name), &px, format)?;
+            let mut px = timed(&mut phases.readback_ms, || resolve(gpu, img, opts))?;
+            timed(&mut phases.write_ms, || {
+                if format == ImageFormat::Png {
+                    crate::io::image::tonemap_for_png(&mut px);
+                }
+                crate::io::image::write_image(&opts.out_dir.join(&name), &px, format)
+            })?;
             stats.files.push(name);
         }
         let gpu_created = gpu.created().since(created_before);
-        stats.frames.push(FrameStats { frame, wall_ms, nodes, gpu_created });
+        let total_ms = phases.close(start);
+        stats.frames.push(FrameStats { frame, wall_ms, total_ms, phases, nodes, gpu_created });
         if let Some(b) = &bar {
             b.inc(1);
         }
@@ -412,10 +453,34 @@ fn render_frames(opts: &RenderOptions, graph: &Graph, gpu: &GpuContext, stats: &
     Ok(())
 }
 
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Runs `f`, adding its duration to `acc` (milliseconds).
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = f();
+    *acc += ms(start.elapsed());
+    out
+}
+
+impl FramePhases {
+    /// The frame's total time since `start`; what the measured phases leave becomes
+    /// `other_ms`.
+    fn close(&mut self, start: Instant) -> f64 {
+        let total = ms(start.elapsed());
+        let measured = self.evaluate_ms + self.loads_ms + self.gpu_wait_ms + self.readback_ms + self.write_ms;
+        self.other_ms = (total - measured).max(0.0);
+        total
+    }
+}
+
 /// Evaluates one frame the way batch rendering does: evaluate, wait for the resources, repeat
 /// until nothing is pending, so the result is deterministic. `after_pass` sees the evaluator
-/// after every pass (the runner sums node timings there). Fails when nothing will arrive (a
-/// live link without a sender) or after `timeout` from `start`.
+/// after every pass (the runner sums node timings there). Returns the time spent waiting for
+/// resources. Fails when nothing will arrive (a live link without a sender) or after `timeout`
+/// from `start`.
 #[allow(clippy::too_many_arguments)]
 pub fn settle(
     evaluator: &mut Evaluator,
@@ -426,13 +491,14 @@ pub fn settle(
     start: Instant,
     timeout: std::time::Duration,
     mut after_pass: impl FnMut(&Evaluator),
-) -> anyhow::Result<()> {
+) -> anyhow::Result<std::time::Duration> {
     let frame = time.frame;
+    let mut waited = std::time::Duration::ZERO;
     loop {
         let summary = evaluator.evaluate(time, Some(gpu), resources, settings);
         after_pass(evaluator);
         if summary.pending == 0 {
-            return Ok(());
+            return Ok(waited);
         }
         if resources.in_flight() == 0 && summary.ran == 0 {
             bail!("frame {frame}: {}", nothing_will_arrive(evaluator));
@@ -446,10 +512,12 @@ pub fn settle(
             );
         }
         // Bounded too: a loader that never returns fails the frame above instead of hanging.
+        let wait = Instant::now();
         resources.wait_idle_timeout(timeout.saturating_sub(start.elapsed()));
         if resources.in_flight() == 0 {
             std::thread::sleep(std::time::Duration::from_millis(1));
         }
+        waited += wait.elapsed();
     }
 }
 

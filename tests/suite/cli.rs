@@ -326,6 +326,20 @@ fn stats_describe_the_run() {
         assert!(commit.len() == 40 && commit.chars().all(|c| c.is_ascii_hexdigit()), "{commit}");
     }
     assert!(stats.get("error").is_none(), "{stats}");
+    // The frame's phases account for all of it: they sum to total_ms, the nodes' CPU time is
+    // part of the evaluation, and the written images were read back and encoded.
+    for frame in stats["frames"].as_array().unwrap() {
+        let f = |k: &str| frame[k].as_f64().unwrap_or_else(|| panic!("no {k} in {frame}"));
+        let p = |k: &str| frame["phases"][k].as_f64().unwrap_or_else(|| panic!("no phases.{k} in {frame}"));
+        let parts = ["evaluate_ms", "loads_ms", "gpu_wait_ms", "readback_ms", "write_ms", "other_ms"];
+        let sum: f64 = parts.iter().map(|k| p(k)).sum();
+        assert!((sum - f("total_ms")).abs() <= 1e-6 * f("total_ms"), "phases sum to {sum}: {frame}");
+        assert!(parts.iter().all(|k| p(k) >= 0.0), "{frame}");
+        assert!(f("wall_ms") <= f("total_ms"), "{frame}");
+        let node_cpu: f64 = frame["nodes"].as_object().unwrap().values().map(|n| n["cpu_ms"].as_f64().unwrap()).sum();
+        assert!(node_cpu <= p("evaluate_ms"), "nodes' CPU {node_cpu} ms beyond the evaluation: {frame}");
+        assert!(p("readback_ms") > 0.0 && p("write_ms") > 0.0, "{frame}");
+    }
     std::fs::remove_dir_all(dir).unwrap();
 }
 
