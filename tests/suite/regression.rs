@@ -203,7 +203,7 @@ fn without_timings(path: &Path) -> String {
 fn drop_timings(v: &mut serde_json::Value) {
     match v {
         serde_json::Value::Object(o) => {
-            o.retain(|k, _| !["wall_ms", "cpu_ms", "gpu_ms"].contains(&k.as_str()));
+            o.retain(|k, _| !["wall_ms", "total_ms", "phases", "cpu_ms", "gpu_ms"].contains(&k.as_str()));
             o.values_mut().for_each(drop_timings);
         }
         serde_json::Value::Array(a) => a.iter_mut().for_each(drop_timings),
