@@ -77,15 +77,7 @@ impl Node for BounceNode {
         let gpu = cx.gpu()?;
         let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let image: Arc<GpuImage> = cx.input("image")?;
-        if (image.width, image.height) != (g.width(), g.height()) {
-            return Err(NodeError::msg(format!(
-                "the image is {}x{} but the G-buffer {}x{}",
-                image.width,
-                image.height,
-                g.width(),
-                g.height()
-            )));
-        }
+        super::check_image_size(&image, &g)?;
         let radius = cx.f32("radius");
         let u = BounceUniform {
             proj: g.view.proj.to_cols_array_2d(),

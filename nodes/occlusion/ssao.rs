@@ -82,16 +82,8 @@ impl Node for SsaoNode {
         let gpu = cx.gpu()?;
         let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let image: Option<Arc<GpuImage>> = cx.optional("image");
-        if let Some(img) = &image
-            && (img.width, img.height) != (g.width(), g.height())
-        {
-            return Err(NodeError::msg(format!(
-                "the image is {}x{} but the G-buffer {}x{}",
-                img.width,
-                img.height,
-                g.width(),
-                g.height()
-            )));
+        if let Some(img) = &image {
+            super::check_image_size(img, &g)?;
         }
         let settings = SsaoSettings {
             mode: cx.choice("mode"),

@@ -107,15 +107,7 @@ impl Node for SsrNode {
         let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let image: Arc<GpuImage> = cx.input("image")?;
         let env: Arc<EnvMap> = cx.input("environment")?;
-        if (image.width, image.height) != (g.width(), g.height()) {
-            return Err(NodeError::msg(format!(
-                "input \"image\" is {}x{} but the G-buffer {}x{}",
-                image.width,
-                image.height,
-                g.width(),
-                g.height()
-            )));
-        }
+        super::check_image_size(&image, &g)?;
         let max_distance = cx.f32("max_distance");
         let u = SsrUniform {
             proj: g.view.proj.to_cols_array_2d(),

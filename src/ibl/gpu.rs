@@ -149,6 +149,24 @@ struct PhongParams {
     cone: [f32; 4],
 }
 
+impl PhongParams {
+    /// The sum over every source texel inside `bounds` of all six faces, source and
+    /// destination of face size `size`, no cone.
+    fn whole_sphere(face: u32, size: u32, exponent: f32, bounds: FaceBounds) -> PhongParams {
+        PhongParams {
+            face,
+            dst_size: size,
+            src_size: size,
+            full_sphere: 1,
+            exponent,
+            window: 0,
+            pad: [0.0; 2],
+            bounds,
+            cone: NO_CONE,
+        }
+    }
+}
+
 /// Where a cube map's level 0 may be non-zero (a PEM is black outside its region): the Phong
 /// prefilter sums only these texels on its whole-sphere levels and returns black, without
 /// summing, for destination texels whose window cannot reach them.
@@ -431,17 +449,8 @@ impl CubePasses {
         let view = Self::mip_view(plain, source);
         let norm_view = Self::mip_view(&norms, 0);
         for face in 0..6 {
-            let params = PhongParams {
-                face,
-                dst_size: d,
-                src_size: d,
-                full_sphere: 1,
-                exponent: 1.0,
-                window: 0,
-                pad: [0.0; 2],
-                bounds: bounds_at_level(&footprint.faces, source, plain.width),
-                cone: NO_CONE,
-            };
+            let params =
+                PhongParams::whole_sphere(face, d, 1.0, bounds_at_level(&footprint.faces, source, plain.width));
             self.phong.draw(
                 gpu,
                 &[
@@ -475,17 +484,7 @@ impl CubePasses {
         exponent: f32,
     ) -> anyhow::Result<()> {
         for face in 0..6 {
-            let params = PhongParams {
-                face,
-                dst_size: size,
-                src_size: size,
-                full_sphere: 1,
-                exponent,
-                window: 0,
-                pad: [0.0; 2],
-                bounds: Footprint::whole(size).faces,
-                cone: NO_CONE,
-            };
+            let params = PhongParams::whole_sphere(face, size, exponent, Footprint::whole(size).faces);
             self.phong_norm.draw(
                 gpu,
                 &[Bind::Uniform(bytemuck::bytes_of(&params))],
