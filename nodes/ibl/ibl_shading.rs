@@ -243,7 +243,22 @@ impl Node for IblShadingNode {
             binds.push(Bind::Texture(shadows.as_ref().map_or(&g.color, |s| &s.atlas)));
             binds.push(Bind::Uniform(bytemuck::bytes_of(&shadow)));
             binds.push(Bind::Sampler(SamplerKind::LinearClamp));
-            binds.push(Bind::Texture(diffuse_ends));
+            // The diffuse ends: a cube array for the sampler, or the six-layer-per-PEM array.
+            let diffuse_view = hardware.then(|| {
+                diffuse_ends.view_of(crate::gpu::texture::ViewSel {
+                    dimension: wgpu::TextureViewDimension::CubeArray,
+                    base_mip: 0,
+                    mips: 1,
+                    base_layer: 0,
+                    layers: diffuse_ends.desc.layers,
+                })
+            });
+            binds.push(match &diffuse_view {
+                Some(view) => {
+                    Bind::View(view, wgpu::TextureViewDimension::CubeArray, diffuse_ends.desc.sample_type(true))
+                }
+                None => Bind::Texture(diffuse_ends),
+            });
             pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
             previous = Some(out);
         }

@@ -17,4 +17,16 @@ fn lookup(tex: texture_2d_array<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
     return cube_trilinear(tex, u32(ibl.face_size), ibl.top_level, d, lod).rgb;
 }
 
+// The diffuse ends of the pass's PEMs (PEM k at layers 6k..6k+5), or of the full map.
+@group(0) @binding(17) var diffuse_ends: texture_2d_array<f32>;
+
+// The diffuse end's four texels along d: found once per pixel, read for every PEM.
+fn diffuse_taps(d: vec3<f32>) -> CubeTaps {
+    return cube_taps(u32(ibl.diffuse.x), d);
+}
+
+fn diffuse_end(k: u32, d: vec3<f32>, taps: CubeTaps) -> vec3<f32> {
+    return cube_gather(diffuse_ends, 0, 6u * k, taps).rgb;
+}
+
 // #include "ibl_shading_common.wgsl"

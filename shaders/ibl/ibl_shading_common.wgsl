@@ -8,8 +8,9 @@
 // Below the chain's 8^2 level a lookup blends in the map's diffuse end (the cosine lobe at 16^2,
 // src/ibl/pem.rs Handover): a chain's own diffuse level is too coarse for bilinear lookups.
 // The pass is included by one of two files that declare the cube maps `env`, `pem0`..`pem7`
-// (bindings 5..13) and `lookup(cube, direction, lod)`: ibl_shading_hw.wgsl (hardware cube
-// sampling) and ibl_shading.wgsl (textureLoad, its reference twin).
+// (bindings 5..13), the diffuse ends (binding 17), `lookup(cube, direction, lod)`,
+// `diffuse_taps(direction)` and `diffuse_end(k, direction, taps)`: ibl_shading_hw.wgsl
+// (hardware cube sampling) and ibl_shading.wgsl (textureLoad, its reference twin).
 
 struct Ibl {
     inv_view_proj: mat4x4<f32>,
@@ -57,8 +58,6 @@ struct Shadow {
 @group(0) @binding(15) var<uniform> shadow: Shadow;
 // Bilinear lookups of the shadow atlas's moments.
 @group(0) @binding(16) var samp: sampler;
-// The diffuse ends of the pass's PEMs (PEM k at layers 6k..6k+5), or of the full map.
-@group(0) @binding(17) var diffuse_ends: texture_2d_array<f32>;
 
 // #include "fullscreen.wgsl"
 // #include "cube.wgsl"
@@ -95,13 +94,13 @@ fn diffuse_weight(g: f32) -> f32 {
     return 1.0 - clamp(chain, 0.0, 1.0);
 }
 
-// PEM k's (or the full map's, k = 0) radiance: the chain's lookup blended with the diffuse
-// end (read at `taps`, the same texels for every PEM) by weight wd.
-fn with_diffuse(k: u32, chain: vec3<f32>, taps: CubeTaps, wd: f32) -> vec3<f32> {
+// PEM k's (or the full map's, k = 0) radiance along d: the chain's lookup blended with the
+// diffuse end by weight wd (`taps`: diffuse_taps(d), the same for every PEM).
+fn with_diffuse(k: u32, chain: vec3<f32>, d: vec3<f32>, taps: CubeTaps, wd: f32) -> vec3<f32> {
     if wd <= 0.0 {
         return chain;
     }
-    return mix(chain, cube_gather(diffuse_ends, 0, 6u * k, taps).rgb, wd);
+    return mix(chain, diffuse_end(k, d, taps), wd);
 }
 
 fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
@@ -182,12 +181,12 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let level = select(level_for_glossiness(g), ibl.diffuse.y, wd > 0.0);
     var taps: CubeTaps;
     if wd > 0.0 {
-        taps = cube_taps(u32(ibl.diffuse.x), sample_dir);
+        taps = diffuse_taps(sample_dir);
     }
 
     var sum = vec3<f32>(0.0);
     if ibl.full_map > 0.5 {
-        sum = with_diffuse(0u, lookup(env, sample_dir, level), taps, wd);
+        sum = with_diffuse(0u, lookup(env, sample_dir, level), sample_dir, taps, wd);
     } else {
         let count = u32(ibl.size.z);
         // World position: depth is the linear view depth along the camera's forward axis.
@@ -196,14 +195,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         // Eq. 3.43 (VIS_i = 1 exactly without an atlas: the products are then exact).
         // One `if` per binding, not a loop over a switch: llvmpipe runs every case of a
         // switch in a loop (8x the lookups).
-        if count > 0u { sum += lit(0u, with_diffuse(0u, lookup(pem0, d, level), taps, wd), p, n, px); }
-        if count > 1u { sum += lit(1u, with_diffuse(1u, lookup(pem1, d, level), taps, wd), p, n, px); }
-        if count > 2u { sum += lit(2u, with_diffuse(2u, lookup(pem2, d, level), taps, wd), p, n, px); }
-        if count > 3u { sum += lit(3u, with_diffuse(3u, lookup(pem3, d, level), taps, wd), p, n, px); }
-        if count > 4u { sum += lit(4u, with_diffuse(4u, lookup(pem4, d, level), taps, wd), p, n, px); }
-        if count > 5u { sum += lit(5u, with_diffuse(5u, lookup(pem5, d, level), taps, wd), p, n, px); }
-        if count > 6u { sum += lit(6u, with_diffuse(6u, lookup(pem6, d, level), taps, wd), p, n, px); }
-        if count > 7u { sum += lit(7u, with_diffuse(7u, lookup(pem7, d, level), taps, wd), p, n, px); }
+        if count > 0u { sum += lit(0u, with_diffuse(0u, lookup(pem0, d, level), d, taps, wd), p, n, px); }
+        if count > 1u { sum += lit(1u, with_diffuse(1u, lookup(pem1, d, level), d, taps, wd), p, n, px); }
+        if count > 2u { sum += lit(2u, with_diffuse(2u, lookup(pem2, d, level), d, taps, wd), p, n, px); }
+        if count > 3u { sum += lit(3u, with_diffuse(3u, lookup(pem3, d, level), d, taps, wd), p, n, px); }
+        if count > 4u { sum += lit(4u, with_diffuse(4u, lookup(pem4, d, level), d, taps, wd), p, n, px); }
+        if count > 5u { sum += lit(5u, with_diffuse(5u, lookup(pem5, d, level), d, taps, wd), p, n, px); }
+        if count > 6u { sum += lit(6u, with_diffuse(6u, lookup(pem6, d, level), d, taps, wd), p, n, px); }
+        if count > 7u { sum += lit(7u, with_diffuse(7u, lookup(pem7, d, level), d, taps, wd), p, n, px); }
     }
     return vec4<f32>(prior + color.rgb * sum, 1.0);
 }

@@ -18,4 +18,16 @@ fn lookup(tex: texture_cube<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
     return textureSampleLevel(tex, samp, d, lod).rgb;
 }
 
+// The diffuse ends of the pass's PEMs as a cube array (PEM k is cube k), or of the full map.
+@group(0) @binding(17) var diffuse_ends: texture_cube_array<f32>;
+
+// The sampler finds the texels itself.
+fn diffuse_taps(d: vec3<f32>) -> CubeTaps {
+    return CubeTaps();
+}
+
+fn diffuse_end(k: u32, d: vec3<f32>, taps: CubeTaps) -> vec3<f32> {
+    return textureSampleLevel(diffuse_ends, samp, d, i32(k), 0.0).rgb;
+}
+
 // #include "ibl_shading_common.wgsl"
