@@ -366,17 +366,6 @@ impl CubePasses {
         Ok(plain)
     }
 
-    /// One mip of a cube's texture as a six-layer array view.
-    fn mip_view(cube: &GpuImage, mip: u32) -> wgpu::TextureView {
-        cube.view_of(crate::gpu::texture::ViewSel {
-            dimension: wgpu::TextureViewDimension::D2Array,
-            base_mip: mip,
-            mips: 1,
-            base_layer: 0,
-            layers: 6,
-        })
-    }
-
     /// The Phong prefilter (src/ibl/pem.rs phong_level): every level of `cube` integrated from
     /// the plain chain.
     fn phong_levels(
@@ -391,8 +380,8 @@ impl CubePasses {
         let sample_type = plain.desc.sample_type(false);
         for mip in 1..cube.desc.mips {
             let source = super::pem::phong_source(mip as usize) as u32;
-            let view = Self::mip_view(plain, source);
-            let norm_view = Self::mip_view(&norms, mip);
+            let view = level_layers(plain, source, 6);
+            let norm_view = level_layers(&norms, mip, 6);
             let (dst, src) = (cube.width >> mip, cube.width >> source);
             let exponent = super::pem::phong_exponent(size, mip as usize);
             let full_sphere = u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE);
@@ -446,8 +435,8 @@ impl CubePasses {
                 norms
             }
         };
-        let view = Self::mip_view(plain, source);
-        let norm_view = Self::mip_view(&norms, 0);
+        let view = level_layers(plain, source, 6);
+        let norm_view = level_layers(&norms, 0, 6);
         for face in 0..6 {
             let params =
                 PhongParams::whole_sphere(face, d, 1.0, bounds_at_level(&footprint.faces, source, plain.width));
