@@ -6,8 +6,9 @@
 
 use std::sync::Arc;
 
+use super::GatherResolve;
 use crate::core::node::prelude::*;
-use crate::gpu::{Bind, FullscreenPass, GpuImage};
+use crate::gpu::GpuImage;
 use crate::render::scene::GBuffer;
 
 pub static BOUNCE: NodeSpec = NodeSpec {
@@ -62,14 +63,9 @@ struct BounceUniform {
     plane_tolerance: f32,
 }
 
-struct Passes {
-    gather: FullscreenPass,
-    resolve: FullscreenPass,
-}
-
 #[derive(Default)]
 struct BounceNode {
-    passes: Option<Passes>,
+    passes: Option<GatherResolve>,
 }
 
 impl Node for BounceNode {
@@ -88,25 +84,8 @@ impl Node for BounceNode {
             strength: cx.f32("strength"),
             plane_tolerance: 0.1 * radius,
         };
-        let passes = self.passes.get_or_insert_with(|| Passes {
-            gather: FullscreenPass::new("bounce.wgsl").with_fragment_entry("fs_gather"),
-            resolve: FullscreenPass::new("bounce.wgsl").with_fragment_entry("fs_resolve"),
-        });
-        let format = gpu.formats().hdr;
-        let gathered = GpuImage::target(gpu, "bounce gathered", g.width(), g.height(), format);
-        let out = GpuImage::target(gpu, "bounce", g.width(), g.height(), format);
-        for (pass, input, target) in [(&mut passes.gather, &*image, &gathered), (&mut passes.resolve, &gathered, &out)]
-        {
-            let binds = [
-                Bind::Uniform(bytemuck::bytes_of(&u)),
-                Bind::Texture(&g.depth),
-                Bind::Texture(&g.normal),
-                Bind::Texture(&g.color),
-                Bind::Texture(&image),
-                Bind::Texture(input),
-            ];
-            pass.draw(gpu, &binds, &[&target.view], &[format]).map_err(|e| NodeError::msg(e.to_string()))?;
-        }
+        let passes = self.passes.get_or_insert_with(|| GatherResolve::new("bounce.wgsl"));
+        let out = passes.run(gpu, "bounce", &g, &image, bytemuck::bytes_of(&u), &[])?;
         cx.set("image", Arc::new(out));
         Ok(())
     }

@@ -6,8 +6,9 @@
 
 use std::sync::Arc;
 
+use super::GatherResolve;
 use crate::core::node::prelude::*;
-use crate::gpu::{Bind, FullscreenPass, GpuImage};
+use crate::gpu::{Bind, GpuImage};
 use crate::ibl::gpu::EnvMap;
 use crate::render::scene::GBuffer;
 
@@ -91,14 +92,9 @@ struct SsrUniform {
     loops: [u32; 4],
 }
 
-struct Passes {
-    gather: FullscreenPass,
-    resolve: FullscreenPass,
-}
-
 #[derive(Default)]
 struct SsrNode {
-    passes: Option<Passes>,
+    passes: Option<GatherResolve>,
 }
 
 impl Node for SsrNode {
@@ -124,27 +120,8 @@ impl Node for SsrNode {
             _pad: [0.0; 2],
             loops: [16, 4, 16, 0],
         };
-        let passes = self.passes.get_or_insert_with(|| Passes {
-            gather: FullscreenPass::new("ssr.wgsl").with_fragment_entry("fs_gather"),
-            resolve: FullscreenPass::new("ssr.wgsl").with_fragment_entry("fs_resolve"),
-        });
-        let format = gpu.formats().hdr;
-        let gathered = GpuImage::target(gpu, "ssr gathered", g.width(), g.height(), format);
-        let out = GpuImage::target(gpu, "ssr", g.width(), g.height(), format);
-        // The gather pass reads `image` in place of its own (not yet written) output.
-        for (pass, input, target) in [(&mut passes.gather, &*image, &gathered), (&mut passes.resolve, &gathered, &out)]
-        {
-            let binds = [
-                Bind::Uniform(bytemuck::bytes_of(&u)),
-                Bind::Texture(&g.depth),
-                Bind::Texture(&g.normal),
-                Bind::Texture(&g.color),
-                Bind::Texture(&image),
-                Bind::Texture(input),
-                Bind::Texture(&env.cube),
-            ];
-            pass.draw(gpu, &binds, &[&target.view], &[format]).map_err(|e| NodeError::msg(e.to_string()))?;
-        }
+        let passes = self.passes.get_or_insert_with(|| GatherResolve::new("ssr.wgsl"));
+        let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &[Bind::Texture(&env.cube)])?;
         cx.set("image", Arc::new(out));
         Ok(())
     }

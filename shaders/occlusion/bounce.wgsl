@@ -36,13 +36,6 @@ struct Bounce {
 
 // #include "screen_space.wgsl"
 
-// An orthonormal basis (t, b) around the unit vector n.
-fn basis(n: vec3<f32>) -> mat3x3<f32> {
-    let a = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), abs(n.x) > 0.9);
-    let t = normalize(cross(a, n));
-    return mat3x3<f32>(t, cross(n, t), n);
-}
-
 // Steps per direction.
 const STEPS: u32 = 8u;
 

@@ -59,3 +59,10 @@ fn surface_similarity(p: vec3<f32>, n: vec3<f32>, go: vec2<i32>) -> f32 {
     let facing = pow(clamp(dot(view_normal(go), n), 0.0, 1.0), 4.0);
     return plane * facing;
 }
+
+// An orthonormal basis (t, b) around the unit vector n.
+fn basis(n: vec3<f32>) -> mat3x3<f32> {
+    let a = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), abs(n.x) > 0.9);
+    let t = normalize(cross(a, n));
+    return mat3x3<f32>(t, cross(n, t), n);
+}

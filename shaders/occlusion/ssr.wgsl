@@ -62,13 +62,6 @@ fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
-// An orthonormal basis (t, b) around the unit vector n.
-fn basis(n: vec3<f32>) -> mat3x3<f32> {
-    let a = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), abs(n.x) > 0.9);
-    let t = normalize(cross(a, n));
-    return mat3x3<f32>(t, cross(n, t), n);
-}
-
 // World units one pixel spans at view depth d.
 fn pixel_size(d: f32) -> f32 {
     return 2.0 * d / (u.proj[1][1] * gsize().y);
