@@ -25,6 +25,11 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
             PortType::Scene,
             "The scene of a Tessellate node refining this surface: the matrix texture then rasterizes the refined (PN-smoothed) GPU mesh, so attachments sit on the surface the G-buffer draws. Needs translate, rotate and scale at their defaults (transform the surface before Tessellate).",
         ),
+        PortSpec::optional(
+            "drawn",
+            PortType::Scene,
+            "The scene of the Draw that shows this surface (or any scene holding it): the matrix texture takes that item's transform, so surface and attachments cannot disagree. With it, leave translate, rotate and scale at their defaults (set, they must equal the Draw's).",
+        ),
     ],
     outputs: &[
         PortSpec::output("matrix", PortType::MatrixTexture, "The matrix texture, for attachment nodes."),
@@ -60,7 +65,7 @@ pub static MATRIX_TEXTURE: NodeSpec = NodeSpec {
         ParamSpec::new(
             "translate",
             ParamKind::Vec3 { default: [0.0, 0.0, 0.0] },
-            "The surface's model transform, as on the Draw that shows it (applied last).",
+            "The surface's model transform, as on the Draw that shows it (applied last); better: link the Draw's scene into `drawn`.",
         ),
         crate::nodes::mesh::geometry::ROTATE,
         crate::nodes::mesh::geometry::SCALE,
@@ -161,7 +166,7 @@ impl MatrixTextureNode {
             self.seam_map = Some((key, upload_seam_map(gpu, mesh, resolution)));
         }
         let seams = self.seam_map.as_ref().expect("set above").1.share();
-        let mut m = MatrixTexture { col_u, col_n, col_v, seams, resolution };
+        let mut m = MatrixTexture { col_u, col_n, col_v, seams, resolution, placed_on: None };
         let bit_copy = &mut self.bit_copy;
         let mut as_floats = |m: MatrixTexture| {
             if !bits {
@@ -174,7 +179,7 @@ impl MatrixTextureNode {
                 copy_bits(gpu, src, &dst, bit_copy);
                 dst
             });
-            MatrixTexture { col_u: u, col_n: n, col_v: v, seams: m.seams, resolution }
+            MatrixTexture { col_u: u, col_n: n, col_v: v, seams: m.seams, resolution, placed_on: None }
         };
         m = as_floats(m);
         if filter_radius > 0 {
@@ -191,6 +196,7 @@ impl MatrixTextureNode {
                     col_n: make("matrix n"),
                     col_v: make("matrix t_v"),
                     resolution,
+                    placed_on: None,
                 };
                 let params = [dir[0], dir[1], filter_radius as f32, 0.0];
                 pass.run_mrt(
@@ -234,7 +240,12 @@ impl Node for MatrixTextureNode {
             cx.warn("some UVs lie outside [0,1]^2; those parts of the surface are not in the matrix texture");
         }
         // The surface in world space: moved by its model transform, as the Draw that shows it.
-        let model = crate::nodes::mesh::geometry::model_matrix(cx)?;
+        let own = crate::nodes::mesh::geometry::model_matrix(cx)?;
+        let model = match cx.optional::<Arc<Vec<DrawItem>>>("drawn") {
+            Some(scene) => drawn_transform(&scene, &mesh, own)?,
+            None => own,
+        };
+        let surface = mesh.clone();
         let refined = match cx.optional::<Arc<Vec<DrawItem>>>("refined") {
             Some(scene) => Some(refined_mesh(&scene, &mesh, model)?),
             None => None,
@@ -299,11 +310,42 @@ impl Node for MatrixTextureNode {
             filter_radius,
             refined.as_ref().and_then(DrawItem::kind_as::<TessMesh>),
         )?;
+        let m = MatrixTexture { placed_on: Some((surface, model)), ..m };
         cx.set("normal", Arc::new(m.col_n.share()));
         cx.set("matrix", Arc::new(m));
         cx.set("min_resolution", min_res);
         Ok(())
     }
+}
+
+/// The transform of the item in `scene` that draws `surface` (the `drawn` input); an error
+/// where none does, where it is drawn with several transforms, or where the node's own
+/// parameters give another one.
+fn drawn_transform(scene: &[DrawItem], surface: &Arc<Mesh>, own: glam::Mat4) -> Result<glam::Mat4, NodeError> {
+    use crate::render::scene::{describe_transform, same_transform};
+    let models: Vec<glam::Mat4> = scene.iter().filter(|i| i.draws(surface)).map(|i| i.model).collect();
+    let Some(&model) = models.first() else {
+        return Err(NodeError::msg(format!(
+            "drawn: none of the scene's {} items draws this surface; link the scene of the Draw whose mesh is the surface linked here",
+            scene.len()
+        )));
+    };
+    if let Some(other) = models.iter().find(|m| !same_transform(**m, model)) {
+        return Err(NodeError::msg(format!(
+            "drawn: the scene draws this surface {} times with different transforms ({} and {}); link the scene of the one Draw the attachments belong on",
+            models.len(),
+            describe_transform(model),
+            describe_transform(*other)
+        )));
+    }
+    if own != glam::Mat4::IDENTITY && !same_transform(own, model) {
+        return Err(NodeError::msg(format!(
+            "two transforms disagree: translate, rotate and scale give {} but the drawn surface has {}; clear them (the drawn input gives the transform) or unlink drawn",
+            describe_transform(own),
+            describe_transform(model)
+        )));
+    }
+    Ok(model)
 }
 
 /// The GPU mesh a Tessellate node made of `surface`, from its scene on the `refined` input.

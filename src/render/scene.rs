@@ -161,6 +161,42 @@ impl DrawItem {
     pub fn with_kind(self, kind: impl ItemKind) -> DrawItem {
         DrawItem { kind: Arc::new(kind), ..self }
     }
+
+    /// Whether this coarse item draws `surface`: the same mesh, or one equal to it (an upstream
+    /// node may hand the same vertices out twice).
+    pub fn draws(&self, surface: &Arc<Mesh>) -> bool {
+        !self.detail
+            && (Arc::ptr_eq(&self.mesh, surface)
+                || (self.mesh.positions.len() == surface.positions.len()
+                    && self.mesh.indices == surface.indices
+                    && self.mesh.positions == surface.positions))
+    }
+}
+
+/// Whether two model transforms agree (to float noise).
+pub fn same_transform(a: Mat4, b: Mat4) -> bool {
+    a.abs_diff_eq(b, 1e-5 * (1.0 + a.abs().to_cols_array().into_iter().fold(0.0, f32::max)))
+}
+
+/// A model transform as its scale, rotation (XYZ degrees) and translation, for messages.
+pub fn describe_transform(m: Mat4) -> String {
+    let (scale, rotation, translation) = m.to_scale_rotation_translation();
+    let (x, y, z) = rotation.to_euler(glam::EulerRot::XYZ);
+    let round =
+        |v: Vec3| format!("[{}, {}, {}]", round_for_message(v.x), round_for_message(v.y), round_for_message(v.z));
+    format!(
+        "translate {}, rotate {}, scale {}",
+        round(translation),
+        round(Vec3::new(x, y, z) * (180.0 / std::f32::consts::PI)),
+        round(scale)
+    )
+}
+
+/// A number as a message shows it: 4 significant digits, no trailing zeros, no "-0".
+fn round_for_message(x: f32) -> String {
+    let s = format!("{:.4}", x);
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.into() }
 }
 
 /// The deferred renderer's multiple render targets.

@@ -20,6 +20,9 @@ pub struct MatrixTexture {
     /// The seam map (see `seam_map`), Rgba32Float; all zero for a surface without seams.
     pub seams: GpuImage,
     pub resolution: u32,
+    /// The surface as linked (before its transform) and the model transform the texture was
+    /// rendered with, so a scene can check that the surface is drawn with the same one.
+    pub placed_on: Option<(Arc<Mesh>, Mat4)>,
 }
 
 impl MatrixTexture {

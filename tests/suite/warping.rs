@@ -814,6 +814,73 @@ fn a_moved_surface_carries_its_attachments() {
     }
 }
 
+/// The plane of `a_moved_surface_carries_its_attachments` drawn by a Draw with `draw_params`,
+/// buttons on it through a MatrixTexture with `matrix_params` (linked to the Draw's scene when
+/// `drawn`), into a G-buffer.
+fn drawn_plane(draw_params: &str, matrix_params: &str, drawn: bool) -> werkstatt::core::graph::Graph {
+    let drawn_link = if drawn { r#"("d.scene", "mt.drawn"),"# } else { "" };
+    graph(&format!(
+        r#"(version: 2, nodes: {{
+            "p": (kind: "Primitive", params: {{"shape": "plane", "size": 2.0}}),
+            "d": (kind: "Draw", params: {{{draw_params}}}),
+            "mt": (kind: "MatrixTexture", params: {{"resolution": 32, {matrix_params}}}),
+            "button": (kind: "Primitive", params: {{"shape": "box", "size": 0.1}}),
+            "grid": (kind: "GridPlacement", params: {{"columns": 2, "rows": 2}}),
+            "attach": (kind: "PointAttachment"),
+            "all": (kind: "Merge"),
+            "cam": (kind: "OrbitCamera"),
+            "g": (kind: "GBufferPass"),
+            "out": (kind: "Preview"),
+        }}, links: [("p.mesh", "d.mesh"), ("p.mesh", "mt.surface"), {drawn_link}
+            ("mt.matrix", "attach.matrix"), ("button.mesh", "attach.mesh"), ("grid.placements", "attach.placements"),
+            ("d.scene", "all.a"), ("attach.scene", "all.b"), ("all.scene", "g.scene"), ("cam.camera", "g.camera"),
+            ("g.depth", "out.image")])"#
+    ))
+}
+
+fn failure(ev: &werkstatt::core::eval::Evaluator, node: &str) -> Option<String> {
+    match ev.report(node).unwrap().status {
+        werkstatt::core::eval::NodeStatus::Failed(m) => Some(m.clone()),
+        _ => None,
+    }
+}
+
+/// One transform per attached surface: linked to the Draw's scene, the matrix texture takes
+/// the Draw's transform (the attachments sit on the moved surface); a second transform that
+/// disagrees is an error on MatrixTexture, and a MatrixTexture left behind by its Draw's
+/// transform is an error on the G-buffer pass, both naming the two transforms.
+#[test]
+fn a_matrix_texture_takes_its_transform_from_the_draw() {
+    let moved = r#""translate": [1.0, 2.0, 3.0], "rotate": [0.0, 90.0, 0.0]"#;
+    let ev = common::run_graph(&drawn_plane(moved, "", true), 16, 16);
+    let model = glam::Mat4::from_rotation_translation(
+        glam::Quat::from_rotation_y(90f32.to_radians()),
+        Vec3::new(1.0, 2.0, 3.0),
+    );
+    let detail = geometry::cube(1.0).unwrap();
+    let inst = point_instance(&Placement { piece: 0, u: 0.3, v: 0.6, angle: 0.0, scale: 1.0 }, 0.1, 1.0, 0.0, 0.0);
+    let w = warp_gpu(matrix_output(&ev, "mt"), &detail, POINT, vec![inst]);
+    for (wv, q) in w.iter().zip(&detail.positions) {
+        let expected = model.transform_point3(Vec3::new(2.0 * (0.3 - 0.5), 0.0, 2.0 * (0.6 - 0.5)) + *q * 0.1);
+        assert!(wv.valid && (wv.position - expected).length() < 1e-4, "{:?} vs {expected:?}", wv.position);
+    }
+    // The same transform given twice is allowed; a different one is not.
+    let ev = common::run_graph(&drawn_plane(moved, moved, true), 16, 16);
+    assert!(failure(&ev, "mt").is_none());
+    let ev = common::evaluate_graph(&drawn_plane(moved, r#""translate": [1.0, 2.0, 0.0]"#, true), 16, 16);
+    let m = failure(&ev, "mt").expect("disagreeing transforms fail");
+    assert!(
+        m.contains("two transforms disagree") && m.contains("translate [1, 2, 0]") && m.contains("translate [1, 2, 3]"),
+        "{m}"
+    );
+    // Without the link, the G-buffer pass sees the attachments leave their surface.
+    let ev = common::evaluate_graph(&drawn_plane(moved, "", false), 16, 16);
+    let m = failure(&ev, "g").expect("attachments off their surface fail");
+    assert!(m.contains("translate [0, 0, 0]") && m.contains("translate [1, 2, 3]") && m.contains("`drawn`"), "{m}");
+    let ev = common::evaluate_graph(&drawn_plane(moved, moved, false), 16, 16);
+    assert!(failure(&ev, "g").is_none(), "equal transforms given twice still draw");
+}
+
 /// A placement file's rows in piece-local coordinates land at the same spot of each piece's
 /// UV rectangle; read as atlas coordinates, the rows whose piece column disagrees are warned.
 #[test]

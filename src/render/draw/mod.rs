@@ -111,6 +111,9 @@ impl SceneDrawer {
         camera: crate::render::scene::Camera,
         view: View,
     ) -> anyhow::Result<GBuffer> {
+        if let Some(mismatch) = kinds::attached::surface_transform_mismatch(items) {
+            anyhow::bail!(mismatch);
+        }
         let (w, h) = (view.width, view.height);
         let formats = *gpu.formats();
         let color = GpuImage::target(gpu, "gbuffer color", w, h, formats.hdr);

@@ -67,3 +67,24 @@ impl ItemKind for AttachedDraw {
         Ok(Exported::World(assemble(&item.mesh, warped)?))
     }
 }
+
+/// Attachments whose matrix texture was rendered with another transform than the item that
+/// draws its surface: they would float away from it. The message says which transforms and
+/// how to give the surface one.
+pub fn surface_transform_mismatch(items: &[DrawItem]) -> Option<String> {
+    use crate::render::scene::{describe_transform, same_transform};
+    items.iter().filter_map(|i| i.kind_as::<AttachedDraw>()).find_map(|attached| {
+        let (surface, placed) = attached.matrix.placed_on.as_ref()?;
+        let drawn: Vec<_> = items.iter().filter(|i| i.draws(surface)).map(|i| i.model).collect();
+        let first = *drawn.first()?;
+        (!drawn.iter().any(|m| same_transform(*m, *placed))).then(|| {
+            format!(
+                "attachments sit on a surface whose MatrixTexture has {} while the item that draws it has {}: \
+                 the attachments would leave the surface; link the Draw's scene into the MatrixTexture's \
+                 `drawn` input (it then takes the Draw's transform) and clear its translate, rotate and scale",
+                describe_transform(*placed),
+                describe_transform(first)
+            )
+        })
+    })
+}
