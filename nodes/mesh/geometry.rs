@@ -256,6 +256,11 @@ pub static MESH_FILE: NodeSpec = NodeSpec {
             ParamKind::Bool { default: false },
             "Centre the mesh and scale it to unit height. Off: the file's units, so meshes from one tool (a body and its garment) line up.",
         ),
+        ParamSpec::new(
+            "normalize_by",
+            ParamKind::Path { default: "", extensions: &["obj", "gltf", "glb"] },
+            "With normalize: the file whose bounds give the centre and scale (empty: this file). Give the meshes of one source the same one (a garment normalized by its body's file), so they stay lined up.",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(MeshFileNode),
@@ -273,7 +278,12 @@ impl Node for MeshFileNode {
             cx.warn(format!("{}: {r}", path.display()));
         }
         let mesh = if cx.bool("normalize") {
-            let (lo, hi) = loaded.bounds();
+            // One scale for the meshes of one source: the bounds of the file they name.
+            let (lo, hi) = if cx.str("normalize_by").is_empty() {
+                loaded.bounds()
+            } else {
+                cx.load(&cx.path("normalize_by"), mesh::load_mesh_file)?.bounds()
+            };
             let scale = 1.0 / (hi.y - lo.y).max(1e-6);
             let centre = (lo + hi) * 0.5;
             let mut m = (*loaded).clone();

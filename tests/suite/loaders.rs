@@ -132,3 +132,41 @@ fn a_relative_mesh_path_is_resolved_against_the_graph_folder() {
         _ => panic!("no mesh"),
     }
 }
+
+/// Meshes of one source normalized together keep lining up: a garment normalized by its body's
+/// file gets the body's centre and scale, not its own.
+#[test]
+fn meshes_normalized_by_one_file_share_its_scale() {
+    use werkstatt::core::port::Value;
+    let dir = out_dir("normalize_by");
+    // A "body" 2 units tall from y = 0, and a "garment" on its upper half.
+    std::fs::write(dir.join("body.obj"), "v -0.5 0 0\nv 0.5 0 0\nv 0 2 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("garment.obj"), "v -0.5 1 0.1\nv 0.5 1 0.1\nv 0 1.5 0.1\nf 1 2 3\n").unwrap();
+    let run = |garment_params: &str| {
+        let text = format!(
+            r#"(version: 2, nodes: {{
+                "body": (kind: "MeshFile", params: {{"path": "{d}/body.obj", "normalize": true}}),
+                "garment": (kind: "MeshFile", params: {{"path": "{d}/garment.obj", "normalize": true, {garment_params}}}),
+                "merge": (kind: "Merge"),
+                "a": (kind: "Draw"), "b": (kind: "Draw"), "export": (kind: "ExportGeometry"),
+            }}, links: [("body.mesh", "a.mesh"), ("garment.mesh", "b.mesh"), ("a.scene", "merge.a"), ("b.scene", "merge.b"),
+                ("merge.scene", "export.scene")])"#,
+            d = dir.display()
+        );
+        let g = werkstatt::core::graph::Graph::load_str(&text, "test.ron".as_ref()).unwrap();
+        let ev = crate::common::run_graph(&g, 8, 8);
+        match ev.output("garment", "mesh") {
+            Some(Value::Mesh(m)) => m.positions.clone(),
+            _ => panic!("no garment mesh"),
+        }
+    };
+    // Alone, the garment is stretched to unit height about its own centre.
+    let own = run("");
+    assert!((own[2].y - 0.5).abs() < 1e-6 && (own[0].y + 0.5).abs() < 1e-6, "{own:?}");
+    // By the body's file: centre (0, 1, 0), scale 1/2, so y 1 -> 0 and 1.5 -> 0.25.
+    let shared = run(&format!(r#""normalize_by": "{}/body.obj""#, dir.display()));
+    for (p, file) in shared.iter().zip([[-0.5f32, 1.0, 0.1], [0.5, 1.0, 0.1], [0.0, 1.5, 0.1]]) {
+        let expected = (glam::Vec3::from(file) - glam::Vec3::new(0.0, 1.0, 0.0)) * 0.5;
+        assert!((*p - expected).length() < 1e-6, "{p:?} vs {expected:?}");
+    }
+}
