@@ -3,11 +3,12 @@
 // the plain chain: every texel of all faces (small destinations) or a window of points one
 // source texel apart on the face's plane, read with the seamless bilinear lookup.
 //
-// On the whole-sphere levels the normalization (the sum of the weights) depends only on the
-// geometry, so fs_phong_norm computes it once per level and fs_phong sums only the source
-// texels inside `bounds`: a PEM is black outside its region, and skipped texels would add
-// exact zeros; on the windowed levels, destination texels outside a cone around the region
-// are black without summing. With N regions, N PEMs cost about one full map instead of N.
+// The normalization (the sum of the weights) depends only on the geometry, so fs_phong_norm
+// computes it once per level and fs_phong sums only the source texels inside `bounds`: a PEM
+// is black outside its region, and skipped texels would add exact zeros. On the windowed
+// levels, destination texels outside a cone around the region are black without summing,
+// and a window inside its face visits only its overlap with the region's rectangle there.
+// With N regions, N PEMs cost about one full map instead of N.
 struct Phong {
     face: u32,
     dst_size: u32,
@@ -55,10 +56,40 @@ fn dst_dir(frag: vec4<f32>) -> vec3<f32> {
     return normalize(face_dir(ph.face, texel_center(ph.dst_size, xy.x), texel_center(ph.dst_size, xy.y)));
 }
 
+// The window's lobe weight at offset (a, b) texels from the destination texel's centre
+// (uc, vc), with its direction; 0 behind r.
+struct WindowTap {
+    d: vec3<f32>,
+    w: f32,
+};
+
+fn window_tap(r: vec3<f32>, uc: f32, vc: f32, a: i32, b: i32) -> WindowTap {
+    let h = 2.0 / f32(ph.src_size);
+    let u = uc + f32(a) * h;
+    let v = vc + f32(b) * h;
+    let d = normalize(face_dir(ph.face, u, v));
+    let c = dot(r, d);
+    var w = 0.0;
+    if c > 0.0 {
+        w = pow(c, ph.exponent) * plane_solid_angle(u, v, h);
+    }
+    return WindowTap(d, w);
+}
+
 @fragment
 fn fs_phong_norm(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let r = dst_dir(frag);
     var total = 0.0;
+    if ph.full_sphere == 0u {
+        let uc = texel_center(ph.dst_size, u32(frag.x));
+        let vc = texel_center(ph.dst_size, u32(frag.y));
+        for (var b = -ph.window; b <= ph.window; b++) {
+            for (var a = -ph.window; a <= ph.window; a++) {
+                total += window_tap(r, uc, vc, a, b).w;
+            }
+        }
+        return vec4<f32>(total, 0.0, 0.0, 1.0);
+    }
     for (var f = 0u; f < 6u; f++) {
         for (var ty = 0u; ty < ph.src_size; ty++) {
             for (var tx = 0u; tx < ph.src_size; tx++) {
@@ -92,18 +123,32 @@ fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
     let uc = texel_center(ph.dst_size, u32(frag.x));
     let vc = texel_center(ph.dst_size, u32(frag.y));
-    let h = 2.0 / f32(ph.src_size);
-    var total = 0.0;
+    let centre = vec2<i32>(frag.xy);
+    let last = i32(ph.src_size) - 1;
+    let total = textureLoad(norm, centre, ph.face, 0).r;
+    // A window inside its face, with source and destination of one face size: its points are
+    // source texel centres (a bilinear lookup there is the texel), and only those inside the
+    // region's rectangle on this face can be non-zero.
+    if ph.src_size == ph.dst_size && all(centre - vec2<i32>(ph.window) >= vec2<i32>(0))
+        && all(centre + vec2<i32>(ph.window) <= vec2<i32>(last)) {
+        let bounds = ph.bounds[ph.face];
+        let lo = max(centre - vec2<i32>(ph.window), vec2<i32>(bounds.xy));
+        let hi = min(centre + vec2<i32>(ph.window), vec2<i32>(bounds.zw));
+        for (var y = lo.y; y <= hi.y; y++) {
+            for (var x = lo.x; x <= hi.x; x++) {
+                let tap = window_tap(r, uc, vc, x - centre.x, y - centre.y);
+                if tap.w > 0.0 {
+                    sum += tap.w * textureLoad(src, vec2<u32>(u32(x), u32(y)), ph.face, 0);
+                }
+            }
+        }
+        return sum / total;
+    }
     for (var b = -ph.window; b <= ph.window; b++) {
         for (var a = -ph.window; a <= ph.window; a++) {
-            let u = uc + f32(a) * h;
-            let v = vc + f32(b) * h;
-            let d = normalize(face_dir(ph.face, u, v));
-            let c = dot(r, d);
-            if c > 0.0 {
-                let w = pow(c, ph.exponent) * plane_solid_angle(u, v, h);
-                sum += w * cube_bilinear(src, ph.src_size, d);
-                total += w;
+            let tap = window_tap(r, uc, vc, a, b);
+            if tap.w > 0.0 {
+                sum += tap.w * cube_bilinear(src, ph.src_size, tap.d);
             }
         }
     }

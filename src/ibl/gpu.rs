@@ -430,7 +430,7 @@ impl CubePasses {
             Some(n) => n.share(),
             None => {
                 let norms = self.norm_target(gpu, "diffuse end normalization", d, 1);
-                self.norm_pass(gpu, &norms, 0, d, 1.0)?;
+                self.norm_pass(gpu, &norms, 0, d, 1.0, None)?;
                 self.diffuse_norms = Some(norms.share());
                 norms
             }
@@ -462,8 +462,9 @@ impl CubePasses {
         GpuImage::create(gpu, label, desc)
     }
 
-    /// fs_phong_norm into mip `mip` (face size `size`) of `norms`: the whole-sphere weights'
-    /// sum at exponent `exponent` over a source of the same face size.
+    /// fs_phong_norm into mip `mip` (face size `size`) of `norms`: the weights' sum at exponent
+    /// `exponent` over a source of the same face size, over the whole sphere or, with
+    /// `window`, over that window.
     fn norm_pass(
         &mut self,
         gpu: &GpuContext,
@@ -471,9 +472,13 @@ impl CubePasses {
         mip: u32,
         size: u32,
         exponent: f32,
+        window: Option<i32>,
     ) -> anyhow::Result<()> {
         for face in 0..6 {
-            let params = PhongParams::whole_sphere(face, size, exponent, Footprint::whole(size).faces);
+            let mut params = PhongParams::whole_sphere(face, size, exponent, Footprint::whole(size).faces);
+            if let Some(window) = window {
+                (params.full_sphere, params.window) = (0, window);
+            }
             self.phong_norm.draw(
                 gpu,
                 &[Bind::Uniform(bytemuck::bytes_of(&params))],
@@ -484,8 +489,8 @@ impl CubePasses {
         Ok(())
     }
 
-    /// The Phong weights' sum per texel of every whole-sphere level of a face-size
-    /// `cube.width` chain (fs_phong_norm), computed once per size.
+    /// The Phong weights' sum per texel of every level of a face-size `cube.width` chain
+    /// (fs_phong_norm), computed once per size.
     fn phong_norms(&mut self, gpu: &GpuContext, cube: &GpuImage) -> anyhow::Result<GpuImage> {
         if let Some(norms) = self.norms.as_ref().filter(|n| n.width == cube.width) {
             return Ok(norms.share());
@@ -493,12 +498,12 @@ impl CubePasses {
         let norms = self.norm_target(gpu, "Phong normalization", cube.width, cube.desc.mips);
         let size = cube.width as usize;
         for mip in 1..cube.desc.mips {
+            // Every level reads its own level of the plain chain (phong_source).
             let dst = cube.width >> mip;
-            // Whole-sphere levels read their own level of the plain chain (phong_source).
-            if dst as usize > super::pem::PHONG_FULL_SPHERE_SIZE {
-                continue;
-            }
-            self.norm_pass(gpu, &norms, mip, dst, super::pem::phong_exponent(size, mip as usize))?;
+            let exponent = super::pem::phong_exponent(size, mip as usize);
+            let window = (dst as usize > super::pem::PHONG_FULL_SPHERE_SIZE)
+                .then(|| super::pem::phong_window(dst as usize, exponent));
+            self.norm_pass(gpu, &norms, mip, dst, exponent, window)?;
         }
         self.norms = Some(norms.share());
         Ok(norms)
