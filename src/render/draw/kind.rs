@@ -67,7 +67,7 @@ pub trait ItemKind: Any + Send + Sync {
     ) -> anyhow::Result<Option<KindDraw>>;
 
     /// The geometry this kind draws for `item`, in the item's own space (then placed by its
-    /// model matrix and grid, as the vertex stage places it) or in world space. A kind that
+    /// model matrix and grid, as the vertex stage places it) or as world-space instances. A kind that
     /// cannot export returns an error saying why; it never exports something else.
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported>;
 }
