@@ -454,10 +454,14 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
         .default_scene()
         .or_else(|| doc.scenes().next())
         .with_context(|| format!("{} has no scene", path.display()))?;
+    // Depth first in document order (a stack popped from its end holds siblings reversed),
+    // so parts come in the order an exporter wrote its objects.
     let mut stack: Vec<(gltf::Node, glam::Mat4)> = scene.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect();
+    stack.reverse();
     while let Some((node, parent)) = stack.pop() {
         let world = parent * glam::Mat4::from_cols_array_2d(&node.transform().matrix());
-        stack.extend(node.children().map(|c| (c, world)));
+        let children: Vec<_> = node.children().map(|c| (c, world)).collect();
+        stack.extend(children.into_iter().rev());
         let Some(mesh) = node.mesh() else { continue };
         let normal_matrix = glam::Mat3::from_mat4(world).inverse().transpose();
         for prim in mesh.primitives() {

@@ -99,7 +99,7 @@ impl Node for ClothSimNode {
             .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
         let strain = cloth.max_strain() as f64;
         if self.colliders.as_ref().is_none_or(|(k, _)| *k != key) {
-            self.colliders = Some((key, Arc::new(collider_items(cloth.colliders())?)));
+            self.colliders = Some((key, Arc::new(collider_items(cloth.colliders(), cx.node_id)?)));
         }
         let (lo, hi) = mesh.bounds();
         cx.count("triangles", mesh.triangle_count());
@@ -173,9 +173,10 @@ pub fn presets_markdown() -> anyhow::Result<String> {
 }
 
 /// Drawable stand-ins for the colliders (a capsule as a cylinder with two spheres).
-fn collider_items(colliders: &[Collider]) -> anyhow::Result<Vec<DrawItem>> {
+fn collider_items(colliders: &[Collider], node_id: &str) -> anyhow::Result<Vec<DrawItem>> {
     let material = Arc::new(Material { base_color: Vec3::new(0.55, 0.55, 0.6), glossiness: 0.3, ..Default::default() });
-    let item = |mesh: Mesh, model: Mat4| DrawItem::plain(Arc::new(mesh), material.clone(), model);
+    let name: Arc<str> = format!("{node_id}_collider").into();
+    let item = |mesh: Mesh, model: Mat4| DrawItem::plain(Arc::new(mesh), material.clone(), model).named(name.clone());
     let mut items = Vec::new();
     for c in colliders {
         match c {

@@ -59,7 +59,11 @@ draw per batch of 64 lights, moments (c, c^2) of the centred depth c = d - 1/2 i
 the region's solid angle Omega: theta = acos(1 - Omega / 2pi), sigma = blur_scale tan(theta) 0.25 R / texel, clamped to 3 sigma <= guard; \
 taps are clamped to the tile, so no blur reads another tile. Memory: atlas texels x 4 bytes (Table 5.1: N x res^2 x 4 B).",
     inputs: &[
-        PortSpec::required("scene", PortType::Scene, "The occluders (coarse items only unless coarse_only is off)."),
+        PortSpec::required(
+            "scene",
+            PortType::Scene,
+            "The occluders: coarse items, and detail items (attachments) unless coarse_only is on or they are over detail_triangle_budget.",
+        ),
         PortSpec::required("lights", PortType::Lights, "Directional lights (MedianCut), one tile each."),
         PortSpec::optional(
             "camera",
@@ -89,8 +93,13 @@ taps are clamped to the tile, so no blur reads another tile. Memory: atlas texel
         ),
         ParamSpec::new(
             "coarse_only",
-            ParamKind::Bool { default: true },
-            "Draw only coarse items (the simulation surface), not detail attachments (the dissertation).",
+            ParamKind::Bool { default: false },
+            "Draw only coarse items (the simulation surface), not detail attachments (the dissertation's figures). Off: attachments cast too while their triangles stay within detail_triangle_budget.",
+        ),
+        ParamSpec::new(
+            "detail_triangle_budget",
+            ParamKind::Int { default: DETAIL_TRIANGLE_BUDGET as i64, min: 0, max: 1_000_000_000 },
+            "With coarse_only off, the most detail triangles (all attachment instances together) that cast; above it only coarse items cast, with a warning naming the count. Each caster is drawn once per light, so the default 50 000 costs the atlas pass at most 50 000 x lights triangles (6.4 M at 128 lights).",
         ),
         ParamSpec::new(
             "sizes",
@@ -149,6 +158,10 @@ crate::choice!(
         Uniform = "uniform",
     }
 );
+
+/// The default `detail_triangle_budget`: 40 buttons of a few hundred triangles cast (a few
+/// thousand in all), a 10 000-button flag (about 2 M) does not.
+pub const DETAIL_TRIANGLE_BUDGET: usize = 50_000;
 
 /// Texels per sigma of a penumbra that a tile sized by penumbra aims at.
 pub const TEXELS_PER_SIGMA: f32 = 2.0;
@@ -468,7 +481,15 @@ impl Node for ShadowAtlasNode {
         let gpu = cx.gpu()?;
         let scene: Arc<Vec<DrawItem>> = cx.input("scene")?;
         let lights: Arc<Lights> = cx.input("lights")?;
-        let coarse_only = cx.bool("coarse_only");
+        let detail: usize = scene.iter().filter(|i| i.detail).map(|i| i.kind.drawn_triangles(i)).sum();
+        let budget = cx.int("detail_triangle_budget").max(0) as usize;
+        let coarse_only = cx.bool("coarse_only") || detail > budget;
+        if coarse_only && !cx.bool("coarse_only") {
+            cx.warn(format!(
+                "the attachments' {detail} triangles are over detail_triangle_budget ({budget}): only coarse items cast shadows"
+            ));
+        }
+        cx.count("detail_triangles", if coarse_only { 0 } else { detail });
         let items: Vec<DrawItem> = scene.iter().filter(|i| !(coarse_only && i.detail)).cloned().collect();
         let guard = cx.int("guard");
         let settings = AtlasSettings {

@@ -533,5 +533,5 @@ impl Connection {
 /// Writes one received frame as `<dir>/frame_NNNN.obj` (atomically), for MeshSequence.
 fn record_frame(dir: &std::path::Path, frame: u64, mesh: &Mesh) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
-    crate::io::geometry::write_obj(&dir.join(format!("frame_{frame:04}.obj")), mesh)
+    crate::io::geometry::write_obj(&dir.join(format!("frame_{frame:04}.obj")), mesh, &[])
 }

@@ -14,7 +14,7 @@ use crate::warp::gpu::{GpuWarper, WarpDevice};
 pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     kind: "ExportGeometry",
     category: Category::Output,
-    doc: "Writes a scene's geometry as it renders (attachments warped, tessellations refined, items under cuboid grids deformed by eq. 3.4) as <out>/<node id>_<frame>.obj, .ply or .glb (binary glTF: attachments realized, one material per scene item with its base colour and glossiness as roughness), or the whole rendered frame range as one USD ASCII cache <out>/<node id>.usda (points and normals time-sampled per frame); outlier vertices' triangles are left out, as rendering discards them. A kind of item that cannot be exported (per-pixel PN depth) is an error.",
+    doc: "Writes a scene's geometry as it renders (attachments warped, tessellations refined, items under cuboid grids deformed by eq. 3.4) as <out>/<node id>_<frame>.obj, .ply or .glb, or the whole rendered frame range as one USD ASCII cache <out>/<node id>.usda (points and normals time-sampled per frame, one mesh). OBJ and glb keep the scene apart: an object (OBJ `o`, glTF node) per item and per attachment instance, named by the node that made the item and the instance index (`buttons_17`), counted in the header; glb adds a material per item (base colour, glossiness as roughness). Outlier vertices' triangles are left out, as rendering discards them. A kind of item that cannot be exported (per-pixel PN depth) is an error.",
     inputs: &[PortSpec::required("scene", PortType::Scene, "What to export.")],
     outputs: &[PortSpec::output("mesh", PortType::Mesh, "The exported geometry as one mesh.")],
     params: &[

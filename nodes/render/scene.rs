@@ -169,7 +169,7 @@ impl Node for DrawNode {
         let material = cx.optional("material").unwrap_or_else(|| Arc::new(Material::default()));
         let model = crate::nodes::mesh::geometry::model_matrix(cx)?;
         cx.count("triangles", mesh.triangle_count());
-        let item = DrawItem { detail: cx.bool("detail"), ..DrawItem::plain(mesh, material, model) };
+        let item = DrawItem { detail: cx.bool("detail"), ..DrawItem::plain(mesh, material, model) }.named(cx.node_id);
         cx.set("scene", Arc::new(vec![item]));
         Ok(())
     }

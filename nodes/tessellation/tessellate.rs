@@ -117,7 +117,7 @@ impl Node for TessellateNode {
             metric: cx.choice("metric"),
             max_edge_px: cx.f32("max_edge_px"),
         };
-        let plain = DrawItem::plain(mesh.clone(), material, Mat4::IDENTITY);
+        let plain = DrawItem::plain(mesh.clone(), material, Mat4::IDENTITY).named(cx.node_id);
         if cx.bool("per_pixel") {
             let item = plain.with_kind(crate::render::draw::kinds::pn_pixels::PnPixels);
             cx.count("patches", mesh.triangle_count());

@@ -50,7 +50,9 @@ fn emit(cx: &mut EvalCx<'_>, c: Common, mode: WarpMode, instances: Vec<InstanceD
     cx.count("instances", instances.len());
     cx.count("triangles", instances.len() * c.mesh.triangle_count());
     let attached = AttachedDraw::new(c.matrix, settings, instances);
-    let item = DrawItem { detail: true, ..DrawItem::plain(c.mesh, c.material, Mat4::IDENTITY) }.with_kind(attached);
+    let item = DrawItem { detail: true, ..DrawItem::plain(c.mesh, c.material, Mat4::IDENTITY) }
+        .with_kind(attached)
+        .named(cx.node_id);
     cx.set("scene", Arc::new(vec![item]));
 }
 

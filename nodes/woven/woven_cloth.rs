@@ -231,7 +231,8 @@ impl Node for WovenClothNode {
             }
             let material = Arc::new(Material { base_color: color, glossiness: gloss, ..Default::default() });
             let item = DrawItem::plain(Arc::new(to_mesh(layer)), material, Mat4::IDENTITY)
-                .with_kind(WovenLayer { layer: name, scales });
+                .with_kind(WovenLayer { layer: name, scales })
+                .named(format!("{}_{name}", cx.node_id));
             items.push(item);
         }
         cx.count("patches_panel", scales[0]);

@@ -1,5 +1,6 @@
-//! Writing geometry files: OBJ (text), PLY (binary little-endian) and binary glTF (.glb, with a
-//! material per part), atomically.
+//! Writing geometry files: OBJ (text) and binary glTF (.glb, with a material per item), each
+//! with an object per scene item and per attachment instance, and PLY (binary little-endian,
+//! one mesh), atomically.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -19,22 +20,139 @@ crate::choice!(
     }
 );
 
-/// A run of an export's triangles drawn with one material: the material of the scene item they
-/// came from. glTF writes one primitive with its own material per part; OBJ and PLY ignore them.
+/// One scene item in an export: its object name, where its vertices and triangles lie in the
+/// exported mesh, its attachment instances and its material. OBJ and glTF write an object per
+/// item drawn once and per attachment instance ([`objects`]); PLY and USDA ignore parts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GeometryPart {
+    /// The item's name: the node that made it, else its kind (unique within the export).
+    pub name: String,
+    /// Vertex indices into the exported mesh.
+    pub vertices: std::ops::Range<usize>,
     /// Triangle indices (not index-buffer offsets) into the exported mesh.
     pub triangles: std::ops::Range<usize>,
+    /// The instances of an attachment, in instance order, each within `vertices` and
+    /// `triangles`; empty for an item drawn once.
+    pub instances: Vec<Span>,
+    /// The pattern piece of each of the item's triangles (a Surface's); empty otherwise.
+    pub pieces: Vec<u32>,
     /// Linear RGB.
     pub base_color: glam::Vec3,
     /// 0 = rough, 1 = mirror-like (the renderer's glossiness).
     pub glossiness: f32,
 }
 
+/// The vertices and triangles of one attachment instance in an exported mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Span {
+    pub vertices: std::ops::Range<usize>,
+    pub triangles: std::ops::Range<usize>,
+}
+
+impl GeometryPart {
+    /// All of `mesh` as one item named `name` in a default grey, with the mesh's pattern pieces.
+    pub fn whole(mesh: &Mesh, name: &str) -> GeometryPart {
+        let pieces = if mesh.piece_ids.len() == mesh.positions.len() {
+            mesh.indices.chunks_exact(3).map(|t| mesh.piece_ids[t[0] as usize]).collect()
+        } else {
+            Vec::new()
+        };
+        GeometryPart {
+            name: name.to_string(),
+            vertices: 0..mesh.positions.len(),
+            triangles: 0..mesh.triangle_count(),
+            instances: Vec::new(),
+            pieces,
+            base_color: glam::Vec3::splat(0.8),
+            glossiness: 0.2,
+        }
+    }
+}
+
+/// One object of an export: an item drawn once, or one instance of an attachment (named
+/// `<item>_<instance index>`). Objects without triangles are left out (an instance whose
+/// vertices were all outliers keeps its index gap).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GeometryObject<'a> {
+    pub name: std::borrow::Cow<'a, str>,
+    /// Index of the part (item) it belongs to.
+    pub part: usize,
+    pub vertices: std::ops::Range<usize>,
+    pub triangles: std::ops::Range<usize>,
+    /// The pattern piece of each triangle, or empty.
+    pub pieces: &'a [u32],
+}
+
+/// The objects of `parts` in order, and what an export header counts of them.
+pub fn objects(parts: &[GeometryPart]) -> (Vec<GeometryObject<'_>>, ObjectCounts) {
+    let mut objects = Vec::new();
+    let mut counts = ObjectCounts::default();
+    for (k, part) in parts.iter().enumerate() {
+        let before = objects.len();
+        if part.instances.is_empty() {
+            if !part.triangles.is_empty() {
+                objects.push(GeometryObject {
+                    name: part.name.as_str().into(),
+                    part: k,
+                    vertices: part.vertices.clone(),
+                    triangles: part.triangles.clone(),
+                    pieces: &part.pieces,
+                });
+            }
+        } else {
+            for (i, s) in part.instances.iter().enumerate().filter(|(_, s)| !s.triangles.is_empty()) {
+                objects.push(GeometryObject {
+                    name: format!("{}_{i}", part.name).into(),
+                    part: k,
+                    vertices: s.vertices.clone(),
+                    triangles: s.triangles.clone(),
+                    pieces: &[],
+                });
+            }
+            counts.instances += objects.len() - before;
+        }
+        counts.items += usize::from(objects.len() > before);
+    }
+    counts.objects = objects.len();
+    (objects, counts)
+}
+
+/// What an export holds: scene items with triangles, attachment instances with triangles, and
+/// objects (items drawn once plus instances).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ObjectCounts {
+    pub items: usize,
+    pub instances: usize,
+    pub objects: usize,
+}
+
+/// Checks that `objects` cover the mesh's triangles in order and their vertex ranges are in
+/// the mesh and hold their triangles' vertices (the writers rely on both).
+fn check_objects(path: &Path, mesh: &Mesh, objects: &[GeometryObject<'_>]) -> anyhow::Result<()> {
+    let triangles = mesh.triangle_count();
+    let contiguous = objects.windows(2).all(|w| w[0].triangles.end == w[1].triangles.start);
+    if !contiguous
+        || objects.first().map_or(0, |o| o.triangles.start) != 0
+        || objects.last().map_or(0, |o| o.triangles.end) != triangles
+    {
+        anyhow::bail!("cannot write {}: the objects do not cover the {triangles} triangles", path.display());
+    }
+    for o in objects {
+        let inside = o.vertices.end <= mesh.positions.len()
+            && mesh.indices[3 * o.triangles.start..3 * o.triangles.end]
+                .iter()
+                .all(|&i| o.vertices.contains(&(i as usize)));
+        if !inside {
+            anyhow::bail!("cannot write {}: object {} uses vertices outside its range", path.display(), o.name);
+        }
+    }
+    Ok(())
+}
+
 /// Writes `mesh` to `path` in `format`; `parts` give the materials of its triangles.
 pub fn write_geometry(path: &Path, mesh: &Mesh, parts: &[GeometryPart], format: GeometryFormat) -> anyhow::Result<()> {
     match format {
-        GeometryFormat::Obj => write_obj(path, mesh),
+        GeometryFormat::Obj => write_obj(path, mesh, parts),
         GeometryFormat::Ply => write_ply(path, mesh),
         GeometryFormat::Glb => write_glb(path, mesh, parts),
         // One frame on its own; the batch runner collects a range into one cache instead.
@@ -43,78 +161,108 @@ pub fn write_geometry(path: &Path, mesh: &Mesh, parts: &[GeometryPart], format: 
 }
 
 /// Writes binary glTF 2.0: one buffer (positions, then normals and UVs where every vertex has
-/// one, then u32 indices), one mesh with a primitive per part sharing the vertex accessors, and
-/// a metallic-roughness material per part (base colour, metallic 0, roughness 1 - glossiness,
-/// double-sided: cloth is seen from both sides). Positions are world space, Y up, as rendered.
-/// Parts that do not cover the triangles exactly are an error (one default-grey part is used
-/// when `parts` is empty).
+/// one, then u32 indices, each object's counted from its first vertex), a mesh and a node per
+/// object (an item drawn once, or an attachment instance as a child of a node named after its
+/// item; see [`objects`]) whose accessors view its range of the shared arrays, and a
+/// metallic-roughness material per item (base colour, metallic 0, roughness 1 - glossiness,
+/// double-sided: cloth is seen from both sides). `asset.extras` counts items, instances and
+/// objects. Positions are world space, Y up, as rendered. Parts whose objects do not cover
+/// the triangles exactly are an error (one default-grey item is used when `parts` is empty).
 pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Result<()> {
     use serde_json::json;
     let (n, triangles) = (mesh.positions.len(), mesh.triangle_count());
-    let fallback = [GeometryPart { triangles: 0..triangles, base_color: glam::Vec3::splat(0.8), glossiness: 0.2 }];
+    let fallback = [GeometryPart::whole(mesh, "werkstatt")];
     let parts = if parts.is_empty() { &fallback[..] } else { parts };
-    let contiguous = parts.windows(2).all(|w| w[0].triangles.end == w[1].triangles.start);
-    if !contiguous || parts[0].triangles.start != 0 || parts[parts.len() - 1].triangles.end != triangles {
-        anyhow::bail!("cannot write {}: the material parts do not cover the {triangles} triangles", path.display());
-    }
     if mesh.indices.iter().any(|&i| i as usize >= n) {
         anyhow::bail!("cannot write {}: an index is past the {n} vertices", path.display());
     }
+    let (objects, counts) = objects(parts);
+    check_objects(path, mesh, &objects)?;
     let with_normals = n > 0 && mesh.normals.len() == n;
     let with_uvs = n > 0 && mesh.uvs.len() == n;
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-    let mut views = Vec::new();
-    let mut accessors = Vec::new();
-    let mut offset = 0usize;
-    let mut vertex_attribute = |views: &mut Vec<_>, accessors: &mut Vec<_>, width: usize, kind: &str| {
+    // One view per array; each object's accessors start at its first vertex.
+    let mut views = vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": 12 * n, "target": 34962})];
+    let mut offset = 12 * n;
+    let mut array_view = |width: usize| {
         views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * width * n, "target": 34962}));
-        let mut a = json!({"bufferView": views.len() - 1, "componentType": 5126, "count": n, "type": kind});
-        if kind == "VEC3" && accessors.is_empty() {
-            // glTF requires the bounds of POSITION.
-            a["min"] = json!(lo.to_array());
-            a["max"] = json!(hi.to_array());
-        }
-        accessors.push(a);
         offset += 4 * width * n;
-        accessors.len() - 1
+        views.len() - 1
     };
-    let mut attributes = serde_json::Map::new();
-    attributes.insert("POSITION".into(), vertex_attribute(&mut views, &mut accessors, 3, "VEC3").into());
-    if with_normals {
-        attributes.insert("NORMAL".into(), vertex_attribute(&mut views, &mut accessors, 3, "VEC3").into());
-    }
-    if with_uvs {
-        attributes.insert("TEXCOORD_0".into(), vertex_attribute(&mut views, &mut accessors, 2, "VEC2").into());
-    }
+    let normal_view = with_normals.then(|| array_view(3));
+    let uv_view = with_uvs.then(|| array_view(2));
     let index_view = views.len();
     views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12 * triangles, "target": 34963}));
     let total = offset + 12 * triangles;
-    let mut primitives = Vec::new();
-    let mut materials = Vec::new();
-    for (k, part) in parts.iter().enumerate() {
-        let c = part.base_color;
-        materials.push(json!({
-            "name": format!("part_{k}"),
-            "pbrMetallicRoughness": {"baseColorFactor": [c.x, c.y, c.z, 1.0], "metallicFactor": 0.0,
-                "roughnessFactor": (1.0 - part.glossiness).clamp(0.0, 1.0)},
-            "doubleSided": true,
-        }));
-        if part.triangles.is_empty() {
+    // Materials are named by item index: tools/fidelity/cycles.py finds its items by them.
+    let materials: Vec<_> = parts
+        .iter()
+        .enumerate()
+        .map(|(k, part)| {
+            let c = part.base_color;
+            json!({
+                "name": format!("part_{k}"),
+                "pbrMetallicRoughness": {"baseColorFactor": [c.x, c.y, c.z, 1.0], "metallicFactor": 0.0,
+                    "roughnessFactor": (1.0 - part.glossiness).clamp(0.0, 1.0)},
+                "doubleSided": true,
+            })
+        })
+        .collect();
+    let (mut accessors, mut meshes, mut nodes, mut roots) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut item_node = None;
+    for o in &objects {
+        let (v0, count) = (o.vertices.start, o.vertices.len());
+        let (lo, hi) = mesh.positions[o.vertices.clone()]
+            .iter()
+            .fold((glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let attribute = |accessors: &mut Vec<serde_json::Value>, view: usize, width: usize, kind: &str| {
+            accessors.push(json!({"bufferView": view, "byteOffset": 4 * width * v0, "componentType": 5126,
+                "count": count, "type": kind}));
+            accessors.len() - 1
+        };
+        let mut attributes = serde_json::Map::new();
+        let position = attribute(&mut accessors, 0, 3, "VEC3");
+        // glTF requires the bounds of POSITION.
+        accessors[position]["min"] = json!(lo.to_array());
+        accessors[position]["max"] = json!(hi.to_array());
+        attributes.insert("POSITION".into(), position.into());
+        if let Some(view) = normal_view {
+            attributes.insert("NORMAL".into(), attribute(&mut accessors, view, 3, "VEC3").into());
+        }
+        if let Some(view) = uv_view {
+            attributes.insert("TEXCOORD_0".into(), attribute(&mut accessors, view, 2, "VEC2").into());
+        }
+        accessors.push(json!({"bufferView": index_view, "byteOffset": 12 * o.triangles.start,
+            "componentType": 5125, "count": 3 * o.triangles.len(), "type": "SCALAR"}));
+        let primitive =
+            json!({"attributes": attributes, "indices": accessors.len() - 1, "material": o.part, "mode": 4});
+        meshes.push(json!({"name": o.name, "primitives": [primitive]}));
+        let node = json!({"name": o.name, "mesh": meshes.len() - 1});
+        if parts[o.part].instances.is_empty() {
+            nodes.push(node);
+            roots.push(nodes.len() - 1);
             continue;
         }
-        accessors.push(json!({"bufferView": index_view, "byteOffset": 12 * part.triangles.start,
-            "componentType": 5125, "count": 3 * part.triangles.len(), "type": "SCALAR"}));
-        primitives.push(json!({"attributes": attributes, "indices": accessors.len() - 1, "material": k, "mode": 4}));
+        // An attachment's instances are children of one node named after the attachment.
+        let parent = match item_node {
+            Some((part, parent)) if part == o.part => parent,
+            _ => {
+                nodes.push(json!({"name": parts[o.part].name, "children": []}));
+                roots.push(nodes.len() - 1);
+                item_node = Some((o.part, nodes.len() - 1));
+                nodes.len() - 1
+            }
+        };
+        nodes.push(node);
+        let child = nodes.len() - 1;
+        nodes[parent]["children"].as_array_mut().expect("an item node has children").push(child.into());
     }
     let doc = json!({
-        "asset": {"version": "2.0", "generator": "werkstatt"},
+        "asset": {"version": "2.0", "generator": "werkstatt",
+            "extras": {"items": counts.items, "attachment_instances": counts.instances, "objects": counts.objects}},
         "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [{"name": "werkstatt", "mesh": 0}],
-        "meshes": [{"name": "werkstatt", "primitives": primitives}],
+        "scenes": [{"nodes": roots}],
+        "nodes": nodes,
+        "meshes": meshes,
         "materials": materials,
         "buffers": [{"byteLength": total}],
         "bufferViews": views,
@@ -146,43 +294,101 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
             // The mesh's v runs down from the top of the image, as glTF's does.
             floats(out, bytemuck::cast_slice(&mesh.uvs))?;
         }
-        mesh.indices[..3 * triangles].iter().try_for_each(|i| out.write_all(&i.to_le_bytes()))
+        objects.iter().try_for_each(|o| {
+            let base = o.vertices.start as u32;
+            let indices = &mesh.indices[3 * o.triangles.start..3 * o.triangles.end];
+            indices.iter().try_for_each(|i| out.write_all(&(i - base).to_le_bytes()))
+        })
     })
     .with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Writes OBJ: positions, UVs (v up), normals and triangles; a Surface's pattern pieces as
-/// objects `piece_0`, `piece_1`, ... (the faces of each piece in their order).
-pub fn write_obj(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
+/// Writes OBJ. With `parts` (an export): a header comment counting items, attachment
+/// instances and objects, then per object ([`objects`]) `o <name>`, its vertices (positions,
+/// UVs with v up, normals) and its triangles, those of a Surface's pattern pieces under
+/// `g piece_<id>` when it has several. Without parts (a recorded frame): every vertex, then
+/// the triangles, a Surface's pattern pieces as objects `piece_0`, `piece_1`, ... (each id up
+/// to the largest, even when empty, so MeshSequence reads the same ids back).
+pub fn write_obj(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(Vec::new());
-    writeln!(out, "# werkstatt export: {} vertices, {} triangles", mesh.positions.len(), mesh.triangle_count())?;
-    for p in &mesh.positions {
-        writeln!(out, "v {} {} {}", p.x, p.y, p.z)?;
-    }
-    for t in &mesh.uvs {
-        // OBJ's v points up.
-        writeln!(out, "vt {} {}", t.x, 1.0 - t.y)?;
-    }
-    for n in &mesh.normals {
-        writeln!(out, "vn {} {} {}", n.x, n.y, n.z)?;
-    }
-    let face = |out: &mut std::io::BufWriter<Vec<u8>>, t: &[u32]| {
-        let [a, b, c] = [t[0] + 1, t[1] + 1, t[2] + 1];
-        writeln!(out, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")
+    let n = mesh.positions.len();
+    let (with_uvs, with_normals) = (mesh.uvs.len() == n, mesh.normals.len() == n);
+    let vertex = |out: &mut std::io::BufWriter<Vec<u8>>, i: usize| -> std::io::Result<()> {
+        let p = mesh.positions[i];
+        writeln!(out, "v {} {} {}", p.x, p.y, p.z)
     };
-    if mesh.piece_ids.is_empty() {
-        for t in mesh.indices.chunks_exact(3) {
-            face(&mut out, t)?;
+    let extras = |out: &mut std::io::BufWriter<Vec<u8>>, range: std::ops::Range<usize>| -> std::io::Result<()> {
+        if with_uvs {
+            // OBJ's v points up.
+            mesh.uvs[range.clone()].iter().try_for_each(|t| writeln!(out, "vt {} {}", t.x, 1.0 - t.y))?;
+        }
+        if with_normals {
+            mesh.normals[range].iter().try_for_each(|n| writeln!(out, "vn {} {} {}", n.x, n.y, n.z))?;
+        }
+        Ok(())
+    };
+    // `shift` turns a mesh index into the file's (1-based, counting only written vertices).
+    let face = |out: &mut std::io::BufWriter<Vec<u8>>, t: &[u32], shift: i64| {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| i as i64 + shift);
+        match (with_uvs, with_normals) {
+            (true, true) => writeln!(out, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}"),
+            (true, false) => writeln!(out, "f {a}/{a} {b}/{b} {c}/{c}"),
+            (false, true) => writeln!(out, "f {a}//{a} {b}//{b} {c}//{c}"),
+            (false, false) => writeln!(out, "f {a} {b} {c}"),
+        }
+    };
+    let triangles = |range: std::ops::Range<usize>| mesh.indices[3 * range.start..3 * range.end].chunks_exact(3);
+    if parts.is_empty() {
+        writeln!(out, "# werkstatt export: {n} vertices, {} triangles", mesh.triangle_count())?;
+        (0..n).try_for_each(|i| vertex(&mut out, i))?;
+        extras(&mut out, 0..n)?;
+        if mesh.piece_ids.is_empty() {
+            for t in triangles(0..mesh.triangle_count()) {
+                face(&mut out, t, 1)?;
+            }
+        } else {
+            // One OBJ object per pattern piece (MeshSequence reads each object as a piece).
+            let pieces = mesh.piece_ids.iter().copied().max().unwrap_or(0);
+            for piece in 0..=pieces {
+                writeln!(out, "o piece_{piece}")?;
+                for t in triangles(0..mesh.triangle_count()).filter(|t| mesh.piece_ids[t[0] as usize] == piece) {
+                    face(&mut out, t, 1)?;
+                }
+            }
         }
     } else {
-        // One OBJ object per pattern piece (MeshSequence reads each object as a piece), every
-        // id up to the largest written even when empty, so the ids read back the same.
-        let pieces = mesh.piece_ids.iter().copied().max().unwrap_or(0);
-        for piece in 0..=pieces {
-            writeln!(out, "o piece_{piece}")?;
-            for t in mesh.indices.chunks_exact(3).filter(|t| mesh.piece_ids[t[0] as usize] == piece) {
-                face(&mut out, t)?;
+        let (objects, counts) = objects(parts);
+        check_objects(path, mesh, &objects)?;
+        let written: usize = objects.iter().map(|o| o.vertices.len()).sum();
+        let total: usize = objects.iter().map(|o| o.triangles.len()).sum();
+        writeln!(
+            out,
+            "# werkstatt export: {written} vertices, {total} triangles; {} items, {} attachment instances, {} objects",
+            counts.items, counts.instances, counts.objects
+        )?;
+        let mut before = 0;
+        for o in &objects {
+            writeln!(out, "o {}", o.name)?;
+            o.vertices.clone().try_for_each(|i| vertex(&mut out, i))?;
+            extras(&mut out, o.vertices.clone())?;
+            let shift = (before + 1) as i64 - o.vertices.start as i64;
+            let mut ids: Vec<u32> = o.pieces.to_vec();
+            ids.sort_unstable();
+            ids.dedup();
+            if ids.len() < 2 {
+                for t in triangles(o.triangles.clone()) {
+                    face(&mut out, t, shift)?;
+                }
+            } else {
+                for id in ids {
+                    writeln!(out, "g piece_{id}")?;
+                    let of_piece = o.pieces.iter().map(|&p| p == id);
+                    for (t, _) in triangles(o.triangles.clone()).zip(of_piece).filter(|(_, mine)| *mine) {
+                        face(&mut out, t, shift)?;
+                    }
+                }
             }
+            before += o.vertices.len();
         }
     }
     let bytes = out.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -281,6 +487,63 @@ mod tests {
             }
         }
         assert!(super::write_pipelined(&mut Full, 1000, 7, fill).is_err());
+    }
+
+    /// OBJ with parts: an object per item drawn once (a Surface's pieces as groups) and per
+    /// attachment instance with triangles; an instance without any leaves its vertices out and
+    /// a gap in the numbering, and later faces still point at their own vertices.
+    #[test]
+    fn obj_objects_are_items_and_instances_with_pieces_as_groups() {
+        use super::{GeometryPart, Span};
+        let tri = |x: f32| [Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 0.0, 0.0), Vec3::new(x, 1.0, 0.0)];
+        let positions: Vec<Vec3> = (0..5).flat_map(|k| tri(k as f32)).collect();
+        // Cloth: vertices 0..6, a triangle of piece 1 then one of piece 0; three instances of a
+        // triangle at 6..15, the middle one dropped.
+        let indices = vec![0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 13, 14];
+        let mesh = crate::mesh::Mesh::from_raw(
+            positions,
+            vec![Vec3::Z; 15],
+            vec![Vec2::ZERO; 15],
+            Vec::new(),
+            Vec::new(),
+            indices,
+        );
+        let part = |name: &str, vertices, triangles, instances, pieces| GeometryPart {
+            name: name.into(),
+            vertices,
+            triangles,
+            instances,
+            pieces,
+            base_color: Vec3::ONE,
+            glossiness: 0.0,
+        };
+        let spans = vec![
+            Span { vertices: 6..9, triangles: 2..3 },
+            Span { vertices: 9..12, triangles: 3..3 },
+            Span { vertices: 12..15, triangles: 3..4 },
+        ];
+        let parts = [part("cloth", 0..6, 0..2, Vec::new(), vec![1, 0]), part("b", 6..15, 2..4, spans, Vec::new())];
+        let path = std::env::temp_dir().join(format!("werkstatt-objects-{}.obj", std::process::id()));
+        super::write_obj(&path, &mesh, &parts).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with("v")).collect();
+        assert_eq!(
+            lines,
+            [
+                "# werkstatt export: 12 vertices, 4 triangles; 2 items, 2 attachment instances, 3 objects",
+                "o cloth",
+                "g piece_0",
+                "f 4/4/4 5/5/5 6/6/6",
+                "g piece_1",
+                "f 1/1/1 2/2/2 3/3/3",
+                "o b_0",
+                "f 7/7/7 8/8/8 9/9/9",
+                "o b_2",
+                "f 10/10/10 11/11/11 12/12/12",
+            ]
+        );
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 12);
     }
 
     /// Binary PLY: the header's counts, 32 bytes per vertex (position, normal, s, t = 1 - v),

@@ -149,12 +149,20 @@ pub struct DrawItem {
     /// `cuboid(model * p)` (dissertation section 3.1.1). None for the ordinary affine path.
     pub cuboid: Option<Arc<crate::cuboid::CuboidGrid>>,
     pub kind: Arc<dyn ItemKind>,
+    /// Who made the item (the node's id, with a suffix where a node makes several), so an
+    /// export can name its objects; None: exports name it by its kind.
+    pub name: Option<Arc<str>>,
 }
 
 impl DrawItem {
     /// A coarse (non-detail) mesh drawn as it is.
     pub fn plain(mesh: Arc<Mesh>, material: Arc<Material>, model: Mat4) -> DrawItem {
-        DrawItem { mesh, material, model, detail: false, cuboid: None, kind: Arc::new(PlainMesh) }
+        DrawItem { mesh, material, model, detail: false, cuboid: None, kind: Arc::new(PlainMesh), name: None }
+    }
+
+    /// This item named `name` (see [`DrawItem::name`]).
+    pub fn named(self, name: impl Into<Arc<str>>) -> DrawItem {
+        DrawItem { name: Some(name.into()), ..self }
     }
 
     /// This item drawn as `kind`.

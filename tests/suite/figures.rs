@@ -147,7 +147,15 @@ fn animated_figure_is_deterministic_and_exports_its_geometry() {
     let faces = obj.lines().filter(|l| l.starts_with("f ")).count();
     let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
     assert_eq!((faces, vertices), (5960, 3288), "faces and vertices of the export");
-    assert!(obj.starts_with("# werkstatt export: 3288 vertices, 5960 triangles\n"), "{}", obj.lines().next().unwrap());
+    // An object per item and per sticker: the flag, each of the two sticker attachments' one
+    // instance, the three colliders.
+    let header = "# werkstatt export: 3288 vertices, 5960 triangles; 6 items, 2 attachment instances, 6 objects\n";
+    assert!(obj.starts_with(header), "{}", obj.lines().next().unwrap());
+    let objects: Vec<&str> = obj.lines().filter_map(|l| l.strip_prefix("o ")).collect();
+    assert_eq!(
+        objects,
+        ["draw_cloth", "logo_0", "sticker_0", "cloth_collider_0", "cloth_collider_1", "cloth_collider_2"]
+    );
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! File formats out: ExportGeometry's binary glTF holds the geometry its OBJ of the same frame
-//! holds (read back by the `gltf` crate, compared with the OBJ text parsed here), one
-//! primitive per scene item, with that item's material.
+//! holds (read back by the `gltf` crate, compared with the OBJ text parsed here), with an
+//! object (OBJ `o`, glTF node) per scene item and per attachment instance, each item's in its
+//! material.
 
 use std::path::Path;
 
@@ -44,6 +45,74 @@ fn read_obj(path: &Path) -> (Vec<[f32; 3]>, Vec<u32>) {
     (v, f)
 }
 
+/// An OBJ's first line and its objects: name, vertices and triangles written under each `o`.
+fn obj_objects(path: &Path) -> (String, Vec<(String, usize, usize)>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut objects: Vec<(String, usize, usize)> = Vec::new();
+    for line in text.lines() {
+        match line.split_whitespace().next() {
+            Some("o") => objects.push((line[2..].to_string(), 0, 0)),
+            Some("v") => objects.last_mut().expect("a vertex outside any object").1 += 1,
+            Some("f") => objects.last_mut().expect("a face outside any object").2 += 1,
+            _ => {}
+        }
+    }
+    (text.lines().next().unwrap_or_default().to_string(), objects)
+}
+
+/// A .glb's nodes depth first in document order: name, parent's name, and for a node with a
+/// mesh its one primitive's positions, indices and material index.
+type GlbNode = (String, Option<String>, Option<(Vec<[f32; 3]>, Vec<u32>, usize)>);
+fn glb_nodes(path: &Path) -> (gltf::Document, Vec<GlbNode>) {
+    let (doc, buffers, _) = gltf::import(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    // Names from the JSON itself (the gltf crate reads them only with its "names" feature).
+    let json = glb_json(path);
+    let names: Vec<String> = json["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n["name"].as_str().expect("every node is named").to_string())
+        .collect();
+    let mut out = Vec::new();
+    fn walk(node: gltf::Node, parent: Option<String>, cx: (&[gltf::buffer::Data], &[String]), out: &mut Vec<GlbNode>) {
+        let (buffers, names) = cx;
+        let name = names[node.index()].clone();
+        let geometry = node.mesh().map(|mesh| {
+            let prims: Vec<_> = mesh.primitives().collect();
+            assert_eq!(prims.len(), 1, "node {name}: one primitive");
+            let prim = &prims[0];
+            assert_eq!(prim.mode(), gltf::mesh::Mode::Triangles);
+            let reader = prim.reader(|b| Some(&buffers[b.index()]));
+            let positions: Vec<[f32; 3]> = reader.read_positions().expect("positions").collect();
+            assert_eq!(reader.read_normals().expect("normals").len(), positions.len());
+            assert_eq!(reader.read_tex_coords(0).expect("uvs").into_f32().len(), positions.len());
+            // Bounds are required on POSITION and must hold every vertex.
+            let bounds = prim.bounding_box();
+            for p in &positions {
+                assert!((0..3).all(|k| bounds.min[k] <= p[k] && p[k] <= bounds.max[k]), "{p:?} outside {bounds:?}");
+            }
+            let indices = reader.read_indices().expect("indices").into_u32().collect();
+            (positions, indices, prim.material().index().expect("a material"))
+        });
+        out.push((name.clone(), parent, geometry));
+        for child in node.children() {
+            walk(child, Some(name.clone()), cx, out);
+        }
+    }
+    let scene = doc.default_scene().expect("a default scene");
+    for node in scene.nodes() {
+        walk(node, None, (&buffers, &names), &mut out);
+    }
+    (doc, out)
+}
+
+/// The JSON chunk of a .glb.
+fn glb_json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap();
+    let length = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    serde_json::from_slice(&bytes[20..20 + length]).unwrap()
+}
+
 #[test]
 fn glb_export_holds_the_obj_geometry_with_a_material_per_item() {
     let dir = out_dir("formats-glb");
@@ -55,46 +124,121 @@ fn glb_export_holds_the_obj_geometry_with_a_material_per_item() {
     files.sort();
     assert_eq!(files, ["glb_0000.glb", "obj_0000.obj"]);
     let (obj_positions, obj_indices) = read_obj(&dir.join("obj_0000.obj"));
+    let (_, obj_objects) = obj_objects(&dir.join("obj_0000.obj"));
 
     let glb = dir.join("glb_0000.glb");
-    let (doc, buffers, _) = gltf::import(&glb).unwrap_or_else(|e| panic!("{}: {e}", glb.display()));
-    let meshes: Vec<_> = doc.meshes().collect();
-    assert_eq!(meshes.len(), 1);
-    let (mut indices, mut colors, mut positions) = (Vec::new(), Vec::new(), Vec::new());
-    for prim in meshes[0].primitives() {
-        assert_eq!(prim.mode(), gltf::mesh::Mode::Triangles);
-        let reader = prim.reader(|b| Some(&buffers[b.index()]));
-        // The primitives share one vertex array.
-        positions = reader.read_positions().expect("positions").collect();
-        assert_eq!(reader.read_normals().expect("normals").len(), positions.len());
-        assert_eq!(reader.read_tex_coords(0).expect("uvs").into_f32().len(), positions.len());
-        let prim_indices: Vec<u32> = reader.read_indices().expect("indices").into_u32().collect();
-        let m = prim.material().pbr_metallic_roughness();
-        colors.push((m.base_color_factor(), m.roughness_factor(), m.metallic_factor(), prim_indices.len() / 3));
-        indices.extend(prim_indices);
+    let (doc, nodes) = glb_nodes(&glb);
+    let (mut indices, mut positions, mut names) = (Vec::new(), Vec::new(), Vec::new());
+    let mut triangles_by_material = [0usize; 2];
+    for (name, _, geometry) in &nodes {
+        let Some((p, i, material)) = geometry else { continue };
+        // Each node's indices count from its own first vertex.
+        indices.extend(i.iter().map(|i| i + positions.len() as u32));
+        positions.extend_from_slice(p);
+        names.push(name.clone());
+        triangles_by_material[*material] += i.len() / 3;
     }
     // Every vertex and triangle of the OBJ, bit for bit (OBJ prints the shortest f32 that reads
-    // back the same).
+    // back the same), object for object.
     assert_eq!(positions.len(), obj_positions.len());
     assert!(positions == obj_positions, "the .glb's positions differ from the .obj's");
     assert_eq!(indices, obj_indices);
+    assert_eq!(names, obj_objects.iter().map(|o| o.0.clone()).collect::<Vec<_>>());
     // The cloth (400 triangles or so) in the fabric, then the 20 buttons in horn.
-    assert_eq!(colors.len(), 2, "{colors:?}");
-    assert_eq!((colors[0].0, colors[0].1, colors[0].2), ([0.9, 0.2, 0.1, 1.0], 0.75, 0.0));
-    assert_eq!((colors[1].0, colors[1].1, colors[1].2), ([0.1, 0.3, 0.9, 1.0], 0.25, 0.0));
-    assert!(colors[0].3 > 300 && colors[1].3 >= 18 * 64, "triangles per part: {colors:?}");
-    // Bounds are required on POSITION and must hold every vertex.
-    let bounds = doc.meshes().next().unwrap().primitives().next().unwrap().bounding_box();
-    for p in &positions {
-        assert!((0..3).all(|k| bounds.min[k] <= p[k] && p[k] <= bounds.max[k]), "{p:?} outside {bounds:?}");
-    }
+    let materials: Vec<_> = doc.materials().map(|m| m.pbr_metallic_roughness()).collect();
+    let colors: Vec<_> =
+        materials.iter().map(|m| (m.base_color_factor(), m.roughness_factor(), m.metallic_factor())).collect();
+    assert_eq!(colors, [([0.9, 0.2, 0.1, 1.0], 0.75, 0.0), ([0.1, 0.3, 0.9, 1.0], 0.25, 0.0)]);
+    assert!(
+        triangles_by_material[0] > 300 && triangles_by_material[1] >= 18 * 64,
+        "triangles per material: {triangles_by_material:?}"
+    );
     eprintln!(
-        "glb export: {} vertices, {} triangles, {} bytes (obj {} bytes), {:.0} ms for both",
+        "glb export: {} vertices, {} triangles, {} nodes, {} bytes (obj {} bytes), {:.0} ms for both",
         positions.len(),
         indices.len() / 3,
+        nodes.len(),
         std::fs::metadata(&glb).unwrap().len(),
         std::fs::metadata(dir.join("obj_0000.obj")).unwrap().len(),
         started.elapsed().as_secs_f64() * 1e3
+    );
+}
+
+/// A flag with 40 buttons (a GridPlacement of 8 x 5 within its one piece): the OBJ holds one
+/// object for the flag and one per button, each button's with exactly the button mesh's
+/// vertices and triangles, and its header counts them; the .glb has a node per object of the
+/// same name and size (the buttons as children of a node `buttons`), and counts them too.
+#[test]
+fn each_attachment_instance_and_item_is_its_own_object() {
+    let dir = out_dir("formats-objects");
+    let graph = dir.join("flag.ron");
+    std::fs::write(
+        &graph,
+        r#"(version: 1, nodes: {
+            "cloth": (kind: "ClothSim", params: {"preset": "flag", "triangles": 400}),
+            "flag": (kind: "Draw", params: {}),
+            "matrix": (kind: "MatrixTexture", params: {"resolution": 128}),
+            "grid": (kind: "GridPlacement", params: {"columns": 8, "rows": 5, "u_min": 0.05, "u_max": 0.95, "v_min": 0.05, "v_max": 0.62}),
+            "button": (kind: "Primitive", params: {"shape": "disc", "radius": 0.5, "height": 0.2, "segments_u": 16}),
+            "buttons": (kind: "PointAttachment", params: {"scale": 0.03}),
+            "scene": (kind: "Merge", params: {}),
+            "obj": (kind: "ExportGeometry", params: {"format": "obj"}),
+            "glb": (kind: "ExportGeometry", params: {"format": "glb"}),
+        }, links: [("cloth.surface", "flag.mesh"), ("cloth.surface", "matrix.surface"), ("cloth.surface", "grid.surface"),
+            ("matrix.matrix", "buttons.matrix"), ("button.mesh", "buttons.mesh"), ("grid.placements", "buttons.placements"),
+            ("flag.scene", "scene.a"), ("buttons.scene", "scene.b"), ("scene.scene", "obj.scene"), ("scene.scene", "glb.scene")])"#,
+    )
+    .unwrap();
+    render_graph(&graph, &dir, (0, 0), (16, 16), &[], &[]).unwrap();
+    let button = werkstatt::nodes::mesh::geometry::disc(0.5, 0.2, 16).unwrap();
+    let (nv, nt) = (button.positions.len(), button.triangle_count());
+    let n = 40;
+
+    let obj = dir.join("obj_0000.obj");
+    let (header, objects) = obj_objects(&obj);
+    assert_eq!(objects.len(), 1 + n, "{:?}", objects.iter().map(|o| &o.0).collect::<Vec<_>>());
+    assert_eq!(objects[0].0, "flag");
+    assert!(objects[0].2 > 300, "{:?}", objects[0]);
+    for (k, (name, vertices, triangles)) in objects[1..].iter().enumerate() {
+        assert_eq!(name, &format!("buttons_{k}"));
+        assert_eq!((*vertices, *triangles), (nv, nt), "{name}: the button mesh has {nv} vertices, {nt} triangles");
+    }
+    let (v, t) = (objects.iter().map(|o| o.1).sum::<usize>(), objects.iter().map(|o| o.2).sum::<usize>());
+    assert_eq!(
+        header,
+        format!(
+            "# werkstatt export: {v} vertices, {t} triangles; 2 items, {n} attachment instances, {} objects",
+            n + 1
+        )
+    );
+
+    let glb = dir.join("glb_0000.glb");
+    let (_, nodes) = glb_nodes(&glb);
+    // The items' nodes and the instances' nodes: 2 + 40.
+    assert_eq!(nodes.len(), 2 + n);
+    let with_mesh: Vec<_> = nodes.iter().filter(|(_, _, g)| g.is_some()).collect();
+    assert_eq!(with_mesh.len(), objects.len());
+    for ((name, parent, geometry), (obj_name, vertices, triangles)) in with_mesh.into_iter().zip(&objects) {
+        let (p, i, _) = geometry.as_ref().unwrap();
+        assert_eq!((name, p.len(), i.len() / 3), (obj_name, *vertices, *triangles));
+        let expected_parent = name.starts_with("buttons_").then(|| "buttons".to_string());
+        assert_eq!(parent, &expected_parent, "{name}");
+    }
+    assert_eq!(
+        glb_json(&glb)["asset"]["extras"],
+        serde_json::json!({"items": 2, "attachment_instances": n, "objects": n + 1})
+    );
+    // The project's reader takes each node as a pattern piece, in the file's order.
+    let back = werkstatt::mesh::load_mesh_file(&glb).unwrap();
+    assert_eq!(back.positions.len(), v);
+    assert_eq!(back.piece_ids.iter().copied().max(), Some(n as u32));
+    assert_eq!(back.piece_ids[back.positions.len() - 1], n as u32);
+    eprintln!(
+        "flag with {n} buttons: obj {} objects, {} bytes; glb {} nodes, {} bytes",
+        objects.len(),
+        std::fs::metadata(&obj).unwrap().len(),
+        nodes.len(),
+        std::fs::metadata(&glb).unwrap().len()
     );
 }
 

@@ -207,6 +207,60 @@ fn a_planar_occluder_blocks_lights_from_above_under_its_middle_only() {
     );
 }
 
+/// A 2 x 2 board attached 0.5 above the middle of a floor (a PointAttachment on the floor's
+/// matrix texture), under light from within 30 degrees of the zenith: by default the
+/// attachment casts (its 2 triangles are within the budget) and the floor under it is dark;
+/// with coarse_only it does not cast; over detail_triangle_budget it does not either, and the
+/// atlas warns with the count.
+#[test]
+fn attachments_cast_by_default_unless_coarse_only_or_over_the_budget() {
+    let out = out_dir("shadow_attachment");
+    let probe = probe(&out, 30.0);
+    let scene = r#""floor": (kind: "Primitive", params: { "shape": "plane", "size": 8.0, "segments_u": 1, "segments_v": 1 }),
+        "floor_draw": (kind: "Draw"),
+        "matrix": (kind: "MatrixTexture", params: { "resolution": 64 }),
+        "spot": (kind: "GridPlacement", params: { "columns": 1, "rows": 1 }),
+        "board": (kind: "Primitive", params: { "shape": "plane", "size": 1.0, "segments_u": 1, "segments_v": 1 }),
+        "board_attached": (kind: "PointAttachment", params: { "scale": 2.0, "lift": 0.5 }),
+        "all": (kind: "Merge"),"#;
+    let links = r#"("floor.mesh", "floor_draw.mesh"), ("m.material", "floor_draw.material"), ("floor_draw.scene", "all.a"),
+        ("floor.mesh", "matrix.surface"), ("floor.mesh", "spot.surface"), ("matrix.matrix", "board_attached.matrix"),
+        ("board.mesh", "board_attached.mesh"), ("spot.placements", "board_attached.placements"),
+        ("m.material", "board_attached.material"), ("board_attached.scene", "all.b"),"#;
+    let under = |atlas: &str| {
+        let s = Setup {
+            scene,
+            links,
+            camera: r#""distance": 5.0, "pitch": 6.0, "yaw": 30.0, "fov": 35.0"#,
+            probe: &probe,
+            lights: 8,
+            atlas,
+            hybrid: "",
+            reference: None,
+        };
+        let ev = run_graph(&graph(&s), 160, 120);
+        let pos = world_positions(&ev, 0);
+        let (mean, _, max, n) =
+            stats(&visibility(&ev), &pos, |p| p.y.abs() < 1e-3 && p.x.abs() < 0.3 && p.z.abs() < 0.3);
+        assert!(n > 20, "only {n} floor pixels under the board");
+        (mean, max, ev.report("atlas").unwrap().warnings.to_vec())
+    };
+    let (cast, cast_max, warnings) = under("");
+    let (coarse, _, coarse_warnings) = under(r#""coarse_only": true"#);
+    let (over, _, over_warnings) = under(r#""detail_triangle_budget": 1"#);
+    eprintln!(
+        "floor under an attachment: visibility {cast:.4} (default), {coarse:.4} (coarse_only), {over:.4} (over the budget)"
+    );
+    assert!(cast_max < 0.1, "the attachment casts no shadow by default: visibility up to {cast_max} under it");
+    assert!(warnings.is_empty() && coarse_warnings.is_empty(), "{warnings:?} {coarse_warnings:?}");
+    assert!(coarse > 0.95, "coarse_only still draws the attachment: visibility {coarse}");
+    assert!(over > 0.95, "over the budget the attachment still casts: visibility {over}");
+    assert!(
+        over_warnings.iter().any(|w| w.contains("2 triangles") && w.contains("detail_triangle_budget (1)")),
+        "{over_warnings:?}"
+    );
+}
+
 /// The standard normal CDF (Abramowitz and Stegun 7.1.26, error under 1.5e-7).
 fn normal_cdf(x: f32) -> f32 {
     let z = (x.abs() / std::f32::consts::SQRT_2) as f64;

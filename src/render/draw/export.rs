@@ -4,7 +4,7 @@
 use glam::{DVec3, Mat3, Vec3};
 
 use crate::cuboid::{CuboidGrid, fast_path};
-use crate::io::geometry::GeometryPart;
+use crate::io::geometry::{GeometryPart, Span};
 use crate::mesh::{Mesh, has_area};
 use crate::render::scene::DrawItem;
 
@@ -16,45 +16,103 @@ pub fn flatten(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<Mesh
     flatten_parts(cx, items).map(|(mesh, _)| mesh)
 }
 
-/// [`flatten`], with the triangles of each item that has any as a part carrying its material
-/// (for formats with materials: glTF).
+/// [`flatten`], with a part per item that has triangles: its name, vertex and triangle
+/// ranges, attachment instances and material (for formats that keep items apart).
 pub fn flatten_parts(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Result<(Mesh, Vec<GeometryPart>)> {
+    let names = item_names(items);
+    let mut meshes = Vec::with_capacity(items.len());
     let mut parts = Vec::with_capacity(items.len());
-    let mut materials = Vec::with_capacity(items.len());
-    let mut triangles = 0;
-    for (i, item) in items.iter().enumerate() {
+    let (mut vertices, mut triangles) = (0, 0);
+    for ((i, item), name) in items.iter().enumerate().zip(names) {
         let exported =
             item.kind.export(cx, item).map_err(|e| e.context(format!("exporting item {i} ({})", item.kind.name())))?;
-        parts.push(match exported {
-            Exported::World(mesh) => mesh,
+        let (mesh, per_instance) = match exported {
+            Exported::Instances { mesh, per_instance } => (mesh, Some(per_instance)),
             Exported::Local(mesh) => {
                 let (model, grid) = fast_path(item.model, item.cuboid.clone());
-                place(&mesh, model, grid.as_deref())
+                (place(&mesh, model, grid.as_deref()), None)
             }
-        });
-        let count = parts.last().map_or(0, Mesh::triangle_count);
+        };
+        let count = mesh.triangle_count();
         if count > 0 {
+            let instances = per_instance.map_or_else(Vec::new, |n| instance_spans(&mesh, n, vertices, triangles));
+            // A placed mesh keeps its item's vertices, so the item's pattern pieces still apply.
+            let piece_of = &item.mesh.piece_ids;
+            let pieces = if per_instance.is_none() && piece_of.len() == mesh.positions.len() {
+                mesh.indices.chunks_exact(3).map(|t| piece_of[t[0] as usize]).collect()
+            } else {
+                Vec::new()
+            };
             let m = &item.material;
-            let range = triangles..triangles + count;
-            materials.push(GeometryPart { triangles: range, base_color: m.base_color, glossiness: m.glossiness });
+            parts.push(GeometryPart {
+                name,
+                vertices: vertices..vertices + mesh.positions.len(),
+                triangles: triangles..triangles + count,
+                instances,
+                pieces,
+                base_color: m.base_color,
+                glossiness: m.glossiness,
+            });
         }
+        vertices += mesh.positions.len();
         triangles += count;
+        meshes.push(mesh);
     }
-    if parts.iter().all(|p| p.indices.is_empty()) {
+    if triangles == 0 {
         anyhow::bail!("nothing to export: the scene has no visible triangles");
     }
-    if parts.len() == 1 {
-        return Ok((parts.pop().expect("one part"), materials));
+    if meshes.len() == 1 {
+        return Ok((meshes.pop().expect("one mesh"), parts));
     }
     let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for p in parts {
+    for p in meshes {
         let base = positions.len() as u32;
         positions.extend_from_slice(&p.positions);
         normals.extend_from_slice(&p.normals);
         uvs.extend_from_slice(&p.uvs);
         indices.extend(p.indices.iter().map(|i| i + base));
     }
-    Ok((Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices), materials))
+    Ok((Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices), parts))
+}
+
+/// Each item's object name: the node that made it, else its kind, made a file-safe word;
+/// items sharing a name are numbered (`collider_0`, `collider_1`).
+fn item_names(items: &[DrawItem]) -> Vec<String> {
+    let base: Vec<String> = items
+        .iter()
+        .map(|item| {
+            let name = item.name.as_deref().unwrap_or(item.kind.name());
+            name.chars().map(|c| if c.is_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect()
+        })
+        .collect();
+    let mut total = std::collections::HashMap::<&str, usize>::new();
+    base.iter().for_each(|b| *total.entry(b.as_str()).or_default() += 1);
+    let mut seen = std::collections::HashMap::<&str, usize>::new();
+    base.iter()
+        .map(|b| {
+            let n = seen.entry(b.as_str()).or_default();
+            *n += 1;
+            if total[b.as_str()] > 1 { format!("{b}_{}", *n - 1) } else { b.clone() }
+        })
+        .collect()
+}
+
+/// The vertex and triangle ranges (offset by the export's `vertices` and `triangles` before
+/// this item) of each instance of an instance-major `mesh` with `per_instance` vertices each;
+/// an instance whose triangles were all dropped (outliers) has an empty triangle range.
+fn instance_spans(mesh: &Mesh, per_instance: usize, vertices: usize, triangles: usize) -> Vec<Span> {
+    let count = mesh.positions.len() / per_instance.max(1);
+    let mut spans = Vec::with_capacity(count);
+    let mut t = 0;
+    for k in 0..count {
+        let start = t;
+        while t < mesh.triangle_count() && (mesh.indices[3 * t] as usize) < (k + 1) * per_instance {
+            t += 1;
+        }
+        let v = vertices + k * per_instance;
+        spans.push(Span { vertices: v..v + per_instance, triangles: triangles + start..triangles + t });
+    }
+    spans
 }
 
 /// `mesh` placed as the vertex stages place it: `model`, then `grid` (eq. 3.4, in f64, and

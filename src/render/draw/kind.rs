@@ -51,6 +51,12 @@ pub trait ItemKind: Any + Send + Sync {
         false
     }
 
+    /// The triangles one draw of `item` rasterizes (every instance's), for budgets such as
+    /// the shadow atlas's.
+    fn drawn_triangles(&self, item: &DrawItem) -> usize {
+        item.mesh.triangle_count()
+    }
+
     /// The draw of `item` (vertex stage `stage`, after the linear fast path) into the pass's
     /// target: its pipeline, group 2, buffers and call. `None`: nothing to draw.
     fn prepare(
@@ -61,7 +67,7 @@ pub trait ItemKind: Any + Send + Sync {
     ) -> anyhow::Result<Option<KindDraw>>;
 
     /// The geometry this kind draws for `item`, in the item's own space (then placed by its
-    /// model matrix and grid, as the vertex stage places it) or in world space. A kind that
+    /// model matrix and grid, as the vertex stage places it) or as world-space instances. A kind that
     /// cannot export returns an error saying why; it never exports something else.
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported>;
 }
@@ -70,8 +76,10 @@ pub trait ItemKind: Any + Send + Sync {
 pub enum Exported {
     /// In the item's space: placed by its model matrix and grid (eq. 3.4), like its vertex stage.
     Local(Mesh),
-    /// Already in world space.
-    World(Mesh),
+    /// Instances of the item's mesh in world space, instance-major: instance k owns vertices
+    /// `k * per_instance..(k + 1) * per_instance` and its triangles follow instance k - 1's.
+    /// Exports keep each instance apart (an OBJ object, a glTF node).
+    Instances { mesh: Mesh, per_instance: usize },
 }
 
 /// Where an export computes what the GPU would: the GPU itself (read back), or the CPU twin of

@@ -21,6 +21,10 @@ impl ItemKind for AttachedDraw {
         false
     }
 
+    fn drawn_triangles(&self, item: &DrawItem) -> usize {
+        self.instances.len() * item.mesh.triangle_count()
+    }
+
     fn prepare(
         &self,
         cx: &mut PrepareCx<'_, '_>,
@@ -64,7 +68,7 @@ impl ItemKind for AttachedDraw {
             ExportDevice::Cpu => WarpDevice::Cpu,
         };
         let warped = cx.warper.warp_layout_on(cx.gpu, &item.mesh, self, device)?;
-        Ok(Exported::World(assemble(&item.mesh, warped)?))
+        Ok(Exported::Instances { mesh: assemble(&item.mesh, warped)?, per_instance: item.mesh.positions.len() })
     }
 }
 
