@@ -114,6 +114,14 @@ fn link_to_missing_node() {
 }
 
 #[test]
+fn a_misspelt_node_in_a_link_gets_a_suggestion() {
+    let all = errors("misspelt_node.ron");
+    let d = all.iter().find(|d| d.problem.kind == ProblemKind::UnknownNode).expect("an unknown-node error");
+    assert_eq!(d.line, 10);
+    assert!(d.to_string().contains("did you mean \"floor_material\"?"), "{d}");
+}
+
+#[test]
 fn missing_required_input() {
     let d = only("missing_input.ron", ProblemKind::MissingInput);
     assert_eq!(d.line, 5);

@@ -141,11 +141,15 @@ impl Graph {
         problems: &mut Vec<Problem>,
     ) -> Option<crate::core::port::PortType> {
         let Some(node) = self.nodes.get(&port.node) else {
-            problems.push(Problem::new(
+            let mut problem = Problem::new(
                 ProblemKind::UnknownNode,
                 place.clone(),
                 format!("link names node \"{}\", which does not exist", port.node),
-            ));
+            );
+            if let Some(n) = spec::closest(&port.node, self.nodes.keys().map(String::as_str)) {
+                problem = problem.help(format!("did you mean \"{n}\"?"));
+            }
+            problems.push(problem);
             return None;
         };
         let spec = spec::find(&node.kind)?;
