@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
-use werkstatt::core::graph::Graph;
+use werkstatt::core::graph::{Graph, Link, NodeDoc, PortRef};
 use werkstatt::core::port::Value;
 use werkstatt::mesh::Mesh;
 use werkstatt::warp::landmarks::{Landmark, NearestPoint, piece_landmark};
@@ -92,9 +92,9 @@ fn surface_points_land_on_the_nearest_surface_point() {
     assert_eq!(got.len(), 8);
 }
 
-/// On a finely tessellated sphere the nearest point of a point outside lies on the ray
-/// through it (to the tessellation's sagitta), and the BVH finds what a search of every
-/// triangle finds.
+/// On a finely tessellated sphere the nearest point of a point outside lies near the ray
+/// through it (within a facet) and on the sphere (within the tessellation's sagitta), and the
+/// BVH finds what a search of every triangle finds.
 #[test]
 fn surface_points_on_a_sphere_match_the_ray_and_a_full_search() {
     let sphere = werkstatt::nodes::mesh::geometry::sphere(1.0, 96, 48).unwrap();
@@ -117,8 +117,9 @@ fn surface_points_on_a_sphere_match_the_ray_and_a_full_search() {
         let d = d.normalize();
         let p = d * (1.5 + 0.5 * k as f32);
         let hit = nearest.nearest(p, 10.0).expect("within reach");
-        assert!(hit.position.distance(d) < 2e-3, "{d}: {}", hit.position);
-        assert!((hit.distance - p.distance(d)).abs() < 2e-3);
+        let facet = std::f32::consts::PI / 48.0;
+        assert!(hit.position.angle_between(d) < facet, "{d}: {}", hit.position);
+        assert!(hit.position.length() <= 1.0 + 1e-5 && hit.position.length() > (0.5 * facet).cos() - 1e-5);
         assert!((hit.distance - brute(p).0).abs() < 1e-6, "the BVH missed the nearest triangle");
         // The UV is the barycentric mix of the triangle's corners: the point the UV names is
         // the hit point.
@@ -194,7 +195,9 @@ fn offset_edges_lie_at_the_offset() {
     for (piece, landmark, across) in
         [(0, "left_edge", 0.1), (0, "right_edge", 0.4), (1, "top_edge", 0.1), (1, "bottom_edge", 0.4)]
     {
-        let ev = landmarks(&format!(r#""piece": {piece}, "landmark": "{landmark}", "offset": 0.1"#), r#""count": 3"#);
+        // A small margin: piece 1's top edge would end where it touches piece 0 at u = 0.5.
+        let params = format!(r#""piece": {piece}, "landmark": "{landmark}", "offset": 0.1, "margin": 0.01"#);
+        let ev = landmarks(&params, r#""count": 3"#);
         let got = uvs(&placements(&ev, "row"));
         assert_eq!(got.len(), 3, "{landmark}");
         for (p, uv) in &got {
@@ -253,7 +256,8 @@ fn polyline(params: &str, with_surface: bool) -> Evaluator {
 fn polylines_are_typed_in_pattern_coordinates() {
     let ev = polyline(r#""points": "0.1 0.2; 0.3,0.2\n0.3 0.6""#, false);
     let got = uvs(&placements(&ev, "row"));
-    let want = [Vec2::new(0.1, 0.2), Vec2::new(0.3, 0.2), Vec2::new(0.3, 0.6)];
+    // Three placements counted along it: its ends and halfway along its 0.6 of length.
+    let want = [Vec2::new(0.1, 0.2), Vec2::new(0.3, 0.3), Vec2::new(0.3, 0.6)];
     assert!(got.iter().zip(want).all(|(g, w)| close(g.1, w)), "{got:?}");
     // Piece 1 spans u 0.5-1, v 0-0.5.
     let ev = polyline(r#""points": "0 0; 1 1", "coordinates": "piece", "piece": 1"#, true);
@@ -287,13 +291,14 @@ fn bad_polylines_are_errors_naming_the_parameter() {
 fn the_worksuit_buttons_run_down_the_front_centre() {
     let dir = common::root().join("graphs");
     let full = Graph::load(&dir.join("worksuit_buttons.ron")).unwrap_or_else(|e| panic!("{e}"));
-    let mut g = graph(
-        r#"(version: 2, nodes: { "out": (kind: "Watch") }, links: [
-            ("avatar.clothes", "front_row.surface"), ("front_row.count", "out.value")])"#,
-    );
-    for id in ["avatar", "front_row"] {
-        g.nodes.insert(id.into(), full.nodes[id].clone());
-    }
+    // The graph's avatar and row with a Watch on the count: no rendering needed.
+    let mut g = full.clone();
+    g.nodes.retain(|id, _| id == "avatar" || id == "front_row");
+    g.links.retain(|l| g.nodes.contains_key(&l.from.node) && g.nodes.contains_key(&l.to.node));
+    let watch = NodeDoc { kind: "Watch".into(), pos: [0.0, 0.0], params: Default::default() };
+    g.nodes.insert("out".into(), watch);
+    let port = |text: &str| PortRef::parse(text).unwrap();
+    g.links.push(Link { from: port("front_row.count"), to: port("out.value") });
     let ev = evaluate(&g, &dir);
     let buttons = placements(&ev, "front_row");
     assert_eq!(buttons.len(), 10);
