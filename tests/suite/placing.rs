@@ -314,3 +314,65 @@ fn the_worksuit_buttons_run_down_the_front_centre() {
         last_y = p.y;
     }
 }
+
+/// FreeSewing's Simon draws eight `#button` snippets on the right front's centre line (SVG
+/// x = 0, 31.5 mm inside the cut-on placket's edge, the part's largest x), 79.27 mm apart: the
+/// sewn pattern has them on piece 1 (the sidecar's second panel) 3.15 cm inside that edge,
+/// equally spaced down v, in SVG order.
+#[test]
+fn freesewing_button_marks_land_on_the_centre_front_edge() {
+    let pattern =
+        werkstatt::garment::freesewing::load(&common::root().join("assets/patterns/freesewing-simon-shirt.ron"))
+            .unwrap_or_else(|e| panic!("{e}"));
+    let sewn = pattern.sew(4.0, werkstatt::garment::Fit::default()).unwrap();
+    assert_eq!(sewn.buttons.len(), 8, "{:?}", sewn.buttons);
+    let m = &sewn.mesh;
+    let edge_u =
+        (0..m.vertex_count()).filter(|&v| m.piece_ids()[v] == 1).map(|v| m.uvs()[v].x).fold(f32::MIN, f32::max);
+    let step = 7.927 * m.uv_per_cm();
+    let mut v: Vec<f32> = Vec::new();
+    for &(piece, uv) in &sewn.buttons {
+        let want_u = edge_u - 3.15 * m.uv_per_cm();
+        assert!(piece == 1 && (uv.x - want_u).abs() < 1e-5, "{:?} against u {want_u}", sewn.buttons);
+        v.push(uv.y);
+    }
+    // SVG order: 154.06, 233.33, ..., 629.68, then 114.43 mm.
+    let top = v.pop().unwrap();
+    assert!((v[0] - top - 3.963 * m.uv_per_cm()).abs() < 1e-4, "{top} {v:?}");
+    for w in v.windows(2) {
+        assert!((w[1] - w[0] - step).abs() < 1e-4, "{v:?}");
+    }
+}
+
+/// With `hold` the UVs found on the first frame stay while the worksuit walks (the buttons
+/// ride the cloth); without, each frame snaps the fixed 3D row anew and the UVs move.
+#[test]
+fn held_surface_points_keep_their_uvs_on_a_moving_surface() {
+    let dir = common::root().join("graphs");
+    let uvs_at = |hold: bool| -> Vec<Vec<Vec2>> {
+        let g = graph(&format!(
+            r#"(version: 2, nodes: {{
+                "avatar": (kind: "Avatar", params: {{"clothes": "../assets/avatar/male_worksuit01.mhclo", "motion": "../assets/avatar/walk1.bvh", "joint_map": "../assets/avatar/makehuman-old-rig.ron"}}),
+                "sp": (kind: "SurfacePoints", params: {{"from": [0.0, 1.3, 0.16], "to": [0.0, 0.95, 0.16], "count": 4, "max_distance": 0.2, "hold": {hold}}}),
+                "out": (kind: "Watch"),
+            }}, links: [("avatar.clothes", "sp.surface"), ("sp.count", "out.value")])"#
+        ));
+        let mut ev = Evaluator::new(&g, &[]).unwrap();
+        let res = werkstatt::core::resources::Resources::new(false);
+        let settings = FrameSettings { width: 8, height: 8, base_dir: dir.clone(), frames: None };
+        [0, 7]
+            .into_iter()
+            .map(|frame| {
+                while ev.evaluate(FrameTime { frame, fps: 30.0 }, Some(common::gpu()), &res, &settings).pending > 0 {
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                placements(&ev, "sp").iter().map(|p| Vec2::new(p.u, p.v)).collect()
+            })
+            .collect()
+    };
+    let held = uvs_at(true);
+    assert_eq!(held[0], held[1]);
+    let snapped = uvs_at(false);
+    assert_eq!(snapped[0], held[0], "the first frame finds the same spots");
+    assert_ne!(snapped[0], snapped[1], "the walk moves the cloth under the fixed row");
+}
