@@ -300,6 +300,18 @@ impl Mesh {
         rects.into_iter().map(|(p, (lo, hi))| (p, lo, hi)).collect()
     }
 
+    /// Piece `piece`'s UV bounding rectangle `(lo, hi)`; the error names the pieces there are.
+    pub fn piece_uv_rect(&self, piece: u32) -> Result<(glam::Vec2, glam::Vec2), String> {
+        let rects = self.piece_uv_rects();
+        match rects.iter().find(|r| r.0 == piece) {
+            Some(&(_, lo, hi)) => Ok((lo, hi)),
+            None => {
+                let known: Vec<String> = rects.iter().map(|r| r.0.to_string()).collect();
+                Err(format!("the surface has no piece {piece}; its pieces are {}", known.join(", ")))
+            }
+        }
+    }
+
     pub fn gpu(&self, gpu: &crate::gpu::GpuContext) -> &GpuMesh {
         self.gpu.get_or_init(|| {
             let verts: Vec<Vertex> = (0..self.positions.len())

@@ -11,6 +11,7 @@ use crate::core::node::prelude::*;
 use crate::garment::drape::{Drape, DrapeParams};
 use crate::garment::{Fit, Pattern, Sewn, freesewing, garmentcode};
 use crate::mesh::Mesh;
+use crate::warp::Placement;
 
 pub static GARMENT: NodeSpec = NodeSpec {
     kind: "Garment",
@@ -25,6 +26,11 @@ pub static GARMENT: NodeSpec = NodeSpec {
         PortSpec::output("surface", PortType::Surface, "The garment at the current time."),
         PortSpec::output("seam_gap", PortType::Scalar, "The largest distance between two sewn vertices (metres)."),
         PortSpec::output("max_strain", PortType::Scalar, "The largest edge strain this frame."),
+        PortSpec::output(
+            "buttons",
+            PortType::Instances,
+            "The pattern's button marks as placements (FreeSewing `#button` snippets; none for GarmentCode).",
+        ),
     ],
     params: &[
         ParamSpec::new(
@@ -129,6 +135,13 @@ impl Node for GarmentNode {
         cx.set("seam_gap", drape.max_seam_gap() as f64);
         cx.set("max_strain", cloth.max_strain() as f64);
         cx.set("surface", Arc::new(mesh));
+        let buttons: Vec<Placement> = sewn
+            .buttons
+            .iter()
+            .map(|&(piece, uv)| Placement { piece, u: uv.x, v: uv.y, angle: 0.0, scale: 1.0 })
+            .collect();
+        cx.count("buttons", buttons.len());
+        cx.set("buttons", Arc::new(buttons));
         Ok(())
     }
 }

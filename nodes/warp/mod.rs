@@ -2,5 +2,6 @@
 
 pub mod attach;
 pub mod curves;
+pub mod landmarks;
 pub mod matrix_texture;
 pub mod placements;

@@ -5,11 +5,11 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{Context as _, bail};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::warp::{ArcTable, Curves, Placement, bezier, curve_direction};
+use crate::warp::{ArcTable, Curves, Placement, bezier, curve_direction, landmarks};
 
 const REGION: [ParamSpec; 4] = [
     ParamSpec::new("u_min", ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, "Region: lowest u."),
@@ -261,14 +261,26 @@ impl Node for GridNode {
 pub static CURVE_PLACEMENT: NodeSpec = NodeSpec {
     kind: "CurvePlacement",
     category: Category::Attachment,
-    doc: "Placements at equal arc-length steps along curves (buttons along a placket), turned to the curve direction.",
-    inputs: &[PortSpec::required("curves", PortType::Curves, "Curves in UV space.")],
+    doc: "Placements at equal arc-length steps along curves (buttons along a placket), turned to the curve direction: every `spacing` from each curve's start, or `count` evenly from its start to its end.",
+    inputs: &[
+        PortSpec::required("curves", PortType::Curves, "Curves in UV space."),
+        PortSpec::optional(
+            "surface",
+            PortType::Surface,
+            "Records each placement's piece and drops those off every piece.",
+        ),
+    ],
     outputs: &[PLACEMENTS, COUNT],
     params: &[
         ParamSpec::new(
             "spacing",
             ParamKind::Float { default: 0.05, min: 1e-5, max: 1.0 },
-            "UV distance between placements.",
+            "UV distance between placements (when count is 0).",
+        ),
+        ParamSpec::new(
+            "count",
+            ParamKind::Int { default: 0, min: 0, max: 1_000_000 },
+            "Placements per curve, evenly spaced from its start to its end (1: its midpoint); 0: use spacing.",
         ),
         ParamSpec::new(
             "angle",
@@ -285,22 +297,129 @@ struct CurvePlacementNode;
 impl Node for CurvePlacementNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let curves: Arc<Curves> = cx.input("curves")?;
-        let spacing = cx.f32("spacing");
+        let surface = surface_input(cx);
+        let coverage = surface.as_deref().map(UvCoverage::new);
+        let (spacing, count) = (cx.f32("spacing"), cx.int("count") as usize);
         let mut out = Vec::new();
+        let mut dropped = 0;
         for path in &curves.paths {
             let table = ArcTable::new(path, 32);
-            let n = (table.length() / spacing).floor() as usize;
-            for i in 0..=n {
-                let (seg, t) = table.at(i as f32 * spacing);
+            let arc_lengths: Vec<f32> = match count {
+                0 => (0..=(table.length() / spacing).floor() as usize).map(|i| i as f32 * spacing).collect(),
+                1 => vec![0.5 * table.length()],
+                n => (0..n).map(|i| table.length() * i as f32 / (n - 1) as f32).collect(),
+            };
+            for s in arc_lengths {
+                let (seg, t) = table.at(s);
                 let p = bezier(&path[seg], t);
                 // The tangent's direction, or its limit where a control point equals an end
                 // point (common in SVG paths), where the tangent itself vanishes.
                 let d = curve_direction(&path[seg], t);
                 // Angle about the normal from +u towards +v, as point attachments read it.
                 let angle = d.y.atan2(d.x).to_degrees() + cx.f32("angle");
-                out.push(Placement { piece: 0, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
+                let Some(piece) = piece_at(&coverage, p) else {
+                    dropped += 1;
+                    continue;
+                };
+                out.push(Placement { piece, u: p.x, v: p.y, angle, scale: cx.f32("scale") });
             }
         }
+        finish(cx, out, dropped, surface.as_deref());
+        Ok(())
+    }
+}
+
+pub static SURFACE_POINTS: NodeSpec = NodeSpec {
+    kind: "SurfacePoints",
+    category: Category::Attachment,
+    doc: "Placements at the surface points nearest 3D points given in the surface's model space: a list, and/or a straight row of `count` points from `from` to `to`; each gets the UV and piece of its nearest point. A point farther than `max_distance` from the surface is an error naming it.",
+    inputs: &[PortSpec::required("surface", PortType::Surface, "The surface to place on (its model space).")],
+    outputs: &[PLACEMENTS, COUNT],
+    params: &[
+        ParamSpec::new("points", ParamKind::Text { default: "" }, "Points \"x y z\", separated by ';' or new lines."),
+        ParamSpec::new("from", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "The row's first point."),
+        ParamSpec::new("to", ParamKind::Vec3 { default: [0.0, 1.0, 0.0] }, "The row's last point."),
+        ParamSpec::new(
+            "count",
+            ParamKind::Int { default: 0, min: 0, max: 100_000 },
+            "Points in the row from `from` to `to`, evenly spaced (1: `from` alone); 0: no row.",
+        ),
+        ParamSpec::new(
+            "max_distance",
+            ParamKind::Float { default: 0.05, min: 0.0, max: 1e6 },
+            "How far (model units) a point may be from the surface.",
+        ),
+        ParamSpec::new(
+            "hold",
+            ParamKind::Bool { default: true },
+            "Keep the UVs found on the first evaluated surface while its vertex and triangle counts stay, so placements ride a moving surface instead of sliding to the points' nearest spots.",
+        ),
+        ParamSpec::new(
+            "angle",
+            ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
+            "Rotation about the normal, degrees.",
+        ),
+        ParamSpec::new("scale", ParamKind::Float { default: 1.0, min: 0.0, max: 1e3 }, "Scale of each placement."),
+    ],
+    capabilities: Capabilities::NONE,
+    create: || Box::new(SurfacePointsNode::default()),
+};
+
+#[derive(Default)]
+struct SurfacePointsNode {
+    /// The placements found, with the parameters and surface counts they were found for.
+    held: Option<(String, Vec<Placement>)>,
+}
+
+impl Node for SurfacePointsNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let surface: Arc<Mesh> = cx.input("surface")?;
+        let (from, to, count, max_distance) = (cx.vec3("from"), cx.vec3("to"), cx.int("count"), cx.f32("max_distance"));
+        let (angle, scale) = (cx.f32("angle"), cx.f32("scale"));
+        let key = format!(
+            "{:?} {from} {to} {count} {max_distance} {angle} {scale} {} {}",
+            cx.str("points"),
+            surface.positions.len(),
+            surface.indices.len()
+        );
+        if cx.bool("hold")
+            && let Some((k, out)) = &self.held
+            && *k == key
+        {
+            finish(cx, out.clone(), 0, None);
+            return Ok(());
+        }
+        let mut points: Vec<(String, Vec3)> = landmarks::parse_points::<3>(cx.str("points"), "points")
+            .map_err(NodeError::msg)?
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| (format!("point {} of \"points\"", i + 1), Vec3::from(p)))
+            .collect();
+        let count = count as usize;
+        for i in 0..count {
+            let t = if count == 1 { 0.0 } else { i as f32 / (count - 1) as f32 };
+            points.push((format!("row point {}", i + 1), from.lerp(to, t)));
+        }
+        if points.is_empty() {
+            return Err(NodeError::msg("no points: write some in \"points\" or set a row's \"count\""));
+        }
+        let nearest = landmarks::NearestPoint::new(&surface);
+        let mut out = Vec::with_capacity(points.len());
+        for (name, p) in &points {
+            let Some(hit) = nearest.nearest(*p, max_distance) else {
+                let (lo, hi) = surface.bounds();
+                let far = nearest.nearest(*p, (hi - lo).length() + p.distance(lo));
+                return Err(NodeError::msg(format!(
+                    "{name} ({}, {}, {}) is {} from the surface, farther than max_distance {max_distance}",
+                    p.x,
+                    p.y,
+                    p.z,
+                    far.map_or("far".to_string(), |h| format!("{:.4}", h.distance))
+                )));
+            };
+            out.push(Placement { piece: hit.piece, u: hit.uv.x, v: hit.uv.y, angle, scale });
+        }
+        self.held = Some((key, out.clone()));
         finish(cx, out, 0, None);
         Ok(())
     }
@@ -329,7 +448,7 @@ pub static PLACEMENT_FILE: NodeSpec = NodeSpec {
 };
 
 crate::choice!(
-    enum Coordinates {
+    pub enum Coordinates {
         Atlas = "atlas",
         Piece = "piece",
     }
@@ -374,22 +493,13 @@ pub fn place_on_pieces(
     mesh: &Mesh,
     piece_local: bool,
 ) -> Result<(Vec<Placement>, usize, usize), String> {
-    let rects = mesh.piece_uv_rects();
     let coverage = UvCoverage::new(mesh);
     let (mut out, mut dropped, mut mismatched) = (Vec::with_capacity(rows.len()), 0, 0);
     for (i, row) in rows.iter().enumerate() {
         let mut p = *row;
         if piece_local {
-            let Some((_, lo, hi)) = rects.iter().find(|r| r.0 == row.piece) else {
-                let known: Vec<String> = rects.iter().map(|r| r.0.to_string()).collect();
-                return Err(format!(
-                    "row {} names piece {}, but the surface has pieces {}",
-                    i + 1,
-                    row.piece,
-                    known.join(", ")
-                ));
-            };
-            let uv = *lo + (*hi - *lo) * Vec2::new(row.u, row.v);
+            let (lo, hi) = mesh.piece_uv_rect(row.piece).map_err(|e| format!("row {}: {e}", i + 1))?;
+            let uv = lo + (hi - lo) * Vec2::new(row.u, row.v);
             (p.u, p.v) = (uv.x, uv.y);
         }
         match coverage.piece_at(Vec2::new(p.u, p.v)) {

@@ -114,6 +114,27 @@ fn part_paths(doc: &roxmltree::Document<'_>, part: &str, svg_name: &str) -> Resu
     Ok(closed)
 }
 
+/// The positions (SVG units) of a part's button snippets (`<use href="#button">`; FreeSewing
+/// writes their `transform` as a scale about the point, 1 for buttons).
+fn part_buttons(doc: &roxmltree::Document<'_>, part: &str) -> Vec<DVec2> {
+    const XLINK: &str = "http://www.w3.org/1999/xlink";
+    let suffix = format!(".{part}");
+    let Some(group) = doc.descendants().find(|n| {
+        n.has_tag_name("g") && n.attribute("id").is_some_and(|id| id.contains("-part-") && id.ends_with(&suffix))
+    }) else {
+        return Vec::new();
+    };
+    group
+        .descendants()
+        .filter(|n| n.has_tag_name("use"))
+        .filter(|n| n.attribute((XLINK, "href")).or(n.attribute("href")) == Some("#button"))
+        .filter_map(|n| {
+            let coord = |name: &str| n.attribute(name).unwrap_or("0").trim().parse::<f64>().ok();
+            Some(DVec2::new(coord("x")?, coord("y")?))
+        })
+        .collect()
+}
+
 /// The segments of a closed path (`None` for an open one or one with several subpaths).
 fn path_segments(d: &str) -> Result<Option<Vec<Vec<DVec2>>>, String> {
     use svgtypes::SimplePathSegment as S;
@@ -199,7 +220,8 @@ pub fn build(car: &Sidecar, svg: &str, file: &str, svg_name: &str) -> Result<Pat
             rotation: euler_xyz_degrees(DVec3::new(r.0, r.1, r.2)),
             translation: DVec3::new(t.0, t.1, t.2),
         };
-        let mut panel = Panel { name: sp.name.clone(), edges, placement, label: None };
+        let buttons = part_buttons(&doc, &sp.part).into_iter().map(to_panel).collect();
+        let mut panel = Panel { name: sp.name.clone(), edges, placement, label: None, buttons };
         let backwards = panel.signed_area() < 0.0;
         if backwards {
             // The drawn side is the front, so reverse the loop rather than mirror the panel.

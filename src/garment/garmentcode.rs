@@ -162,7 +162,7 @@ fn panel(v: &Value, name: &str, file: &str, to_cm: f64) -> Result<Panel, Garment
         rotation: euler_xyz_degrees(DVec3::from_array(rotation)),
         translation: DVec3::from_array(translation) * to_cm,
     };
-    let mut panel = Panel { name: name.to_string(), edges, placement, label };
+    let mut panel = Panel { name: name.to_string(), edges, placement, label, buttons: Vec::new() };
     if panel.signed_area() < 0.0 {
         // Clockwise: the front faces -z. Mirror it in the plane so the outline runs
         // counter-clockwise, as the triangulator needs; the placement keeps it in place.

@@ -81,6 +81,9 @@ pub struct Panel {
     pub placement: Placement,
     /// Body part the panel belongs to, where the file says (GarmentCode `label`).
     pub label: Option<String>,
+    /// Button marks (centimetres, in the panel's frame), where the file has them (FreeSewing
+    /// `#button` snippets).
+    pub buttons: Vec<DVec2>,
 }
 
 impl Panel {
@@ -173,6 +176,8 @@ pub struct Sewn {
     pub stitched: Vec<(Vec<u32>, Vec<u32>)>,
     /// Warnings about the pattern (stitched edges of different lengths).
     pub warnings: Vec<String>,
+    /// The panels' button marks in the UV atlas: (piece id, UV), v down.
+    pub buttons: Vec<(u32, Vec2)>,
 }
 
 impl Pattern {
@@ -354,7 +359,20 @@ impl Pattern {
             let p = panel.placement.apply(rest.as_dvec2());
             positions.push(((p * fit.scale + fit.offset) * 0.01).as_vec3());
         }
+        // A panel point goes into the atlas as its rest positions do (`PatternMesh::pack_atlas`):
+        // from the piece's box, y mirrored to v down, at the atlas scale.
+        let mut buttons = Vec::new();
+        for (pi, panel) in self.panels.iter().enumerate() {
+            let pm = &mesh.piece_meshes()[pi];
+            let rest = &mesh.rest_positions()[pm.vertices.start as usize..pm.vertices.end as usize];
+            let (lo, hi) = rest.iter().fold((rest[0], rest[0]), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+            for b in &panel.buttons {
+                let local = Vec2::new(b.x as f32 - lo.x, hi.y - b.y as f32);
+                buttons.push((pi as u32, pm.uv_min + local * mesh.uv_per_cm()));
+            }
+        }
         Ok(Sewn {
+            buttons,
             piece_names: self.panels.iter().map(|p| p.name.clone()).collect(),
             mesh,
             positions,

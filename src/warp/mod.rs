@@ -3,6 +3,7 @@
 //! benchmark path and by tests to cross-check the GPU.
 
 pub mod gpu;
+pub mod landmarks;
 
 use std::sync::Arc;
 

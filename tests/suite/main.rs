@@ -33,6 +33,7 @@ mod loaders;
 mod mesh;
 mod mesh_sequence;
 mod node_contracts;
+mod placing;
 mod regression;
 mod render;
 mod roundtrip;

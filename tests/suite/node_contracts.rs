@@ -65,6 +65,10 @@ fn fixture_params(kind: &str) -> Params {
         ],
         "SvgCurves" => vec![("path", data("assets/patterns/embroidery.svg"))],
         "PlacementFile" => vec![("path", data("assets/placements/buttons.csv"))],
+        // Points off the producer's surface, so their nearest points are searched for.
+        "SurfacePoints" => {
+            vec![("points", ParamValue::Str("0 0 2; 1 0 0".into())), ("max_distance", ParamValue::Float(10.0))]
+        }
         "MeshSequence" => vec![("path", data("tests/data/sequence"))],
         "ClothSim" => vec![("triangles", ParamValue::Int(200))],
         "Garment" => vec![
