@@ -90,8 +90,7 @@ const MAX_SAMPLES: u32 = 1_000_000;
 impl AbcArchive {
     /// Opens `path` and lists its polygon meshes. Errors name the file.
     pub fn open(path: &Path) -> anyhow::Result<AbcArchive> {
-        contain(path, || Self::open_inner(path))
-            .with_context(|| format!("cannot read the Alembic file {}", path.display()))
+        contain(|| Self::open_inner(path)).with_context(|| format!("cannot read the Alembic file {}", path.display()))
     }
 
     fn open_inner(path: &Path) -> anyhow::Result<AbcArchive> {
@@ -110,19 +109,24 @@ impl AbcArchive {
         Ok(AbcArchive { path: path.to_path_buf(), reader, archive, meshes })
     }
 
-    /// The times (seconds) at which mesh `m` changes: the samples of its positions, topology and
-    /// the transforms above it. Sorted, distinct.
+    /// The times (seconds) at which mesh `m` changes: the samples of its positions, and of its
+    /// topology and the transforms above it where those change. Sorted, distinct.
     pub fn sample_times(&mut self, m: usize) -> anyhow::Result<Vec<f64>> {
         let AbcArchive { path, reader, archive, meshes } = self;
         let mesh = &meshes[m];
-        contain(path, || {
+        contain(|| {
             let mut props = Vec::new();
             for name in ["P", ".faceIndices", ".faceCounts"] {
                 props.push(property(&mesh.geom, name, reader, archive)?.with_context(|| format!("no {name}"))?);
             }
             let mut times = Vec::new();
-            for p in props.iter().chain(mesh.xforms.iter().filter_map(|x| x.vals.as_ref())) {
+            let xforms = mesh.xforms.iter().filter_map(|x| x.vals.as_ref());
+            for (k, p) in props.iter().chain(xforms).enumerate() {
                 let n = p.header.next_sample_index;
+                // A constant property's one sample may sit at time 0, before the animation.
+                if k > 0 && (n < 2 || stored_index(&p.header, n - 1)? == 0) {
+                    continue;
+                }
                 if n > MAX_SAMPLES {
                     bail!("property {} claims {n} samples", p.header.name);
                 }
@@ -141,8 +145,8 @@ impl AbcArchive {
 
     /// The frame rate of mesh `m`'s positions when they are sampled uniformly.
     pub fn uniform_rate(&mut self, m: usize) -> Option<f64> {
-        let AbcArchive { path, reader, archive, meshes } = self;
-        let p = contain(path, || property(&meshes[m].geom, "P", reader, archive)).ok()??;
+        let AbcArchive { reader, archive, meshes, .. } = self;
+        let p = contain(|| property(&meshes[m].geom, "P", reader, archive)).ok()??;
         let ts = p.header.time_sampling.as_ref()?;
         (ts.sampling_type.num_samples_per_cycle == 1 && ts.sampling_type.time_per_cycle > 0.0)
             .then(|| 1.0 / ts.sampling_type.time_per_cycle)
@@ -152,7 +156,7 @@ impl AbcArchive {
     pub fn sample(&mut self, m: usize, t: f64) -> anyhow::Result<AbcMeshSample> {
         let name = self.meshes[m].name.clone();
         let AbcArchive { path, reader, archive, meshes } = self;
-        contain(path, || sample_mesh(reader, archive, &meshes[m], t))
+        contain(|| sample_mesh(reader, archive, &meshes[m], t))
             .with_context(|| format!("cannot read {name} at {t} s from the Alembic file {}", path.display()))
     }
 }
@@ -286,11 +290,10 @@ fn read_at(r: &mut FileBlocks, p: &Property, t: f64) -> anyhow::Result<Values> {
     read_sample(r, p, k).with_context(|| format!("property {}", p.header.name))
 }
 
-/// Runs `f`, turning a crash inside ogawa-rs into an error naming the file.
-fn contain<T>(path: &Path, f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|_| {
-        bail!("{}: the Alembic reader failed on the file's structure (corrupt or unsupported)", path.display())
-    })
+/// Runs `f`, turning a crash inside ogawa-rs into an error (the caller names the file).
+fn contain<T>(f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
+        .unwrap_or_else(|_| bail!("the Alembic reader failed on the file's structure (corrupt or unsupported)"))
 }
 
 fn ogawa(e: ogawa_rs::OgawaError) -> anyhow::Error {

@@ -211,3 +211,23 @@ fn damaged_caches_are_errors_naming_the_file() {
     assert!(failed > 100 && read > 0, "{failed} errors, {read} read");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// Plays a whole sequence (every frame once, not interpolated) through MeshSequence: the load
+/// time and peak memory in docs/formats.md. A measurement, not a test:
+/// `WERKSTATT_SEQUENCE_BENCH=/tmp/big.abc /usr/bin/time -v target/debug/deps/suite-* --ignored --exact alembic::play_a_whole_sequence --nocapture`
+#[test]
+#[ignore = "a measurement; set WERKSTATT_SEQUENCE_BENCH to a cache or OBJ sequence"]
+fn play_a_whole_sequence() {
+    let Ok(path) = std::env::var("WERKSTATT_SEQUENCE_BENCH") else { return };
+    let start = std::time::Instant::now();
+    let res = Resources::new(false);
+    let mut ev = sequence_graph(Path::new(&path), r#""interpolate": false"#);
+    let frames = load_index(&index_path(Path::new(&path), "")).unwrap().frames.len();
+    // settle renders at 30 fps; the caches here run at 24: every render frame 0.8 cache frames on.
+    let mut vertices = 0;
+    for f in 0..=(frames as i64 * 5 / 4) {
+        assert_eq!(settle(&mut ev, &res, f), NodeStatus::Ok);
+        vertices = vertices.max(surface(&ev).positions.len());
+    }
+    println!("{path}: {frames} frames of {vertices} vertices in {:.2} s", start.elapsed().as_secs_f64());
+}
