@@ -214,15 +214,17 @@ fn damaged_caches_are_errors_naming_the_file() {
 
 /// Plays a whole sequence (every frame once, not interpolated) through MeshSequence: the load
 /// time and peak memory in docs/formats.md. A measurement, not a test:
-/// `WERKSTATT_SEQUENCE_BENCH=/tmp/big.abc /usr/bin/time -v target/debug/deps/suite-* --ignored --exact alembic::play_a_whole_sequence --nocapture`
+/// `WERKSTATT_SEQUENCE_BENCH=/tmp/big.abc WERKSTATT_SEQUENCE_OBJECT=Cloth /usr/bin/time -v target/debug/deps/suite-* --ignored --exact alembic::play_a_whole_sequence --nocapture`
 #[test]
 #[ignore = "a measurement; set WERKSTATT_SEQUENCE_BENCH to a cache or OBJ sequence"]
 fn play_a_whole_sequence() {
     let Ok(path) = std::env::var("WERKSTATT_SEQUENCE_BENCH") else { return };
+    // An .abc cache's mesh (WERKSTATT_SEQUENCE_OBJECT; default: all of them).
+    let object = std::env::var("WERKSTATT_SEQUENCE_OBJECT").unwrap_or_default();
     let start = std::time::Instant::now();
     let res = Resources::new(false);
-    let mut ev = sequence_graph(Path::new(&path), r#""interpolate": false"#);
-    let frames = load_index(&index_path(Path::new(&path), "")).unwrap().frames.len();
+    let mut ev = sequence_graph(Path::new(&path), &format!(r#""interpolate": false, "object": {object:?}"#));
+    let frames = load_index(&index_path(Path::new(&path), &object)).unwrap().frames.len();
     // settle renders at 30 fps; the caches here run at 24: every render frame 0.8 cache frames on.
     let mut vertices = 0;
     for f in 0..=(frames as i64 * 5 / 4) {
