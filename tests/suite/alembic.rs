@@ -233,3 +233,40 @@ fn play_a_whole_sequence() {
     }
     println!("{path}: {frames} frames of {vertices} vertices in {:.2} s", start.elapsed().as_secs_f64());
 }
+
+static PART_LOADS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// A frame of a cache is a resource `file|part`: it reloads when its file changes, and a
+/// missing file is named as such (not the label).
+#[test]
+fn file_parts_reload_with_their_file_and_name_it_when_missing() {
+    use werkstatt::core::resources::{part_path, split_part};
+    let dir = temp_dir("abc-parts");
+    let file = dir.join("cache.abc");
+    std::fs::write(&file, b"x").unwrap();
+    let part = part_path(&file, "frame=3,object=%2FCloth");
+    assert_eq!(split_part(&part), (file.as_path(), Some("frame=3,object=%2FCloth")));
+    let load = |p: &Path| -> anyhow::Result<usize> {
+        PART_LOADS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        std::fs::read(split_part(p).0)?;
+        Ok(1)
+    };
+    let res = Resources::new(false);
+    let _ = res.request(&part, load);
+    common::wait_idle(&res);
+    res.reload(&file);
+    common::wait_idle(&res);
+    assert_eq!(PART_LOADS.load(std::sync::atomic::Ordering::SeqCst), 2, "the part reloads with its file");
+    std::fs::remove_file(&file).unwrap();
+    res.reload(&file);
+    common::wait_idle(&res);
+    let e = res.request(&part, load).1.unwrap_err().to_string();
+    assert_eq!(e, format!("no such file: {}", file.display()));
+    // Through MeshSequence.
+    let mut ev = sequence_graph(&file, "");
+    match settle(&mut ev, &res, 0) {
+        NodeStatus::Failed(m) => assert!(m.contains(&format!("no such file: {}", file.display())), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
