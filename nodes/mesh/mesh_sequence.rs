@@ -1,13 +1,16 @@
 //! Simulator input from files: an OBJ frame sequence (`frame_0001.obj`, ...) that another
-//! simulator exported, or a USD ASCII mesh cache (.usda), played back against the frame time
-//! with linear interpolation.
+//! simulator exported, a USD ASCII mesh cache (.usda) or an Alembic cache (.abc), played back
+//! against the frame time with linear interpolation.
 //!
 //! Every frame file loads through the lazy resource system on a worker thread; the node
 //! holds the (at most two) files the current time needs, prefetches the next one and lets
 //! the resource system forget the others, so memory stays bounded however long the
 //! sequence is. All frames must share one topology (vertices, triangles, UVs, pieces); a
 //! frame that does not is an error naming its file. A .usda cache is one text file holding
-//! every frame, so it is parsed whole, once, and all its frames are held.
+//! every frame, so it is parsed whole, once, and all its frames are held. An Alembic cache's
+//! frames load one at a time like OBJ files (each a resource `cache.abc|frame=...`), reading
+//! only that time's samples; its topology may change from frame to frame (frames of different
+//! topology are not blended).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -18,12 +21,14 @@ use glam::{Vec2, Vec3};
 
 use crate::core::hash::fnv1a;
 use crate::core::node::prelude::*;
+use crate::core::resources::{part_path, split_part};
+use crate::io::alembic::AbcArchive;
 use crate::mesh::{self, Mesh};
 
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
     category: Category::Simulation,
-    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...) or a USD ASCII mesh cache (.usda, its time codes as frame numbers at its timeCodesPerSecond) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object; positions and normals are interpolated between frames. Frames load on worker threads; only the files around the current time are held in memory.",
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...), a USD ASCII mesh cache (.usda, its time codes as frame numbers at its timeCodesPerSecond) or an Alembic cache (.abc, Ogawa; its sample times as frames) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object or Alembic mesh; positions and normals are interpolated between frames. Frames load on worker threads; only the frames around the current time are held in memory (a .usda cache is held whole).",
     inputs: &[],
     outputs: &[PortSpec::output(
         "surface",
@@ -33,13 +38,18 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "path",
-            ParamKind::Path { default: "", extensions: &["obj", "usda"] },
-            "A folder holding one sequence, a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame), or a .usda cache with one Mesh prim that has per-vertex primvars:st; relative to the graph's folder.",
+            ParamKind::Path { default: "", extensions: &["obj", "usda", "abc"] },
+            "A folder holding one sequence, a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame), a .usda cache with one Mesh prim that has per-vertex primvars:st, or an Alembic .abc cache of polygon meshes with UVs; relative to the graph's folder.",
+        ),
+        ParamSpec::new(
+            "object",
+            ParamKind::Text { default: "" },
+            "Alembic only: the mesh to play, by full name (/Cloth/Grid) or the name of it or an object above it (Cloth); empty: every polygon mesh in the file, each a pattern piece.",
         ),
         ParamSpec::new(
             "fps",
             ParamKind::Float { default: 24.0, min: 1e-3, max: 1e4 },
-            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0. A .usda cache uses its own timeCodesPerSecond instead.",
+            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0. A .usda cache uses its own timeCodesPerSecond instead, an .abc cache its sample spacing.",
         ),
         ParamSpec::new(
             "start_frame",
@@ -68,8 +78,11 @@ pub struct SequenceIndex {
     pub frames: Vec<(i64, PathBuf)>,
     /// A .usda cache's frames, parsed with the index (one per entry of `frames`).
     pub cached: Option<CachedFrames>,
-    /// A .usda cache's timeCodesPerSecond, which replaces the node's `fps`.
+    /// A .usda cache's timeCodesPerSecond or an .abc cache's sample rate, which replaces the
+    /// node's `fps`.
     pub fps: Option<f64>,
+    /// Frames are loaded with [`load_abc_frame`] and may differ in topology (an .abc cache).
+    pub alembic: bool,
 }
 
 /// Frames parsed together with their index.
@@ -201,7 +214,7 @@ impl Node for MeshSequenceNode {
                 "parameter \"path\" is empty: name a folder of OBJ frames or a pattern like frames/frame_%04d.obj",
             ));
         }
-        let index = cx.load(&cx.path("path"), load_index)?;
+        let index = cx.load(&index_path(&cx.path("path"), cx.str("object")), load_index)?;
         let numbers: Vec<i64> = index.frames.iter().map(|(n, _)| *n).collect();
         let mode: Mode = cx.choice("mode");
         let start = match cx.int("start_frame") {
@@ -234,23 +247,30 @@ impl Node for MeshSequenceNode {
         }
         .map(|i| index.frames[i].1.clone());
         let (pa, pb) = (index.frames[a].1.clone(), index.frames[b].1.clone());
-        let (fa, fb) = match &index.cached {
+        let (fa, mut fb) = match &index.cached {
             Some(cached) => {
                 if self.reference.is_none() {
                     self.reference = Some((first.clone(), cached.0[0].topology.clone()));
                 }
                 (cached.0[a].clone(), cached.0[b].clone())
             }
-            None => self.load_pair(cx, &first, [pa.as_path(), pb.as_path()], next)?,
+            None if index.alembic => self.load_pair(cx, None, [pa.as_path(), pb.as_path()], next, load_abc_frame)?,
+            None => self.load_pair(cx, Some(&first), [pa.as_path(), pb.as_path()], next, load_frame)?,
         };
-        let (ref_path, ref_topology) = self.reference.as_ref().expect("set above");
-        for (frame, path) in [(&fa, &pa), (&fb, &pb)] {
-            if let Some(why) = frame.topology.difference(ref_topology) {
-                return Err(NodeError::msg(format!(
-                    "{}: the topology differs from {}, the first file of the sequence: {why}. Every frame of a sequence needs the same vertices, triangles and UVs",
-                    path.display(),
-                    ref_path.display()
-                )));
+        if index.alembic {
+            // A cache whose topology changes shows each frame as it is, without blending.
+            if fa.topology != fb.topology {
+                (fb, w) = (fa.clone(), 0.0);
+            }
+        } else if let Some((ref_path, ref_topology)) = &self.reference {
+            for (frame, path) in [(&fa, &pa), (&fb, &pb)] {
+                if let Some(why) = frame.topology.difference(ref_topology) {
+                    return Err(NodeError::msg(format!(
+                        "{}: the topology differs from {}, the first file of the sequence: {why}. Every frame of a sequence needs the same vertices, triangles and UVs",
+                        path.display(),
+                        ref_path.display()
+                    )));
+                }
             }
         }
         let mesh = match &self.last {
@@ -265,19 +285,19 @@ impl Node for MeshSequenceNode {
 }
 
 impl MeshSequenceNode {
-    /// Loads frame files `pa` and `pb` (and the first, the reference topology, once) through
-    /// the lazy resources, prefetches `next` and releases the files no longer needed.
+    /// Loads frames `pa` and `pb` with `loader` (and `first`, the reference topology, once)
+    /// through the lazy resources, prefetches `next` and releases the frames no longer needed.
     fn load_pair(
         &mut self,
         cx: &mut EvalCx<'_>,
-        first: &Path,
+        first: Option<&Path>,
         [pa, pb]: [&Path; 2],
         next: Option<PathBuf>,
+        loader: fn(&Path) -> anyhow::Result<SeqFrame>,
     ) -> Result<(Arc<SeqFrame>, Arc<SeqFrame>), NodeError> {
+        let first = first.filter(|_| self.reference.is_none());
         let mut wanted = vec![pa.to_path_buf(), pb.to_path_buf()];
-        if self.reference.is_none() {
-            wanted.push(first.to_path_buf());
-        }
+        wanted.extend(first.map(Path::to_path_buf));
         wanted.extend(next.clone());
         // Let go of what this time does not need before loading (bounded memory while scrubbing).
         self.held.retain(|p| wanted.contains(p) || !cx.release::<SeqFrame>(p));
@@ -287,13 +307,13 @@ impl MeshSequenceNode {
             }
         }
         if let Some(p) = &next {
-            cx.prefetch(p, load_frame);
+            cx.prefetch(p, loader);
         }
         // Request all before waiting on any, so they load in parallel.
-        let reference = self.reference.is_none().then(|| cx.load(first, load_frame));
-        let (fa, fb) = (cx.load(pa, load_frame), cx.load(pb, load_frame));
-        if let Some(r) = reference {
-            self.reference = Some((first.to_path_buf(), r?.topology.clone()));
+        let reference = first.map(|f| (f, cx.load(f, loader)));
+        let (fa, fb) = (cx.load(pa, loader), cx.load(pb, loader));
+        if let Some((f, r)) = reference {
+            self.reference = Some((f.to_path_buf(), r?.topology.clone()));
         }
         Ok((fa?, fb?))
     }
@@ -303,6 +323,9 @@ impl MeshSequenceNode {
 /// end in a number, which must share one prefix) or a pattern whose file name holds
 /// `%d`, `%0Nd`, a run of `#` or one `*` where the frame number goes.
 pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
+    if let (file, Some(part)) = split_part(path) {
+        return load_abc_index(file, &unescape(part.strip_prefix("object=").unwrap_or(part)));
+    }
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("usda")) {
         return load_usda_index(path);
     }
@@ -361,7 +384,7 @@ pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
         bail!("{} and {} have the same frame number {}", w[0].1.display(), w[1].1.display(), w[0].0);
     }
-    Ok(SequenceIndex { frames, cached: None, fps: None })
+    Ok(SequenceIndex { frames, cached: None, fps: None, alembic: false })
 }
 
 /// A .usda cache as a sequence: its one Mesh prim's samples, time codes as frame numbers.
@@ -386,7 +409,144 @@ fn load_usda_index(path: &Path) -> anyhow::Result<SequenceIndex> {
         frames.push((*t as i64, PathBuf::from(format!("{}@{t}", path.display()))));
         cached.push(Arc::new(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) }));
     }
-    Ok(SequenceIndex { frames, cached: Some(CachedFrames(cached)), fps: Some(stage.time_codes_per_second) })
+    Ok(SequenceIndex {
+        frames,
+        cached: Some(CachedFrames(cached)),
+        fps: Some(stage.time_codes_per_second),
+        alembic: false,
+    })
+}
+
+/// The resource that lists a sequence's frames: the path itself, or for an Alembic cache
+/// the file and the `object` parameter.
+pub fn index_path(path: &Path, object: &str) -> PathBuf {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("abc")) {
+        part_path(path, &format!("object={}", escape(object)))
+    } else {
+        path.to_path_buf()
+    }
+}
+
+/// An Alembic cache as a sequence: the sample times of the chosen meshes, as frames at the
+/// positions' uniform rate (or, for other samplings, the smallest spacing between samples).
+fn load_abc_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
+    let mut archive = AbcArchive::open(file)?;
+    let meshes = select_meshes(&archive, file, object)?;
+    let mut times = Vec::new();
+    for &m in &meshes {
+        times.extend(archive.sample_times(m)?);
+    }
+    times.sort_by(f64::total_cmp);
+    times.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let rates: Vec<Option<f64>> = meshes.iter().map(|&m| archive.uniform_rate(m)).collect();
+    let on_grid = |rate: f64| times.iter().all(|t| (t * rate - (t * rate).round()).abs() < 1e-3);
+    let fps = match rates[0] {
+        Some(r) if rates.iter().all(|&q| q == Some(r)) && on_grid(r) => Some(r),
+        _ => times.windows(2).map(|w| w[1] - w[0]).min_by(f64::total_cmp).map(|gap| 1.0 / gap),
+    };
+    let mut frames = Vec::new();
+    for &t in &times {
+        let n = fps.map_or(0.0, |fps| (t * fps).round());
+        if n.abs() > 1e15 {
+            bail!("{}: the sample time {t} s is too far from 0", file.display());
+        }
+        let part = format!("frame={n},t={t},object={}", escape(object));
+        frames.push((n as i64, part_path(file, &part)));
+    }
+    Ok(SequenceIndex { frames, cached: None, fps, alembic: true })
+}
+
+/// The meshes `object` names (see the `object` parameter), in file order.
+fn select_meshes(archive: &AbcArchive, file: &Path, object: &str) -> anyhow::Result<Vec<usize>> {
+    let names = || archive.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ");
+    if archive.meshes.is_empty() {
+        bail!("{}: holds no polygon mesh (PolyMesh)", file.display());
+    }
+    let chosen: Vec<usize> = (0..archive.meshes.len())
+        .filter(|&m| {
+            let name = &archive.meshes[m].name;
+            object.is_empty() || name == object || name.split('/').any(|part| part == object)
+        })
+        .collect();
+    if chosen.is_empty() {
+        bail!("{}: no mesh named \"{object}\" (its meshes: {})", file.display(), names());
+    }
+    Ok(chosen)
+}
+
+/// Loads one frame of an Alembic cache, named by a label of [`load_abc_index`]: every chosen
+/// mesh at that time, each a pattern piece.
+pub fn load_abc_frame(label: &Path) -> anyhow::Result<SeqFrame> {
+    let (file, Some(part)) = split_part(label) else { bail!("{} names no frame of an Alembic cache", label.display()) };
+    let field = |key: &str| part.split(',').find_map(|f| f.strip_prefix(key));
+    let t: f64 = field("t=").and_then(|t| t.parse().ok()).context("the frame label has no time")?;
+    let object = unescape(field("object=").unwrap_or(""));
+    let mut archive = AbcArchive::open(file)?;
+    let meshes = select_meshes(&archive, file, &object)?;
+    let (mut v, mut vt, mut vn) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut corners, mut tri_piece) = (Vec::new(), Vec::new());
+    for (piece, &m) in meshes.iter().enumerate() {
+        let sample = archive.sample(m, t)?;
+        if !sample.has_uvs {
+            bail!(
+                "{}: the mesh {} has no UVs (uv), which a Surface needs as pattern coordinates",
+                file.display(),
+                archive.meshes[m].name
+            );
+        }
+        let offset = |i: u32, base: usize| if i == NONE { NONE } else { i + base as u32 };
+        let mut start = 0;
+        for &count in &sample.face_counts {
+            let face = &sample.corners[start..start + count as usize];
+            start += count as usize;
+            for k in 1..face.len().saturating_sub(1) {
+                for c in [face[0], face[k], face[k + 1]] {
+                    corners.push([offset(c[0], v.len()), offset(c[1], vt.len()), offset(c[2], vn.len())]);
+                }
+                tri_piece.push(piece as u32);
+            }
+        }
+        v.extend(sample.positions);
+        // Alembic's v axis points up; the Surface's runs down.
+        vt.extend(sample.uvs.iter().map(|uv| Vec2::new(uv.x, 1.0 - uv.y)));
+        vn.extend(sample.normals);
+    }
+    let mesh = mesh_from_corners(&v, &vt, &vn, &corners, &tri_piece, meshes.len())
+        .with_context(|| format!("cannot use {} at {t} s as a sequence frame", file.display()))?;
+    Ok(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) })
+}
+
+/// An object name made safe for a resource label: bytes other than letters, digits and
+/// `_.-:` as `%XX`.
+fn escape(name: &str) -> String {
+    let mut out = String::new();
+    for b in name.bytes() {
+        if b.is_ascii_alphanumeric() || b"_.-:".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+fn unescape(text: &str) -> String {
+    let mut bytes = Vec::new();
+    let mut rest = text.as_bytes();
+    while let Some((&b, tail)) = rest.split_first() {
+        let hex = tail.get(..2).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
+        match (b, hex) {
+            (b'%', Some(h)) => {
+                bytes.push(h);
+                rest = &tail[2..];
+            }
+            _ => {
+                bytes.push(b);
+                rest = tail;
+            }
+        }
+    }
+    String::from_utf8_lossy(&bytes).into_owned()
 }
 
 /// The text before and after the frame-number placeholder of a file-name pattern.
@@ -416,12 +576,9 @@ pub fn load_frame(path: &Path) -> anyhow::Result<SeqFrame> {
 
 const NONE: u32 = u32::MAX;
 
-/// Parses an OBJ frame into a Surface whose topology depends only on the faces' position and
-/// texture-coordinate indices: one vertex per distinct (v, vt) pair in order of first use,
-/// so a position on a UV seam becomes two vertices the same way in every frame, while the
-/// normal indices (which exporters renumber from frame to frame) do not matter. Normals are
-/// the file's, averaged per position (so seams do not show), or area-weighted face normals
-/// when the file has none. Polygons are fans; each `o` object is a pattern piece.
+/// Parses an OBJ frame into a Surface ([`mesh_from_corners`]) whose topology depends only on
+/// the faces' position and texture-coordinate indices, not on the normal indices (which
+/// exporters renumber from frame to frame). Polygons are fans; each `o` object is a piece.
 pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
     let (mut v, mut vt, mut vn) = (Vec::<Vec3>::new(), Vec::<Vec2>::new(), Vec::<Vec3>::new());
     // Triangle corners as (v, vt, vn) with 0-based indices, and each triangle's piece.
@@ -485,6 +642,22 @@ pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
             _ => {}
         }
     }
+    mesh_from_corners(&v, &vt, &vn, &corners, &tri_piece, pieces.len())
+}
+
+/// A frame's Surface from triangle corners (indices into positions `v`, UVs `vt` (v down) and
+/// normals `vn`; normal NONE where there are none) and each triangle's piece: one vertex per
+/// distinct (position, UV) pair in order of first use, so a position on a UV seam becomes two
+/// vertices the same way in every frame. Normals are the given ones averaged per position (so
+/// seams do not show), or area-weighted face normals where a corner has none.
+fn mesh_from_corners(
+    v: &[Vec3],
+    vt: &[Vec2],
+    vn: &[Vec3],
+    corners: &[[u32; 3]],
+    tri_piece: &[u32],
+    piece_count: usize,
+) -> anyhow::Result<Mesh> {
     if corners.is_empty() {
         bail!("no faces");
     }
@@ -502,7 +675,7 @@ pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
     let positions: Vec<Vec3> = pos_of.iter().map(|&i| v[i as usize]).collect();
     let mut per_position = vec![Vec3::ZERO; v.len()];
     if corners.iter().all(|c| c[2] != NONE) {
-        for c in &corners {
+        for c in corners {
             per_position[c[0] as usize] += vn[c[2] as usize].normalize_or_zero();
         }
     } else {
@@ -515,7 +688,7 @@ pub fn parse_obj(text: &str) -> anyhow::Result<Mesh> {
         }
     }
     let normals = pos_of.iter().map(|&i| per_position[i as usize].try_normalize().unwrap_or(Vec3::Y)).collect();
-    if pieces.len() < 2 {
+    if piece_count < 2 {
         piece_ids.clear();
     }
     Mesh::from_parts(positions, Some(normals), uvs, indices, piece_ids)

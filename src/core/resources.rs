@@ -214,7 +214,7 @@ impl Resources {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .values()
-            .filter(|s| s.path == path)
+            .filter(|s| s.path == path || split_part(&s.path).0 == path)
             .cloned()
             .collect();
         for s in slots {
@@ -265,6 +265,25 @@ impl Drop for Inner {
     }
 }
 
+/// A resource that is one part of a file (a frame of an Alembic cache): `<file>|<part>`. It
+/// reloads with its file, and a missing file is reported as such. `part` must not hold `|` or
+/// a path separator.
+pub fn part_path(file: &Path, part: &str) -> PathBuf {
+    debug_assert!(!part.contains(['|', '/', '\\']), "a resource part holds no | or separator");
+    let mut s = file.as_os_str().to_owned();
+    s.push("|");
+    s.push(part);
+    PathBuf::from(s)
+}
+
+/// The file and part of a [`part_path`]; a plain path is its own file.
+pub fn split_part(path: &Path) -> (&Path, Option<&str>) {
+    match path.to_str().and_then(|s| s.rsplit_once('|')) {
+        Some((file, part)) => (Path::new(file), Some(part)),
+        None => (path, None),
+    }
+}
+
 /// Whether a path parameter names a file sequence (frame_%04d.obj, frame_####.obj,
 /// frame_*.obj) rather than one file.
 pub fn is_file_pattern(path: &str) -> bool {
@@ -283,9 +302,10 @@ fn worker(rx: Arc<Mutex<Receiver<SlotRef>>>, inner: std::sync::Weak<Inner>) {
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (slot.load)(&slot.path)));
         // Say plainly that the file is missing: loaders word it their own way ("open file
         // failed"). A sequence pattern never exists as such; its loader explains what matched.
-        let missing = !slot.path.exists() && !is_file_pattern(&slot.path.to_string_lossy());
+        let file = split_part(&slot.path).0;
+        let missing = !slot.path.exists() && !file.exists() && !is_file_pattern(&file.to_string_lossy());
         let state = match result {
-            Ok(Err(_)) if missing => SlotState::Failed(format!("no such file: {}", slot.path.display())),
+            Ok(Err(_)) if missing => SlotState::Failed(format!("no such file: {}", file.display())),
             Ok(Ok(v)) => SlotState::Ready(v),
             Ok(Err(e)) => SlotState::Failed(format!("{}: {e:#}", slot.path.display())),
             Err(_) => SlotState::Failed(format!("{}: the loader crashed on this file", slot.path.display())),

@@ -6,6 +6,7 @@
 
 mod common;
 
+mod alembic;
 mod avatar;
 mod bounce;
 mod btf;

@@ -17,7 +17,7 @@ fn tablecloth() -> PathBuf {
     common::root().join("tests/data/sequence")
 }
 
-fn temp_dir(name: &str) -> PathBuf {
+pub(crate) fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("werkstatt-seq-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -25,7 +25,7 @@ fn temp_dir(name: &str) -> PathBuf {
 }
 
 /// A graph with one MeshSequence node "seq"; `params` is RON text like `"fps": 15.0`.
-fn sequence_graph(path: &Path, params: &str) -> Evaluator {
+pub(crate) fn sequence_graph(path: &Path, params: &str) -> Evaluator {
     let text = format!(
         r#"(version: 1, nodes: {{"seq": (kind: "MeshSequence", params: {{"path": {:?}, {params}}})}}, links: [])"#,
         path.display().to_string()
@@ -35,7 +35,7 @@ fn sequence_graph(path: &Path, params: &str) -> Evaluator {
 }
 
 /// Evaluates frame `f` the way batch rendering does: waiting for loads until nothing is pending.
-fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
+pub(crate) fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
     let time = FrameTime { frame: f, fps: 30.0 };
     for _ in 0..20 {
         let s = ev.evaluate(time, None, res, &FrameSettings::default());
@@ -47,7 +47,7 @@ fn settle(ev: &mut Evaluator, res: &Resources, f: i64) -> NodeStatus {
     ev.report("seq").unwrap().status.clone()
 }
 
-fn surface(ev: &Evaluator) -> Arc<Mesh> {
+pub(crate) fn surface(ev: &Evaluator) -> Arc<Mesh> {
     match ev.output("seq", "surface") {
         Some(Value::Surface(m)) => m.clone(),
         _ => panic!("no surface; status {:?}", ev.report("seq").unwrap().status),
