@@ -28,7 +28,7 @@ pub static PATTERN_LANDMARKS: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "landmark",
-            ParamKind::Choice { default: "centre", options: LandmarkChoice::OPTIONS },
+            ParamKind::Choice { default: "centre", options: Landmark::OPTIONS },
             "centre: top to bottom through the middle; left_edge / right_edge: top to bottom along that side; top_edge / bottom_edge: left to right (top is small v).",
         ),
         ParamSpec::new(
@@ -51,43 +51,19 @@ pub static PATTERN_LANDMARKS: NodeSpec = NodeSpec {
     create: || Box::new(PatternLandmarksNode),
 };
 
-crate::choice!(
-    enum LandmarkChoice {
-        Centre = "centre",
-        LeftEdge = "left_edge",
-        RightEdge = "right_edge",
-        TopEdge = "top_edge",
-        BottomEdge = "bottom_edge",
-    }
-);
-
 struct PatternLandmarksNode;
 impl Node for PatternLandmarksNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let surface: Arc<Mesh> = cx.input("surface")?;
-        let landmark = match cx.choice::<LandmarkChoice>("landmark") {
-            LandmarkChoice::Centre => Landmark::Centre,
-            LandmarkChoice::LeftEdge => Landmark::LeftEdge,
-            LandmarkChoice::RightEdge => Landmark::RightEdge,
-            LandmarkChoice::TopEdge => Landmark::TopEdge,
-            LandmarkChoice::BottomEdge => Landmark::BottomEdge,
-        };
-        let (offset, margin) = (cx.f32("offset"), cx.f32("margin"));
-        let piece = cx.int("piece") as u32;
-        let mut points = piece_landmark(&surface, piece, landmark, offset.max(0.0), margin, cx.int("samples") as usize)
-            .map_err(|e| NodeError::msg(format!("parameter \"piece\": {e}")))?;
-        if landmark == Landmark::Centre {
-            points.iter_mut().for_each(|p| p.x += offset);
-        } else if offset < 0.0 {
-            // Outward of the edge: the same line measured at 0, moved out.
-            let out = match landmark {
-                Landmark::LeftEdge => Vec2::new(offset, 0.0),
-                Landmark::RightEdge => Vec2::new(-offset, 0.0),
-                Landmark::TopEdge => Vec2::new(0.0, offset),
-                _ => Vec2::new(0.0, -offset),
-            };
-            points.iter_mut().for_each(|p| *p += out);
-        }
+        let points = piece_landmark(
+            &surface,
+            cx.int("piece") as u32,
+            cx.choice::<Landmark>("landmark"),
+            cx.f32("offset"),
+            cx.f32("margin"),
+            cx.int("samples") as usize,
+        )
+        .map_err(|e| NodeError::msg(format!("parameter \"piece\": {e}")))?;
         cx.set("curves", Arc::new(Curves { paths: vec![polyline_segments(&points)] }));
         Ok(())
     }

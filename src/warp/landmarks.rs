@@ -55,20 +55,22 @@ impl<'a> NearestPoint<'a> {
     }
 }
 
-/// A line of a pattern piece found from its UV outline.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Landmark {
-    /// Halfway between the piece's left and right outline, top to bottom.
-    Centre,
-    /// The left outline (smallest u) moved right by the offset, top to bottom.
-    LeftEdge,
-    /// The right outline (largest u) moved left by the offset, top to bottom.
-    RightEdge,
-    /// The top outline (smallest v: v points down) moved down by the offset, left to right.
-    TopEdge,
-    /// The bottom outline (largest v) moved up by the offset, left to right.
-    BottomEdge,
-}
+crate::choice!(
+    /// A line of a pattern piece found from its UV outline.
+    pub enum Landmark {
+        /// Halfway between the piece's left and right outline, top to bottom; the offset
+        /// shifts it towards +u.
+        Centre = "centre",
+        /// The left outline (smallest u) moved right by the offset, top to bottom.
+        LeftEdge = "left_edge",
+        /// The right outline (largest u) moved left by the offset, top to bottom.
+        RightEdge = "right_edge",
+        /// The top outline (smallest v: v points down) moved down by the offset, left to right.
+        TopEdge = "top_edge",
+        /// The bottom outline (largest v) moved up by the offset, left to right.
+        BottomEdge = "bottom_edge",
+    }
+);
 
 /// The polyline of `landmark` on `piece`: `samples` scanlines across the piece (rows of
 /// constant v for the centre and the left and right edges, columns of constant u for the top
@@ -129,14 +131,21 @@ pub fn piece_landmark(
         if lo_b > hi_b {
             continue;
         }
-        let across = match landmark {
+        // An edge is measured inward; a negative offset moves the edge itself outward.
+        let inward = offset.max(0.0);
+        let measured = match landmark {
             Landmark::Centre => 0.5 * (lo_b + hi_b),
-            Landmark::LeftEdge | Landmark::TopEdge => lo_b + offset,
-            Landmark::RightEdge | Landmark::BottomEdge => hi_b - offset,
+            Landmark::LeftEdge | Landmark::TopEdge => lo_b + inward,
+            Landmark::RightEdge | Landmark::BottomEdge => hi_b - inward,
         };
-        if !(lo_b..=hi_b).contains(&across) {
+        if !(lo_b..=hi_b).contains(&measured) {
             continue;
         }
+        let across = match landmark {
+            Landmark::Centre => measured + offset,
+            Landmark::LeftEdge | Landmark::TopEdge => measured + offset.min(0.0),
+            Landmark::RightEdge | Landmark::BottomEdge => measured - offset.min(0.0),
+        };
         let mut p = Vec2::ZERO;
         p[a] = line(k);
         p[b] = across;
