@@ -763,6 +763,32 @@ fn a_new_graph_is_saved_through_save_as() {
     assert_eq!(h.state().state.title(), "fresh.ron - werkstatt");
 }
 
+/// File > Open's "Browse…" opens a file dialog drawn by egui in the graph's folder; picking
+/// a file there opens it.
+#[test]
+fn a_graph_is_opened_through_the_file_dialog() {
+    let dir = temp_dir("browse");
+    let path = copy_default(&dir);
+    let other = dir.join("other.ron");
+    std::fs::write(&other, "(version: 2, nodes: {\"n\": (kind: \"Number\")}, links: [])").unwrap();
+    std::fs::write(dir.join("notes.txt"), "not a graph").unwrap();
+    let mut h = editor_with(&path, Vec2::new(1600.0, 1000.0), 1.0, Options { file_dialogs: true, ..options() });
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::O);
+    settle(&mut h);
+    h.get_by_role_and_label(Role::Button, "Browse…").click();
+    settle(&mut h);
+    let label =
+        |h: &Harness<'_, EditorApp>, name: &str| h.query_by(|n| n.label().is_some_and(|l| l.ends_with(name))).is_some();
+    assert!(label(&h, "other.ron") && label(&h, "default.ron"), "the dialog lists the graph's folder");
+    assert!(!label(&h, "notes.txt"), "the dialog shows graphs only");
+    h.get_by(|n| n.label().is_some_and(|l| l.ends_with("other.ron"))).click();
+    settle(&mut h);
+    h.get_by(|n| n.role() == Role::Button && n.label().is_some_and(|l| l.ends_with("Open"))).click();
+    settle(&mut h);
+    assert_eq!(h.state().state.path.as_deref(), Some(other.as_path()));
+    assert!(h.state().state.graph.nodes.contains_key("n"));
+}
+
 // ---- a slow graph: evaluation off the UI thread, progress, cancel, costs, memory ----
 
 /// The CPU time of the calling thread: what a UI frame costs itself, whatever else the

@@ -10,6 +10,7 @@ use egui::{Color32, Key, KeyboardShortcut, Modifiers, RichText};
 
 use super::canvas::{Action, Canvas, ERROR_COLOR, node_menu};
 use super::cost;
+use super::file_picker::{Answer, FilePicker, Purpose};
 use super::files::{FileWatch, Recovery, find_recovery};
 use super::inspector::Inspector;
 use super::live::Live;
@@ -20,7 +21,8 @@ use crate::gpu::GpuContext;
 /// How the editor talks to the world; tests switch the system parts off.
 #[derive(Clone, Debug)]
 pub struct Options {
-    /// Native file dialogs (rfd); without, a path field is asked for instead.
+    /// File dialogs behind "Browse…" and the inspector's file buttons; without, a path field
+    /// is asked for instead.
     pub file_dialogs: bool,
     /// Write `<graph>.autosave.ron` while there are unsaved changes.
     pub autosave: bool,
@@ -36,7 +38,7 @@ impl Default for Options {
 
 /// What to do once unsaved changes are dealt with.
 #[derive(Clone, Debug)]
-enum Then {
+pub enum Then {
     New,
     Open(Option<PathBuf>),
     Quit,
@@ -94,6 +96,8 @@ pub struct EditorApp {
     /// The refusals already reported in the status bar.
     reported_refusals: std::collections::BTreeMap<String, String>,
     dialog: Option<Dialog>,
+    /// The file dialog, while one is open.
+    picker: Option<FilePicker>,
     options: Options,
     /// Time spent in each UI frame (layout, evaluation, canvas), newest last.
     pub frame_times: FrameTimes,
@@ -127,10 +131,11 @@ impl EditorApp {
             reported_refusals: Default::default(),
             canvas: Canvas::new(),
             viewport: Viewport::new(),
-            inspector: Inspector { file_dialogs: options.file_dialogs },
+            inspector: Inspector { file_dialogs: options.file_dialogs, picker: None },
             files: FileWatch::default(),
             gpu,
             dialog: None,
+            picker: None,
             options,
             frame_times: FrameTimes::default(),
             window_frames: FrameTimes::default(),
@@ -265,20 +270,37 @@ impl EditorApp {
         self.dialog = Some(Dialog::Path { save: true, text, then });
     }
 
-    /// The system file dialog (rfd) for the path prompt; `None` when cancelled or when the
-    /// desktop offers no dialog (then the path field is still there).
-    fn browse(&self, save: bool, current: &str) -> Option<PathBuf> {
-        let mut d = rfd::FileDialog::new().add_filter("werkstatt graph", &["ron"]).set_title(if save {
-            "Save graph as"
-        } else {
-            "Open graph"
-        });
-        let current = Path::new(current);
-        let dir = if current.is_dir() { Some(current) } else { current.parent() };
-        if let Some(dir) = dir.filter(|d| !d.as_os_str().is_empty()).and_then(|d| std::path::absolute(d).ok()) {
-            d = d.set_directory(dir);
+    /// Opens the file dialog for the path prompt (the prompt closes; the dialog's answer
+    /// opens or saves).
+    fn browse(&mut self, save: bool, current: &str, then: Option<Then>) {
+        let title = if save { "Save graph as" } else { "Open graph" };
+        let name = save.then(|| self.state.file_name());
+        let purpose = Purpose::Graph { save, then };
+        self.picker = Some(FilePicker::new(title, &["ron"], Path::new(current), name.as_deref(), purpose));
+    }
+
+    /// Draws the open file dialog and acts on its answer.
+    fn file_picker(&mut self, ctx: &egui::Context) {
+        let Some(picker) = &mut self.picker else { return };
+        match picker.show(ctx) {
+            Answer::Open => {}
+            Answer::Cancelled => self.picker = None,
+            Answer::Picked(path, purpose) => {
+                self.picker = None;
+                match purpose {
+                    Purpose::Graph { save: true, then } => {
+                        self.save_to(&graph_file(path), then, ctx);
+                    }
+                    Purpose::Graph { save: false, .. } => self.open(&path),
+                    Purpose::Param { node, param, base } => {
+                        let value = crate::core::param::ParamValue::Str(super::inspector::relative_to(&path, &base));
+                        if let Err(e) = self.state.set_param(&node, &param, value) {
+                            self.state.error(e.to_string());
+                        }
+                    }
+                }
+            }
         }
-        if save { d.set_file_name(self.state.file_name()).save_file() } else { d.pick_file() }
     }
 
     fn apply(&mut self, actions: Vec<Action>, ctx: &egui::Context) {
@@ -565,6 +587,7 @@ impl EditorApp {
         // Taken out while shown: a button may open the next dialog (recovery after open).
         let Some(mut dialog) = self.dialog.take() else { return };
         let mut close = false;
+        let mut browse = None;
         let modal = egui::Modal::new(egui::Id::new("werkstatt-dialog")).show(ctx, |ui| {
             ui.set_max_width(420.0);
             match &mut dialog {
@@ -620,22 +643,16 @@ impl EditorApp {
                     }
                     let enter = r.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter));
                     ui.horizontal(|ui| {
-                        let mut go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;
-                        if self.options.file_dialogs
-                            && ui.button("Browse…").clicked()
-                            && let Some(p) = self.browse(save, text)
-                        {
-                            *text = p.display().to_string();
-                            go = true;
+                        let go = ui.button(if save { "Save" } else { "Open" }).clicked() || enter;
+                        if self.options.file_dialogs && ui.button("Browse…").clicked() {
+                            close = true;
+                            browse = Some((save, text.clone(), then.clone()));
                         }
                         if go && !text.trim().is_empty() {
                             close = true;
-                            let mut p = PathBuf::from(text.trim());
+                            let p = PathBuf::from(text.trim());
                             if save {
-                                if p.extension().is_none() {
-                                    p.set_extension("ron");
-                                }
-                                self.save_to(&p, then.clone(), ctx);
+                                self.save_to(&graph_file(p), then.clone(), ctx);
                             } else {
                                 self.open(&p);
                             }
@@ -653,6 +670,9 @@ impl EditorApp {
         if !close && self.dialog.is_none() {
             self.dialog = Some(dialog);
         }
+        if let Some((save, text, then)) = browse {
+            self.browse(save, &text, then);
+        }
     }
 
     fn disk_banner(&mut self, ui: &mut egui::Ui) {
@@ -669,6 +689,14 @@ impl EditorApp {
             }
         });
     }
+}
+
+/// Where a graph saved as `path` goes: `.ron` is added when the name has no extension.
+fn graph_file(mut path: PathBuf) -> PathBuf {
+    if path.extension().is_none() {
+        path.set_extension("ron");
+    }
+    path
 }
 
 /// A live evaluation that asks the window for a repaint when its worker finishes.
@@ -745,6 +773,10 @@ impl eframe::App for EditorApp {
             .inner;
         self.apply(actions, &ctx);
         self.dialogs(&ctx);
+        if let Some(picker) = self.inspector.picker.take() {
+            self.picker = Some(picker);
+        }
+        self.file_picker(&ctx);
 
         if self.options.autosave
             && let Some(Err(e)) = self.files.autosave(&self.state, false)

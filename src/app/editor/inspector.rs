@@ -9,19 +9,22 @@ use std::path::Path;
 use egui::{RichText, Ui};
 
 use super::canvas::{ERROR_COLOR, PENDING_COLOR, port_color};
+use super::file_picker::{FilePicker, Purpose};
 use super::live::{Live, NodeState};
 use super::state::EditorState;
 use crate::core::param::{ParamKind, ParamSpec, ParamValue};
 use crate::core::spec;
 
 pub struct Inspector {
-    /// Whether file buttons open the system file dialog (off in tests).
+    /// Whether file buttons open a file dialog (off in tests).
     pub file_dialogs: bool,
+    /// A file dialog a file button asked for, for the window to show.
+    pub picker: Option<FilePicker>,
 }
 
 impl Default for Inspector {
     fn default() -> Self {
-        Inspector { file_dialogs: true }
+        Inspector { file_dialogs: true, picker: None }
     }
 }
 
@@ -191,21 +194,14 @@ impl Inspector {
             }
             ParamKind::Path { extensions, .. } => {
                 let mut s = str_of(current);
-                let mut changed =
+                let changed =
                     ui.add(egui::TextEdit::singleline(&mut s).desired_width(130.0)).on_hover_text(tip).changed();
                 if self.file_dialogs && ui.small_button("…").on_hover_text("choose a file").clicked() {
                     let base = state.path.as_deref().and_then(Path::parent).map(Path::to_path_buf).unwrap_or_default();
-                    let mut dialog = rfd::FileDialog::new().set_title(format!("{id}.{}", ps.name));
-                    if !extensions.is_empty() {
-                        dialog = dialog.add_filter(ps.name, extensions);
-                    }
-                    if let Ok(dir) = std::path::absolute(&base) {
-                        dialog = dialog.set_directory(dir);
-                    }
-                    if let Some(file) = dialog.pick_file() {
-                        s = relative_to(&file, &base);
-                        changed = true;
-                    }
+                    let near = if s.is_empty() { base.clone() } else { base.join(&s) };
+                    let purpose = Purpose::Param { node: id.to_string(), param: ps.name.to_string(), base };
+                    let title = format!("{id}.{}", ps.name);
+                    self.picker = Some(FilePicker::new(&title, extensions, &near, None, purpose));
                 }
                 changed.then_some(ParamValue::Str(s))
             }
@@ -244,7 +240,7 @@ fn str_of(v: &ParamValue) -> String {
 }
 
 /// `file` relative to `base` when it lies inside it (graphs keep portable relative paths).
-fn relative_to(file: &Path, base: &Path) -> String {
+pub(super) fn relative_to(file: &Path, base: &Path) -> String {
     let abs_base = std::path::absolute(base).unwrap_or_else(|_| base.to_path_buf());
     match file.strip_prefix(&abs_base) {
         Ok(rel) => rel.to_string_lossy().into_owned(),

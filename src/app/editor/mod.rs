@@ -11,6 +11,7 @@ pub mod app;
 pub mod canvas;
 pub mod cost;
 pub mod document;
+pub mod file_picker;
 pub mod files;
 pub mod history;
 pub mod inspector;
