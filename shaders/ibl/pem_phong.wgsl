@@ -1,7 +1,8 @@
 // The Phong prefilter (src/ibl/pem.rs phong_level): per destination texel with direction r,
 // the lobe max(0, r.w)^s times each sample's solid angle, normalized, over a source level of
-// the plain chain: every texel of all faces (small destinations) or a window of points one
-// source texel apart on the face's plane, read with the seamless bilinear lookup.
+// the plain chain: every texel of all faces (small destinations) or a window of source texel
+// centres around the one holding the destination texel's centre, extended past the face's
+// edges on its plane and read there with the seamless bilinear lookup.
 //
 // The normalization (the sum of the weights) depends only on the geometry, so fs_phong_norm
 // computes it once per level and fs_phong sums only the source texels inside `bounds`: a PEM
@@ -24,6 +25,8 @@ struct Phong {
     // Windowed levels: outside this cone (axis, cos of the half-angle) the window cannot
     // reach a non-zero texel, so the sum is exactly zero.
     cone: vec4<f32>,
+    // The same for one lookup (window 0): a tap outside it reads exact zeros.
+    tap_cone: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> ph: Phong;
@@ -56,24 +59,32 @@ fn dst_dir(frag: vec4<f32>) -> vec3<f32> {
     return normalize(face_dir(ph.face, texel_center(ph.dst_size, xy.x), texel_center(ph.dst_size, xy.y)));
 }
 
-// The window's lobe weight at offset (a, b) texels from the destination texel's centre
-// (uc, vc), with its direction; 0 behind r.
+// The window's lobe weight at offset (a, b) source texels from `centre`, the source texel
+// holding the destination texel's centre, with the tap's direction: taps are source texel
+// centres, extended past the face's edges on its plane. 0 behind r, and 0 outside
+// `tap_cone`, where the source is exactly zero: across face edges each tap is a seamless
+// lookup, the costly part, and a PEM's window mostly reaches outside its region.
 struct WindowTap {
     d: vec3<f32>,
     w: f32,
 };
 
-fn window_tap(r: vec3<f32>, uc: f32, vc: f32, a: i32, b: i32) -> WindowTap {
+fn window_tap(r: vec3<f32>, centre: vec2<i32>, a: i32, b: i32) -> WindowTap {
     let h = 2.0 / f32(ph.src_size);
-    let u = uc + f32(a) * h;
-    let v = vc + f32(b) * h;
+    let u = (f32(centre.x + a) + 0.5) * h - 1.0;
+    let v = (f32(centre.y + b) + 0.5) * h - 1.0;
     let d = normalize(face_dir(ph.face, u, v));
     let c = dot(r, d);
     var w = 0.0;
-    if c > 0.0 {
+    if c > 0.0 && dot(d, ph.tap_cone.xyz) >= ph.tap_cone.w {
         w = pow(c, ph.exponent) * plane_solid_angle(u, v, h);
     }
     return WindowTap(d, w);
+}
+
+// The source texel holding the centre of destination texel `frag` (pem.rs window_centre).
+fn window_centre(frag: vec4<f32>) -> vec2<i32> {
+    return vec2<i32>(frag.xy) * i32(ph.src_size) / i32(ph.dst_size);
 }
 
 @fragment
@@ -81,11 +92,10 @@ fn fs_phong_norm(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let r = dst_dir(frag);
     var total = 0.0;
     if ph.full_sphere == 0u {
-        let uc = texel_center(ph.dst_size, u32(frag.x));
-        let vc = texel_center(ph.dst_size, u32(frag.y));
+        let centre = window_centre(frag);
         for (var b = -ph.window; b <= ph.window; b++) {
             for (var a = -ph.window; a <= ph.window; a++) {
-                total += window_tap(r, uc, vc, a, b).w;
+                total += window_tap(r, centre, a, b).w;
             }
         }
         return vec4<f32>(total, 0.0, 0.0, 1.0);
@@ -121,22 +131,18 @@ fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     if dot(r, ph.cone.xyz) < ph.cone.w {
         return vec4<f32>(0.0);
     }
-    let uc = texel_center(ph.dst_size, u32(frag.x));
-    let vc = texel_center(ph.dst_size, u32(frag.y));
-    let centre = vec2<i32>(frag.xy);
+    let centre = window_centre(frag);
     let last = i32(ph.src_size) - 1;
-    let total = textureLoad(norm, centre, ph.face, 0).r;
-    // A window inside its face, with source and destination of one face size: its points are
-    // source texel centres (a bilinear lookup there is the texel), and only those inside the
-    // region's rectangle on this face can be non-zero.
-    if ph.src_size == ph.dst_size && all(centre - vec2<i32>(ph.window) >= vec2<i32>(0))
-        && all(centre + vec2<i32>(ph.window) <= vec2<i32>(last)) {
+    let total = textureLoad(norm, vec2<i32>(frag.xy), ph.face, 0).r;
+    // A window inside its face: its taps are source texels, and only those inside the region's
+    // rectangle on this face can be non-zero.
+    if all(centre - vec2<i32>(ph.window) >= vec2<i32>(0)) && all(centre + vec2<i32>(ph.window) <= vec2<i32>(last)) {
         let bounds = ph.bounds[ph.face];
         let lo = max(centre - vec2<i32>(ph.window), vec2<i32>(bounds.xy));
         let hi = min(centre + vec2<i32>(ph.window), vec2<i32>(bounds.zw));
         for (var y = lo.y; y <= hi.y; y++) {
             for (var x = lo.x; x <= hi.x; x++) {
-                let tap = window_tap(r, uc, vc, x - centre.x, y - centre.y);
+                let tap = window_tap(r, centre, x - centre.x, y - centre.y);
                 if tap.w > 0.0 {
                     sum += tap.w * textureLoad(src, vec2<u32>(u32(x), u32(y)), ph.face, 0);
                 }
@@ -146,7 +152,7 @@ fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
     for (var b = -ph.window; b <= ph.window; b++) {
         for (var a = -ph.window; a <= ph.window; a++) {
-            let tap = window_tap(r, uc, vc, a, b);
+            let tap = window_tap(r, centre, a, b);
             if tap.w > 0.0 {
                 sum += tap.w * cube_bilinear(src, ph.src_size, tap.d);
             }

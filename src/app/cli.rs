@@ -70,7 +70,7 @@ enum Command {
         backend: Option<Backend>,
     },
     /// Open the node editor on a graph (created on save if it does not exist yet).
-    #[cfg(feature = "editor")]
+    #[cfg(all(feature = "editor", not(test)))]
     Edit {
         /// The graph file (.ron); without it the editor starts with a new graph.
         graph: Option<PathBuf>,
@@ -667,7 +667,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        #[cfg(feature = "editor")]
+        #[cfg(all(feature = "editor", not(test)))]
         Command::Edit { graph, backend } => {
             crate::app::editor::run(graph, pick_backend(backend)?)?;
             Ok(ExitCode::SUCCESS)

@@ -147,6 +147,9 @@ struct PhongParams {
     bounds: FaceBounds,
     /// Axis and cos of the half-angle outside which the level is black ([`Footprint::cone`]).
     cone: [f32; 4],
+    /// The same for single lookups into the source level (window 0): taps outside it read
+    /// exact zeros, and are skipped.
+    tap_cone: [f32; 4],
 }
 
 impl PhongParams {
@@ -163,6 +166,7 @@ impl PhongParams {
             pad: [0.0; 2],
             bounds,
             cone: NO_CONE,
+            tap_cone: NO_CONE,
         }
     }
 }
@@ -209,13 +213,14 @@ impl Footprint {
     }
 
     /// The cone (axis, cos of the half-angle) outside which a Phong level of a plain-chain
-    /// source of face size `src` and window `window` is exactly black: the window reaches
-    /// sqrt(2) window texels on the face plane, each bilinear lookup one texel further, and
-    /// the plain chain's box filter spreads the footprint by one more (angles on the sphere are
-    /// at most distances on a face plane). -2 where the cone covers everything.
+    /// source of face size `src` and window `window` is exactly black: the window's centre
+    /// lies within a texel of the destination texel's, its taps reach sqrt(2) window texels
+    /// further on the face plane, each bilinear lookup one texel further, and the plain chain's
+    /// box filter spreads the footprint by one more (angles on the sphere are at most
+    /// distances on a face plane). -2 where the cone covers everything.
     fn cone(&self, src: u32, window: i32) -> [f32; 4] {
         let h = 2.0 / src as f32;
-        let angle = self.angle + SQRT_2 * h * (window.max(0) as f32 + 2.0);
+        let angle = self.angle + SQRT_2 * h * (window.max(0) as f32 + 3.0);
         if angle >= PI {
             return NO_CONE;
         }
@@ -379,7 +384,7 @@ impl CubePasses {
         let size = cube.width as usize;
         let sample_type = plain.desc.sample_type(false);
         for mip in 1..cube.desc.mips {
-            let source = super::pem::phong_source(mip as usize) as u32;
+            let source = super::pem::phong_source(size, mip as usize) as u32;
             let view = level_layers(plain, source, 6);
             let norm_view = level_layers(&norms, mip, 6);
             let (dst, src) = (cube.width >> mip, cube.width >> source);
@@ -398,6 +403,7 @@ impl CubePasses {
                     bounds: bounds_at_level(&footprint.faces, source, cube.width),
                     // The whole-sphere sum reaches every texel in front of r: no cone there.
                     cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, window) },
+                    tap_cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, 0) },
                 };
                 self.phong.draw(
                     gpu,
@@ -463,8 +469,8 @@ impl CubePasses {
     }
 
     /// fs_phong_norm into mip `mip` (face size `size`) of `norms`: the weights' sum at exponent
-    /// `exponent` over a source of the same face size, over the whole sphere or, with
-    /// `window`, over that window.
+    /// `exponent` over the whole sphere of a source of the same face size or, with
+    /// `window` = (source face size, half-width), over that window.
     fn norm_pass(
         &mut self,
         gpu: &GpuContext,
@@ -472,12 +478,12 @@ impl CubePasses {
         mip: u32,
         size: u32,
         exponent: f32,
-        window: Option<i32>,
+        window: Option<(u32, i32)>,
     ) -> anyhow::Result<()> {
         for face in 0..6 {
             let mut params = PhongParams::whole_sphere(face, size, exponent, Footprint::whole(size).faces);
-            if let Some(window) = window {
-                (params.full_sphere, params.window) = (0, window);
+            if let Some((src, window)) = window {
+                (params.full_sphere, params.src_size, params.window) = (0, src, window);
             }
             self.phong_norm.draw(
                 gpu,
@@ -498,11 +504,11 @@ impl CubePasses {
         let norms = self.norm_target(gpu, "Phong normalization", cube.width, cube.desc.mips);
         let size = cube.width as usize;
         for mip in 1..cube.desc.mips {
-            // Every level reads its own level of the plain chain (phong_source).
             let dst = cube.width >> mip;
+            let src = cube.width >> super::pem::phong_source(size, mip as usize);
             let exponent = super::pem::phong_exponent(size, mip as usize);
             let window = (dst as usize > super::pem::PHONG_FULL_SPHERE_SIZE)
-                .then(|| super::pem::phong_window(dst as usize, exponent));
+                .then(|| (src, super::pem::phong_window(src as usize, exponent)));
             self.norm_pass(gpu, &norms, mip, dst, exponent, window)?;
         }
         self.norms = Some(norms.share());

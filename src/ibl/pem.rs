@@ -184,11 +184,21 @@ pub fn phong_window(n: usize, s: f32) -> i32 {
     ((1.25 * theta.tan() * n as f32 / 2.0).ceil() as i32 + 1).min(64)
 }
 
-/// The plain-chain level a Phong level reads: its own. With [`PHONG_TEXELS_PER_LOBE`] texels
-/// per lobe volume the lobe's sigma spans about three of them, so the 2x2 box pre-filter of
-/// the plain chain widens it by under 2%, and finer sources would cost 4x per level.
-pub fn phong_source(level: usize) -> usize {
-    level
+/// The plain-chain level a Phong level `level` of a chain whose level 0 is `size` wide reads.
+/// Windowed levels read the next coarser level: with [`PHONG_TEXELS_PER_LOBE`] texels per lobe
+/// volume the lobe's sigma spans about 1.5 texels there, and the window holds 2.6x fewer
+/// taps (13^2 instead of 21^2). Summing texel centres adds no lookup blur, and the 2x2 box
+/// pre-filter widens the lobe by about 2%, which the calibration measures with the rest.
+/// Whole-sphere levels (small, and wide lobes) read their own level.
+pub fn phong_source(size: usize, level: usize) -> usize {
+    if (size >> level) > PHONG_FULL_SPHERE_SIZE { level + 1 } else { level }
+}
+
+/// The source texel of a face of size `src` holding the centre of texel `i` of a face of size
+/// `dst` (`src` divides `dst`): the centre of a Phong window, whose taps are source texel
+/// centres.
+pub fn window_centre(i: usize, dst: usize, src: usize) -> usize {
+    i * src / dst
 }
 
 /// The solid angle of a point sample at face coordinates (u, v) spaced `h` apart on a face
@@ -201,14 +211,15 @@ fn plane_solid_angle(u: f32, v: f32, h: f32) -> f32 {
 /// of the plain (2x2 box) chain's level [`phong_source`] against max(0, r.w)^s, s =
 /// [`phong_exponent`]: a quadrature over that level's texels, each weighted by the lobe and its
 /// solid angle. Destination faces of [`PHONG_FULL_SPHERE_SIZE`] or less sum every source texel
-/// of all six faces; larger ones sum a (2w+1)^2 window ([`phong_window`]) of points spaced one
-/// source texel apart on the face's plane around the texel's centre, extended past
-/// its edges into the neighbouring faces and read with the seamless bilinear lookup. The
-/// weights depend only on geometry, so PEMs filtered this way still sum to the filtered map.
+/// of all six faces; larger ones sum a (2w+1)^2 window ([`phong_window`]) of source texel
+/// centres around the one holding the texel's centre ([`window_centre`]), extended past
+/// the face's edges on its plane into the neighbouring faces and read there with the seamless
+/// bilinear lookup. The weights depend only on geometry, so PEMs filtered this way still sum
+/// to the filtered map.
 /// shaders/ibl/pem_phong.wgsl `fs_phong` is the GPU version.
 pub fn phong_level(plain: &[CubeImage], level: usize) -> CubeImage {
     let size = plain[0].size;
-    phong_convolve(&plain[phong_source(level)], (size >> level).max(1), phong_exponent(size, level))
+    phong_convolve(&plain[phong_source(size, level)], (size >> level).max(1), phong_exponent(size, level))
 }
 
 /// `src` convolved with the normalized lobe max(0, r.w)^s into a cube of face size `n` (the
@@ -235,9 +246,11 @@ fn phong_convolve(src: &CubeImage, n: usize, s: f32) -> CubeImage {
                     }
                 } else {
                     let win = phong_window(m, s);
+                    let (cx, cy) = (window_centre(x, n, m) as i32, window_centre(y, n, m) as i32);
+                    let plane = |t: i32| 2.0 * (t as f32 + 0.5) / m as f32 - 1.0;
                     for b in -win..=win {
                         for a in -win..=win {
-                            let (u, v) = (uc + a as f32 * h, vc + b as f32 * h);
+                            let (u, v) = (plane(cx + a), plane(cy + b));
                             let d = face_dir(face, u, v).normalize();
                             let c = r.dot(d);
                             if c > 0.0 {

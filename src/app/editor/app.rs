@@ -16,7 +16,7 @@ use super::inspector::Inspector;
 use super::live::Live;
 use super::state::{EditorState, Level};
 use super::viewport::Viewport;
-use crate::gpu::GpuContext;
+use crate::gpu::{Backend, GpuContext};
 
 /// How the editor talks to the world; tests switch the system parts off.
 #[derive(Clone, Debug)]
@@ -808,4 +808,35 @@ impl eframe::App for EditorApp {
         }
         self.frame_times.push(start.elapsed());
     }
+}
+
+/// Opens the editor window on `graph` (or a new graph) and runs until it is closed.
+pub fn run(graph: Option<PathBuf>, backend: Backend) -> anyhow::Result<()> {
+    let mut setup = egui_wgpu::WgpuSetupCreateNew::without_display_handle();
+    setup.instance_descriptor.backends = match backend {
+        Backend::Auto => wgpu::Backends::VULKAN | wgpu::Backends::GL,
+        Backend::Vulkan => wgpu::Backends::VULKAN,
+        Backend::Gl => wgpu::Backends::GL,
+    };
+    // The engine opens its own device on this adapter (see `EditorApp::new`); the window asks
+    // for the same features and limits.
+    setup.device_descriptor = Arc::new(GpuContext::device_descriptor);
+    let mut native = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default().with_title("werkstatt").with_inner_size([1440.0, 900.0]),
+        renderer: eframe::Renderer::Wgpu,
+        ..Default::default()
+    };
+    native.wgpu_options.wgpu_setup = egui_wgpu::WgpuSetup::CreateNew(setup);
+    eframe::run_native(
+        "werkstatt",
+        native,
+        Box::new(move |cc| Ok(Box::new(EditorApp::new(cc, graph, Options::default())))),
+    )
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "cannot open the editor window: {e}\n  help: `werkstatt edit` needs a display (X11 or Wayland; \
+             on a machine without one, run it under Xvfb); {}",
+            crate::gpu::NO_ADAPTER_HELP
+        )
+    })
 }
