@@ -34,6 +34,8 @@ struct Phong {
 @group(0) @binding(1) var src: texture_2d_array<f32>;
 // fs_phong on whole-sphere levels: fs_phong_norm's output for this level (one mip).
 @group(0) @binding(2) var norm: texture_2d_array<f32>;
+// cs_phong: the level written, all six faces.
+@group(1) @binding(0) var dst: texture_storage_2d_array<rgba16float, write>;
 
 // #include "fullscreen.wgsl"
 // #include "cube.wgsl"
@@ -54,9 +56,8 @@ fn lobe_weight(r: vec3<f32>, f: u32, tx: u32, ty: u32) -> f32 {
     return 0.0;
 }
 
-fn dst_dir(frag: vec4<f32>) -> vec3<f32> {
-    let xy = vec2<u32>(frag.xy);
-    return normalize(face_dir(ph.face, texel_center(ph.dst_size, xy.x), texel_center(ph.dst_size, xy.y)));
+fn dst_dir(face: u32, xy: vec2<u32>) -> vec3<f32> {
+    return normalize(face_dir(face, texel_center(ph.dst_size, xy.x), texel_center(ph.dst_size, xy.y)));
 }
 
 // The window's lobe weight at offset (a, b) source texels from `centre`, the source texel
@@ -69,11 +70,11 @@ struct WindowTap {
     w: f32,
 };
 
-fn window_tap(r: vec3<f32>, centre: vec2<i32>, a: i32, b: i32) -> WindowTap {
+fn window_tap(face: u32, r: vec3<f32>, centre: vec2<i32>, a: i32, b: i32) -> WindowTap {
     let h = 2.0 / f32(ph.src_size);
     let u = (f32(centre.x + a) + 0.5) * h - 1.0;
     let v = (f32(centre.y + b) + 0.5) * h - 1.0;
-    let d = normalize(face_dir(ph.face, u, v));
+    let d = normalize(face_dir(face, u, v));
     let c = dot(r, d);
     var w = 0.0;
     if c > 0.0 && dot(d, ph.tap_cone.xyz) >= ph.tap_cone.w {
@@ -82,20 +83,20 @@ fn window_tap(r: vec3<f32>, centre: vec2<i32>, a: i32, b: i32) -> WindowTap {
     return WindowTap(d, w);
 }
 
-// The source texel holding the centre of destination texel `frag` (pem.rs window_centre).
-fn window_centre(frag: vec4<f32>) -> vec2<i32> {
-    return vec2<i32>(frag.xy) * i32(ph.src_size) / i32(ph.dst_size);
+// The source texel holding the centre of destination texel `xy` (pem.rs window_centre).
+fn window_centre(xy: vec2<u32>) -> vec2<i32> {
+    return vec2<i32>(xy) * i32(ph.src_size) / i32(ph.dst_size);
 }
 
 @fragment
 fn fs_phong_norm(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
-    let r = dst_dir(frag);
+    let r = dst_dir(ph.face, vec2<u32>(frag.xy));
     var total = 0.0;
     if ph.full_sphere == 0u {
-        let centre = window_centre(frag);
+        let centre = window_centre(vec2<u32>(frag.xy));
         for (var b = -ph.window; b <= ph.window; b++) {
             for (var a = -ph.window; a <= ph.window; a++) {
-                total += window_tap(r, centre, a, b).w;
+                total += window_tap(ph.face, r, centre, a, b).w;
             }
         }
         return vec4<f32>(total, 0.0, 0.0, 1.0);
@@ -110,9 +111,9 @@ fn fs_phong_norm(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     return vec4<f32>(total, 0.0, 0.0, 1.0);
 }
 
-@fragment
-fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
-    let r = dst_dir(frag);
+// Level texel `xy` of face `face`.
+fn phong(face: u32, xy: vec2<u32>) -> vec4<f32> {
+    let r = dst_dir(face, xy);
     var sum = vec4<f32>(0.0);
     if ph.full_sphere == 1u {
         for (var f = 0u; f < 6u; f++) {
@@ -126,25 +127,25 @@ fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
                 }
             }
         }
-        return sum / textureLoad(norm, vec2<u32>(frag.xy), ph.face, 0).r;
+        return sum / textureLoad(norm, xy, face, 0).r;
     }
     if dot(r, ph.cone.xyz) < ph.cone.w {
         return vec4<f32>(0.0);
     }
-    let centre = window_centre(frag);
+    let centre = window_centre(xy);
     let last = i32(ph.src_size) - 1;
-    let total = textureLoad(norm, vec2<i32>(frag.xy), ph.face, 0).r;
+    let total = textureLoad(norm, xy, face, 0).r;
     // A window inside its face: its taps are source texels, and only those inside the region's
     // rectangle on this face can be non-zero.
     if all(centre - vec2<i32>(ph.window) >= vec2<i32>(0)) && all(centre + vec2<i32>(ph.window) <= vec2<i32>(last)) {
-        let bounds = ph.bounds[ph.face];
+        let bounds = ph.bounds[face];
         let lo = max(centre - vec2<i32>(ph.window), vec2<i32>(bounds.xy));
         let hi = min(centre + vec2<i32>(ph.window), vec2<i32>(bounds.zw));
         for (var y = lo.y; y <= hi.y; y++) {
             for (var x = lo.x; x <= hi.x; x++) {
-                let tap = window_tap(r, centre, x - centre.x, y - centre.y);
+                let tap = window_tap(face, r, centre, x - centre.x, y - centre.y);
                 if tap.w > 0.0 {
-                    sum += tap.w * textureLoad(src, vec2<u32>(u32(x), u32(y)), ph.face, 0);
+                    sum += tap.w * textureLoad(src, vec2<u32>(u32(x), u32(y)), face, 0);
                 }
             }
         }
@@ -152,11 +153,25 @@ fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
     for (var b = -ph.window; b <= ph.window; b++) {
         for (var a = -ph.window; a <= ph.window; a++) {
-            let tap = window_tap(r, centre, a, b);
+            let tap = window_tap(face, r, centre, a, b);
             if tap.w > 0.0 {
                 sum += tap.w * cube_bilinear(src, ph.src_size, tap.d);
             }
         }
     }
     return sum / total;
+}
+
+// One dispatch per level for all six faces (z); GL, whose storage writes into these arrays
+// read back black, draws fs_phong per face instead.
+@compute @workgroup_size(8, 8, 1)
+fn cs_phong(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x < ph.dst_size && id.y < ph.dst_size {
+        textureStore(dst, id.xy, id.z, phong(id.z, id.xy));
+    }
+}
+
+@fragment
+fn fs_phong(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    return phong(ph.face, vec2<u32>(frag.xy));
 }

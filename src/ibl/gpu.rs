@@ -86,10 +86,10 @@ const CUBE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// Writes mip `level` of all six faces of `dst` with one of shaders/ibl/pem_filter.wgsl's
 /// passes (`params` and `binds` after it in group 0): one compute dispatch, or on GL one
 /// render pass per face.
-fn faces_pass(
+fn faces_pass<P: FaceParams>(
     gpu: &GpuContext,
     (compute, render): &mut (ComputePass, FullscreenPass),
-    params: FilterParams,
+    params: P,
     binds: &[Bind<'_>],
     dst: &GpuImage,
     level: u32,
@@ -103,12 +103,29 @@ fn faces_pass(
         return compute.dispatch(gpu, &[&group0, &group1], [size.div_ceil(8), size.div_ceil(8), 6]);
     }
     for face in 0..6 {
-        let params = FilterParams { face, ..params };
+        let params = params.with_face(face);
         let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
         group0.extend_from_slice(binds);
         render.draw(gpu, &group0, &[&dst.layer_view(face, level)], &[dst.format])?;
     }
     Ok(())
+}
+
+/// Uniforms of a pass over a cube's faces: the render path draws one face at a time.
+trait FaceParams: bytemuck::Pod {
+    fn with_face(self, face: u32) -> Self;
+}
+
+impl FaceParams for FilterParams {
+    fn with_face(self, face: u32) -> Self {
+        FilterParams { face, ..self }
+    }
+}
+
+impl FaceParams for PhongParams {
+    fn with_face(self, face: u32) -> Self {
+        PhongParams { face, ..self }
+    }
 }
 
 /// Mip `level` of the first `layers` layers of a cube map's texture, as a 2D array: its six
@@ -259,7 +276,9 @@ pub struct CubePasses {
     /// level) or, on GL, as a render pass per face.
     filter: (ComputePass, FullscreenPass),
     mask: (ComputePass, FullscreenPass),
-    phong: FullscreenPass,
+    /// The Phong levels (compute, or a render pass per face on GL), and fs_phong alone for the
+    /// diffuse end, which writes a layer range of a 2D array.
+    phong: (ComputePass, FullscreenPass),
     phong_norm: FullscreenPass,
     /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
     /// only on the geometry, and every PEM of a set shares it.
@@ -280,7 +299,10 @@ impl Default for CubePasses {
                 ComputePass::new("pem_filter.wgsl", "cs_mask"),
                 FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
             ),
-            phong: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
+            phong: (
+                ComputePass::new("pem_phong.wgsl", "cs_phong"),
+                FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
+            ),
             phong_norm: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong_norm"),
             norms: None,
             diffuse_norms: None,
@@ -391,31 +413,24 @@ impl CubePasses {
             let exponent = super::pem::phong_exponent(size, mip as usize);
             let full_sphere = u32::from(dst as usize <= super::pem::PHONG_FULL_SPHERE_SIZE);
             let window = super::pem::phong_window(src as usize, exponent);
-            for face in 0..6 {
-                let params = PhongParams {
-                    face,
-                    dst_size: dst,
-                    src_size: src,
-                    full_sphere,
-                    exponent,
-                    window,
-                    pad: [0.0; 2],
-                    bounds: bounds_at_level(&footprint.faces, source, cube.width),
-                    // The whole-sphere sum reaches every texel in front of r: no cone there.
-                    cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, window) },
-                    tap_cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, 0) },
-                };
-                self.phong.draw(
-                    gpu,
-                    &[
-                        Bind::Uniform(bytemuck::bytes_of(&params)),
-                        Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
-                        Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
-                    ],
-                    &[&cube.layer_view(face, mip)],
-                    &[cube.format],
-                )?;
-            }
+            let params = PhongParams {
+                face: 0,
+                dst_size: dst,
+                src_size: src,
+                full_sphere,
+                exponent,
+                window,
+                pad: [0.0; 2],
+                bounds: bounds_at_level(&footprint.faces, source, cube.width),
+                // The whole-sphere sum reaches every texel in front of r: no cone there.
+                cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, window) },
+                tap_cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, 0) },
+            };
+            let binds = [
+                Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
+                Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
+            ];
+            faces_pass(gpu, &mut self.phong, params, &binds, cube, mip)?;
         }
         Ok(())
     }
@@ -446,7 +461,7 @@ impl CubePasses {
         for face in 0..6 {
             let params =
                 PhongParams::whole_sphere(face, d, 1.0, bounds_at_level(&footprint.faces, source, plain.width));
-            self.phong.draw(
+            self.phong.1.draw(
                 gpu,
                 &[
                     Bind::Uniform(bytemuck::bytes_of(&params)),
