@@ -76,29 +76,37 @@ pub const PEMS_PER_PASS: usize = 8;
 /// Diffuse ends ([`super::pem::diffuse_end`]) of `cubes` cube maps of face size `size`, one
 /// 2D array (cube k's faces at layers 6k..6k+5, one mip).
 pub fn diffuse_target(gpu: &GpuContext, label: &str, size: u32, cubes: u32) -> GpuImage {
-    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::STORAGE_BINDING;
     GpuImage::create(gpu, label, TextureDesc::array(size, size, 6 * cubes, CUBE_FORMAT, usage))
 }
 
 /// The format of cube maps and PEMs (shaders/ibl/pem_filter.wgsl stores into it).
 const CUBE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
-/// Writes mip `level` of all six faces of `dst` with one of shaders/ibl/pem_filter.wgsl's
-/// passes (`params` and `binds` after it in group 0): one compute dispatch, or on GL one
-/// render pass per face.
+/// Writes mip `level` of the six faces at layers `first_layer..first_layer + 6` of `dst` (a
+/// cube, or a 2D array of cubes) with one of shaders/ibl/pem_filter.wgsl's or pem_phong.wgsl's
+/// passes (`params` and `binds` after it in group 0): one compute dispatch, or on GL one render
+/// pass per face.
 fn faces_pass<P: FaceParams>(
     gpu: &GpuContext,
     (compute, render): &mut (ComputePass, FullscreenPass),
     params: P,
     binds: &[Bind<'_>],
-    dst: &GpuImage,
-    level: u32,
+    (dst, level, first_layer): (&GpuImage, u32, u32),
 ) -> anyhow::Result<()> {
     let size = dst.width >> level;
     if gpu.info.backend != wgpu::Backend::Gl {
         let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
         group0.extend_from_slice(binds);
-        let store = level_layers(dst, level, dst.texture.depth_or_array_layers());
+        let store = dst.view_of(crate::gpu::texture::ViewSel {
+            dimension: wgpu::TextureViewDimension::D2Array,
+            base_mip: level,
+            mips: 1,
+            base_layer: first_layer,
+            layers: 6,
+        });
         let group1 = [Bind::StorageTexture(&store, CUBE_FORMAT, wgpu::TextureViewDimension::D2Array)];
         return compute.dispatch(gpu, &[&group0, &group1], [size.div_ceil(8), size.div_ceil(8), 6]);
     }
@@ -106,7 +114,7 @@ fn faces_pass<P: FaceParams>(
         let params = params.with_face(face);
         let mut group0 = vec![Bind::Uniform(bytemuck::bytes_of(&params))];
         group0.extend_from_slice(binds);
-        render.draw(gpu, &group0, &[&dst.layer_view(face, level)], &[dst.format])?;
+        render.draw(gpu, &group0, &[&dst.layer_view(first_layer + face, level)], &[dst.format])?;
     }
     Ok(())
 }
@@ -276,8 +284,7 @@ pub struct CubePasses {
     /// level) or, on GL, as a render pass per face.
     filter: (ComputePass, FullscreenPass),
     mask: (ComputePass, FullscreenPass),
-    /// The Phong levels (compute, or a render pass per face on GL), and fs_phong alone for the
-    /// diffuse end, which writes a layer range of a 2D array.
+    /// The Phong levels and diffuse ends (compute, or a render pass per face on GL).
     phong: (ComputePass, FullscreenPass),
     phong_norm: FullscreenPass,
     /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
@@ -374,7 +381,7 @@ impl CubePasses {
             let params = FilterParams { face: 0, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
             let sample_type = cube.desc.sample_type(false);
             let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type)];
-            faces_pass(gpu, &mut self.filter, params, &binds, cube, mip)?;
+            faces_pass(gpu, &mut self.filter, params, &binds, (cube, mip, 0))?;
         }
         Ok(())
     }
@@ -430,7 +437,7 @@ impl CubePasses {
                 Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
                 Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
             ];
-            faces_pass(gpu, &mut self.phong, params, &binds, cube, mip)?;
+            faces_pass(gpu, &mut self.phong, params, &binds, (cube, mip, 0))?;
         }
         Ok(())
     }
@@ -458,20 +465,12 @@ impl CubePasses {
         };
         let view = level_layers(plain, source, 6);
         let norm_view = level_layers(&norms, 0, 6);
-        for face in 0..6 {
-            let params =
-                PhongParams::whole_sphere(face, d, 1.0, bounds_at_level(&footprint.faces, source, plain.width));
-            self.phong.1.draw(
-                gpu,
-                &[
-                    Bind::Uniform(bytemuck::bytes_of(&params)),
-                    Bind::View(&view, wgpu::TextureViewDimension::D2Array, plain.desc.sample_type(false)),
-                    Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
-                ],
-                &[&dst.layer_view(6 * index + face, 0)],
-                &[dst.format],
-            )?;
-        }
+        let params = PhongParams::whole_sphere(0, d, 1.0, bounds_at_level(&footprint.faces, source, plain.width));
+        let binds = [
+            Bind::View(&view, wgpu::TextureViewDimension::D2Array, plain.desc.sample_type(false)),
+            Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
+        ];
+        faces_pass(gpu, &mut self.phong, params, &binds, (dst, 0, 6 * index))?;
         Ok(())
     }
 
@@ -544,7 +543,7 @@ impl CubePasses {
         let params = FilterParams { face: 0, src_size: src.width, region, pad: 0, weights: [0.0; 28] };
         let sample_type = src.desc.sample_type(false);
         let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type), Bind::Texture(regions)];
-        faces_pass(gpu, &mut self.mask, params, &binds, dst, 0)?;
+        faces_pass(gpu, &mut self.mask, params, &binds, (dst, 0, 0))?;
         Ok(())
     }
 
