@@ -4,8 +4,10 @@
 //! ([`pca`]), BTFs baked from woven yarn geometry ([`bake`]) and measured ones read from folders
 //! of images ([`measured`]). See `docs/btf.md`.
 
+pub mod bake;
 pub mod container;
 pub mod directions;
+pub mod measured;
 pub mod pca;
 
 use directions::{Dir, Sampling};
