@@ -199,6 +199,85 @@ enum BtfWhat {
         #[arg(long)]
         full: bool,
     },
+    /// Bake a BTF from woven yarn geometry with a CPU ray tracer (docs/btf.md, "Baking"). Bakes
+    /// are cached by a hash of their parameters.
+    Bake {
+        #[arg(long, value_enum, default_value = "plain")]
+        weave: WeaveArg,
+        /// test: 32x32 texels, 19 directions; default: 128x128, 81; paper: 256x256, 81.
+        #[arg(long, value_enum, default_value = "default")]
+        tier: TierArg,
+        /// Where the BTF file goes.
+        #[arg(long)]
+        out: PathBuf,
+        /// The warp yarns' albedo, linear "r,g,b" in [0, 1].
+        #[arg(long, value_name = "R,G,B")]
+        warp: Option<String>,
+        /// The weft yarns' albedo, linear "r,g,b" in [0, 1].
+        #[arg(long, value_name = "R,G,B")]
+        weft: Option<String>,
+        /// n: n x n samples per texel (default 2).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8))]
+        supersample: Option<u32>,
+        /// Tracing threads (0: one per core); the result does not depend on them.
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// The cache folder (default: .werkstatt-cache next to --out).
+        #[arg(long)]
+        cache_dir: Option<PathBuf>,
+        /// Bake even if the cache has this bake, and do not cache it.
+        #[arg(long)]
+        no_cache: bool,
+    },
+    /// Read a measured BTF from a folder of per-direction images (Bonn database names, or a
+    /// manifest.json) into a BTF file (docs/btf.md, "Measured BTFs").
+    Import {
+        folder: PathBuf,
+        /// Where the BTF file goes.
+        #[arg(long)]
+        out: PathBuf,
+        /// The images are sRGB-encoded (default: linear).
+        #[arg(long)]
+        srgb: bool,
+        /// Multiplies every value.
+        #[arg(long, default_value_t = 1.0)]
+        scale: f32,
+        /// Resample onto this sampling (default: keep H2 or the test tier's, else H2).
+        #[arg(long, value_enum)]
+        sampling: Option<SamplingArg>,
+    },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum WeaveArg {
+    Plain,
+    Twill,
+    Satin,
+    /// A flat Lambertian plane (the analytic check).
+    Flat,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum TierArg {
+    Test,
+    Default,
+    Paper,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum SamplingArg {
+    /// The paper's 81 directions.
+    H2,
+    /// The test tier's 19.
+    Tests,
+}
+
+/// "r,g,b" as three numbers.
+fn parse_rgb(flag: &str, text: &str) -> anyhow::Result<[f32; 3]> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let numbers: Vec<f32> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    anyhow::ensure!(parts.len() == 3 && numbers.len() == 3, "{flag} takes three numbers \"r,g,b\", not {text:?}");
+    Ok([numbers[0], numbers[1], numbers[2]])
 }
 
 #[derive(Subcommand)]
@@ -831,6 +910,118 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             crate::btf::container::save(&crate::btf::Btf::lambertian(sampling, size, size, check), &out)?;
             println!("wrote {}", out.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Btf {
+            what: BtfWhat::Bake { weave, tier, out, warp, weft, supersample, threads, cache_dir, no_cache },
+        } => {
+            use crate::btf::bake::{BakeParams, Baker, Pattern, Tier};
+            let pattern = match weave {
+                WeaveArg::Plain => Pattern::Plain,
+                WeaveArg::Twill => Pattern::Twill,
+                WeaveArg::Satin => Pattern::Satin,
+                WeaveArg::Flat => Pattern::Flat,
+            };
+            let tier = match tier {
+                TierArg::Test => Tier::Test,
+                TierArg::Default => Tier::Default,
+                TierArg::Paper => Tier::Paper,
+            };
+            let mut params = BakeParams::tier(pattern, tier);
+            if let Some(w) = warp {
+                params.warp_colour = parse_rgb("--warp", &w)?;
+            }
+            if let Some(w) = weft {
+                params.weft_colour = parse_rgb("--weft", &w)?;
+            }
+            if let Some(n) = supersample {
+                params.supersample = n as usize;
+            }
+            let start = std::time::Instant::now();
+            let key = params.cache_key();
+            let cache_dir =
+                cache_dir.unwrap_or_else(|| out.parent().unwrap_or(std::path::Path::new("")).join(".werkstatt-cache"));
+            let cached = cache_dir.join(format!("bake-{key:016x}.btf"));
+            let copy = |from: &std::path::Path| {
+                std::fs::copy(from, &out)
+                    .map(|_| ())
+                    .map_err(|e| anyhow::anyhow!("copying {} to {}: {e}", from.display(), out.display()))
+            };
+            if !no_cache && cached.is_file() {
+                copy(&cached)?;
+                println!("wrote {} from the cache {} (key {key:016x})", out.display(), cached.display());
+                return Ok(ExitCode::SUCCESS);
+            }
+            let baker = Baker::new(&params, threads)?;
+            let built = start.elapsed();
+            let target = if no_cache { out.clone() } else { cached.clone() };
+            if !no_cache {
+                std::fs::create_dir_all(&cache_dir)
+                    .map_err(|e| anyhow::anyhow!("creating the cache folder {}: {e}", cache_dir.display()))?;
+            }
+            // Written beside its place and renamed when whole, so an interrupted bake leaves no
+            // file that looks finished.
+            let part = target.with_extension("btf.part");
+            let mut writer = crate::btf::container::Writer::create(&part, params.size, params.size, &params.sampling)?;
+            let show = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+            let bar = indicatif::ProgressBar::new(baker.views() as u64);
+            if show {
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} views {elapsed} (eta {eta})")
+                        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                );
+            } else {
+                bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+            }
+            for view in 0..baker.views() {
+                writer.write_view(&baker.view(view))?;
+                bar.inc(1);
+            }
+            bar.finish_and_clear();
+            writer.finish()?;
+            std::fs::rename(&part, &target)
+                .map_err(|e| anyhow::anyhow!("renaming {} to {}: {e}", part.display(), target.display()))?;
+            if !no_cache {
+                copy(&cached)?;
+            }
+            let n = params.sampling.len();
+            println!(
+                "baked {:?} {}x{} texels, {n} views x {n} lights, {}x{} samples per texel: geometry {:.2} s, \
+                 tracing {:.1} s",
+                pattern,
+                params.size,
+                params.size,
+                params.supersample,
+                params.supersample,
+                built.as_secs_f64(),
+                (start.elapsed() - built).as_secs_f64()
+            );
+            if no_cache {
+                println!("wrote {}", out.display());
+            } else {
+                println!("wrote {} (cached as {})", out.display(), cached.display());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Btf { what: BtfWhat::Import { folder, out, srgb, scale, sampling } } => {
+            use crate::btf::directions::Sampling;
+            let sampling = sampling.map(|s| match s {
+                SamplingArg::H2 => Sampling::h2(),
+                SamplingArg::Tests => Sampling::h2_tests(),
+            });
+            let options = crate::btf::measured::ImportOptions { srgb, scale, sampling };
+            let start = std::time::Instant::now();
+            let btf = crate::btf::measured::import_folder(&folder, &options)?;
+            crate::btf::container::save(&btf, &out)?;
+            let n = btf.sampling.len();
+            println!(
+                "{}: {}x{} texels, {n} views x {n} lights, {:.2} s; wrote {}",
+                folder.display(),
+                btf.width,
+                btf.height,
+                start.elapsed().as_secs_f64(),
+                out.display()
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::All { json, preset, budget_s, only, backend } } => {

@@ -40,24 +40,67 @@ struct Header {
 
 /// Writes `btf` to `path`.
 pub fn save(btf: &Btf, path: &Path) -> anyhow::Result<()> {
-    let header = Header {
-        format: FORMAT.into(),
-        version: VERSION,
-        width: btf.width as u32,
-        height: btf.height as u32,
-        channels: 3,
-        encoding: "f16-le".into(),
-        rings: btf.sampling.rings.iter().map(|r| (r.theta, r.count)).collect(),
-        views: btf.sampling.directions().iter().map(|d| (d.theta, d.phi)).collect(),
-        lights: btf.sampling.directions().iter().map(|d| (d.theta, d.phi)).collect(),
-    };
-    let mut bytes = serde_json::to_vec(&header)?;
-    bytes.push(b'\n');
-    bytes.reserve(btf.data.len() * 2);
-    for &x in &btf.data {
-        bytes.extend_from_slice(&half::f16::from_f32(x).to_le_bytes());
+    let mut w = Writer::create(path, btf.width, btf.height, &btf.sampling)?;
+    for view in 0..btf.sampling.len() {
+        w.write_view(btf.slot(view))?;
     }
-    std::fs::write(path, bytes).with_context(|| format!("writing the BTF {}", path.display()))
+    w.finish()
+}
+
+/// A BTF file written one view slot at a time, so that a bake need not hold every image.
+pub struct Writer {
+    file: std::io::BufWriter<std::fs::File>,
+    path: std::path::PathBuf,
+    /// Values per view slot (all its light images).
+    slot_len: usize,
+    views_left: usize,
+}
+
+impl Writer {
+    /// Creates `path` and writes the header of a `width x height` BTF on `sampling`.
+    pub fn create(path: &Path, width: usize, height: usize, sampling: &Sampling) -> anyhow::Result<Writer> {
+        let header = Header {
+            format: FORMAT.into(),
+            version: VERSION,
+            width: width as u32,
+            height: height as u32,
+            channels: 3,
+            encoding: "f16-le".into(),
+            rings: sampling.rings.iter().map(|r| (r.theta, r.count)).collect(),
+            views: sampling.directions().iter().map(|d| (d.theta, d.phi)).collect(),
+            lights: sampling.directions().iter().map(|d| (d.theta, d.phi)).collect(),
+        };
+        let context = || format!("writing the BTF {}", path.display());
+        let mut file = std::io::BufWriter::new(std::fs::File::create(path).with_context(context)?);
+        let mut line = serde_json::to_vec(&header)?;
+        line.push(b'\n');
+        std::io::Write::write_all(&mut file, &line).with_context(context)?;
+        let n = sampling.len();
+        Ok(Writer { file, path: path.to_path_buf(), slot_len: n * width * height * 3, views_left: n })
+    }
+
+    /// Appends the next view slot: its light images in the sampling's order.
+    pub fn write_view(&mut self, slot: &[f32]) -> anyhow::Result<()> {
+        ensure!(self.views_left > 0, "{}: every view slot is already written", self.path.display());
+        ensure!(
+            slot.len() == self.slot_len,
+            "{}: a view slot has {} values, not {}",
+            self.path.display(),
+            slot.len(),
+            self.slot_len
+        );
+        let bytes: Vec<u8> = slot.iter().flat_map(|&x| half::f16::from_f32(x).to_le_bytes()).collect();
+        std::io::Write::write_all(&mut self.file, &bytes)
+            .with_context(|| format!("writing the BTF {}", self.path.display()))?;
+        self.views_left -= 1;
+        Ok(())
+    }
+
+    /// Flushes the file; every view slot must have been written.
+    pub fn finish(mut self) -> anyhow::Result<()> {
+        ensure!(self.views_left == 0, "{}: {} view slots were not written", self.path.display(), self.views_left);
+        std::io::Write::flush(&mut self.file).with_context(|| format!("writing the BTF {}", self.path.display()))
+    }
 }
 
 /// Reads a BTF written by [`save`].

@@ -357,28 +357,9 @@ pub struct Compressed {
 /// Compresses every view slot of `btf` with at most `c` components, slots spread over the
 /// available threads (each slot alone is deterministic, so the result does not depend on them).
 pub fn compress(btf: &super::Btf, c: usize, centring: Centring) -> Compressed {
-    let n = btf.sampling.len();
-    let threads = std::thread::available_parallelism().map_or(1, |t| t.get()).min(n.max(1));
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut slots: Vec<(usize, SlotPca)> = std::thread::scope(|s| {
-        let workers: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        if j >= n {
-                            return done;
-                        }
-                        done.push((j, compress_slot(btf.slot(j), btf.image_len(), c, centring)));
-                    }
-                })
-            })
-            .collect();
-        workers.into_iter().flat_map(|w| w.join().expect("a compression thread panicked")).collect()
-    });
-    slots.sort_by_key(|(j, _)| *j);
-    Compressed { components: c, centring, slots: slots.into_iter().map(|(_, s)| s).collect() }
+    let slots =
+        crate::core::parallel::map(btf.sampling.len(), 0, |j| compress_slot(btf.slot(j), btf.image_len(), c, centring));
+    Compressed { components: c, centring, slots }
 }
 
 /// How well a [`Compressed`] BTF reproduces the original.
@@ -401,11 +382,7 @@ pub struct Report {
 impl Compressed {
     /// Compares the reconstruction of every image with `btf`, the BTF it was made from.
     pub fn report(&self, btf: &super::Btf) -> Report {
-        let mut sorted: Vec<f32> = btf.data.iter().copied().filter(|x| x.is_finite()).collect();
-        sorted.sort_by(f32::total_cmp);
-        let p995 = sorted.get((sorted.len() as f64 * 0.995) as usize).or(sorted.last()).copied().unwrap_or(1.0);
-        let exposure = if p995 > 0.0 { 255.0 / p995 as f64 } else { 1.0 };
-        let to8 = |x: f32| (x as f64 * exposure).clamp(0.0, 255.0);
+        let exposure = super::exposure8(&btf.data);
         let (mut err2, mut energy) = (0.0f64, 0.0f64);
         let mut lengths = Vec::with_capacity(btf.data.len() / 3);
         let n = btf.sampling.len();
@@ -414,15 +391,11 @@ impl Compressed {
             for i in 0..n {
                 let recon = slot.reconstruct(i);
                 let orig = &original[i * slot.dim..][..slot.dim];
-                for (r, o) in recon.chunks_exact(3).zip(orig.chunks_exact(3)) {
-                    let mut len2 = 0.0;
-                    for (a, b) in r.iter().zip(o) {
-                        err2 += (*a as f64 - *b as f64).powi(2);
-                        energy += (*b as f64).powi(2);
-                        len2 += (to8(*a) - to8(*b)).powi(2);
-                    }
-                    lengths.push(len2.sqrt());
+                for (a, b) in recon.iter().zip(orig) {
+                    err2 += (*a as f64 - *b as f64).powi(2);
+                    energy += (*b as f64).powi(2);
                 }
+                lengths.extend(super::error8(&recon, orig, exposure));
             }
         }
         lengths.sort_by(f64::total_cmp);

@@ -4,6 +4,7 @@ pub mod eval;
 pub mod graph;
 pub mod hash;
 pub mod node;
+pub mod parallel;
 pub mod param;
 pub mod port;
 pub mod progress;

@@ -32,3 +32,44 @@ fn btf_compress_prints_sizes_and_errors() {
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("lambert.btf") && !err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn btf_bake_writes_a_cached_btf_and_import_reads_a_bonn_folder() {
+    let dir = std::env::temp_dir().join(format!("werkstatt-btf-bake-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("twill.btf");
+    let path = out.to_str().unwrap();
+    let bake = ["btf", "bake", "--weave", "twill", "--tier", "test", "--warp", "0.5,0.5,0.1", "--out", path];
+    let (code, first, err) = werkstatt(&bake);
+    assert_eq!(code, 0, "{err}");
+    assert!(first.contains("baked Twill 32x32 texels, 19 views x 19 lights") && first.contains("cached as"), "{first}");
+    let bytes = std::fs::read(&out).unwrap();
+    // The second bake with the same parameters comes from the cache, byte for byte.
+    std::fs::remove_file(&out).unwrap();
+    let (code, second, err) = werkstatt(&bake);
+    assert_eq!(code, 0, "{err}");
+    assert!(second.contains("from the cache"), "{second}");
+    assert!(std::fs::read(&out).unwrap() == bytes, "the cached bake differs");
+    let (code, out_text, err) = werkstatt(&["btf", "compress", path, "-c", "8"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out_text.contains("19 views x 19 lights, c = 8"), "{out_text}");
+    let (code, _, err) = werkstatt(&["btf", "bake", "--warp", "1,2", "--out", path]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--warp takes three numbers"), "{err}");
+
+    // One frontal image, spread over the test tier's 19 x 19 directions.
+    let bonn = dir.join("bonn");
+    std::fs::create_dir_all(bonn.join("tv000_pv000")).unwrap();
+    let image = bonn.join("tv000_pv000/00000 tl000 pl000 tv000 pv000.png");
+    image::RgbImage::from_pixel(4, 4, image::Rgb([255, 128, 0])).save(&image).unwrap();
+    let imported = dir.join("bonn.btf");
+    let args = ["btf", "import", bonn.to_str().unwrap(), "--sampling", "tests", "--out", imported.to_str().unwrap()];
+    let (code, text, err) = werkstatt(&args);
+    assert_eq!(code, 0, "{err}");
+    assert!(text.contains("4x4 texels, 19 views x 19 lights"), "{text}");
+    std::fs::write(&image, b"broken").unwrap();
+    let (code, _, err) = werkstatt(&args);
+    assert_eq!(code, 1);
+    assert!(err.contains("cannot read the image") && err.contains("00000 tl000 pl000 tv000 pv000.png"), "{err}");
+}

@@ -1,0 +1,45 @@
+//! Work spread over threads with results in a fixed order, so that what is computed never
+//! depends on the thread count.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// `f(0), f(1), ..., f(count - 1)` computed on `threads` threads (0: one per core), in index
+/// order. Items are handed out one at a time, so uneven items balance.
+pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let threads = match threads {
+        0 => std::thread::available_parallelism().map_or(1, |t| t.get()),
+        t => t,
+    }
+    .min(count.max(1));
+    let next = AtomicUsize::new(0);
+    let mut done: Vec<(usize, T)> = std::thread::scope(|s| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= count {
+                            return done;
+                        }
+                        done.push((i, f(i)));
+                    }
+                })
+            })
+            .collect();
+        workers.into_iter().flat_map(|w| w.join().expect("a worker thread panicked")).collect()
+    });
+    done.sort_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, t)| t).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn results_come_in_index_order_for_any_thread_count() {
+        for threads in [0, 1, 2, 7] {
+            assert_eq!(super::map(10, threads, |i| i * i), (0..10).map(|i| i * i).collect::<Vec<_>>());
+        }
+        assert!(super::map(0, 3, |i| i).is_empty());
+    }
+}
