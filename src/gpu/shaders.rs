@@ -10,6 +10,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("common/vertex_in.wgsl", include_str!("../../shaders/common/vertex_in.wgsl")),
     ("common/object.wgsl", include_str!("../../shaders/common/object.wgsl")),
     ("common/gbuffer_common.wgsl", include_str!("../../shaders/common/gbuffer_common.wgsl")),
+    ("common/surface.wgsl", include_str!("../../shaders/common/surface.wgsl")),
     ("render/depth.wgsl", include_str!("../../shaders/render/depth.wgsl")),
     ("common/depth_readback.wgsl", include_str!("../../shaders/common/depth_readback.wgsl")),
     ("render/gbuffer.wgsl", include_str!("../../shaders/render/gbuffer.wgsl")),
