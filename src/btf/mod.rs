@@ -1,10 +1,11 @@
 //! Bidirectional texture functions of cloth (Sattler, Sarlette and Klein, "Efficient and
 //! realistic visualization of cloth", 2003): the measured directions and the weights that blend
-//! them ([`directions`]), the project's BTF file ([`container`]) and per-view PCA compression
-//! ([`pca`]). See `docs/btf.md`.
+//! them ([`directions`]), the project's BTF file ([`container`]), per-view PCA compression
+//! ([`pca`]) and its upload for rendering ([`gpu`]). See `docs/btf.md`.
 
 pub mod container;
 pub mod directions;
+pub mod gpu;
 pub mod pca;
 
 use directions::Sampling;

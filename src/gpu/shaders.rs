@@ -50,6 +50,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("cuboid/cuboid.wgsl", include_str!("../../shaders/cuboid/cuboid.wgsl")),
     ("cuboid/cuboid_gbuffer.wgsl", include_str!("../../shaders/cuboid/cuboid_gbuffer.wgsl")),
     ("cuboid/cuboid_depth.wgsl", include_str!("../../shaders/cuboid/cuboid_depth.wgsl")),
+    ("btf/btf_shading.wgsl", include_str!("../../shaders/btf/btf_shading.wgsl")),
 ];
 
 /// The file name of every shader (`tonemap.wgsl`).
