@@ -223,7 +223,7 @@ fn a_lambertian_btf_shades_like_lambert() {
 }
 
 /// A white BTF (rho = 1) under a white environment of radiance 1, as 256 median-cut lights:
-/// about 1 everywhere on the sphere. What remains is the discretisation into 256 lights (the
+/// 1 everywhere on the sphere, within 1% on average and 2% at any pixel. What remains is the discretisation into 256 lights (the
 /// hemisphere's edge cuts regions) and the cosine's interpolation between rings.
 #[test]
 fn a_white_furnace_of_median_cut_lights_gives_one() {
@@ -247,8 +247,10 @@ fn a_white_furnace_of_median_cut_lights_gives_one() {
     let mean = values.iter().sum::<f32>() / values.len() as f32;
     let worst = values.iter().map(|v| (v - 1.0).abs()).fold(0.0, f32::max);
     eprintln!("furnace: mean {mean:.4}, worst pixel off by {worst:.4}, {} pixels", values.len());
-    assert!((mean - 1.0).abs() < 0.02, "furnace mean {mean}");
-    assert!(worst < 0.06, "a furnace pixel is off by {worst}");
+    // Measured: mean 0.9946, worst pixel 0.0088 off (without the fade past the last ring,
+    // 1.061 and 0.072).
+    assert!((mean - 1.0).abs() < 0.01, "furnace mean {mean}");
+    assert!(worst < 0.02, "a furnace pixel is off by {worst}");
 }
 
 fn failure(ev: &Evaluator, node: &str) -> String {
