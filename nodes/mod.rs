@@ -1,7 +1,7 @@
 //! The node library, one folder per family, as `src/` is grouped: `core` (numbers, maths, time,
 //! watching, writing and previewing images), `mesh` (primitives, mesh files, sequences, the live
 //! link), `cloth`, `render` (materials and draws, camera, G-buffer, direct light, tone mapping,
-//! export), one folder per technique (`warp`, `cuboid`, `tessellation`, `ibl`, `occlusion`) and
+//! export), one folder per technique (`warp`, `cuboid`, `tessellation`, `ibl`, `occlusion`, `woven`, `btf`) and
 //! `compare`. The nodes are glue: the algorithms they run live in `src/` (`src/warp/`, ...).
 //! `ALL` is the registry.
 
@@ -11,6 +11,7 @@ pub mod cloth {
     pub mod garment;
     pub mod node;
 }
+pub mod btf;
 pub mod compare;
 pub mod core;
 pub mod cuboid;
@@ -66,6 +67,8 @@ pub static ALL: &[&NodeSpec] = &[
     &ibl::pems::PEMS,
     &ibl::shadow_atlas::SHADOW_ATLAS,
     &ibl::ibl_shading::IBL_SHADING,
+    &btf::btf_resource::BTF,
+    &btf::btf_shading::BTF_SHADING,
     &occlusion::ssao::SSAO,
     &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
     &occlusion::bounce::BOUNCE,

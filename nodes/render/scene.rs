@@ -44,6 +44,11 @@ pub static MATERIAL: NodeSpec = NodeSpec {
             ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
             "Glossiness where the map is 0.",
         ),
+        ParamSpec::new(
+            "btf_id",
+            ParamKind::Int { default: 0, min: 0, max: 65535 },
+            "Marks the material for the BtfShading node whose material_id equals it (written to the G-buffer's surface target); 0: none.",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(MaterialNode),
@@ -100,6 +105,7 @@ impl Node for MaterialNode {
                 uv_scale: cx.f32("uv_scale"),
                 gloss_map,
                 gloss_min: cx.f32("gloss_min"),
+                btf_id: cx.int("btf_id") as u16,
             })),
         );
         Ok(())

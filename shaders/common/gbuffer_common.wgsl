@@ -1,5 +1,6 @@
 // What every G-buffer writer shares: the per-frame camera, the per-object material, and
-// the write of colour + glossiness, normal + detail flag, linear depth.
+// the write of colour + glossiness, normal + detail flag, linear depth, and the surface
+// (UV, tangent frame, BTF id; surface.wgsl).
 
 struct Frame {
     view_proj: mat4x4<f32>,
@@ -12,13 +13,18 @@ struct Frame {
 
 // #include "vertex_in.wgsl"
 
+// #include "surface.wgsl"
+
 struct GBufferOut {
     @location(0) color: vec4<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) depth: f32,
+    @location(3) surface: vec4<u32>,
 };
 
-fn write_gbuffer(world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front: bool) -> GBufferOut {
+// `world`: the fragment's world position (for the tangent frame's derivatives). Call in uniform
+// control flow.
+fn write_gbuffer(world: vec3<f32>, world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front: bool) -> GBufferOut {
     var albedo = object.base_color.rgb;
     if object.has_texture > 0.5 {
         albedo = albedo * textureSample(base_map, base_sampler, uv * object.uv_scale).rgb;
@@ -36,5 +42,6 @@ fn write_gbuffer(world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front:
     out.color = vec4<f32>(albedo, gloss);
     out.normal = vec4<f32>(n, object.detail);
     out.depth = view_depth;
+    out.surface = encode_surface(world, n, uv, object.btf_id);
     return out;
 }

@@ -20,6 +20,8 @@ struct Object {
     has_gloss_map: f32,
     // Glossiness where the gloss map is 0.
     gloss_min: f32,
+    // The BtfShading material id written to the G-buffer's surface target (0: none).
+    btf_id: f32,
     // Pads the object to 256 bytes, the largest storage offset alignment an adapter may ask.
     unused: array<vec4<f32>, 5>,
 };

@@ -11,6 +11,7 @@ struct VertexOut {
     @location(1) uv: vec2<f32>,
     @location(2) view_depth: f32,
     @location(3) @interpolate(flat) object: u32,
+    @location(4) world: vec3<f32>,
 };
 
 // One instance per item of the draw (`index` picks its object for the fragment stage).
@@ -23,6 +24,7 @@ fn deformed_vertex(v: MeshVertexIn, item: ItemIn, d: Deformed, index: u32, direc
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
     out.object = index;
+    out.world = d.position;
     return out;
 }
 
@@ -63,5 +65,5 @@ fn vs_cuboid_direct(v: MeshVertexIn, item: CuboidItemIn, @builtin(instance_index
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
     use_object(in.object);
-    return write_gbuffer(in.normal, in.uv, in.view_depth, front);
+    return write_gbuffer(in.world, in.normal, in.uv, in.view_depth, front);
 }

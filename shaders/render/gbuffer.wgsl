@@ -9,6 +9,7 @@ struct VertexOut {
     @location(1) uv: vec2<f32>,
     @location(2) view_depth: f32,
     @location(3) @interpolate(flat) object: u32,
+    @location(4) world: vec3<f32>,
 };
 
 // One instance per item of the draw (`index` picks its object for the fragment stage).
@@ -21,11 +22,12 @@ fn vs_main(v: MeshVertexIn, item: ItemIn, @builtin(instance_index) index: u32) -
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
     out.object = index;
+    out.world = world.xyz;
     return out;
 }
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
     use_object(in.object);
-    return write_gbuffer(in.normal, in.uv, in.view_depth, front);
+    return write_gbuffer(in.world, in.normal, in.uv, in.view_depth, front);
 }

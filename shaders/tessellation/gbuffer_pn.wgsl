@@ -23,6 +23,7 @@ struct PnGBufferOut {
     @location(0) color: vec4<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) depth: f32,
+    @location(3) surface: vec4<u32>,
     @builtin(frag_depth) frag_depth: f32,
 };
 
@@ -97,12 +98,13 @@ fn fs_main(in: PnVertexOut, @builtin(front_facing) front: bool) -> PnGBufferOut 
     let uv0 = vec2<f32>(mesh_vertices[i0 * FLOATS + 9u], mesh_vertices[i0 * FLOATS + 10u]);
     let uv1 = vec2<f32>(mesh_vertices[i1 * FLOATS + 9u], mesh_vertices[i1 * FLOATS + 10u]);
     let uv2 = vec2<f32>(mesh_vertices[i2 * FLOATS + 9u], mesh_vertices[i2 * FLOATS + 10u]);
-    let g = write_gbuffer(n, uv0 * w.x + uv1 * w.y + uv2 * w.z, -(frame.view * vec4<f32>(p, 1.0)).z, front);
+    let g = write_gbuffer(p, n, uv0 * w.x + uv1 * w.y + uv2 * w.z, -(frame.view * vec4<f32>(p, 1.0)).z, front);
     let clip = frame.view_proj * vec4<f32>(p, 1.0);
     var out: PnGBufferOut;
     out.color = g.color;
     out.normal = g.normal;
     out.depth = g.depth;
+    out.surface = g.surface;
     out.frag_depth = clamp(clip.z / clip.w, 0.0, 1.0);
     return out;
 }

@@ -12,6 +12,7 @@ struct VertexOut {
     @location(2) view_depth: f32,
     // 1 where a vertex of the primitive is an outlier.
     @location(3) outlier: f32,
+    @location(4) world: vec3<f32>,
 };
 
 @vertex
@@ -25,15 +26,18 @@ fn vs_main(v: VertexIn, i: InstanceIn) -> VertexOut {
     out.uv = v.uv;
     out.view_depth = -(frame.view * world).z;
     out.outlier = select(1.0, 0.0, w.valid);
+    out.world = w.position;
     return out;
 }
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
+    // An attached item draws alone: its object is the first of the draw's range.
+    use_object(0u);
+    // Written before the discard: the tangent frame's derivatives need uniform control flow.
+    let g = write_gbuffer(in.world, in.normal, in.uv, in.view_depth, front);
     if in.outlier > 0.0 {
         discard;
     }
-    // An attached item draws alone: its object is the first of the draw's range.
-    use_object(0u);
-    return write_gbuffer(in.normal, in.uv, in.view_depth, front);
+    return g;
 }

@@ -1,12 +1,13 @@
 //! Bidirectional texture functions of cloth (Sattler, Sarlette and Klein, "Efficient and
 //! realistic visualization of cloth", 2003): the measured directions and the weights that blend
 //! them ([`directions`]), the project's BTF file ([`container`]), per-view PCA compression
-//! ([`pca`]), BTFs baked from woven yarn geometry ([`bake`]) and measured ones read from folders
-//! of images ([`measured`]). See `docs/btf.md`.
+//! ([`pca`]) and its upload for rendering ([`gpu`]), BTFs baked from woven yarn geometry
+//! ([`bake`]) and measured ones read from folders of images ([`measured`]). See `docs/btf.md`.
 
 pub mod bake;
 pub mod container;
 pub mod directions;
+pub mod gpu;
 pub mod measured;
 pub mod pca;
 

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::btf::gpu::GpuBtf;
 use crate::cuboid::Transform as CuboidTransform;
 use crate::gpu::GpuImage;
 use crate::ibl::gpu::{EnvMap, Lights, PemSet};
@@ -107,6 +108,8 @@ port_types! {
     ShadowAtlas(Arc<ShadowAtlas>) { color: [120, 120, 200], view: Some(|s| Some(&s.atlas)) };
     /// A cuboid (trilinear) transform or grid of them over a bounding box; affine where linear.
     CuboidTransform(Arc<CuboidTransform>) { color: [200, 120, 255], view: None };
+    /// A bidirectional texture function compressed per view (PCA) on the GPU.
+    Btf(Arc<GpuBtf>) { color: [170, 110, 60], view: None };
 }
 
 impl PortType {
@@ -152,6 +155,14 @@ impl Value {
                 s.atlas.width,
                 s.atlas.height,
                 s.bytes as f64 / (1u64 << 20) as f64
+            ),
+            Value::Btf(b) => format!(
+                "BTF {}x{}, {} directions, c = {}, {:.1} MiB",
+                b.width,
+                b.height,
+                b.sampling.len(),
+                b.components,
+                b.bytes as f64 / (1u64 << 20) as f64
             ),
             Value::CuboidTransform(t) => match &**t {
                 CuboidTransform::Affine(_) => "affine cuboid (linear fast path)".into(),
@@ -221,6 +232,7 @@ typed!(Arc<Lights>: Lights);
 typed!(Arc<PemSet>: Pems);
 typed!(Arc<ShadowAtlas>: ShadowAtlas);
 typed!(Arc<CuboidTransform>: CuboidTransform);
+typed!(Arc<GpuBtf>: Btf);
 
 #[cfg(test)]
 mod tests {

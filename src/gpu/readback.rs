@@ -105,6 +105,8 @@ pub fn read_back_layer(gpu: &GpuContext, image: &GpuImage, layer: u32, mip: u32)
         F::Rgba32Float => (16, 4),
         F::R32Float | F::Depth32Float => (4, 1),
         F::Rg32Float => (8, 2),
+        // The integers' bits as f32 (`f32::to_bits` gives them back): the G-buffer's surface.
+        F::Rgba32Uint => (16, 4),
         other => bail!("cannot read back a texture of format {other:?}"),
     };
     if layer >= image.desc.layers || mip >= image.desc.mips {

@@ -10,6 +10,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("common/vertex_in.wgsl", include_str!("../../shaders/common/vertex_in.wgsl")),
     ("common/object.wgsl", include_str!("../../shaders/common/object.wgsl")),
     ("common/gbuffer_common.wgsl", include_str!("../../shaders/common/gbuffer_common.wgsl")),
+    ("common/surface.wgsl", include_str!("../../shaders/common/surface.wgsl")),
     ("render/depth.wgsl", include_str!("../../shaders/render/depth.wgsl")),
     ("common/depth_readback.wgsl", include_str!("../../shaders/common/depth_readback.wgsl")),
     ("render/gbuffer.wgsl", include_str!("../../shaders/render/gbuffer.wgsl")),
@@ -49,6 +50,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("cuboid/cuboid.wgsl", include_str!("../../shaders/cuboid/cuboid.wgsl")),
     ("cuboid/cuboid_gbuffer.wgsl", include_str!("../../shaders/cuboid/cuboid_gbuffer.wgsl")),
     ("cuboid/cuboid_depth.wgsl", include_str!("../../shaders/cuboid/cuboid_depth.wgsl")),
+    ("btf/btf_shading.wgsl", include_str!("../../shaders/btf/btf_shading.wgsl")),
 ];
 
 /// The file name of every shader (`tonemap.wgsl`).

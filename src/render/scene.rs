@@ -120,6 +120,9 @@ pub struct Material {
     /// `gloss_min` (0) to `glossiness` (1) within one material.
     pub gloss_map: Option<Arc<Image8>>,
     pub gloss_min: f32,
+    /// Which `BtfShading` node shades this material: the one whose `material_id` equals it
+    /// (written to the G-buffer's surface target); 0 for none.
+    pub btf_id: u16,
 }
 
 impl Default for Material {
@@ -131,6 +134,7 @@ impl Default for Material {
             uv_scale: 1.0,
             gloss_map: None,
             gloss_min: 0.0,
+            btf_id: 0,
         }
     }
 }
@@ -215,6 +219,9 @@ pub struct GBuffer {
     pub normal: GpuImage,
     /// Linear view-space depth, R32Float; 0 where nothing was drawn.
     pub depth: GpuImage,
+    /// The surface (Rgba32Uint; shaders/common/surface.wgsl): UV, the tangent of increasing u
+    /// (octahedral), the material's BTF id and the frame's handedness. 0 where nothing was drawn.
+    pub surface: GpuImage,
     /// The hardware depth buffer, Depth32Float.
     pub depth_buffer: GpuImage,
     pub camera: Camera,

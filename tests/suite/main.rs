@@ -10,6 +10,7 @@ mod alembic;
 mod avatar;
 mod bounce;
 mod btf;
+mod btf_render;
 mod cli;
 mod cloth;
 mod cloth_collision;

@@ -36,6 +36,7 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
         PortType::Pems => ("Pems", "pems", vec![]),
         PortType::ShadowAtlas => ("ShadowAtlas", "shadows", vec![("tile_size", ParamValue::Int(32))]),
         PortType::CuboidTransform => ("Cuboid", "transform", vec![]),
+        PortType::Btf => ("Btf", "btf", vec![]),
         PortType::Vector | PortType::Color => return None,
     })
 }
@@ -79,6 +80,7 @@ fn fixture_params(kind: &str) -> Params {
         "MatrixTexture" => vec![("resolution", ParamValue::Int(64))],
         "EnvironmentMap" => vec![("path", data("assets/hdri/forest.hdr")), ("size", ParamValue::Int(8))],
         "MedianCut" => vec![("count", ParamValue::Int(5))],
+        "Btf" => vec![("path", data("assets/btf/checker8.btf")), ("resolution", ParamValue::Int(4))],
         "Primitive" => vec![("segments_u", ParamValue::Int(8)), ("segments_v", ParamValue::Int(4))],
         _ => vec![],
     }

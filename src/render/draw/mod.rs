@@ -32,6 +32,10 @@ use objects::{GpuObject, OBJECT_SIZE, OBJECT_VISIBILITY, object_layout};
 use target::{FrameUniform, TilesUniform};
 pub use target::{MAX_TILES, Tile};
 
+/// The G-buffer's surface target (shaders/common/surface.wgsl): UV and tangent bits, renderable
+/// on every backend (GL renders no 32-bit float targets).
+pub const SURFACE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
+
 /// What a pass that draws scenes keeps between frames: the buffers of objects and grid cells,
 /// per draw its cached bind groups, and the point-attachment resolver (the pipelines live in the
 /// context's cache, so a shader reload reaches them).
@@ -119,6 +123,7 @@ impl SceneDrawer {
         let color = GpuImage::target(gpu, "gbuffer color", w, h, formats.hdr);
         let normal = GpuImage::target(gpu, "gbuffer normal", w, h, formats.hdr);
         let depth = GpuImage::target(gpu, "gbuffer depth", w, h, formats.linear_depth);
+        let surface = GpuImage::target(gpu, "gbuffer surface", w, h, SURFACE_FORMAT);
         let depth_buffer = GpuImage::target(gpu, "gbuffer depth buffer", w, h, formats.depth);
         let frame_uniform =
             FrameUniform { view_proj: view.view_proj.to_cols_array_2d(), view: view.view.to_cols_array_2d() };
@@ -130,11 +135,11 @@ impl SceneDrawer {
             label: "gbuffer",
             group0: (layout, group),
             tile_index: None,
-            colors: &[&color, &normal, &depth],
+            colors: &[&color, &normal, &depth, &surface],
             depth: &depth_buffer,
         };
         self.draw(gpu, items, &target)?;
-        Ok(GBuffer { color, normal, depth, depth_buffer, camera, view })
+        Ok(GBuffer { color, normal, depth, surface, depth_buffer, camera, view })
     }
 
     /// Draws `items` depth-only into a new `width` x `height` depth texture (the context's depth

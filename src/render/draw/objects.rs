@@ -27,7 +27,9 @@ pub struct GpuObject {
     has_gloss_map: f32,
     /// Glossiness where the gloss map is 0.
     gloss_min: f32,
-    pad: [f32; 3],
+    /// The material's BtfShading id (the G-buffer's surface target).
+    btf_id: f32,
+    pad: [f32; 2],
     unused: [[f32; 4]; 5],
 }
 
@@ -36,6 +38,7 @@ pub struct GpuObject {
 pub const OBJECT_SIZE: u64 = std::mem::size_of::<GpuObject>() as u64;
 const _: () = assert!(OBJECT_SIZE == 256);
 const _: () = assert!(std::mem::offset_of!(GpuObject, gloss_min) == 160);
+const _: () = assert!(std::mem::offset_of!(GpuObject, btf_id) == 164);
 
 pub const OBJECT_VISIBILITY: wgpu::ShaderStages = wgpu::ShaderStages::VERTEX_FRAGMENT;
 
@@ -55,7 +58,8 @@ impl GpuObject {
             detail: flag(item.detail),
             has_gloss_map: flag(m.gloss_map.is_some()),
             gloss_min: m.gloss_min,
-            pad: [0.0; 3],
+            btf_id: f32::from(m.btf_id),
+            pad: [0.0; 2],
             unused: [[0.0; 4]; 5],
         }
     }

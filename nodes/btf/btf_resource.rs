@@ -1,0 +1,154 @@
+//! `Btf`: a bidirectional texture function, compressed per view by PCA (eq. 1) and uploaded
+//! for `BtfShading` (src/btf/gpu.rs).
+
+use std::sync::Arc;
+
+use crate::btf::Btf;
+use crate::btf::directions::Sampling;
+use crate::btf::gpu::MAX_COMPONENTS;
+use crate::btf::pca::{Centring, compress};
+use crate::core::node::prelude::*;
+
+crate::choice!(
+    /// Where the BTF comes from.
+    pub enum BtfSource {
+        /// The project's container file (src/btf/container.rs).
+        File = "file",
+        /// The analytic Lambertian BTF rho / pi cos(theta_i), optionally striped.
+        Lambert = "lambert",
+        /// A diagnostic BTF: every (view, light) image one flat colour, distinct per pair, so a
+        /// render shows which images the interpolation blends and how much.
+        Directions = "directions",
+    }
+);
+
+crate::choice!(
+    /// The directions of an analytic BTF.
+    pub enum BtfSampling {
+        /// Table 1's second sampling, 81 directions up to theta = 75 deg.
+        H2 = "h2",
+        /// Its rings up to 30 deg, 19 directions (the test tier).
+        H2Tests = "h2_tests",
+    }
+);
+
+pub static BTF: NodeSpec = NodeSpec {
+    kind: "Btf",
+    category: Category::Scene,
+    doc: "A bidirectional texture function (Sattler et al. 2003): for every view and light direction an image of the fabric. Read from a BTF file (on a worker thread) or made analytically (a Lambertian rho/pi cos theta_i, optionally striped; or a diagnostic BTF of flat colours), compressed per view slot by PCA centred on the mean (eq. 1, `components` eigentextures) and uploaded: a 2D texture array of (c + 1) layers per view (mean, eigentextures; f16) and a buffer of coefficients. For BtfShading.",
+    inputs: &[],
+    outputs: &[PortSpec::output("btf", PortType::Btf, "The compressed BTF on the GPU.")],
+    params: &[
+        ParamSpec::new(
+            "source",
+            ParamKind::Choice { default: "lambert", options: BtfSource::OPTIONS },
+            "file: the BTF file at `path`; lambert: rho/pi cos theta_i with `albedo` (stripes of `stripe_albedo`); directions: flat colours per (view, light) pair, for checking the interpolation.",
+        ),
+        ParamSpec::new(
+            "path",
+            ParamKind::Path { default: "", extensions: &["btf"] },
+            "The BTF file for source = file (werkstatt btf bake / lambertian), relative to the graph's folder.",
+        ),
+        ParamSpec::new(
+            "components",
+            ParamKind::Int { default: 16, min: 1, max: MAX_COMPONENTS as i64 },
+            "Eigentextures kept per view slot (c, eq. 1), besides the mean; at most the lights per view. A slot of lower rank keeps fewer.",
+        ),
+        ParamSpec::new(
+            "sampling",
+            ParamKind::Choice { default: "h2", options: BtfSampling::OPTIONS },
+            "Directions of an analytic BTF: h2 (81, up to 75 deg) or h2_tests (19, up to 30 deg).",
+        ),
+        ParamSpec::new(
+            "resolution",
+            ParamKind::Int { default: 16, min: 1, max: 1024 },
+            "Image size of an analytic BTF (texels per side of the tile).",
+        ),
+        ParamSpec::new("albedo", ParamKind::Color { default: [0.8, 0.8, 0.8] }, "Lambert: rho, linear RGB."),
+        ParamSpec::new(
+            "stripes",
+            ParamKind::Int { default: 0, min: 0, max: 512 },
+            "Lambert: pairs of stripes along the tile's u (x) axis, the second of each pair in `stripe_albedo`; 0: uniform.",
+        ),
+        ParamSpec::new("stripe_albedo", ParamKind::Color { default: [0.2, 0.2, 0.6] }, "Lambert: the stripes' rho."),
+    ],
+    capabilities: Capabilities::NONE,
+    create: || Box::new(BtfNode),
+};
+
+struct BtfNode;
+
+impl Node for BtfNode {
+    fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
+        let gpu = cx.gpu()?;
+        let btf: Arc<Btf> = match cx.choice::<BtfSource>("source") {
+            BtfSource::File => {
+                if cx.str("path").is_empty() {
+                    return Err(NodeError::msg("source = \"file\" but parameter \"path\" is empty: name a .btf file"));
+                }
+                let path = cx.path("path");
+                cx.load(&path, crate::btf::container::load).map_err(|e| match e {
+                    NodeError::Failed(m) => NodeError::msg(format!("parameter \"path\": {m}")),
+                    other => other,
+                })?
+            }
+            source => {
+                let sampling = match cx.choice::<BtfSampling>("sampling") {
+                    BtfSampling::H2 => Sampling::h2(),
+                    BtfSampling::H2Tests => Sampling::h2_tests(),
+                };
+                let size = cx.int("resolution") as usize;
+                Arc::new(match source {
+                    BtfSource::Directions => directions_btf(sampling, size),
+                    _ => {
+                        let (a, b, stripes) = (cx.vec3("albedo"), cx.vec3("stripe_albedo"), cx.int("stripes") as usize);
+                        Btf::lambertian(sampling, size, size, |x, _| {
+                            let striped = stripes > 0 && !(x * 2 * stripes / size).is_multiple_of(2);
+                            if striped { b.to_array() } else { a.to_array() }
+                        })
+                    }
+                })
+            }
+        };
+        let components = cx.int("components") as usize;
+        let lights = btf.sampling.len();
+        if components > lights {
+            return Err(NodeError::msg(format!(
+                "parameter \"components\" is {components}, but the BTF has {lights} light directions per view: a view's PCA has at most {lights} components"
+            )));
+        }
+        let pca = compress(&btf, components, Centring::Mean);
+        let gpu_btf = crate::btf::gpu::upload(gpu, &pca, &btf.sampling, btf.width, btf.height, components)
+            .map_err(|e| NodeError::msg(format!("uploading the BTF: {e:#}")))?;
+        cx.count("btf_bytes", gpu_btf.bytes as usize);
+        cx.set("btf", Arc::new(gpu_btf));
+        Ok(())
+    }
+}
+
+/// The diagnostic BTF: image (view j, light i) is one flat colour from a hash of (j, i), each
+/// channel in [0.1, 0.9].
+pub fn directions_btf(sampling: Sampling, size: usize) -> Btf {
+    let n = sampling.len();
+    let mut data = Vec::with_capacity(n * n * size * size * 3);
+    for j in 0..n {
+        for i in 0..n {
+            let colour = directions_colour(j, i);
+            for _ in 0..size * size {
+                data.extend_from_slice(&colour);
+            }
+        }
+    }
+    Btf { width: size, height: size, sampling, data }
+}
+
+/// The flat colour of image (view `j`, light `i`) of [`directions_btf`].
+pub fn directions_colour(j: usize, i: usize) -> [f32; 3] {
+    let mut h = (j as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (i as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f);
+    std::array::from_fn(|_| {
+        h ^= h >> 29;
+        h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h ^= h >> 32;
+        0.1 + 0.8 * (h >> 40) as f32 / (1u64 << 24) as f32
+    })
+}

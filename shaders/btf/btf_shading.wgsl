@@ -1,0 +1,210 @@
+// BtfShading (nodes/btf/btf_shading.rs; docs/btf.md, "Rendering"): deferred BTF shading of
+// Sattler et al. 2003. Per pixel of the G-buffer whose material carries this node's id: the
+// view and every light in the cloth's tangent frame (surface.wgsl), the 4 nearest view slots
+// (eq. 5) and per light the 4 nearest light directions (eq. 3), both weighted as
+// `Sampling::weights` (src/btf/directions.rs) does, line for line below. Per view slot the
+// coefficients are blended over lights first (gamma_k, RGB with the lights' colours: eqs. 3, 10),
+// then the slot's mean and eigentextures are summed once (eq. 4); exposure f (eq. 11).
+
+// #include "fullscreen.wgsl"
+// #include "surface.wgsl"
+
+// Mean + at most 32 eigentextures per slot (src/btf/gpu.rs MAX_COMPONENTS).
+const MAX_LAYERS: u32 = 33u;
+const MAX_RINGS: u32 = 16u;
+const DEG: f32 = 57.29577951308232;
+const PI: f32 = 3.14159265358979;
+
+struct Params {
+    inv_view_proj: mat4x4<f32>,
+    eye: vec4<f32>,
+    // width, height, light count, material id
+    size: vec4<f32>,
+    // directions n, layers per slot (c + 1), rings, exposure
+    btf: vec4<f32>,
+    // tiles per UV unit, cos(rotation), sin(rotation), alpha of eq. 6 (radians)
+    tiling: vec4<f32>,
+    // rgb: where nothing is shaded and no base image is bound; w: 1 if a base image is bound
+    background: vec4<f32>,
+    // theta (degrees), count, first direction, 0
+    rings: array<vec4<f32>, MAX_RINGS>,
+};
+
+// A directional light: dir.xyz towards the light, dir.w 1 where eq. 6's boundary applies;
+// color.rgb its irradiance on a surface facing it.
+struct Light {
+    dir: vec4<f32>,
+    color: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var g_normal: texture_2d<f32>;
+@group(0) @binding(2) var g_depth: texture_2d<f32>;
+@group(0) @binding(3) var g_surface: texture_2d<u32>;
+@group(0) @binding(4) var base_image: texture_2d<f32>;
+@group(0) @binding(5) var btf_images: texture_2d_array<f32>;
+@group(0) @binding(6) var btf_sampler: sampler;
+@group(0) @binding(7) var shadow_ramp: texture_2d<f32>;
+@group(0) @binding(8) var ramp_sampler: sampler;
+@group(0) @binding(9) var<storage, read> coeffs: array<f32>;
+@group(0) @binding(10) var<storage, read> lights: array<Light>;
+
+struct RingWeights {
+    index: vec2<u32>,
+    weight: vec2<f32>,
+};
+
+struct Weights {
+    index: vec4<u32>,
+    weight: vec4<f32>,
+};
+
+// `on_ring` of Sampling::weights: phi between two neighbouring directions of ring i.
+fn on_ring(i: u32, phi: f32) -> RingWeights {
+    let n = u32(params.rings[i].y);
+    let start = u32(params.rings[i].z);
+    var out: RingWeights;
+    if n == 1u {
+        out.index = vec2<u32>(start, start);
+        out.weight = vec2<f32>(1.0, 0.0);
+        return out;
+    }
+    let x = (phi - 360.0 * floor(phi / 360.0)) * f32(n) / 360.0;
+    let k0 = min(u32(floor(x)), n - 1u);
+    let s = clamp(x - f32(k0), 0.0, 1.0);
+    out.index = vec2<u32>(start + k0, start + (k0 + 1u) % n);
+    out.weight = vec2<f32>(1.0 - s, s);
+    return out;
+}
+
+// Sampling::weights: theta (clamped to the rings) bracketed between rings a and b, linear t;
+// on each ring linear in phi; weights (1-t)(1-s_a), (1-t)s_a, t(1-s_b), t s_b.
+fn direction_weights(theta_in: f32, phi: f32) -> Weights {
+    let last = u32(params.btf.z) - 1u;
+    let theta = clamp(theta_in, params.rings[0].x, params.rings[last].x);
+    var b = last;
+    for (var r = 0u; r <= last; r++) {
+        if params.rings[r].x >= theta {
+            b = r;
+            break;
+        }
+    }
+    b = min(max(b, 1u), last);
+    let a = select(b - 1u, 0u, b == 0u);
+    var t = 0.0;
+    if a != b {
+        t = clamp((theta - params.rings[a].x) / (params.rings[b].x - params.rings[a].x), 0.0, 1.0);
+    }
+    let ra = on_ring(a, phi);
+    let rb = on_ring(b, phi);
+    var w: Weights;
+    w.index = vec4<u32>(ra.index, rb.index);
+    w.weight = vec4<f32>((1.0 - t) * ra.weight, t * rb.weight);
+    return w;
+}
+
+// Dir::from_vec: (theta, phi) in degrees of a tangent-frame vector, phi in [0, 360).
+fn to_direction(v: vec3<f32>) -> vec2<f32> {
+    let u = normalize(v);
+    let theta = acos(clamp(u.z, -1.0, 1.0)) * DEG;
+    let phi = atan2(u.y, u.x) * DEG;
+    return vec2<f32>(theta, phi - 360.0 * floor(phi / 360.0));
+}
+
+// Past the outermost ring a light keeps that ring's images (the weights clamp theta), scaled
+// by cos(theta_i) / cos(theta_last): the data contain cos(theta_i), which this carries on to 0
+// at the horizon instead of a jump there. Below the horizon: 0.
+fn grazing(cos_l: f32) -> f32 {
+    let c_last = cos(params.rings[u32(params.btf.z) - 1u].x / DEG);
+    if cos_l <= 0.0 {
+        return 0.0;
+    }
+    if cos_l >= c_last || c_last < 1e-4 {
+        return 1.0;
+    }
+    return cos_l / c_last;
+}
+
+// Eq. 6: u = (1 + cos(alpha + angle(n, l))) / 2 into the half-black, half-white (blurred)
+// 1D texture; per pixel from the interpolated normal (the paper interpolates u per vertex:
+// both assume the smooth surface the normals describe). alpha + angle stops at pi, so a large
+// alpha never lights the far side.
+fn smooth_shadow(cos_l: f32) -> f32 {
+    let angle = acos(clamp(cos_l, -1.0, 1.0));
+    let u = (1.0 + cos(min(params.tiling.w + angle, PI))) / 2.0;
+    return textureSampleLevel(shadow_ramp, ramp_sampler, vec2<f32>(u, 0.5), 0.0).r;
+}
+
+@fragment
+fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    let px = vec2<i32>(frag.xy);
+    var base = vec4<f32>(params.background.rgb, 1.0);
+    if params.background.w > 0.5 {
+        base = textureLoad(base_image, px, 0);
+    }
+    let depth = textureLoad(g_depth, px, 0).r;
+    let bits = textureLoad(g_surface, px, 0);
+    if depth <= 0.0 || (bits.w & SURFACE_ID_MASK) != u32(params.size.w) {
+        return base;
+    }
+    let n = normalize(textureLoad(g_normal, px, 0).xyz);
+    let ndc = vec2<f32>(frag.x / params.size.x * 2.0 - 1.0, 1.0 - frag.y / params.size.y * 2.0);
+    let far_h = params.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let near_h = params.inv_view_proj * vec4<f32>(ndc, 0.0, 1.0);
+    let v = -normalize(far_h.xyz / far_h.w - near_h.xyz / near_h.w);
+
+    // The weave's frame and coordinates: tiled, and turned by the rotation from the tangent
+    // (u) towards the BTF's y (up its images, decreasing v).
+    let s = decode_surface(bits, n);
+    let c = params.tiling.y;
+    let sn = params.tiling.z;
+    let p = vec2<f32>(s.uv.x, -s.uv.y) * params.tiling.x;
+    let w = vec2<f32>(c * p.x + sn * p.y, -sn * p.x + c * p.y);
+    let tex = vec2<f32>(w.x, -w.y);
+    let fx = c * s.x + sn * s.y;
+    let fy = -sn * s.x + c * s.y;
+
+    let vd = to_direction(vec3<f32>(dot(v, fx), dot(v, fy), dot(v, n)));
+    let wv = direction_weights(vd.x, vd.y);
+    let directions = u32(params.btf.x);
+    let per_slot = u32(params.btf.y);
+    let light_count = u32(params.size.z);
+    var radiance = vec3<f32>(0.0);
+    for (var m = 0u; m < 4u; m++) {
+        let wm = wv.weight[m];
+        if wm <= 0.0 {
+            continue;
+        }
+        let j = wv.index[m];
+        var gamma: array<vec3<f32>, MAX_LAYERS>;
+        for (var li = 0u; li < light_count; li++) {
+            let light = lights[li];
+            let l = light.dir.xyz;
+            let cos_l = dot(n, l);
+            var scale = light.color.rgb * grazing(cos_l);
+            if light.dir.w > 0.5 {
+                scale = scale * smooth_shadow(cos_l);
+            }
+            if all(scale <= vec3<f32>(0.0)) {
+                continue;
+            }
+            let ld = to_direction(vec3<f32>(dot(l, fx), dot(l, fy), cos_l));
+            let wl = direction_weights(ld.x, ld.y);
+            for (var q = 0u; q < 4u; q++) {
+                let wq = wl.weight[q];
+                if wq <= 0.0 {
+                    continue;
+                }
+                let row = (j * directions + wl.index[q]) * per_slot;
+                for (var k = 0u; k < per_slot; k++) {
+                    gamma[k] += scale * (wq * coeffs[row + k]);
+                }
+            }
+        }
+        for (var k = 0u; k < per_slot; k++) {
+            let layer = i32(j * per_slot + k);
+            radiance += wm * gamma[k] * textureSampleLevel(btf_images, btf_sampler, tex, layer, 0.0).rgb;
+        }
+    }
+    return vec4<f32>(radiance * params.btf.w, 1.0);
+}
