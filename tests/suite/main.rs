@@ -43,6 +43,7 @@ mod shadow;
 mod ssao;
 mod ssr;
 mod tessellation;
+mod usd;
 mod warping;
 mod woven;
 
