@@ -14,6 +14,7 @@ mod cli;
 mod cloth;
 mod cloth_collision;
 mod cuboid;
+mod draco;
 #[cfg(feature = "editor")]
 mod editor;
 #[cfg(feature = "editor")]
