@@ -291,13 +291,13 @@ fn sample_mesh<H>(layer: &Layer<H>, decode: &mut Decode<'_, H>, m: usize, t: f64
         names.first().map(|n| n.to_string())
     };
     let uvs = match &uv_name {
-        Some(name) => primvar(prim, name, t, decode, &topology, 2)?,
+        Some(name) => primvar(prim, name, t, decode, &topology, 2, true)?,
         None => None,
     };
     let has_uvs = uvs.is_some();
     let (uvs, uv_corner) = uvs.unwrap_or_default();
     let normal_name = if prim.attrs.contains_key("primvars:normals") { "primvars:normals" } else { "normals" };
-    let (normals, normal_corner) = primvar(prim, normal_name, t, decode, &topology, 3)?.unwrap_or_default();
+    let (normals, normal_corner) = primvar(prim, normal_name, t, decode, &topology, 3, false)?.unwrap_or_default();
 
     let mut world = DMat4::IDENTITY;
     for p in chain(layer, prim) {
@@ -349,7 +349,8 @@ struct Topology<'a> {
 
 /// A primvar's values (flat, `width` numbers each) and each face corner's value index, by its
 /// interpolation (vertex and varying: per point; faceVarying: per corner; uniform: per face;
-/// constant: one) and its `:indices`. None where the mesh has no such primvar.
+/// constant: one) and its `:indices`; `merge_equal` (2 numbers each): equal face-varying values
+/// share an index. None where the mesh has no such primvar.
 fn primvar<H>(
     prim: &Prim<H>,
     name: &str,
@@ -357,6 +358,7 @@ fn primvar<H>(
     decode: &mut Decode<'_, H>,
     topo: &Topology<'_>,
     width: usize,
+    merge_equal: bool,
 ) -> anyhow::Result<Option<(Vec<f64>, Vec<u32>)>> {
     let Some(v) = get(prim, name, t, decode)? else { return Ok(None) };
     let values = numbers(v, name, width)?;
@@ -384,13 +386,14 @@ fn primvar<H>(
     };
     let per_corner = match ix {
         Some(ix) => entry_of_corner.iter().map(|&e| ix[e as usize]).collect(),
-        // Un-indexed face-varying values (Blender's UVs) repeat a value at every corner that
-        // shares it: equal values get one index, so a UV seam, not every corner, splits a
-        // vertex (as OBJ's shared `vt` and Alembic's indexed UVs do).
-        None if interpolation == "faceVarying" => {
-            let mut first: HashMap<Vec<u64>, u32> = HashMap::new();
-            let bits = |e: u32| values[e as usize * width..][..width].iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            entry_of_corner.iter().map(|&e| *first.entry(bits(e)).or_insert(e)).collect()
+        // Un-indexed face-varying UVs (Blender's) repeat a value at every corner that shares
+        // it: equal values get one index, so a UV seam, not every corner, splits a vertex (as
+        // OBJ's shared `vt` and Alembic's indexed UVs do). Normals need not: they are averaged
+        // per point.
+        None if interpolation == "faceVarying" && merge_equal => {
+            let mut first: HashMap<[u64; 2], u32> = HashMap::with_capacity(count);
+            let key = |e: u32| std::array::from_fn(|k| values[e as usize * width + k].to_bits());
+            entry_of_corner.iter().map(|&e| *first.entry(key(e)).or_insert(e)).collect()
         }
         None => entry_of_corner,
     };
