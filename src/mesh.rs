@@ -453,9 +453,102 @@ pub fn load_obj(path: &std::path::Path) -> anyhow::Result<Mesh> {
         .with_context(|| format!("invalid mesh in {}", path.display()))
 }
 
-/// Loads every mesh of a glTF file's default scene (node transforms applied) with `gltf`.
+/// The glTF extension for Draco-compressed primitives, decoded here with `draco-oxide-decoder`.
+const DRACO: &str = "KHR_draco_mesh_compression";
+
+/// Opens a .gltf or .glb with its buffers (not its images). The `gltf` crate refuses files
+/// that require an extension it does not know; Draco is decoded here, so it is let through.
+fn import_gltf(path: &std::path::Path) -> anyhow::Result<(gltf::Document, Vec<gltf::buffer::Data>)> {
+    let bytes = std::fs::read(path)?;
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes)?;
+    let mut json = document.into_json();
+    let draco = json.extensions_used.iter().any(|e| e == DRACO);
+    json.extensions_required.retain(|e| e != DRACO);
+    // A Draco primitive's accessors have no bufferView (the data is in the Draco stream), which
+    // the crate's validation calls missing; everything else it finds is still an error.
+    let document = match gltf::Document::from_json(json.clone()) {
+        Err(gltf::Error::Validation(errors))
+            if draco
+                && errors.iter().all(|(path, e)| {
+                    matches!(e, gltf::json::validation::Error::Missing)
+                        && path.to_string().starts_with("accessors[")
+                        && path.to_string().ends_with("].bufferView")
+                }) =>
+        {
+            gltf::Document::from_json_without_validation(json)
+        }
+        other => other?,
+    };
+    let buffers = gltf::import_buffers(&document, path.parent(), blob)?;
+    Ok((document, buffers))
+}
+
+/// One primitive's vertices (positions, then UVs and normals where it has them) and triangles.
+type Primitive = (Vec<Vec3>, Option<Vec<Vec2>>, Option<Vec<Vec3>>, Vec<u32>);
+
+/// A Draco-compressed primitive (`ext`: its KHR_draco_mesh_compression object), decoded.
+fn draco_primitive(
+    doc: &gltf::Document,
+    buffers: &[gltf::buffer::Data],
+    ext: &serde_json::Value,
+) -> anyhow::Result<Primitive> {
+    use draco_oxide_core::attribute::{Attribute, ComponentDataType};
+    let view = ext["bufferView"].as_u64().with_context(|| format!("{DRACO} names no bufferView"))?;
+    let view = doc
+        .views()
+        .nth(view as usize)
+        .with_context(|| format!("{DRACO} names bufferView {view}, which is not there"))?;
+    let data = &buffers[view.buffer().index()];
+    let bytes = data
+        .get(view.offset()..view.offset().saturating_add(view.length()))
+        .context("the Draco bufferView runs past its buffer")?;
+    // The decoder is young (alpha): a crash on bad data is an error here, not a crash.
+    let mesh = std::panic::catch_unwind(|| draco_oxide_decoder::decode_mesh(bytes))
+        .map_err(|_| anyhow::anyhow!("the Draco decoder failed on the compressed data"))?
+        .map_err(|e| anyhow::anyhow!("the Draco data cannot be decoded: {e}"))?;
+    let by_name = |name: &str| -> Option<&Attribute> {
+        let id = ext["attributes"][name].as_u64()?;
+        mesh.attributes.iter().find(|a| a.get_id().as_usize() as u64 == id)
+    };
+    let position = by_name("POSITION").context("the Draco data has no POSITION")?;
+    let points = position.len();
+    // Each point's value: the attribute's float values through its point-to-value map.
+    let values = |a: &Attribute, n: usize, name: &str| -> anyhow::Result<Vec<f32>> {
+        if a.get_component_type() != ComponentDataType::F32 || a.get_num_components() != n || a.len() != points {
+            bail!("the Draco {name} is not {n} floats for each of the {points} points");
+        }
+        let unique: Vec<f32> =
+            a.get_data_as_bytes().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        let value = |p: usize| a.point_map_as_slice().map_or(Some(p), |m| m.get(p).map(|&v| usize::from(v)));
+        let mut out = Vec::with_capacity(points * n);
+        for p in 0..points {
+            let v = value(p).filter(|&v| (v + 1) * n <= unique.len());
+            out.extend_from_slice(
+                &unique[v.with_context(|| format!("the Draco {name} of point {p} is missing"))? * n..][..n],
+            );
+        }
+        Ok(out)
+    };
+    let positions = values(position, 3, "POSITION")?.chunks_exact(3).map(Vec3::from_slice).collect();
+    let uvs = match by_name("TEXCOORD_0") {
+        Some(a) => Some(values(a, 2, "TEXCOORD_0")?.chunks_exact(2).map(Vec2::from_slice).collect()),
+        None => None,
+    };
+    let normals = match by_name("NORMAL") {
+        Some(a) => Some(values(a, 3, "NORMAL")?.chunks_exact(3).map(Vec3::from_slice).collect()),
+        None => None,
+    };
+    let indices: Vec<u32> = mesh.faces.iter().flatten().map(|&p| usize::from(p) as u32).collect();
+    if let Some(bad) = indices.iter().find(|&&i| i as usize >= points) {
+        bail!("a Draco face uses point {bad} of {points}");
+    }
+    Ok((positions, uvs, normals, indices))
+}
+
+/// Loads every mesh of a glTF file's default scene (node transforms applied) with `gltf`;
+/// Draco-compressed primitives (`KHR_draco_mesh_compression`) with `draco-oxide-decoder`.
 pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
-    let (doc, buffers, _) = gltf::import(path).with_context(|| format!("cannot parse glTF file {}", path.display()))?;
+    let (doc, buffers) = import_gltf(path).with_context(|| format!("cannot parse glTF file {}", path.display()))?;
     let mut positions = Vec::new();
     let mut uvs = Vec::new();
     let mut normals = Vec::new();
@@ -480,25 +573,37 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
             if prim.mode() != gltf::mesh::Mode::Triangles {
                 continue;
             }
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
-            let Some(pos) = reader.read_positions() else { continue };
+            let (pos, prim_uvs, prim_normals, prim_indices) = match prim.extension_value(DRACO) {
+                Some(ext) => draco_primitive(&doc, &buffers, ext)
+                    .with_context(|| format!("{}: mesh {} primitive {}", path.display(), mesh.index(), prim.index()))?,
+                None => {
+                    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
+                    let Some(pos) = reader.read_positions() else { continue };
+                    let pos: Vec<Vec3> = pos.map(Vec3::from).collect();
+                    let count = pos.len() as u32;
+                    (
+                        pos,
+                        reader.read_tex_coords(0).map(|t| t.into_f32().map(Vec2::from).collect()),
+                        reader.read_normals().map(|n| n.map(Vec3::from).collect()),
+                        match reader.read_indices() {
+                            Some(i) => i.into_u32().collect(),
+                            None => (0..count).collect(),
+                        },
+                    )
+                }
+            };
             let base = positions.len() as u32;
-            let before = positions.len();
-            part_starts.push(before);
-            positions.extend(pos.map(|p| world.transform_point3(Vec3::from(p))));
-            let count = positions.len() - before;
-            match reader.read_tex_coords(0) {
-                Some(t) => uvs.extend(t.into_f32().map(Vec2::from)),
+            part_starts.push(positions.len());
+            positions.extend(pos.iter().map(|p| world.transform_point3(*p)));
+            match prim_uvs {
+                Some(t) => uvs.extend(t),
                 None => all_uvs = false,
             }
-            match reader.read_normals() {
-                Some(n) => normals.extend(n.map(|n| normal_matrix * Vec3::from(n))),
+            match prim_normals {
+                Some(n) => normals.extend(n.iter().map(|n| normal_matrix * *n)),
                 None => all_normals = false,
             }
-            match reader.read_indices() {
-                Some(i) => indices.extend(i.into_u32().map(|i| i + base)),
-                None => indices.extend(base..base + count as u32),
-            }
+            indices.extend(prim_indices.iter().map(|i| i + base));
         }
     }
     if positions.is_empty() {

@@ -1,16 +1,16 @@
 //! Simulator input from files: an OBJ frame sequence (`frame_0001.obj`, ...) that another
-//! simulator exported, a USD ASCII mesh cache (.usda) or an Alembic cache (.abc), played back
-//! against the frame time with linear interpolation.
+//! simulator exported, a USD mesh cache (.usda, .usdc, .usd) or an Alembic cache (.abc), played
+//! back against the frame time with linear interpolation.
 //!
 //! Every frame file loads through the lazy resource system on a worker thread; the node
 //! holds the (at most two) files the current time needs, prefetches the next one and lets
 //! the resource system forget the others, so memory stays bounded however long the
 //! sequence is. All frames must share one topology (vertices, triangles, UVs, pieces); a
-//! frame that does not is an error naming its file. A .usda cache is one text file holding
-//! every frame, so it is parsed whole, once, and all its frames are held. An Alembic cache's
-//! frames load one at a time like OBJ files (each a resource `cache.abc|frame=...`), reading
-//! only that time's samples; its topology may change from frame to frame (frames of different
-//! topology are not blended).
+//! frame that does not is an error naming its file. The frames of an Alembic or binary USD
+//! cache load one at a time like OBJ files (each a resource `cache.abc|frame=...`), reading
+//! only that time's samples. A USD text cache (.usda) holds every frame in one text, so it is
+//! parsed whole, once, and all its frames are held. A cache's topology may change from frame
+//! to frame (frames of different topology are not blended).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -23,12 +23,14 @@ use crate::core::hash::fnv1a;
 use crate::core::node::prelude::*;
 use crate::core::resources::{part_path, split_part};
 use crate::io::alembic::AbcArchive;
+use crate::io::usd::{self, UsdFile};
+use crate::io::{NONE, PolySample};
 use crate::mesh::{self, Mesh};
 
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
     category: Category::Simulation,
-    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...), a USD ASCII mesh cache (.usda, its time codes as frame numbers at its timeCodesPerSecond) or an Alembic cache (.abc, Ogawa; its sample times as frames) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object or Alembic mesh; positions and normals are interpolated between frames. Frames load on worker threads; only the frames around the current time are held in memory (a .usda cache is held whole).",
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...), a USD mesh cache (.usda, .usdc or .usd; its time codes as frame numbers at its timeCodesPerSecond) or an Alembic cache (.abc, Ogawa; its sample times as frames) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object, USD Mesh prim or Alembic mesh; positions and normals are interpolated between frames. Frames load on worker threads; only the frames around the current time are held in memory (a .usda text cache is held whole).",
     inputs: &[],
     outputs: &[PortSpec::output(
         "surface",
@@ -38,18 +40,18 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new(
             "path",
-            ParamKind::Path { default: "", extensions: &["obj", "usda", "abc"] },
-            "A folder holding one sequence, a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame), a .usda cache with one Mesh prim that has per-vertex primvars:st, or an Alembic .abc cache of polygon meshes with UVs; relative to the graph's folder.",
+            ParamKind::Path { default: "", extensions: &["obj", "usda", "usdc", "usd", "abc"] },
+            "A folder holding one sequence, a file pattern: frame_%04d.obj, frame_####.obj or frame_*.obj (the number in each file name is its frame), a USD cache (.usda, .usdc, .usd) of Mesh prims with UVs (primvars:st), or an Alembic .abc cache of polygon meshes with UVs; relative to the graph's folder.",
         ),
         ParamSpec::new(
             "object",
             ParamKind::Text { default: "" },
-            "Alembic only: the mesh to play, by full name (/Cloth/Grid) or the name of it or an object above it (Cloth); empty: every polygon mesh in the file, each a pattern piece.",
+            "Alembic and USD caches: the mesh to play, by full path (/Cloth/Grid) or the name of it or of an object or prim above it (Cloth); empty: every polygon mesh in the file, each a pattern piece.",
         ),
         ParamSpec::new(
             "fps",
             ParamKind::Float { default: 24.0, min: 1e-3, max: 1e4 },
-            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0. A .usda cache uses its own timeCodesPerSecond instead, an .abc cache its sample spacing.",
+            "Frames per second of the sequence's numbering: file frame n is shown (n - start_frame) / fps seconds after time 0. A USD cache uses its own timeCodesPerSecond instead, an .abc cache its sample spacing.",
         ),
         ParamSpec::new(
             "start_frame",
@@ -74,15 +76,17 @@ pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
 /// The frame files of one sequence, sorted by frame number.
 #[derive(Debug)]
 pub struct SequenceIndex {
-    /// Frame numbers and files (for a .usda cache: labels `cache.usda@time`).
+    /// Frame numbers and files (for a cache: labels `cache.abc|frame=...`, see
+    /// [`load_cache_frame`]).
     pub frames: Vec<(i64, PathBuf)>,
     /// A .usda cache's frames, parsed with the index (one per entry of `frames`).
     pub cached: Option<CachedFrames>,
-    /// A .usda cache's timeCodesPerSecond or an .abc cache's sample rate, which replaces the
-    /// node's `fps`.
+    /// A USD cache's frame rate (timeCodesPerSecond) or an .abc cache's sample rate, which
+    /// replaces the node's `fps`.
     pub fps: Option<f64>,
-    /// Frames are loaded with [`load_abc_frame`] and may differ in topology (an .abc cache).
-    pub alembic: bool,
+    /// The frames come from one cache file (Alembic, USD), loaded with [`load_cache_frame`],
+    /// and may differ in topology.
+    pub cache: bool,
 }
 
 /// Frames parsed together with their index.
@@ -254,10 +258,10 @@ impl Node for MeshSequenceNode {
                 }
                 (cached.0[a].clone(), cached.0[b].clone())
             }
-            None if index.alembic => self.load_pair(cx, None, [pa.as_path(), pb.as_path()], next, load_abc_frame)?,
+            None if index.cache => self.load_pair(cx, None, [pa.as_path(), pb.as_path()], next, load_cache_frame)?,
             None => self.load_pair(cx, Some(&first), [pa.as_path(), pb.as_path()], next, load_frame)?,
         };
-        if index.alembic {
+        if index.cache {
             // A cache whose topology changes shows each frame as it is, without blending.
             if fa.topology != fb.topology {
                 (fb, w) = (fa.clone(), 0.0);
@@ -324,10 +328,8 @@ impl MeshSequenceNode {
 /// `%d`, `%0Nd`, a run of `#` or one `*` where the frame number goes.
 pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     if let (file, Some(part)) = split_part(path) {
-        return load_abc_index(file, &unescape(part.strip_prefix("object=").unwrap_or(part)));
-    }
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("usda")) {
-        return load_usda_index(path);
+        let object = unescape(part.strip_prefix("object=").unwrap_or(part));
+        return if usd::is_usd(file) { load_usd_index(file, &object) } else { load_abc_index(file, &object) };
     }
     let (dir, prefix, suffix) = if path.is_dir() {
         (path.to_path_buf(), None, None)
@@ -384,43 +386,73 @@ pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
         bail!("{} and {} have the same frame number {}", w[0].1.display(), w[1].1.display(), w[0].0);
     }
-    Ok(SequenceIndex { frames, cached: None, fps: None, alembic: false })
+    Ok(SequenceIndex { frames, cached: None, fps: None, cache: false })
 }
 
-/// A .usda cache as a sequence: its one Mesh prim's samples, time codes as frame numbers.
-fn load_usda_index(path: &Path) -> anyhow::Result<SequenceIndex> {
-    let stage = crate::io::usda::read_usda(path)?;
-    if stage.meshes.len() > 1 {
-        bail!("{}: holds {} Mesh prims; MeshSequence plays one", path.display(), stage.meshes.len());
+/// A USD cache as a sequence: the time codes at which the chosen Mesh prims change, as frames
+/// (see [`usd::frames_of`]). A text cache's frames are made here, from the one parse.
+fn load_usd_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
+    let mut stage = UsdFile::open(file)?;
+    let meshes = select_meshes(&stage.mesh_names(), file, object)?;
+    let mut times = Vec::new();
+    for &m in &meshes {
+        times.extend(stage.sample_times(m)?);
     }
-    let prim = &stage.meshes[0];
-    let (mut frames, mut cached) = (Vec::new(), Vec::new());
-    for (t, s) in &prim.samples {
-        let at = || format!("{}: {} at time {t}", path.display(), prim.path);
-        if t.fract() != 0.0 || t.abs() > 1e15 {
-            bail!("{}: the time code is not a whole frame number", at());
-        }
-        if s.uvs.is_empty() {
-            bail!("{}: no per-vertex primvars:st, which a Surface needs as pattern coordinates", at());
-        }
-        let normals = (!s.normals.is_empty()).then(|| s.normals.clone());
-        let mesh = Mesh::from_parts(s.positions.clone(), normals, s.uvs.clone(), s.indices.clone(), Vec::new())
-            .with_context(at)?;
-        frames.push((*t as i64, PathBuf::from(format!("{}@{t}", path.display()))));
-        cached.push(Arc::new(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) }));
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let (fps, numbers) =
+        usd::frames_of(stage.time_codes_per_second(), &times).with_context(|| file.display().to_string())?;
+    if let Some(w) = numbers.windows(2).find(|w| w[0] == w[1]) {
+        bail!(
+            "{}: two time codes fall on frame {}; their spacing is too uneven to number as frames",
+            file.display(),
+            w[0]
+        );
     }
-    Ok(SequenceIndex {
-        frames,
-        cached: Some(CachedFrames(cached)),
-        fps: Some(stage.time_codes_per_second),
-        alembic: false,
-    })
+    let frames: Vec<(i64, PathBuf)> = numbers
+        .iter()
+        .zip(&times)
+        .map(|(n, t)| (*n, part_path(file, &format!("frame={n},t={t},object={}", escape(object)))))
+        .collect();
+    let cached = if matches!(stage, UsdFile::Text { .. }) {
+        let frames = times.iter().map(|&t| usd_frame(&mut stage, &meshes, t).map(Arc::new));
+        Some(CachedFrames(frames.collect::<anyhow::Result<_>>()?))
+    } else {
+        None
+    };
+    Ok(SequenceIndex { frames, cached, fps: Some(fps), cache: true })
+}
+
+/// The chosen Mesh prims of a USD file at time code `t`, each a pattern piece.
+fn usd_frame(stage: &mut UsdFile, meshes: &[usize], t: f64) -> anyhow::Result<SeqFrame> {
+    let names = stage.mesh_names();
+    let mut samples = Vec::new();
+    for &m in meshes {
+        samples.push((names[m].clone(), stage.sample(m, t)?));
+    }
+    frame_of_samples(stage.path(), samples, &format!("time code {t}"))
+}
+
+/// Loads one frame of a cache file, named by a label of its index
+/// (`file|frame=N,t=T,object=...`): an Alembic cache's meshes at T seconds, a USD cache's at
+/// time code T.
+pub fn load_cache_frame(label: &Path) -> anyhow::Result<SeqFrame> {
+    let (file, Some(part)) = split_part(label) else { bail!("{} names no frame of a cache", label.display()) };
+    if !usd::is_usd(file) {
+        return load_abc_frame(label);
+    }
+    let field = |key: &str| part.split(',').find_map(|f| f.strip_prefix(key));
+    let t: f64 = field("t=").and_then(|t| t.parse().ok()).context("the frame label has no time")?;
+    let object = unescape(field("object=").unwrap_or(""));
+    let mut stage = UsdFile::open(file)?;
+    let meshes = select_meshes(&stage.mesh_names(), file, &object)?;
+    usd_frame(&mut stage, &meshes, t)
 }
 
 /// The resource that lists a sequence's frames: the path itself, or for an Alembic cache
 /// the file and the `object` parameter.
 pub fn index_path(path: &Path, object: &str) -> PathBuf {
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("abc")) {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("abc")) || usd::is_usd(path) {
         part_path(path, &format!("object={}", escape(object)))
     } else {
         path.to_path_buf()
@@ -431,7 +463,8 @@ pub fn index_path(path: &Path, object: &str) -> PathBuf {
 /// positions' uniform rate (or, for other samplings, the smallest spacing between samples).
 fn load_abc_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
     let mut archive = AbcArchive::open(file)?;
-    let meshes = select_meshes(&archive, file, object)?;
+    let names: Vec<String> = archive.meshes.iter().map(|m| m.name.clone()).collect();
+    let meshes = select_meshes(&names, file, object)?;
     let mut times = Vec::new();
     for &m in &meshes {
         times.extend(archive.sample_times(m)?);
@@ -453,23 +486,20 @@ fn load_abc_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
         let part = format!("frame={n},t={t},object={}", escape(object));
         frames.push((n as i64, part_path(file, &part)));
     }
-    Ok(SequenceIndex { frames, cached: None, fps, alembic: true })
+    Ok(SequenceIndex { frames, cached: None, fps, cache: true })
 }
 
-/// The meshes `object` names (see the `object` parameter), in file order.
-fn select_meshes(archive: &AbcArchive, file: &Path, object: &str) -> anyhow::Result<Vec<usize>> {
-    let names = || archive.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ");
-    if archive.meshes.is_empty() {
-        bail!("{}: holds no polygon mesh (PolyMesh)", file.display());
+/// The meshes `object` names (see the `object` parameter) among a file's `names`, in file
+/// order.
+fn select_meshes(names: &[String], file: &Path, object: &str) -> anyhow::Result<Vec<usize>> {
+    if names.is_empty() {
+        bail!("{}: holds no polygon mesh", file.display());
     }
-    let chosen: Vec<usize> = (0..archive.meshes.len())
-        .filter(|&m| {
-            let name = &archive.meshes[m].name;
-            object.is_empty() || name == object || name.split('/').any(|part| part == object)
-        })
+    let chosen: Vec<usize> = (0..names.len())
+        .filter(|&m| object.is_empty() || names[m] == object || names[m].split('/').any(|part| part == object))
         .collect();
     if chosen.is_empty() {
-        bail!("{}: no mesh named \"{object}\" (its meshes: {})", file.display(), names());
+        bail!("{}: no mesh named \"{object}\" (its meshes: {})", file.display(), names.join(", "));
     }
     Ok(chosen)
 }
@@ -482,17 +512,45 @@ pub fn load_abc_frame(label: &Path) -> anyhow::Result<SeqFrame> {
     let t: f64 = field("t=").and_then(|t| t.parse().ok()).context("the frame label has no time")?;
     let object = unescape(field("object=").unwrap_or(""));
     let mut archive = AbcArchive::open(file)?;
-    let meshes = select_meshes(&archive, file, &object)?;
+    let names: Vec<String> = archive.meshes.iter().map(|m| m.name.clone()).collect();
+    let mut samples = Vec::new();
+    for m in select_meshes(&names, file, &object)? {
+        samples.push((names[m].clone(), archive.sample(m, t)?));
+    }
+    frame_of_samples(file, samples, &format!("{t} s"))
+}
+
+/// A frame of a cache from its meshes (name, sample), each a pattern piece; `at` says when,
+/// for errors.
+fn frame_of_samples(file: &Path, mut samples: Vec<(String, PolySample)>, at: &str) -> anyhow::Result<SeqFrame> {
+    let cannot = || format!("cannot use {} at {at} as a sequence frame", file.display());
+    // One mesh with its UVs (and normals) per vertex keeps its vertices as they are, in the
+    // file's order: a cache written by ExportGeometry plays back vertex for vertex.
+    if let [(_, s)] = samples.as_mut_slice() {
+        let per_vertex = |k: usize, len: usize| s.corners.iter().all(|c| c[k] == c[0]) && len == s.positions.len();
+        let no_normals = s.corners.iter().all(|c| c[2] == NONE);
+        if s.has_uvs && per_vertex(1, s.uvs.len()) && (no_normals || per_vertex(2, s.normals.len())) {
+            let mut indices = Vec::new();
+            let mut start = 0;
+            for &count in &s.face_counts {
+                let face = &s.corners[start..start + count as usize];
+                start += count as usize;
+                indices
+                    .extend((1..face.len().saturating_sub(1)).flat_map(|k| [face[0][0], face[k][0], face[k + 1][0]]));
+            }
+            let uvs = s.uvs.iter().map(|uv| Vec2::new(uv.x, 1.0 - uv.y)).collect();
+            let normals = (!no_normals).then(|| std::mem::take(&mut s.normals));
+            let mesh = Mesh::from_parts(std::mem::take(&mut s.positions), normals, uvs, indices, Vec::new())
+                .with_context(cannot)?;
+            return Ok(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) });
+        }
+    }
     let (mut v, mut vt, mut vn) = (Vec::new(), Vec::new(), Vec::new());
     let (mut corners, mut tri_piece) = (Vec::new(), Vec::new());
-    for (piece, &m) in meshes.iter().enumerate() {
-        let sample = archive.sample(m, t)?;
+    let pieces = samples.len();
+    for (piece, (name, sample)) in samples.into_iter().enumerate() {
         if !sample.has_uvs {
-            bail!(
-                "{}: the mesh {} has no UVs (uv), which a Surface needs as pattern coordinates",
-                file.display(),
-                archive.meshes[m].name
-            );
+            bail!("{}: the mesh {name} has no UVs, which a Surface needs as pattern coordinates", file.display());
         }
         let offset = |i: u32, base: usize| if i == NONE { NONE } else { i + base as u32 };
         let mut start = 0;
@@ -507,12 +565,11 @@ pub fn load_abc_frame(label: &Path) -> anyhow::Result<SeqFrame> {
             }
         }
         v.extend(sample.positions);
-        // Alembic's v axis points up; the Surface's runs down.
+        // Caches store v up; the Surface's runs down.
         vt.extend(sample.uvs.iter().map(|uv| Vec2::new(uv.x, 1.0 - uv.y)));
         vn.extend(sample.normals);
     }
-    let mesh = mesh_from_corners(&v, &vt, &vn, &corners, &tri_piece, meshes.len())
-        .with_context(|| format!("cannot use {} at {t} s as a sequence frame", file.display()))?;
+    let mesh = mesh_from_corners(&v, &vt, &vn, &corners, &tri_piece, pieces).with_context(cannot)?;
     Ok(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) })
 }
 
@@ -573,8 +630,6 @@ pub fn load_frame(path: &Path) -> anyhow::Result<SeqFrame> {
     let mesh = parse_obj(&text).with_context(|| format!("cannot use {} as a sequence frame", path.display()))?;
     Ok(SeqFrame { topology: Topology::of(&mesh), mesh: Arc::new(mesh) })
 }
-
-const NONE: u32 = u32::MAX;
 
 /// Parses an OBJ frame into a Surface ([`mesh_from_corners`]) whose topology depends only on
 /// the faces' position and texture-coordinate indices, not on the normal indices (which

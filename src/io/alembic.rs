@@ -29,26 +29,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use glam::{DMat4, DVec3, Vec2, Vec3};
+
+use super::{NONE, PolySample};
 use ogawa_rs::{
     Archive, ArchiveReader, DataType, GroupChunk, ObjectReader, PodType, PropertyHeader, PropertyReader, TimeSampling,
 };
-
-/// No index (a corner without a UV or normal).
-pub const NONE: u32 = u32::MAX;
-
-/// One polygon mesh at one time, in world space with counter-clockwise faces.
-#[derive(Debug, Clone)]
-pub struct AbcMeshSample {
-    pub positions: Vec<Vec3>,
-    /// Corners per face.
-    pub face_counts: Vec<u32>,
-    /// Per corner (faces one after another): position index, UV index, normal index (or NONE).
-    pub corners: Vec<[u32; 3]>,
-    /// UVs as stored (v up); `has_uvs`: the mesh has a `uv` property (even if it is empty now).
-    pub uvs: Vec<Vec2>,
-    pub has_uvs: bool,
-    pub normals: Vec<Vec3>,
-}
 
 /// An open archive and its polygon meshes (with the transforms above each).
 pub struct AbcArchive {
@@ -153,7 +138,7 @@ impl AbcArchive {
     }
 
     /// Mesh `m` at time `t` (seconds): each property's sample at or before `t`.
-    pub fn sample(&mut self, m: usize, t: f64) -> anyhow::Result<AbcMeshSample> {
+    pub fn sample(&mut self, m: usize, t: f64) -> anyhow::Result<PolySample> {
         let name = self.meshes[m].name.clone();
         let AbcArchive { path, reader, archive, meshes } = self;
         contain(|| sample_mesh(reader, archive, &meshes[m], t))
@@ -161,7 +146,7 @@ impl AbcArchive {
     }
 }
 
-fn sample_mesh(r: &mut FileBlocks, a: &Archive, mesh: &AbcMesh, t: f64) -> anyhow::Result<AbcMeshSample> {
+fn sample_mesh(r: &mut FileBlocks, a: &Archive, mesh: &AbcMesh, t: f64) -> anyhow::Result<PolySample> {
     let mut required = |name: &str| -> anyhow::Result<Values> {
         let p = property(&mesh.geom, name, r, a)?.with_context(|| format!("the mesh has no {name}"))?;
         read_at(r, &p, t)
@@ -203,7 +188,7 @@ fn sample_mesh(r: &mut FileBlocks, a: &Archive, mesh: &AbcMesh, t: f64) -> anyho
         }
         start += c as usize;
     }
-    Ok(AbcMeshSample { positions, face_counts: counts, corners, uvs, has_uvs, normals })
+    Ok(PolySample { positions, face_counts: counts, corners, uvs, has_uvs, normals })
 }
 
 /// A geometry parameter (`uv`, `N`): an array (per corner or per vertex) or a compound of

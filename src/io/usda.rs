@@ -7,15 +7,17 @@
 //! up), `faceVertexCounts` and `faceVertexIndices`. Each is written once as its first frame's
 //! value and, where frames differ, also as `timeSamples` keyed by frame.
 //!
-//! Read: the subset this writes and what similar writers (Blender, Houdini) put in a mesh
-//! cache: `def` prims nested in any depth, attribute defaults and time samples (held between
-//! samples), polygons fan-triangulated; normals and UVs are kept where they are per vertex.
+//! Read: the prims of a layer at any depth with their attributes' defaults, time samples and
+//! `interpolation` ([`read_usda_layer`]); [`crate::io::usd`] assembles meshes from them. The
+//! text is read in one pass without a token list, and number arrays are kept flat, so a cache
+//! costs about 8 bytes per number it holds.
 
 use anyhow::{Context as _, bail};
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::usd::{Attr, Layer, Prim, Value};
 use crate::mesh::Mesh;
 
 /// Writes `frames` (frame number, mesh; in increasing frame order) as one animated mesh.
@@ -101,68 +103,71 @@ fn attribute(s: &mut String, decl: &str, meta: &str, frames: &[(i64, &Mesh)], va
     s.push_str("        }\n");
 }
 
-/// A stage read from a .usda file: its time codes and every Mesh prim.
-#[derive(Debug)]
-pub struct UsdaStage {
-    pub time_codes_per_second: f64,
-    pub start: f64,
-    pub end: f64,
-    pub meshes: Vec<UsdaMesh>,
-}
-
-/// One Mesh prim: its path and its geometry at each time it has samples (one at `start` when
-/// nothing is animated).
-#[derive(Debug)]
-pub struct UsdaMesh {
-    pub path: String,
-    pub samples: Vec<(f64, MeshSample)>,
-}
-
-/// A mesh at one time: triangles (polygons fan-triangulated), normals and UVs (v down, as the
-/// renderer's) where the file has them per vertex, else empty.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MeshSample {
-    pub positions: Vec<Vec3>,
-    pub normals: Vec<Vec3>,
-    pub uvs: Vec<Vec2>,
-    pub indices: Vec<u32>,
-}
-
-/// Reads a .usda file; every error names the file (and the line where the text is wrong).
-pub fn read_usda(path: &Path) -> anyhow::Result<UsdaStage> {
+/// Reads a .usda file's layer; every error names the file (and the line where the text is
+/// wrong).
+pub fn read_usda_layer(path: &Path) -> anyhow::Result<Layer<Val>> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let text = std::str::from_utf8(&bytes).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
     parse_usda(text).map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))
 }
 
-/// Parses USD ASCII text (see [`read_usda`]).
-pub fn parse_usda(text: &str) -> anyhow::Result<UsdaStage> {
+/// Parses USD ASCII text (see [`read_usda_layer`]).
+pub fn parse_usda(text: &str) -> anyhow::Result<Layer<Val>> {
     if !text.starts_with("#usda ") {
         bail!("not USD ASCII: the file does not start with \"#usda\"");
     }
-    let mut p = Parser { toks: tokenize(text)?, at: 0 };
-    let mut stage = UsdaStage { time_codes_per_second: 24.0, start: 0.0, end: 0.0, meshes: Vec::new() };
-    if p.peek_punct('(') {
+    let mut p = Parser { lex: Lexer { text, i: 0, line: 1 }, peeked: None };
+    p.lex.skip_line();
+    let mut layer = Layer::default();
+    if p.peek_punct('(')? {
         for (key, value) in p.metadata()? {
-            let number = || value.number().with_context(|| format!("{key} is not a number"));
+            let number = || match &value {
+                Val::Numbers(n) if n.len() == 1 => Ok(n[0]),
+                _ => Err(anyhow::anyhow!("{key} is not a number")),
+            };
             match key.as_str() {
-                "timeCodesPerSecond" => stage.time_codes_per_second = number()?,
-                "startTimeCode" => stage.start = number()?,
-                "endTimeCode" => stage.end = number()?,
+                "timeCodesPerSecond" => layer.time_codes_per_second = number()?,
+                "startTimeCode" => layer.start = number()?,
+                "endTimeCode" => layer.end = number()?,
+                "metersPerUnit" => layer.meters_per_unit = number()?,
+                "upAxis" => {
+                    let Val::Text(axis) = &value else { bail!("upAxis is not a token") };
+                    layer.up_axis = axis.clone();
+                }
                 _ => {}
             }
         }
     }
-    while p.at < p.toks.len() {
-        p.prim("", &mut stage)?;
+    while p.peek()?.is_some() {
+        p.prim("", &mut layer)?;
     }
-    if stage.meshes.is_empty() {
-        bail!("the stage holds no Mesh prim");
+    layer.finish()?;
+    Ok(layer)
+}
+
+/// A parsed value: numbers (scalars, tuples and arrays of them, flattened), a word or string,
+/// a list of other values, or time samples.
+#[derive(Debug, Clone)]
+pub enum Val {
+    Numbers(Vec<f64>),
+    Text(String),
+    List(Vec<Val>),
+    Samples(Vec<(f64, Val)>),
+}
+
+/// A parsed value as a [`Value`]: numbers, or a token or list of tokens.
+pub fn val_value(v: &Val) -> anyhow::Result<Value> {
+    match v {
+        Val::Numbers(n) => Ok(Value::Numbers(n.clone())),
+        Val::Text(t) => Ok(Value::Tokens(vec![t.clone()])),
+        Val::List(items) => items
+            .iter()
+            .map(|i| if let Val::Text(t) = i { Some(t.clone()) } else { None })
+            .collect::<Option<_>>()
+            .map(Value::Tokens)
+            .context("a list of mixed values"),
+        Val::Samples(_) => bail!("time samples where a value belongs"),
     }
-    if !(stage.time_codes_per_second.is_finite() && stage.time_codes_per_second > 0.0) {
-        bail!("timeCodesPerSecond {} is not a positive number", stage.time_codes_per_second);
-    }
-    Ok(stage)
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -173,147 +178,139 @@ enum Tok {
     Punct(char),
 }
 
-#[derive(Debug, Clone)]
-enum Val {
-    Num(f64),
-    /// A word or string (tokens, asset paths): not needed for meshes.
-    Other,
-    List(Vec<Val>),
-    Dict(Vec<(f64, Val)>),
+/// Tokens one at a time, with the line each starts on.
+struct Lexer<'a> {
+    text: &'a str,
+    i: usize,
+    line: usize,
 }
 
-impl Val {
-    fn number(&self) -> Option<f64> {
-        if let Val::Num(n) = self { Some(*n) } else { None }
-    }
-
-    fn numbers(&self) -> Option<Vec<f64>> {
-        let Val::List(items) = self else { return None };
-        items.iter().map(Val::number).collect()
-    }
-
-    /// `[(x, y), ...]` as tuples of `N` numbers.
-    fn tuples<const N: usize>(&self) -> Option<Vec<[f32; N]>> {
-        let Val::List(items) = self else { return None };
-        let tuple = |v: &Val| {
-            let n = v.numbers()?;
-            let mut out = [0.0; N];
-            (n.len() == N).then(|| {
-                out.iter_mut().zip(n).for_each(|(o, x)| *o = x as f32);
-                out
-            })
-        };
-        items.iter().map(tuple).collect()
-    }
-}
-
-/// Tokens with the line each starts on.
-fn tokenize(text: &str) -> anyhow::Result<Vec<(Tok, usize)>> {
-    let mut toks = Vec::new();
-    let b = text.as_bytes();
-    let (mut i, mut line) = (0, 1);
-    while i < b.len() {
-        let c = b[i];
-        match c {
-            b'\n' => {
-                line += 1;
-                i += 1;
-            }
-            _ if c.is_ascii_whitespace() => i += 1,
-            b'#' => {
-                while i < b.len() && b[i] != b'\n' {
-                    i += 1;
-                }
-            }
-            b'"' | b'\'' => {
-                // Triple-quoted strings may span lines; escapes are kept as written.
-                let triple = b[i..].starts_with(&[c, c, c]);
-                let quote = if triple { 3 } else { 1 };
-                let start = i + quote;
-                let mut j = start;
-                loop {
-                    if j >= b.len() {
-                        bail!("line {line}: a string is not closed");
-                    }
-                    if b[j] == b'\\' {
-                        j += 2;
-                        continue;
-                    }
-                    if b[j..].starts_with(&b[i..i + quote]) {
-                        break;
-                    }
-                    j += 1;
-                }
-                let s = text.get(start..j.min(b.len())).context("a string is cut inside a character")?;
-                toks.push((Tok::Str(s.to_string()), line));
-                line += s.matches('\n').count();
-                i = j + quote;
-            }
-            b'<' => {
-                let end = b[i..]
-                    .iter()
-                    .position(|&x| x == b'>')
-                    .with_context(|| format!("line {line}: a path is not closed"))?;
-                toks.push((Tok::Str(text[i + 1..i + end].to_string()), line));
-                i += end + 1;
-            }
-            b'0'..=b'9' | b'-' | b'+' | b'.' => {
-                let start = i;
-                i += 1;
-                while i < b.len() && matches!(b[i], b'0'..=b'9' | b'.' | b'e' | b'E' | b'-' | b'+') {
-                    i += 1;
-                }
-                let word = &text[start..i];
-                let n = word.parse::<f64>().map_err(|_| anyhow::anyhow!("line {line}: \"{word}\" is not a number"))?;
-                toks.push((Tok::Num(n), line));
-            }
-            _ if c.is_ascii_alphabetic() || c == b'_' => {
-                let start = i;
-                while i < b.len() && (b[i].is_ascii_alphanumeric() || matches!(b[i], b'_' | b':' | b'.')) {
-                    i += 1;
-                }
-                // "inf" and "nan" are numbers in USD text.
-                match &text[start..i] {
-                    "inf" => toks.push((Tok::Num(f64::INFINITY), line)),
-                    "nan" => toks.push((Tok::Num(f64::NAN), line)),
-                    w => toks.push((Tok::Word(w.to_string()), line)),
-                }
-            }
-            b'(' | b')' | b'[' | b']' | b'{' | b'}' | b'=' | b',' | b':' | b';' => {
-                toks.push((Tok::Punct(c as char), line));
-                i += 1;
-            }
-            _ => bail!("line {line}: unexpected character {:?}", text[i..].chars().next().unwrap_or('?')),
+impl Lexer<'_> {
+    fn skip_line(&mut self) {
+        let b = self.text.as_bytes();
+        while self.i < b.len() && b[self.i] != b'\n' {
+            self.i += 1;
         }
     }
-    Ok(toks)
+
+    /// The next token and its line, or None at the end.
+    fn token(&mut self) -> anyhow::Result<Option<(Tok, usize)>> {
+        let (text, b) = (self.text, self.text.as_bytes());
+        loop {
+            let Some(&c) = b.get(self.i) else { return Ok(None) };
+            let line = self.line;
+            match c {
+                b'\n' => {
+                    self.line += 1;
+                    self.i += 1;
+                }
+                _ if c.is_ascii_whitespace() => self.i += 1,
+                b'#' => self.skip_line(),
+                b'"' | b'\'' | b'@' => {
+                    // Triple-quoted strings (and @@@ asset paths) may span lines; escapes are
+                    // kept as written.
+                    let i = self.i;
+                    let quote = if b[i..].starts_with(&[c, c, c]) { 3 } else { 1 };
+                    let start = i + quote;
+                    let mut j = start;
+                    loop {
+                        if j >= b.len() {
+                            bail!("line {line}: a string is not closed");
+                        }
+                        if b[j] == b'\\' && c != b'@' {
+                            j += 2;
+                            continue;
+                        }
+                        if b[j..].starts_with(&b[i..i + quote]) {
+                            break;
+                        }
+                        j += 1;
+                    }
+                    let s = text.get(start..j).context("a string is cut inside a character")?;
+                    self.line += s.matches('\n').count();
+                    self.i = j + quote;
+                    return Ok(Some((Tok::Str(s.to_string()), line)));
+                }
+                b'<' => {
+                    let end = b[self.i..]
+                        .iter()
+                        .position(|&x| x == b'>')
+                        .with_context(|| format!("line {line}: a path is not closed"))?;
+                    let s = text.get(self.i + 1..self.i + end).context("a path is cut inside a character")?;
+                    self.i += end + 1;
+                    return Ok(Some((Tok::Str(s.to_string()), line)));
+                }
+                b'0'..=b'9' | b'-' | b'+' | b'.' => {
+                    let start = self.i;
+                    self.i += 1;
+                    while self.i < b.len() && matches!(b[self.i], b'0'..=b'9' | b'.' | b'e' | b'E' | b'-' | b'+') {
+                        self.i += 1;
+                    }
+                    let word = &text[start..self.i];
+                    // "-inf" and "-nan" are numbers in USD text.
+                    let word = match (word, b.get(self.i..self.i + 3)) {
+                        ("-", Some(b"inf" | b"nan")) => {
+                            self.i += 3;
+                            &text[start..self.i]
+                        }
+                        _ => word,
+                    };
+                    let n =
+                        word.parse::<f64>().map_err(|_| anyhow::anyhow!("line {line}: \"{word}\" is not a number"))?;
+                    return Ok(Some((Tok::Num(n), line)));
+                }
+                _ if c.is_ascii_alphabetic() || c == b'_' => {
+                    let start = self.i;
+                    while self.i < b.len()
+                        && (b[self.i].is_ascii_alphanumeric() || matches!(b[self.i], b'_' | b':' | b'.'))
+                    {
+                        self.i += 1;
+                    }
+                    return Ok(Some(match &text[start..self.i] {
+                        "inf" => (Tok::Num(f64::INFINITY), line),
+                        "nan" => (Tok::Num(f64::NAN), line),
+                        w => (Tok::Word(w.to_string()), line),
+                    }));
+                }
+                b'(' | b')' | b'[' | b']' | b'{' | b'}' | b'=' | b',' | b':' | b';' => {
+                    self.i += 1;
+                    return Ok(Some((Tok::Punct(c as char), line)));
+                }
+                _ => bail!("line {line}: unexpected character {:?}", text[self.i..].chars().next().unwrap_or('?')),
+            }
+        }
+    }
 }
 
-struct Parser {
-    toks: Vec<(Tok, usize)>,
-    at: usize,
+struct Parser<'a> {
+    lex: Lexer<'a>,
+    peeked: Option<(Tok, usize)>,
 }
 
-/// An attribute of a prim: its default value and its time samples.
-#[derive(Default)]
-struct Attr {
-    default: Option<Val>,
-    samples: Vec<(f64, Val)>,
-}
-
-impl Parser {
+impl Parser<'_> {
     fn line(&self) -> usize {
-        self.toks.get(self.at).or(self.toks.last()).map_or(1, |t| t.1)
+        self.peeked.as_ref().map_or(self.lex.line, |p| p.1)
+    }
+
+    fn peek(&mut self) -> anyhow::Result<Option<&Tok>> {
+        if self.peeked.is_none() {
+            self.peeked = self.lex.token()?;
+        }
+        Ok(self.peeked.as_ref().map(|p| &p.0))
     }
 
     fn next(&mut self) -> anyhow::Result<Tok> {
-        let t = self.toks.get(self.at).map(|t| t.0.clone());
-        self.at += 1;
-        t.with_context(|| format!("line {}: the file ends early", self.line()))
+        self.peek()?;
+        let line = self.line();
+        self.peeked.take().map(|p| p.0).with_context(|| format!("line {line}: the file ends early"))
     }
 
-    fn peek_punct(&self, c: char) -> bool {
-        matches!(self.toks.get(self.at), Some((Tok::Punct(p), _)) if *p == c)
+    fn peek_punct(&mut self, c: char) -> anyhow::Result<bool> {
+        Ok(matches!(self.peek()?, Some(Tok::Punct(p)) if *p == c))
+    }
+
+    fn peek_word(&mut self) -> anyhow::Result<bool> {
+        Ok(matches!(self.peek()?, Some(Tok::Word(_))))
     }
 
     fn expect(&mut self, c: char) -> anyhow::Result<()> {
@@ -327,33 +324,47 @@ impl Parser {
     fn value(&mut self) -> anyhow::Result<Val> {
         let line = self.line();
         Ok(match self.next()? {
-            Tok::Num(n) => Val::Num(n),
-            Tok::Str(_) | Tok::Word(_) => Val::Other,
+            Tok::Num(n) => Val::Numbers(vec![n]),
+            Tok::Str(s) | Tok::Word(s) => Val::Text(s),
             Tok::Punct(open @ ('[' | '(')) => {
                 let close = if open == '[' { ']' } else { ')' };
-                let mut items = Vec::new();
-                while !self.peek_punct(close) {
-                    items.push(self.value()?);
-                    if !self.peek_punct(close) {
+                // Numbers and tuples of numbers go straight into one flat list.
+                let (mut flat, mut items) = (Vec::new(), Vec::new());
+                while !self.peek_punct(close)? {
+                    match self.value()? {
+                        Val::Numbers(n) if items.is_empty() => flat.extend(n),
+                        v => {
+                            if !flat.is_empty() {
+                                items.push(Val::Numbers(std::mem::take(&mut flat)));
+                            }
+                            items.push(v);
+                        }
+                    }
+                    if !self.peek_punct(close)? {
                         self.expect(',')?;
                     }
                 }
                 self.expect(close)?;
-                Val::List(items)
+                if items.is_empty() { Val::Numbers(flat) } else { Val::List(items) }
             }
             Tok::Punct('{') => {
+                // Time samples (`time: value, ...`); a dictionary value is skipped.
+                if !matches!(self.peek()?, Some(Tok::Num(_) | Tok::Punct('}'))) {
+                    self.skip_braces()?;
+                    return Ok(Val::List(Vec::new()));
+                }
                 let mut entries = Vec::new();
-                while !self.peek_punct('}') {
+                while !self.peek_punct('}')? {
                     let line = self.line();
                     let Tok::Num(key) = self.next()? else { bail!("line {line}: a time sample's key is not a number") };
                     self.expect(':')?;
                     entries.push((key, self.value()?));
-                    if !self.peek_punct('}') {
+                    if !self.peek_punct('}')? {
                         self.expect(',')?;
                     }
                 }
                 self.expect('}')?;
-                Val::Dict(entries)
+                Val::Samples(entries)
             }
             t => bail!("line {line}: expected a value, found {t:?}"),
         })
@@ -372,14 +383,14 @@ impl Parser {
                     // `key = value`, or typed/listop forms (`prepend apiSchemas = [...]`):
                     // the last word before '=' is the key.
                     let mut key = w;
-                    while let Some((Tok::Word(_), _)) = self.toks.get(self.at) {
-                        key = match self.next()? {
-                            Tok::Word(w) => w,
-                            _ => unreachable!("peeked a word"),
-                        };
+                    while self.peek_word()? {
+                        if let Tok::Word(w) = self.next()? {
+                            key = w;
+                        }
                     }
                     self.expect('=')?;
-                    if self.peek_punct('{') {
+                    if self.peek_punct('{')? {
+                        self.expect('{')?;
                         self.skip_braces()?;
                     } else {
                         out.push((key, self.value()?));
@@ -390,8 +401,8 @@ impl Parser {
         }
     }
 
+    /// Skips to the '}' that closes a '{' already read.
     fn skip_braces(&mut self) -> anyhow::Result<()> {
-        self.expect('{')?;
         let mut depth = 1;
         while depth > 0 {
             match self.next()? {
@@ -403,156 +414,98 @@ impl Parser {
         Ok(())
     }
 
-    /// `def|over|class [Type] "name" [(metadata)] { ... }`; Mesh prims go into `stage`.
-    fn prim(&mut self, parent: &str, stage: &mut UsdaStage) -> anyhow::Result<()> {
+    /// `def|over|class [Type] "name" [(metadata)] { ... }`, pushed into `layer` with every
+    /// prim inside it.
+    fn prim(&mut self, parent: &str, layer: &mut Layer<Val>) -> anyhow::Result<()> {
         let line = self.line();
         match self.next()? {
             Tok::Word(w) if matches!(w.as_str(), "def" | "over" | "class") => {}
             t => bail!("line {line}: expected a prim (def ...), found {t:?}"),
         }
-        let type_name = match self.next()? {
-            Tok::Word(w) => {
-                let line = self.line();
-                let Tok::Str(_) = self.next()? else { bail!("line {line}: a prim without a name") };
-                self.at -= 1;
-                w
+        let mut type_name = String::new();
+        let name = loop {
+            match self.next()? {
+                Tok::Word(w) if type_name.is_empty() => type_name = w,
+                Tok::Str(name) => break name,
+                t => bail!("line {line}: expected a prim type and name, found {t:?}"),
             }
-            Tok::Str(_) => {
-                self.at -= 1;
-                String::new()
-            }
-            t => bail!("line {line}: expected a prim type or name, found {t:?}"),
         };
-        let Tok::Str(name) = self.next()? else { bail!("line {line}: a prim without a name") };
         let path = format!("{parent}/{name}");
-        if self.peek_punct('(') {
+        if self.peek_punct('(')? {
             self.metadata()?;
         }
         self.expect('{')?;
-        let mut attrs: std::collections::HashMap<String, Attr> = std::collections::HashMap::new();
-        while !self.peek_punct('}') {
-            if matches!(self.toks.get(self.at), Some((Tok::Word(w), _)) if matches!(w.as_str(), "def" | "over" | "class"))
-            {
-                self.prim(&path, stage)?;
-                continue;
+        let index = layer.prims.len();
+        layer.prims.push(Prim { path: path.clone(), type_name, attrs: Default::default() });
+        loop {
+            let nested = match self.peek()? {
+                Some(Tok::Punct('}')) => break,
+                Some(Tok::Word(w)) => matches!(w.as_str(), "def" | "over" | "class"),
+                _ => false,
+            };
+            if nested {
+                self.prim(&path, layer)?;
+            } else {
+                self.property(&mut layer.prims[index].attrs)?;
             }
-            self.property(&mut attrs)?;
         }
-        self.expect('}')?;
-        if type_name == "Mesh" {
-            let samples = mesh_samples(&attrs, stage.start).with_context(|| format!("Mesh {path} (line {line})"))?;
-            stage.meshes.push(UsdaMesh { path, samples });
-        }
-        Ok(())
+        self.expect('}')
     }
 
     /// `[uniform|custom|varying] type[[]] name[.timeSamples] [= value] [(metadata)]`, or
     /// `rel name [= <path>]`, or a variant set (an error: not supported).
-    fn property(&mut self, attrs: &mut std::collections::HashMap<String, Attr>) -> anyhow::Result<()> {
+    fn property(&mut self, attrs: &mut std::collections::HashMap<String, Attr<Val>>) -> anyhow::Result<()> {
         let line = self.line();
         let mut words = Vec::new();
-        while let Some((Tok::Word(_), _)) = self.toks.get(self.at) {
-            let Tok::Word(w) = self.next()? else { unreachable!("peeked a word") };
-            words.push(w);
-            if self.peek_punct('[') {
+        while self.peek_word()? {
+            let Tok::Word(mut w) = self.next()? else { unreachable!("peeked a word") };
+            if self.peek_punct('[')? {
                 self.expect('[')?;
                 self.expect(']')?;
+                w.push_str("[]");
             }
+            words.push(w);
         }
         let Some(name) = words.pop() else { bail!("line {line}: expected a property, found {:?}", self.next()?) };
-        if words.is_empty() {
-            bail!("line {line}: property {name} has no type");
-        }
-        let value = if self.peek_punct('=') {
+        let Some(type_name) = words.pop() else { bail!("line {line}: property {name} has no type") };
+        let value = if self.peek_punct('=')? {
             self.expect('=')?;
             Some(self.value()?)
         } else {
             None
         };
-        if self.peek_punct('(') {
-            self.metadata()?;
+        let interpolation = if self.peek_punct('(')? {
+            self.metadata()?.into_iter().find_map(|(k, v)| match v {
+                Val::Text(t) if k == "interpolation" => Some(t),
+                _ => None,
+            })
+        } else {
+            None
+        };
+        let (base, samples) = match name.strip_suffix(".timeSamples") {
+            Some(base) => (base.to_string(), true),
+            None => (name, false),
+        };
+        let attr = attrs.entry(base.clone()).or_default();
+        attr.type_name = type_name;
+        if interpolation.is_some() {
+            attr.interpolation = interpolation;
         }
-        if let Some(base) = name.strip_suffix(".timeSamples") {
-            let Some(Val::Dict(samples)) = value else { bail!("line {line}: {name} is not a dictionary of samples") };
-            attrs.entry(base.to_string()).or_default().samples = samples;
-        } else if let Some(value) = value {
-            attrs.entry(name).or_default().default = Some(value);
+        match value {
+            Some(Val::Samples(s)) if samples => attr.samples = s,
+            Some(_) if samples => bail!("line {line}: {base}.timeSamples is not a dictionary of samples"),
+            Some(v) => attr.default = Some(v),
+            None => {}
         }
         Ok(())
     }
 }
 
-/// The mesh at every time any of its attributes has a sample; each attribute's value at a time
-/// is its sample there, else the one before (held), else the first, else its default.
-fn mesh_samples(attrs: &std::collections::HashMap<String, Attr>, start: f64) -> anyhow::Result<Vec<(f64, MeshSample)>> {
-    let names = ["points", "faceVertexCounts", "faceVertexIndices", "normals", "primvars:st"];
-    let mut times: Vec<f64> =
-        names.iter().filter_map(|n| attrs.get(*n)).flat_map(|a| a.samples.iter().map(|s| s.0)).collect();
-    times.sort_by(f64::total_cmp);
-    times.dedup();
-    if times.is_empty() {
-        times.push(start);
-    }
-    let at = |name: &str, t: f64| -> Option<&Val> {
-        let a = attrs.get(name)?;
-        let held = a.samples.iter().rev().find(|s| s.0 <= t).or(a.samples.first()).map(|s| &s.1);
-        held.or(a.default.as_ref())
-    };
-    let mut out = Vec::with_capacity(times.len());
-    for t in times {
-        let positions: Vec<Vec3> = at("points", t)
-            .with_context(|| format!("time {t}: no points"))?
-            .tuples::<3>()
-            .with_context(|| format!("time {t}: points are not a list of 3 numbers each"))?
-            .into_iter()
-            .map(Vec3::from)
-            .collect();
-        let ints = |name: &str| -> anyhow::Result<Vec<i64>> {
-            let v = at(name, t).with_context(|| format!("time {t}: no {name}"))?;
-            let n = v.numbers().with_context(|| format!("time {t}: {name} is not a list of numbers"))?;
-            n.into_iter()
-                .map(|x| (x.fract() == 0.0 && x >= 0.0 && x < u32::MAX as f64).then_some(x as i64))
-                .collect::<Option<_>>()
-                .with_context(|| format!("time {t}: {name} holds a value that is not a count or index"))
-        };
-        let (counts, corners) = (ints("faceVertexCounts")?, ints("faceVertexIndices")?);
-        if counts.iter().sum::<i64>() != corners.len() as i64 {
-            bail!(
-                "time {t}: faceVertexCounts add up to {}, not the {} faceVertexIndices",
-                counts.iter().sum::<i64>(),
-                corners.len()
-            );
-        }
-        if let Some(i) = corners.iter().find(|&&i| i as usize >= positions.len()) {
-            bail!("time {t}: index {i} is past the {} points", positions.len());
-        }
-        let mut indices = Vec::new();
-        let mut k = 0;
-        for &n in &counts {
-            let face = &corners[k..k + n as usize];
-            for j in 1..face.len().saturating_sub(1) {
-                indices.extend([face[0], face[j], face[j + 1]].map(|i| i as u32));
-            }
-            k += n as usize;
-        }
-        // Per-vertex normals and UVs only; face-varying ones are left to the mesh builder.
-        let per_vertex = |v: Option<Vec<[f32; 3]>>| v.filter(|v| v.len() == positions.len()).unwrap_or_default();
-        let normals = per_vertex(at("normals", t).and_then(Val::tuples::<3>)).into_iter().map(Vec3::from).collect();
-        let uvs = at("primvars:st", t)
-            .and_then(Val::tuples::<2>)
-            .filter(|v| v.len() == positions.len())
-            .unwrap_or_default()
-            .into_iter()
-            .map(|[s, t]| Vec2::new(s, 1.0 - t))
-            .collect();
-        out.push((t, MeshSample { positions, normals, uvs, indices }));
-    }
-    Ok(out)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::usd::UsdFile;
+    use glam::Vec2;
 
     fn mesh(dx: f32) -> Mesh {
         Mesh::from_raw(
@@ -565,8 +518,12 @@ mod tests {
         )
     }
 
+    fn open(text: &str) -> UsdFile {
+        UsdFile::Text { path: "test.usda".into(), layer: parse_usda(text).unwrap_or_else(|e| panic!("{e:#}")) }
+    }
+
     /// Written and read back: the time codes, a sample per frame where points move, the
-    /// topology written once, UVs' v flipped there and back.
+    /// topology written once, UVs per vertex (v up in the file).
     #[test]
     fn a_cache_reads_back_frame_by_frame() {
         let (still, moved) = (mesh(0.0), mesh(-0.125));
@@ -574,26 +531,45 @@ mod tests {
         let text = usda_text(30.0, &frames).unwrap();
         assert_eq!(text.matches("faceVertexIndices").count(), 1, "constant topology once:\n{text}");
         assert!(text.contains("texCoord2f[] primvars:st = [(0, 1), (1, 1), (0.5, 0.25)]"), "{text}");
-        let stage = parse_usda(&text).unwrap();
-        assert_eq!((stage.time_codes_per_second, stage.start, stage.end), (30.0, 3.0, 5.0));
-        assert_eq!(stage.meshes.len(), 1);
-        assert_eq!(stage.meshes[0].path, "/werkstatt/mesh");
-        let samples = &stage.meshes[0].samples;
-        assert_eq!(samples.iter().map(|s| s.0).collect::<Vec<_>>(), [3.0, 4.0, 5.0]);
-        for ((_, m), (_, s)) in frames.iter().zip(samples) {
-            assert_eq!((&s.positions, &s.normals, &s.uvs, &s.indices), (&m.positions, &m.normals, &m.uvs, &m.indices));
+        let mut file = open(&text);
+        let UsdFile::Text { layer, .. } = &file else { unreachable!() };
+        assert_eq!((layer.time_codes_per_second, layer.start, layer.end), (30.0, 3.0, 5.0));
+        assert_eq!(file.mesh_names(), ["/werkstatt/mesh"]);
+        assert_eq!(file.sample_times(0).unwrap(), [3.0, 4.0, 5.0]);
+        for (frame, m) in &frames {
+            let s = file.sample(0, *frame as f64).unwrap();
+            assert_eq!(s.positions, m.positions);
+            assert_eq!(s.face_counts, [3]);
+            // Per-vertex UVs and normals: each corner's index is its vertex's.
+            assert_eq!(s.corners, [[0, 0, 0], [1, 1, 1], [2, 2, 2]]);
+            assert_eq!(s.normals, m.normals);
+            assert_eq!(s.uvs, [Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(0.5, 0.25)]);
         }
     }
 
-    /// Quads are fan-triangulated, held samples fill the times in between.
+    /// Quads stay quads, held samples fill the times in between, transforms above the mesh and
+    /// a Z-up stage turn the points (Z up becomes Y up), face-varying UVs index by corner.
     #[test]
-    fn polygons_triangulate_and_samples_hold() {
-        let text = "#usda 1.0\n(\n    \"a doc string\"\n    timeCodesPerSecond = 24\n)\ndef \"root\" (\n    kind = \"component\"\n)\n{\n    def Mesh \"quad\" {\n        int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]\n        point3f[] points.timeSamples = {\n            1: [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)],\n            3: [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],\n        }\n        float3[] extent = [(0, 0, 0), (1, 1, 1)]\n        rel material:binding = </Looks/a>\n    }\n}\n";
-        let stage = parse_usda(text).unwrap();
-        let s = &stage.meshes[0].samples;
-        assert_eq!(stage.meshes[0].path, "/root/quad");
-        assert_eq!(s.len(), 2);
-        assert_eq!(s[0].1.indices, [0, 1, 2, 0, 2, 3]);
-        assert_eq!(s[1].1.positions[2], Vec3::ONE);
+    fn samples_hold_and_transforms_apply() {
+        let text = "#usda 1.0\n(\n    \"a doc string\"\n    timeCodesPerSecond = 24\n    upAxis = \"Z\"\n)\ndef Xform \"root\" (\n    kind = \"component\"\n    customData = { dictionary Blender = { bool generated = 1 } }\n)\n{\n    double3 xformOp:translate = (0, 0, 2)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]\n    def Mesh \"quad\" {\n        int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]\n        point3f[] points.timeSamples = {\n            1: [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)],\n            3: [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],\n        }\n        texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] (\n            interpolation = \"faceVarying\"\n        )\n        int[] primvars:st:indices = [3, 2, 1, 0]\n        float3[] extent = [(0, 0, 0), (1, 1, 1)]\n        rel material:binding = </Looks/a>\n        custom string userProperties:blender:object_name = \"quad\"\n    }\n}\n";
+        let mut file = open(text);
+        assert_eq!(file.mesh_names(), ["/root/quad"]);
+        assert_eq!(file.sample_times(0).unwrap(), [1.0, 3.0]);
+        let s = file.sample(0, 2.0).unwrap();
+        assert_eq!(s.face_counts, [4]);
+        // Held: time 2 shows the sample at 1; z (up) = 2 becomes y = 2.
+        assert_eq!(s.positions[2], Vec3::new(1.0, 2.0, -1.0));
+        assert_eq!(s.corners.iter().map(|c| c[1]).collect::<Vec<_>>(), [3, 2, 1, 0]);
+        assert_eq!(file.sample(0, 3.0).unwrap().positions[2], Vec3::new(1.0, 3.0, -1.0));
+    }
+
+    /// Errors name the line.
+    #[test]
+    fn bad_text_names_the_line() {
+        let e = format!(
+            "{:#}",
+            parse_usda("#usda 1.0\ndef Mesh \"m\" {\n    int[] faceVertexCounts = [4, ]]\n}\n").unwrap_err()
+        );
+        assert!(e.contains("line 3"), "{e}");
     }
 }

@@ -5,6 +5,8 @@
 
 use std::path::Path;
 
+use werkstatt::io::usd::UsdFile;
+
 use crate::common::{out_dir, render_graph};
 
 /// A cloth drawn in one material and 20 buttons attached to it in another, exported at frame 0
@@ -262,19 +264,24 @@ fn usda_cache_holds_each_frame_of_the_obj_sequence() {
     let stats = render_graph(&graph, &dir, (0, 3), (16, 16), &[], &[]).unwrap();
     assert!(stats.files.contains(&"usd.usda".to_string()), "{:?}", stats.files);
     let path = dir.join("usd.usda");
-    let stage = werkstatt::io::usda::read_usda(&path).unwrap();
-    assert_eq!((stage.time_codes_per_second, stage.start, stage.end), (30.0, 0.0, 3.0));
-    assert_eq!(stage.meshes.len(), 1);
-    let samples = &stage.meshes[0].samples;
-    assert_eq!(samples.iter().map(|s| s.0).collect::<Vec<_>>(), [0.0, 1.0, 2.0, 3.0], "one sample per frame");
-    for (t, s) in samples {
-        let (positions, indices) = read_obj(&dir.join(format!("obj_{:04}.obj", *t as i64)));
+    let mut stage = UsdFile::open(&path).unwrap();
+    let UsdFile::Text { layer, .. } = &stage else { panic!("a text stage") };
+    assert_eq!((layer.time_codes_per_second, layer.start, layer.end), (30.0, 0.0, 3.0));
+    assert_eq!(stage.mesh_names().len(), 1);
+    let times = stage.sample_times(0).unwrap();
+    assert_eq!(times, [0.0, 1.0, 2.0, 3.0], "one sample per frame");
+    let mut samples = Vec::new();
+    for t in times {
+        let s = stage.sample(0, t).unwrap();
+        let (positions, indices) = read_obj(&dir.join(format!("obj_{:04}.obj", t as i64)));
         let ours: Vec<[f32; 3]> = s.positions.iter().map(|p| p.to_array()).collect();
         assert!(ours == positions, "frame {t}: the cache's points differ from the OBJ's");
-        assert_eq!(s.indices, indices, "frame {t}");
+        assert!(s.face_counts.iter().all(|&c| c == 3));
+        assert_eq!(s.corners.iter().map(|c| c[0]).collect::<Vec<_>>(), indices, "frame {t}");
         assert_eq!(s.normals.len(), ours.len());
+        samples.push(s);
     }
-    assert_ne!(samples[0].1.positions, samples[3].1.positions, "the cloth moves");
+    assert_ne!(samples[0].positions, samples[3].positions, "the cloth moves");
     eprintln!("usda cache: 4 frames, {} bytes", std::fs::metadata(&path).unwrap().len());
 
     // Played back by MeshSequence at the cache's own rate (the node's fps is ignored) and
@@ -361,8 +368,58 @@ fn damaged_usda_and_glb_files_fail_with_the_file_named() {
     // The project's own readers take the good files.
     let mesh = werkstatt::mesh::load_mesh_file(&dir.join("glb_0000.glb")).unwrap();
     assert_eq!(mesh.triangle_count(), 18);
-    let stage = werkstatt::io::usda::read_usda(&dir.join("usd.usda")).unwrap();
-    assert_eq!(stage.meshes[0].samples[0].1.indices.len(), 3 * 18);
+    let mut stage = UsdFile::open(&dir.join("usd.usda")).unwrap();
+    assert_eq!(stage.sample(0, 0.0).unwrap().corners.len(), 3 * 18);
     corruption_loop(&dir.join("glb_0000.glb"), |p| werkstatt::mesh::load_mesh_file(p).map(|_| ()));
-    corruption_loop(&dir.join("usd.usda"), |p| werkstatt::io::usda::read_usda(p).map(|_| ()));
+    corruption_loop(&dir.join("usd.usda"), |p| UsdFile::open(p)?.sample(0, 0.0).map(|_| ()));
+}
+
+/// Blender reads the .glb and the .usda as written: the same triangles and bounds as the OBJ of
+/// the same frame. Needs Blender's Python module: set WERKSTATT_BPY to a python that can
+/// `import bpy` (`pip install bpy==5.0.*`, Python 3.11); without it the test says so and passes.
+#[test]
+fn blender_imports_the_glb_and_usda_exports() {
+    let Some(python) = std::env::var_os("WERKSTATT_BPY") else {
+        eprintln!("skipped: set WERKSTATT_BPY to a python with bpy to import the exports into Blender");
+        return;
+    };
+    let dir = out_dir("formats-bpy");
+    let graph = dir.join("scene.ron");
+    let with_usda = GRAPH
+        .replace(
+            r#""glb": (kind: "ExportGeometry", params: {"format": "glb"}),"#,
+            r#""glb": (kind: "ExportGeometry", params: {"format": "glb"}), "usd": (kind: "ExportGeometry", params: {"format": "usda"}),"#,
+        )
+        .replace(r#"("scene.scene", "glb.scene")]"#, r#"("scene.scene", "glb.scene"), ("scene.scene", "usd.scene")]"#);
+    assert_ne!(with_usda, GRAPH);
+    std::fs::write(&graph, with_usda).unwrap();
+    render_graph(&graph, &dir, (0, 0), (16, 16), &[], &[]).unwrap();
+    let (positions, indices) = read_obj(&dir.join("obj_0000.obj"));
+    let (lo, hi) = positions.iter().fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
+        (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k])))
+    });
+    let files = [dir.join("glb_0000.glb"), dir.join("usd.usda")];
+    let out = std::process::Command::new(&python)
+        .arg(crate::common::root().join("tools/usd/import_check.py"))
+        .args(&files)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run WERKSTATT_BPY={}: {e}", python.to_string_lossy()));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "Blender's import failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    for file in &files {
+        let name = file.to_str().unwrap();
+        let line =
+            stdout.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no result for {name}:\n{stdout}"));
+        let words: Vec<&str> = line[name.len()..].split_whitespace().collect();
+        let triangles: usize = words[0].parse().unwrap();
+        let bounds: Vec<f32> = words[1..7].iter().map(|w| w.parse().unwrap()).collect();
+        eprintln!("Blender read {name}: {triangles} triangles, bounds {bounds:?}");
+        assert_eq!(triangles, indices.len() / 3, "{name}: triangles in Blender");
+        for k in 0..3 {
+            assert!(
+                (bounds[k] - lo[k]).abs() < 1e-4 && (bounds[k + 3] - hi[k]).abs() < 1e-4,
+                "{name}: bounds {bounds:?}, the OBJ's {lo:?} {hi:?}"
+            );
+        }
+    }
 }

@@ -15,6 +15,7 @@ mod cli;
 mod cloth;
 mod cloth_collision;
 mod cuboid;
+mod draco;
 #[cfg(feature = "editor")]
 mod editor;
 #[cfg(feature = "editor")]
@@ -44,6 +45,7 @@ mod shadow;
 mod ssao;
 mod ssr;
 mod tessellation;
+mod usd;
 mod warping;
 mod woven;
 

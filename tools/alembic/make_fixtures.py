@@ -96,4 +96,5 @@ def main():
     build_scene(out)
 
 
-main()
+if __name__ == "__main__":
+    main()
