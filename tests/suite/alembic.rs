@@ -165,30 +165,7 @@ fn damaged_caches_are_errors_naming_the_file() {
     let original = std::fs::read(data().join("cloth.abc")).unwrap();
     let dir = temp_dir("abc-fuzz");
     let path = dir.join("damaged.abc");
-    let mut cases: Vec<Vec<u8>> = Vec::new();
-    let n = original.len();
-    for cut in (0..64).chain((0..60).map(|k| k * n / 60)).chain([n - 1]) {
-        cases.push(original[..cut].to_vec());
-    }
-    // A fixed pseudo-random sequence (xorshift): the same cases on every run.
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
-    for k in 0..400 {
-        let mut bytes = original.clone();
-        // The structure (headers, groups, metadata) sits at the start and the end.
-        let at = match k % 3 {
-            0 => next() as usize % 256.min(n),
-            1 => n - 1 - next() as usize % 4096.min(n),
-            _ => next() as usize % n,
-        };
-        bytes[at] = if k % 2 == 0 { !bytes[at] } else { next() as u8 };
-        cases.push(bytes);
-    }
+    let cases = common::damaged_container(&original);
     let (mut failed, mut read) = (0, 0);
     for (case, bytes) in cases.iter().enumerate() {
         std::fs::write(&path, bytes).unwrap();

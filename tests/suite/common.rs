@@ -255,3 +255,41 @@ pub fn write_probe(path: &std::path::Path, width: usize, height: usize, f: impl 
     let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
     image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, width, height).unwrap();
 }
+
+/// Damaged copies of a file for the readers' corruption loops, the same on every run: the
+/// truncations at `cuts`, then 400 copies with one byte inverted (even k) or replaced (odd k)
+/// at the place `pick(k, random)` chooses, from a fixed xorshift sequence.
+pub fn damaged_copies(
+    original: &[u8],
+    cuts: impl IntoIterator<Item = usize>,
+    pick: impl Fn(usize, u64) -> usize,
+) -> Vec<Vec<u8>> {
+    let mut cases: Vec<Vec<u8>> = cuts.into_iter().map(|cut| original[..cut].to_vec()).collect();
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for k in 0..400 {
+        let mut bytes = original.to_vec();
+        let at = pick(k, next());
+        bytes[at] = if k % 2 == 0 { !bytes[at] } else { next() as u8 };
+        cases.push(bytes);
+    }
+    cases
+}
+
+/// Cuts and places for container files, whose structure (headers, tables, metadata) sits at the
+/// start and the end: the first 64 lengths and 60 spread over the file; the first 256 bytes, the
+/// last 4096, or anywhere.
+pub fn damaged_container(original: &[u8]) -> Vec<Vec<u8>> {
+    let n = original.len();
+    let cuts = (0..64).chain((0..60).map(|k| k * n / 60)).chain([n - 1]);
+    damaged_copies(original, cuts, |k, r| match k % 3 {
+        0 => r as usize % 256.min(n),
+        1 => n - 1 - r as usize % 4096.min(n),
+        _ => r as usize % n,
+    })
+}

@@ -62,21 +62,10 @@ fn damaged_draco_files_are_errors_naming_the_file() {
     let dir = temp_dir("draco-fuzz");
     let path = dir.join("damaged.glb");
     let n = original.len();
-    let mut cases: Vec<Vec<u8>> = (0..60).map(|k| original[..k * n / 60].to_vec()).collect();
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
-    for k in 0..400 {
-        let mut bytes = original.clone();
-        // The JSON sits at the start, the Draco streams after it.
-        let at = if k % 4 == 0 { next() as usize % n } else { n / 3 + next() as usize % (n - n / 3) };
-        bytes[at] = if k % 2 == 0 { !bytes[at] } else { next() as u8 };
-        cases.push(bytes);
-    }
+    // The JSON sits at the start, the Draco streams after it.
+    let cases = common::damaged_copies(&original, (0..60).map(|k| k * n / 60), |k, r| {
+        if k % 4 == 0 { r as usize % n } else { n / 3 + r as usize % (n - n / 3) }
+    });
     let (mut failed, mut read) = (0, 0);
     for (case, bytes) in cases.iter().enumerate() {
         std::fs::write(&path, bytes).unwrap();

@@ -167,26 +167,7 @@ fn damaged_files_are_errors_naming_the_file(name: &str) {
     let original = std::fs::read(data().join(name)).unwrap();
     let dir = temp_dir(&format!("usd-fuzz-{name}"));
     let path = dir.join(format!("damaged.{}", Path::new(name).extension().unwrap().to_str().unwrap()));
-    let n = original.len();
-    let mut cases: Vec<Vec<u8>> =
-        (0..64).chain((0..60).map(|k| k * n / 60)).chain([n - 1]).map(|cut| original[..cut].to_vec()).collect();
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
-    for k in 0..400 {
-        let mut bytes = original.clone();
-        let at = match k % 3 {
-            0 => next() as usize % 256.min(n),
-            1 => n - 1 - next() as usize % 4096.min(n),
-            _ => next() as usize % n,
-        };
-        bytes[at] = if k % 2 == 0 { !bytes[at] } else { next() as u8 };
-        cases.push(bytes);
-    }
+    let cases = common::damaged_container(&original);
     let (mut failed, mut read) = (0, 0);
     for (case, bytes) in cases.iter().enumerate() {
         std::fs::write(&path, bytes).unwrap();
