@@ -438,12 +438,12 @@ fn usd_frame(stage: &mut UsdFile, meshes: &[usize], t: f64) -> anyhow::Result<Se
 /// time code T.
 pub fn load_cache_frame(label: &Path) -> anyhow::Result<SeqFrame> {
     let (file, Some(part)) = split_part(label) else { bail!("{} names no frame of a cache", label.display()) };
-    if !usd::is_usd(file) {
-        return load_abc_frame(label);
-    }
     let field = |key: &str| part.split(',').find_map(|f| f.strip_prefix(key));
     let t: f64 = field("t=").and_then(|t| t.parse().ok()).context("the frame label has no time")?;
     let object = unescape(field("object=").unwrap_or(""));
+    if !usd::is_usd(file) {
+        return abc_frame(file, t, &object);
+    }
     let mut stage = UsdFile::open(file)?;
     let meshes = select_meshes(&stage.mesh_names(), file, &object)?;
     usd_frame(&mut stage, &meshes, t)
@@ -504,17 +504,12 @@ fn select_meshes(names: &[String], file: &Path, object: &str) -> anyhow::Result<
     Ok(chosen)
 }
 
-/// Loads one frame of an Alembic cache, named by a label of [`load_abc_index`]: every chosen
-/// mesh at that time, each a pattern piece.
-pub fn load_abc_frame(label: &Path) -> anyhow::Result<SeqFrame> {
-    let (file, Some(part)) = split_part(label) else { bail!("{} names no frame of an Alembic cache", label.display()) };
-    let field = |key: &str| part.split(',').find_map(|f| f.strip_prefix(key));
-    let t: f64 = field("t=").and_then(|t| t.parse().ok()).context("the frame label has no time")?;
-    let object = unescape(field("object=").unwrap_or(""));
+/// One frame of an Alembic cache: every chosen mesh at `t` seconds, each a pattern piece.
+fn abc_frame(file: &Path, t: f64, object: &str) -> anyhow::Result<SeqFrame> {
     let mut archive = AbcArchive::open(file)?;
     let names: Vec<String> = archive.meshes.iter().map(|m| m.name.clone()).collect();
     let mut samples = Vec::new();
-    for m in select_meshes(&names, file, &object)? {
+    for m in select_meshes(&names, file, object)? {
         samples.push((names[m].clone(), archive.sample(m, t)?));
     }
     frame_of_samples(file, samples, &format!("{t} s"))

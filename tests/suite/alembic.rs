@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use werkstatt::core::eval::NodeStatus;
 use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::mesh::mesh_sequence::{blend, index_path, load_abc_frame, load_frame, load_index};
+use werkstatt::nodes::mesh::mesh_sequence::{blend, index_path, load_cache_frame, load_frame, load_index};
 
 use crate::common;
 use crate::mesh_sequence::{sequence_graph, settle, surface, temp_dir};
@@ -16,24 +16,26 @@ fn data() -> PathBuf {
     common::root().join("tests/data/alembic")
 }
 
-/// The frames of `object` in `file`: (frame number, mesh), through the sequence index.
-fn abc_frames(file: &Path, object: &str) -> Vec<(i64, Mesh)> {
+/// The frames of `object` in a cache `file` (Alembic or USD): (frame number, mesh), through the
+/// sequence index.
+pub fn cache_frames(file: &Path, object: &str) -> Vec<(i64, Mesh)> {
     let index = load_index(&index_path(file, object)).unwrap_or_else(|e| panic!("{e:#}"));
     index
         .frames
         .iter()
-        .map(|(n, label)| (*n, (*load_abc_frame(label).unwrap_or_else(|e| panic!("{e:#}")).mesh).clone()))
+        .map(|(n, label)| (*n, (*load_cache_frame(label).unwrap_or_else(|e| panic!("{e:#}")).mesh).clone()))
         .collect()
 }
 
-fn obj_frame(n: i64) -> Mesh {
+/// Blender's OBJ export of the fixtures' cloth simulation, frame `n`.
+pub fn obj_frame(n: i64) -> Mesh {
     let path = data().join(format!("cloth_obj/cloth{n:04}.obj"));
     (*load_frame(&path).unwrap_or_else(|e| panic!("{e:#}")).mesh).clone()
 }
 
 /// The largest difference between two meshes' positions, UVs and normals; their triangles
 /// must be the same.
-fn differences(a: &Mesh, b: &Mesh) -> [f32; 3] {
+pub fn differences(a: &Mesh, b: &Mesh) -> [f32; 3] {
     assert_eq!(a.positions.len(), b.positions.len(), "vertex counts");
     assert_eq!(a.indices, b.indices, "triangles");
     let most = |d: Vec<f32>| d.into_iter().fold(0.0f32, f32::max);
@@ -49,7 +51,7 @@ fn the_cloth_cache_equals_the_obj_sequence_vertex_by_vertex() {
     let index = load_index(&index_path(&data().join("cloth.abc"), "Cloth")).unwrap();
     // Blender wrote frames 1..8 at 24 fps: samples at 1/24 s, 2/24 s, ...
     assert_eq!(index.fps, Some(24.0));
-    let frames = abc_frames(&data().join("cloth.abc"), "Cloth");
+    let frames = cache_frames(&data().join("cloth.abc"), "Cloth");
     assert_eq!(frames.iter().map(|(n, _)| *n).collect::<Vec<_>>(), (1..=8).collect::<Vec<_>>());
     for (n, abc) in &frames {
         let obj = obj_frame(*n);
@@ -67,10 +69,10 @@ fn the_cloth_cache_equals_the_obj_sequence_vertex_by_vertex() {
 
 #[test]
 fn the_meshes_of_a_file_are_pieces_with_uvs_and_normals() {
-    let all = abc_frames(&data().join("cloth.abc"), "");
+    let all = cache_frames(&data().join("cloth.abc"), "");
     let (cloth, sphere) = (
-        &abc_frames(&data().join("cloth.abc"), "/Cloth/Grid")[0].1,
-        &abc_frames(&data().join("cloth.abc"), "Collider")[0].1,
+        &cache_frames(&data().join("cloth.abc"), "/Cloth/Grid")[0].1,
+        &cache_frames(&data().join("cloth.abc"), "Collider")[0].1,
     );
     let mesh = &all[0].1;
     assert_eq!(mesh.positions.len(), cloth.positions.len() + sphere.positions.len());
@@ -111,15 +113,20 @@ fn frames_between_samples_hold_or_interpolate() {
 
 #[test]
 fn a_changing_topology_plays_frame_by_frame() {
-    let frames = abc_frames(&data().join("build.abc"), "");
+    plays_a_changing_topology(&data().join("build.abc"));
+}
+
+/// Blender's Build modifier adding the grid's 16 faces over frames 1..5, cached as `file`:
+/// the frames grow, and between two frames of different topology the earlier one shows, not a
+/// blend or an error.
+pub fn plays_a_changing_topology(file: &Path) {
+    let frames = cache_frames(file, "");
     let triangles: Vec<usize> = frames.iter().map(|(_, m)| m.triangle_count()).collect();
-    // The Build modifier adds the grid's 16 faces over frames 1..5.
     assert_eq!(frames.len(), 5);
     assert!(triangles.windows(2).all(|w| w[0] < w[1]), "{triangles:?}");
     assert_eq!(*triangles.last().unwrap(), 32);
-    // Between two frames of different topology the earlier one shows, not a blend or an error.
     let res = Resources::new(false);
-    let mut ev = sequence_graph(&data().join("build.abc"), "");
+    let mut ev = sequence_graph(file, "");
     for f in 0..8 {
         assert_eq!(settle(&mut ev, &res, f), NodeStatus::Ok);
         let at = ((f as f64 * 0.8).floor() as usize).min(4);
@@ -171,7 +178,7 @@ fn damaged_caches_are_errors_naming_the_file() {
         std::fs::write(&path, bytes).unwrap();
         let outcome = load_index(&index_path(&path, "")).and_then(|index| {
             for (_, label) in index.frames.iter().take(2).chain(index.frames.last()) {
-                load_abc_frame(label)?;
+                load_cache_frame(label)?;
             }
             Ok(())
         });

@@ -8,42 +8,14 @@ use std::path::{Path, PathBuf};
 use werkstatt::core::eval::NodeStatus;
 use werkstatt::core::resources::Resources;
 use werkstatt::mesh::Mesh;
-use werkstatt::nodes::mesh::mesh_sequence::{index_path, load_cache_frame, load_frame, load_index};
+use werkstatt::nodes::mesh::mesh_sequence::{index_path, load_cache_frame, load_index};
 
+use crate::alembic::{cache_frames, differences, obj_frame, plays_a_changing_topology};
 use crate::common;
 use crate::mesh_sequence::{sequence_graph, settle, surface, temp_dir};
 
 fn data() -> PathBuf {
     common::root().join("tests/data/usd")
-}
-
-/// The frames of `object` in `file`: (frame number, mesh), through the sequence index.
-fn usd_frames(file: &Path, object: &str) -> Vec<(i64, Mesh)> {
-    let index = load_index(&index_path(file, object)).unwrap_or_else(|e| panic!("{e:#}"));
-    index
-        .frames
-        .iter()
-        .map(|(n, label)| (*n, (*load_cache_frame(label).unwrap_or_else(|e| panic!("{e:#}")).mesh).clone()))
-        .collect()
-}
-
-/// Blender's OBJ export of the same simulation (the Alembic fixtures' reference).
-fn obj_frame(n: i64) -> Mesh {
-    let path = common::root().join(format!("tests/data/alembic/cloth_obj/cloth{n:04}.obj"));
-    (*load_frame(&path).unwrap_or_else(|e| panic!("{e:#}")).mesh).clone()
-}
-
-/// The largest difference between two meshes' positions, UVs and normals; their triangles
-/// must be the same.
-fn differences(a: &Mesh, b: &Mesh) -> [f32; 3] {
-    assert_eq!(a.positions.len(), b.positions.len(), "vertex counts");
-    assert_eq!(a.indices, b.indices, "triangles");
-    let most = |d: Vec<f32>| d.into_iter().fold(0.0f32, f32::max);
-    [
-        most(a.positions.iter().zip(&b.positions).map(|(p, q)| p.distance(*q)).collect()),
-        most(a.uvs.iter().zip(&b.uvs).map(|(p, q)| p.distance(*q)).collect()),
-        most(a.normals.iter().zip(&b.normals).map(|(p, q)| p.distance(*q)).collect()),
-    ]
 }
 
 /// Blender's default .usdc (Z up, the cloth's placement as Xform ops above the mesh,
@@ -53,7 +25,7 @@ fn the_binary_cloth_cache_equals_the_obj_sequence_vertex_by_vertex() {
     let index = load_index(&index_path(&data().join("cloth.usdc"), "Cloth")).unwrap();
     assert_eq!(index.fps, Some(24.0));
     assert!(index.cached.is_none(), "binary frames load one at a time");
-    let frames = usd_frames(&data().join("cloth.usdc"), "Cloth");
+    let frames = cache_frames(&data().join("cloth.usdc"), "Cloth");
     assert_eq!(frames.iter().map(|(n, _)| *n).collect::<Vec<_>>(), (1..=8).collect::<Vec<_>>());
     for (n, usd) in &frames {
         assert_eq!((usd.positions.len(), usd.triangle_count()), (289, 512));
@@ -72,7 +44,7 @@ fn the_text_cloth_cache_equals_the_obj_sequence() {
     let index = load_index(&index_path(&data().join("cloth.usda"), "")).unwrap();
     assert_eq!(index.fps, Some(24.0));
     assert_eq!(index.cached.as_ref().map(|c| c.0.len()), Some(8), "a text cache is parsed once");
-    for (n, usd) in usd_frames(&data().join("cloth.usda"), "") {
+    for (n, usd) in cache_frames(&data().join("cloth.usda"), "") {
         let obj = obj_frame(n);
         let [dp, duv, _] = differences(&usd, &obj);
         assert!(dp < 2e-6 && duv < 2e-6, "frame {n}: positions {dp}, UVs {duv}");
@@ -85,9 +57,9 @@ fn the_text_cloth_cache_equals_the_obj_sequence() {
 /// and its faces turn outward.
 #[test]
 fn the_mesh_prims_of_a_file_are_pieces() {
-    let all = usd_frames(&data().join("cloth.usdc"), "");
-    let cloth = &usd_frames(&data().join("cloth.usdc"), "/root/Cloth/Grid")[0].1;
-    let sphere = &usd_frames(&data().join("cloth.usdc"), "Collider")[0].1;
+    let all = cache_frames(&data().join("cloth.usdc"), "");
+    let cloth = &cache_frames(&data().join("cloth.usdc"), "/root/Cloth/Grid")[0].1;
+    let sphere = &cache_frames(&data().join("cloth.usdc"), "Collider")[0].1;
     let mesh = &all[0].1;
     assert_eq!(mesh.positions.len(), cloth.positions.len() + sphere.positions.len());
     let pieces: std::collections::BTreeSet<u32> = mesh.piece_ids.iter().copied().collect();
@@ -106,18 +78,7 @@ fn the_mesh_prims_of_a_file_are_pieces() {
 
 #[test]
 fn a_changing_topology_plays_frame_by_frame() {
-    let frames = usd_frames(&data().join("build.usdc"), "");
-    let triangles: Vec<usize> = frames.iter().map(|(_, m)| m.triangle_count()).collect();
-    assert_eq!(frames.len(), 5);
-    assert!(triangles.windows(2).all(|w| w[0] < w[1]), "{triangles:?}");
-    assert_eq!(*triangles.last().unwrap(), 32);
-    let res = Resources::new(false);
-    let mut ev = sequence_graph(&data().join("build.usdc"), "");
-    for f in 0..8 {
-        assert_eq!(settle(&mut ev, &res, f), NodeStatus::Ok);
-        let at = ((f as f64 * 0.8).floor() as usize).min(4);
-        assert_eq!(surface(&ev).triangle_count(), triangles[at], "render frame {f}");
-    }
+    plays_a_changing_topology(&data().join("build.usdc"));
 }
 
 /// Through the node at 30 fps: render frame f shows cache frame 1 + 0.8 f, held or blended;
