@@ -89,17 +89,18 @@ pub static IBL_SHADING: NodeSpec = NodeSpec {
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct IblUniform {
     inv_view_proj: [[f32; 4]; 4],
+    /// Width, height, unused, unused.
     size: [f32; 4],
+    /// The background colour, unused.
     background: [f32; 4],
     background_level: f32,
     top_level: f32,
-    /// 1 to shade with the full filtered map (one lookup, no partition).
-    full_map: f32,
+    unused: f32,
     /// Face size of level 0.
     face_size: f32,
     levels: [f32; 36],
-    /// The diffuse end's face size, the handover level and exponent, 1 where it is used
-    /// (src/ibl/pem.rs Handover).
+    /// The diffuse end's face size, the handover level and exponent (src/ibl/pem.rs Handover),
+    /// unused.
     diffuse: [f32; 4],
 }
 
@@ -114,8 +115,7 @@ struct ShadowUniform {
     bleed_reduction: f32,
     /// In texels.
     jitter: f32,
-    /// 1 when shadows are on.
-    enabled: f32,
+    unused: f32,
     /// Each light's normal offset (world units).
     normal_offset: [f32; PEMS_PER_PASS],
     /// atlas width, height (texels), unused, depth bias.
@@ -136,7 +136,7 @@ impl ShadowUniform {
             u.normal_offset[k] = l.normal_offset;
         }
         let p = &a.params;
-        (u.min_variance, u.bleed_reduction, u.jitter, u.enabled) = (p.min_variance, p.bleed_reduction, p.jitter, 1.0);
+        (u.min_variance, u.bleed_reduction, u.jitter) = (p.min_variance, p.bleed_reduction, p.jitter);
         u.bias = [w, h, 0.0, p.depth_bias];
         let forward = g.view.inv_view.transform_vector3(glam::Vec3::NEG_Z).normalize();
         u.eye = g.view.eye.extend(1.0).to_array();
@@ -197,10 +197,8 @@ impl Node for IblShadingNode {
         let mut levels = [0.0f32; 36];
         levels[..TABLE].copy_from_slice(&pems.calibration.levels);
         let top = (pems.full.desc.mips - 1) as f32;
-        let diffuse = match pems.calibration.handover() {
-            Some(h) => [pems.full_diffuse.width as f32, h.level, h.exponent, 1.0],
-            None => [0.0; 4],
-        };
+        let handover = pems.calibration.handover();
+        let diffuse = handover.map_or([0.0; 4], |h| [pems.full_diffuse.width as f32, h.level, h.exponent, 0.0]);
         let (w, h) = (g.width(), g.height());
         // Each pass's PEMs and their diffuse ends.
         let batches: Vec<(&[GpuImage], &GpuImage)> = match mode {
@@ -212,11 +210,11 @@ impl Node for IblShadingNode {
         for (i, &(batch, diffuse_ends)) in batches.iter().enumerate() {
             let uniform = IblUniform {
                 inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
-                size: [w as f32, h as f32, batch.len() as f32, if i == 0 { 1.0 } else { 0.0 }],
-                background: [bg.x, bg.y, bg.z, if background == Background::Environment { 1.0 } else { 0.0 }],
+                size: [w as f32, h as f32, 0.0, 0.0],
+                background: [bg.x, bg.y, bg.z, 0.0],
                 background_level: cx.f32("background_level").min(top),
                 top_level: top,
-                full_map: if mode == IblMode::Full { 1.0 } else { 0.0 },
+                unused: 0.0,
                 face_size: pems.full.width as f32,
                 levels,
                 diffuse,
@@ -259,7 +257,16 @@ impl Node for IblShadingNode {
                 }
                 None => Bind::Texture(diffuse_ends),
             });
-            pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
+            let switches = [
+                ("PEMS", batch.len() as u32),
+                ("FIRST", u32::from(i == 0)),
+                ("FULL_MAP", u32::from(mode == IblMode::Full)),
+                ("BACKGROUND_ENV", u32::from(background == Background::Environment)),
+                ("SHADOWS", u32::from(shadows.is_some())),
+                ("JITTER", u32::from(shadows.as_ref().is_some_and(|s| s.params.jitter > 0.0))),
+                ("DIFFUSE_ENDS", u32::from(handover.is_some())),
+            ];
+            pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &switches)?;
             previous = Some(out);
         }
         cx.set("image", Arc::new(previous.expect("at least one pass")));

@@ -103,13 +103,13 @@ impl Node for SsaoNode {
                     view: g.view.view.to_cols_array_2d(),
                     size: [g.width() as f32, g.height() as f32, g.width() as f32, g.height() as f32],
                     radius: settings.radius,
-                    samples: settings.samples as f32,
+                    unused0: 0.0,
                     strength: settings.strength,
                     scale: 1.0,
                     depth_bias: 0.0,
                     range: 0.0,
                     plane_tolerance: 0.0,
-                    blur: 0.0,
+                    unused1: 0.0,
                 };
                 let binds = [
                     Bind::Uniform(bytemuck::bytes_of(&u)),

@@ -12,21 +12,38 @@
 // `diffuse_taps(direction)` and `diffuse_end(k, direction, taps)`: ibl_shading_hw.wgsl
 // (hardware cube sampling) and ibl_shading.wgsl (textureLoad, its reference twin).
 
+// The pass's switches, set per pipeline (FullscreenPass::draw_specialized) instead of read from
+// the uniform block: lavapipe compiles a shader again on every draw whose branches depend on
+// uniforms alone.
+// PEMs bound in this pass (0..8).
+override PEMS: u32 = 8u;
+// The first pass writes; later passes add to `previous`.
+override FIRST: bool = true;
+// Shade with the full filtered map (one lookup, no partition).
+override FULL_MAP: bool = false;
+// The background shows the environment map (else `background.rgb`).
+override BACKGROUND_ENV: bool = false;
+// A shadow atlas is bound (else VIS_i = 1).
+override SHADOWS: bool = false;
+// Shadow lookups are jittered.
+override JITTER: bool = false;
+// The diffuse ends are bound and blended in below the handover.
+override DIFFUSE_ENDS: bool = false;
+
 struct Ibl {
     inv_view_proj: mat4x4<f32>,
-    // x: width, y: height, z: PEMs bound in this pass (0..8), w: 1 on the first pass.
+    // x: width, y: height (z, w unused).
     size: vec4<f32>,
-    // rgb: background colour; w: background mode (0 colour, 1 the environment map).
+    // rgb: background colour (w unused).
     background: vec4<f32>,
     background_level: f32,
     top_level: f32,
-    // 1 to shade with the full filtered map (one lookup, no partition).
-    full_map: f32,
+    _unused: f32,
     // Face size of level 0.
     face_size: f32,
     // Mip level for s = 2^(i * 10 / 32), i = 0..32 (33 entries).
     levels: array<vec4<f32>, 9>,
-    // x: the diffuse ends' face size, y: the handover level, z: its exponent, w: 1 when used.
+    // x: the diffuse ends' face size, y: the handover level, z: its exponent (w unused).
     diffuse: vec4<f32>,
 };
 
@@ -46,8 +63,7 @@ struct Shadow {
     bleed_reduction: f32,
     // In texels.
     jitter: f32,
-    // 1 when shadows are on.
-    enabled: f32,
+    _unused: f32,
     // Each light's lookup offset along the normal (world units: its tile's texels).
     normal_offset: array<vec4<f32>, 2>,
     // x, y: atlas size (texels), z: unused, w: depth bias.
@@ -83,7 +99,7 @@ fn level_for_glossiness(g: f32) -> f32 {
 // The diffuse end's weight at glossiness g (Handover::diffuse_weight): from 1 at s = 1 to 0 at
 // the handover exponent, matching lobe volumes; 0 beyond.
 fn diffuse_weight(g: f32) -> f32 {
-    if ibl.diffuse.w < 0.5 || g >= 1.0 {
+    if !DIFFUSE_ENDS || g >= 1.0 {
         return 0.0;
     }
     let s = max(1.0 / (1.0 - max(g, 0.0)), 1.0);
@@ -113,12 +129,12 @@ fn hash2(p: vec2<u32>, k: u32) -> vec2<f32> {
 
 // VIS_k of the pass's light k at world position p with normal n (pixel px for the jitter).
 fn visibility(k: u32, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -> f32 {
-    if shadow.enabled < 0.5 {
+    if !SHADOWS {
         return 1.0;
     }
     let c = shadow.to_atlas[k] * vec4<f32>(p + n * shadow.normal_offset[k / 4u][k % 4u], 1.0);
     var uv = c.xy;
-    if shadow.jitter > 0.0 {
+    if JITTER {
         // A 4x4 tiled hash per light (Fig. 4.13): a different pattern for each light.
         let n = hash2(vec2<u32>(px) % vec2<u32>(4u), k + 1u) * 2.0 - 1.0;
         uv += n * shadow.jitter / shadow.bias.xy;
@@ -151,8 +167,7 @@ fn lit(k: u32, radiance: vec3<f32>, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
-    let first = ibl.size.w > 0.5;
-    let prior = select(textureLoad(previous, px, 0).rgb, vec3<f32>(0.0), first);
+        let prior = select(textureLoad(previous, px, 0).rgb, vec3<f32>(0.0), FIRST);
 
     // The view ray through this pixel.
     let ndc = vec2<f32>(frag.x / ibl.size.x * 2.0 - 1.0, 1.0 - frag.y / ibl.size.y * 2.0);
@@ -162,10 +177,10 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 
     let depth = textureLoad(g_depth, px, 0).r;
     if depth <= 0.0 {
-        if !first {
+        if !FIRST {
             return vec4<f32>(prior, 1.0);
         }
-        if ibl.background.w > 0.5 {
+        if BACKGROUND_ENV {
             return vec4<f32>(lookup(env, ray, ibl.background_level), 1.0);
         }
         return vec4<f32>(ibl.background.rgb, 1.0);
@@ -185,10 +200,10 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
 
     var sum = vec3<f32>(0.0);
-    if ibl.full_map > 0.5 {
+    if FULL_MAP {
         sum = with_diffuse(0u, lookup(env, sample_dir, level), sample_dir, taps, wd);
     } else {
-        let count = u32(ibl.size.z);
+        let count = PEMS;
         // World position: depth is the linear view depth along the camera's forward axis.
         let p = shadow.eye.xyz + ray * (depth / dot(ray, shadow.forward.xyz));
         let d = sample_dir;

@@ -8,6 +8,14 @@
 // Positions are reconstructed in view space from the G-buffer's linear depth (-z_view).
 // An AO texel q stands for G-buffer pixel q * scale (scale 1, or 2 at half resolution).
 
+// The sample count and whether the blur follows, set per pipeline
+// (FullscreenPass::draw_specialized): lavapipe compiles a shader again on every draw whose loops
+// or branches depend on uniforms alone.
+override SAMPLES: u32 = 8u;
+// The blur follows: the estimate is written unclamped, the blur clamps and applies the
+// strength (the tile's average is then exactly the 16N-sample estimate).
+override BLUR: bool = true;
+
 struct Ssao {
     // View to clip (the G-buffer's projection).
     proj: mat4x4<f32>,
@@ -17,7 +25,7 @@ struct Ssao {
     size: vec4<f32>,
     // World units.
     radius: f32,
-    samples: f32,
+    _unused0: f32,
     // The exponent.
     strength: f32,
     // 1, or 2 at half resolution.
@@ -27,9 +35,7 @@ struct Ssao {
     range: f32,
     // Of the blur and upsampling.
     plane_tolerance: f32,
-    // 1 when the blur follows (the estimate is written unclamped, the blur clamps and
-    // applies the strength: the tile's average is then exactly the 16N-sample estimate).
-    blur: f32,
+    _unused1: f32,
 };
 
 @group(0) @binding(0) var<uniform> u: Ssao;
@@ -60,7 +66,7 @@ fn strengthen(v: f32) -> f32 {
 
 // The estimate's output: as it is when the blur follows, else clamped and raised to the strength.
 fn finish(v: f32) -> vec4<f32> {
-    if u.blur > 0.5 {
+    if BLUR {
         return output(v);
     }
     return output(strengthen(v));
@@ -107,7 +113,7 @@ fn fs_sphere(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     }
     let p = view_pos(vec2<f32>(gp) + 0.5, d);
     let radius = u.radius;
-    let n = u32(u.samples);
+    let n = SAMPLES;
     let b = pattern(q);
     let total = f32(n * 16u);
     // The larger of the bias parameter and one G-buffer pixel's footprint at this depth
@@ -170,7 +176,7 @@ fn fs_horizon(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         return output(1.0);
     }
     let slices = 2u;
-    let steps = max(u32(u.samples) / 4u, 1u);
+    let steps = max(SAMPLES / 4u, 1u);
     let b = f32(pattern(q));
     let jitter = fract((b + 0.5) * INV_PHI);
     var visibility = 0.0;

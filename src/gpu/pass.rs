@@ -382,9 +382,27 @@ impl FullscreenPass {
         targets: &[&wgpu::TextureView],
         formats: &[wgpu::TextureFormat],
     ) -> anyhow::Result<()> {
+        self.draw_specialized(gpu, binds, targets, formats, &[])
+    }
+
+    /// Like `draw`, with the shader's `override` constants set (one cached pipeline per set of
+    /// values). Switches that stay fixed for many frames (counts, modes, whether an input is
+    /// bound) belong here rather than in branches on a uniform: lavapipe (Mesa 22) inlines the
+    /// uniforms that a branch or loop depends on alone and compiles the shader again on every
+    /// draw that binds them, which cost IblShading 20x its drawing time per frame with a cold
+    /// shader cache (docs/ibl.md, "Frame time and memory").
+    pub fn draw_specialized(
+        &mut self,
+        gpu: &GpuContext,
+        binds: &[Bind<'_>],
+        targets: &[&wgpu::TextureView],
+        formats: &[wgpu::TextureFormat],
+        constants: &[(&str, u32)],
+    ) -> anyhow::Result<()> {
         let layout = self.bindings.layout(gpu, binds);
         let pipeline = gpu.render_pipeline(&RenderPipelineDesc {
             fragment_entry: self.fragment_entry,
+            constants,
             ..RenderPipelineDesc::fullscreen(self.shader, &[Some(&layout)], formats)
         })?;
         let group = self.bindings.bind_group(gpu, &layout, binds);

@@ -31,7 +31,8 @@ pub(crate) struct SsaoUniform {
     pub(crate) size: [f32; 4],
     /// World units.
     pub(crate) radius: f32,
-    pub(crate) samples: f32,
+    /// Unused: the sample count is the pipeline's constant `SAMPLES`.
+    pub(crate) unused0: f32,
     /// The exponent.
     pub(crate) strength: f32,
     /// 1, or 2 at half resolution.
@@ -41,8 +42,8 @@ pub(crate) struct SsaoUniform {
     pub(crate) range: f32,
     /// Of the blur and upsampling.
     pub(crate) plane_tolerance: f32,
-    /// 1 when the blur follows.
-    pub(crate) blur: f32,
+    /// Unused: whether the blur follows is the pipeline's constant `BLUR`.
+    pub(crate) unused1: f32,
 }
 
 pub(crate) struct Passes {
@@ -89,13 +90,13 @@ impl Passes {
             view: g.view.view.to_cols_array_2d(),
             size: [w as f32, h as f32, tw as f32, th as f32],
             radius: s.radius,
-            samples: s.samples as f32,
+            unused0: 0.0,
             strength: s.strength,
             scale: scale as f32,
             depth_bias: BIAS * s.radius,
             range: RANGE * s.radius,
             plane_tolerance: PLANE_TOLERANCE * s.radius,
-            blur: if s.blur { 1.0 } else { 0.0 },
+            unused1: 0.0,
         };
         let run = |pass: &mut FullscreenPass, u: SsaoUniform, ao: &GpuImage, out: &GpuImage| {
             let binds = [
@@ -105,7 +106,8 @@ impl Passes {
                 Bind::Texture(ao),
                 Bind::Texture(&g.color),
             ];
-            pass.draw(gpu, &binds, &[&out.view], &[out.format])
+            let switches = [("SAMPLES", s.samples), ("BLUR", u32::from(s.blur))];
+            pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &switches)
         };
         let raw = GpuImage::target(gpu, "ssao raw", aw, ah, format);
         let estimate = match s.mode {
