@@ -6,13 +6,19 @@
 @group(2) @binding(1) var mt_n: texture_2d<f32>;
 @group(2) @binding(2) var mt_v: texture_2d<f32>;
 
+// The mapping, per pipeline (src/warp/mod.rs `WarpSettings::constants`): lavapipe compiles a
+// shader again on every draw whose branches depend on uniforms alone, and a scene's attachments
+// differ in mode. 0 point, 1 area, 2 curve, 3 curve aligned to the curve normal,
+// 4 no surface: plain instancing, M_tex's translation as the xz offset; a benchmark baseline,
+// 5 point with the frame resolved once per instance by attach_resolve.wgsl.
+override MODE: u32 = 0u;
+// Fur gravity bends the hairs (`gravity` > 0).
+override GRAVITY: bool = false;
+
 // src/warp/mod.rs `WarpUniform`. Time-dependent mappings (spin) are baked into each
 // instance's M_tex / M_tan by the nodes.
 struct Warp {
-    // 0 point, 1 area, 2 curve, 3 curve aligned to the curve normal,
-    // 4 no surface: plain instancing, M_tex's translation as the xz offset; a benchmark baseline,
-    // 5 point with the frame resolved once per instance by attach_resolve.wgsl.
-    mode: f32,
+    _unused: f32,
     // Fur gravity c (eq. 11).
     gravity: f32,
     // Lowest valid-texel weight.
@@ -287,7 +293,7 @@ fn fur_bend(f: SurfaceFrame, q: vec3<f32>, c: f32) -> mat2x3<f32> {
 }
 
 fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
-    let mode = i32(warp.mode + 0.5);
+    let mode = i32(MODE);
     var uv_in = vec2<f32>(0.0);         // f_uv(p), without the homogeneous 1
     var f_map = vec4<f32>(p, 1.0);      // eq. (5)
     var t = 0.0;
@@ -334,7 +340,7 @@ fn warp_vertex(p: vec3<f32>, normal: vec3<f32>, inst: Instance) -> Warped {
     // Fur gravity (eqs. 11-12): every hair vertex keeps its distance to the surface point
     // p_s below it (its foot on the tangent plane); normals bend with the hairs.
     let c = warp.gravity;
-    if c > 0.0 {
+    if GRAVITY {
         let bend = fur_bend(frame, q, c);
         q = bend[0];
         jac = mat3x3<f32>(vec3<f32>(1.0, 0.0, 0.0), bend[1], vec3<f32>(0.0, 0.0, 1.0)) * jac;

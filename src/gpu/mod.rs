@@ -560,8 +560,9 @@ impl GpuContext {
         shader: &str,
         entry: &str,
         groups: &[Option<&wgpu::BindGroupLayout>],
+        constants: &[(&str, u32)],
     ) -> Result<wgpu::ComputePipeline, ShaderError> {
-        pipelines::compute_pipeline(self, shader, entry, groups)
+        pipelines::compute_pipeline(self, shader, entry, groups, constants)
     }
 
     // ---- timing ----

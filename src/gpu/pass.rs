@@ -442,6 +442,7 @@ impl ComputePass {
         &mut self,
         gpu: &GpuContext,
         groups: &[&[Bind<'_>]],
+        constants: &[(&str, u32)],
     ) -> anyhow::Result<(wgpu::ComputePipeline, Vec<Option<wgpu::BindGroup>>)> {
         while self.groups.len() < groups.len() {
             self.groups.push(Bindings::new(wgpu::ShaderStages::COMPUTE));
@@ -452,7 +453,7 @@ impl ComputePass {
             .map(|(binds, b)| (!binds.is_empty()).then(|| b.layout(gpu, binds)))
             .collect();
         let refs: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(Option::as_ref).collect();
-        let pipeline = gpu.compute_pipeline(self.shader, self.entry, &refs)?;
+        let pipeline = gpu.compute_pipeline(self.shader, self.entry, &refs, constants)?;
         let bind_groups = groups
             .iter()
             .zip(self.groups.iter_mut())
@@ -464,7 +465,19 @@ impl ComputePass {
 
     /// Dispatches `workgroups` with `groups` bound.
     pub fn dispatch(&mut self, gpu: &GpuContext, groups: &[&[Bind<'_>]], workgroups: [u32; 3]) -> anyhow::Result<()> {
-        let (pipeline, bind_groups) = self.prepare(gpu, groups)?;
+        self.dispatch_specialized(gpu, groups, workgroups, &[])
+    }
+
+    /// Like `dispatch`, with the shader's `override` constants set (see
+    /// [`FullscreenPass::draw_specialized`]).
+    pub fn dispatch_specialized(
+        &mut self,
+        gpu: &GpuContext,
+        groups: &[&[Bind<'_>]],
+        workgroups: [u32; 3],
+        constants: &[(&str, u32)],
+    ) -> anyhow::Result<()> {
+        let (pipeline, bind_groups) = self.prepare(gpu, groups, constants)?;
         gpu.record(|enc| {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(self.shader),

@@ -348,13 +348,15 @@ pub(crate) fn compute_pipeline(
     shader: &str,
     entry: &str,
     groups: &[Option<&wgpu::BindGroupLayout>],
+    constants: &[(&str, u32)],
 ) -> Result<wgpu::ComputePipeline, ShaderError> {
     let variant = {
         let mut h = std::collections::hash_map::DefaultHasher::new();
-        (entry, groups).hash(&mut h);
+        (entry, groups, constants).hash(&mut h);
         h.finish()
     };
     cached(gpu, &gpu.pipelines.compute, shader, variant, |module| {
+        let overrides: Vec<(&str, f64)> = constants.iter().map(|&(name, v)| (name, f64::from(v))).collect();
         let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(shader),
             bind_group_layouts: groups,
@@ -365,7 +367,7 @@ pub(crate) fn compute_pipeline(
             layout: Some(&layout),
             module,
             entry_point: Some(entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &overrides, ..Default::default() },
             cache: None,
         })
     })

@@ -60,10 +60,11 @@ impl InstanceResolver {
             raw.size(),
             wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         );
-        let uniform = draw.settings.uniform(false);
+        let uniform = draw.settings.uniform();
         let warp = warp_binds(&draw.matrix, &uniform);
         let io = [Bind::Storage(raw), Bind::StorageRw(&out)];
-        self.pass.dispatch(gpu, &[&io, &[], &warp], ComputePass::groups_for(draw.instances.len(), 64))?;
+        let groups = ComputePass::groups_for(draw.instances.len(), 64);
+        self.pass.dispatch_specialized(gpu, &[&io, &[], &warp], groups, &draw.settings.constants(false))?;
         Ok(out)
     }
 }
@@ -219,11 +220,13 @@ impl GpuWarper {
         } else {
             draw.instances.to_vec()
         };
-        let uniform = draw.settings.uniform(resolved);
+        let uniform = draw.settings.uniform();
+        let constants = draw.settings.constants(resolved);
         let mut out = WarpedLayout::with_len(nv * instances.len());
         for (c, insts) in instances.chunks(chunk).enumerate() {
             let start = c * chunk * nv;
-            self.warp_chunk(gpu, mesh, insts, &warp_binds(&draw.matrix, &uniform), &mut out, start)?;
+            let warp = warp_binds(&draw.matrix, &uniform);
+            self.warp_chunk(gpu, mesh, insts, (&warp, &constants), &mut out, start)?;
         }
         Ok(out)
     }
@@ -233,7 +236,7 @@ impl GpuWarper {
         gpu: &GpuContext,
         mesh: &Mesh,
         insts: &[InstanceData],
-        warp: &[Bind<'_>],
+        (warp, constants): (&[Bind<'_>], &[(&str, u32)]),
         out: &mut WarpedLayout,
         start: usize,
     ) -> anyhow::Result<()> {
@@ -254,7 +257,7 @@ impl GpuWarper {
             Bind::StorageRw(output),
             Bind::Uniform(bytemuck::cast_slice(&counts)),
         ];
-        self.pass.dispatch(gpu, &[&io, &[], warp], ComputePass::groups_for(total, 64))?;
+        self.pass.dispatch_specialized(gpu, &[&io, &[], warp], ComputePass::groups_for(total, 64), constants)?;
         let range = start..start + total;
         read_buffer_with(gpu, output, size, |bytes| {
             let (p, rest) = bytes.split_at(total * 12);

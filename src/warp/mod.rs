@@ -459,9 +459,8 @@ pub struct WarpSettings {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct WarpUniform {
-    /// 0 point, 1 area, 2 curve, 3 curve aligned to the curve normal, 4 no surface (plain
-    /// instancing, a benchmark baseline), 5 point with the frame resolved once per instance.
-    pub mode: f32,
+    /// Unused: the mode is the pipeline's constant `MODE` ([`WarpSettings::constants`]).
+    pub unused: f32,
     /// Fur gravity c of eq. (11).
     pub gravity: f32,
     /// Lowest valid-texel weight.
@@ -471,9 +470,17 @@ pub struct WarpUniform {
 
 impl WarpSettings {
     /// The `Warp` uniform; `resolved`: point frames were looked up per instance (mode 5).
-    pub fn uniform(&self, resolved: bool) -> WarpUniform {
-        let mode = if resolved && self.mode == WarpMode::Point { 5.0 } else { self.mode as u32 as f32 };
-        WarpUniform { mode, gravity: self.gravity, min_weight: self.min_weight, _pad: 0.0 }
+    pub fn uniform(&self) -> WarpUniform {
+        WarpUniform { unused: 0.0, gravity: self.gravity, min_weight: self.min_weight, _pad: 0.0 }
+    }
+
+    /// The override constants of shaders/warp/warp.wgsl: `MODE` (0 point, 1 area, 2 curve, 3
+    /// curve aligned to the curve normal, 4 no surface (plain instancing, a benchmark baseline),
+    /// 5 point with the frame resolved once per instance; `resolved`: point frames were looked up
+    /// per instance) and `GRAVITY`.
+    pub fn constants(&self, resolved: bool) -> [(&'static str, u32); 2] {
+        let mode = if resolved && self.mode == WarpMode::Point { 5 } else { self.mode as u32 };
+        [("MODE", mode), ("GRAVITY", u32::from(self.gravity > 0.0))]
     }
 }
 

@@ -41,6 +41,7 @@ mod regression;
 mod render;
 mod roundtrip;
 mod scene_drawer;
+mod shader_lint;
 mod shadow;
 mod ssao;
 mod ssr;

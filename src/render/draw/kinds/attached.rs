@@ -42,14 +42,15 @@ impl ItemKind for AttachedDraw {
         let resolver = &mut *cx.resolver;
         let instances = self.draw_buffer(gpu, |raw| resolver.resolve(gpu, raw, self))?.clone();
         let layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
-        let uniform = self.settings.uniform(self.per_instance_frames());
+        let uniform = self.settings.uniform();
         let group = cx.group2.bind_group(gpu, &layout, &warp_binds(&self.matrix, &uniform));
         let (shader, entry) = match cx.pass.target {
             TargetKind::GBuffer => ("attach.wgsl", "vs_main"),
             TargetKind::DepthTiles => ("depth.wgsl", "vs_attached"),
         };
         // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp/warp.wgsl).
-        let constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
+        let mut constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
+        constants.extend(self.settings.constants(self.per_instance_frames()));
         let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants };
         let vertex = [Some(Vertex::layout()), Some(InstanceData::layout())];
         let mesh = item.mesh.gpu(gpu);
