@@ -89,7 +89,7 @@ pub static IBL_SHADING: NodeSpec = NodeSpec {
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct IblUniform {
     inv_view_proj: [[f32; 4]; 4],
-    /// Width, height, unused, unused.
+    /// Width, height, unused, 1 on the first pass.
     size: [f32; 4],
     /// The background colour, unused.
     background: [f32; 4],
@@ -210,7 +210,7 @@ impl Node for IblShadingNode {
         for (i, &(batch, diffuse_ends)) in batches.iter().enumerate() {
             let uniform = IblUniform {
                 inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
-                size: [w as f32, h as f32, 0.0, 0.0],
+                size: [w as f32, h as f32, 0.0, if i == 0 { 1.0 } else { 0.0 }],
                 background: [bg.x, bg.y, bg.z, 0.0],
                 background_level: cx.f32("background_level").min(top),
                 top_level: top,
@@ -259,7 +259,6 @@ impl Node for IblShadingNode {
             });
             let switches = [
                 ("PEMS", batch.len() as u32),
-                ("FIRST", u32::from(i == 0)),
                 ("FULL_MAP", u32::from(mode == IblMode::Full)),
                 ("BACKGROUND_ENV", u32::from(background == Background::Environment)),
                 ("SHADOWS", u32::from(shadows.is_some())),

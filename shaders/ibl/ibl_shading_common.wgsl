@@ -17,8 +17,6 @@
 // uniforms alone.
 // PEMs bound in this pass (0..8).
 override PEMS: u32 = 8u;
-// The first pass writes; later passes add to `previous`.
-override FIRST: bool = true;
 // Shade with the full filtered map (one lookup, no partition).
 override FULL_MAP: bool = false;
 // The background shows the environment map (else `background.rgb`).
@@ -32,7 +30,9 @@ override DIFFUSE_ENDS: bool = false;
 
 struct Ibl {
     inv_view_proj: mat4x4<f32>,
-    // x: width, y: height (z, w unused).
+    // x: width, y: height, z unused, w: 1 on the first pass (which writes; later passes add to
+    // `previous`). Read through `select`, not a branch, so every pass of a frame shares one
+    // pipeline (a pipeline of this shader took lavapipe about 1.5 s to compile).
     size: vec4<f32>,
     // rgb: background colour (w unused).
     background: vec4<f32>,
@@ -167,7 +167,8 @@ fn lit(k: u32, radiance: vec3<f32>, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
-        let prior = select(textureLoad(previous, px, 0).rgb, vec3<f32>(0.0), FIRST);
+    let first = ibl.size.w > 0.5;
+    let prior = select(textureLoad(previous, px, 0).rgb, vec3<f32>(0.0), first);
 
     // The view ray through this pixel.
     let ndc = vec2<f32>(frag.x / ibl.size.x * 2.0 - 1.0, 1.0 - frag.y / ibl.size.y * 2.0);
@@ -177,13 +178,12 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 
     let depth = textureLoad(g_depth, px, 0).r;
     if depth <= 0.0 {
-        if !FIRST {
-            return vec4<f32>(prior, 1.0);
-        }
+        // The first pass writes the background; later ones keep it.
+        var background = ibl.background.rgb;
         if BACKGROUND_ENV {
-            return vec4<f32>(lookup(env, ray, ibl.background_level), 1.0);
+            background = lookup(env, ray, ibl.background_level);
         }
-        return vec4<f32>(ibl.background.rgb, 1.0);
+        return vec4<f32>(select(prior, background, first), 1.0);
     }
     let color = textureLoad(g_color, px, 0);
     let n = normalize(textureLoad(g_normal, px, 0).xyz);
