@@ -362,7 +362,7 @@ impl GpuBench {
 #[derive(Subcommand)]
 enum BenchWhat {
     /// Every GPU bench (attachments, table1, cuboids, pem-memory, ibl, shadows, ssao,
-    /// tessellation) in this order within a time budget: each bench's rows as JSON, all.json
+    /// tessellation, btf) in this order within a time budget: each bench's rows as JSON, all.json
     /// (what ran, how long, each status) and summary.md (our tables beside the seeds' figures)
     /// into DIR. Exit code 1 when a bench failed.
     All {
@@ -448,6 +448,17 @@ enum BenchWhat {
         frames: usize,
         #[command(flatten)]
         out: GpuBench,
+    },
+    /// BTF cloth (Sattler et al. 2003, Table 2), on the CPU: per-vertex visibility
+    /// preprocessing, the environment (HEM) update and its eigen-weightset rotation on folded
+    /// panels of about 900 and 6400 vertices; the BTF tiers' bake, compression and sizes.
+    Btf {
+        /// The lavapipe preset: a 16² hemicube and only the 900-vertex panel's eigen-weightsets.
+        #[arg(long)]
+        small: bool,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
     /// ms per frame of the Ssao passes for each mode at full and half resolution.
@@ -1086,6 +1097,18 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!("{}", r.markdown())
             })?;
             out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Btf { small, json } } => {
+            use crate::app::bench_btf::{HemRow, TierRow};
+            println!("{}", HemRow::HEADER);
+            let hem = crate::app::bench_btf::hem(small, |r| println!("{}", r.markdown()))?;
+            println!("\n{}", TierRow::HEADER);
+            let tiers = crate::app::bench_btf::tiers(|r| println!("{}", r.markdown()))?;
+            if let Some(path) = json {
+                let rows = serde_json::json!({ "hem": hem, "tiers": tiers });
+                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Ssao { samples, frames, out } } => {

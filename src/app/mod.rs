@@ -4,6 +4,7 @@
 
 mod bench;
 mod bench_all;
+mod bench_btf;
 pub mod cli;
 pub mod compare;
 pub mod contact_sheet;

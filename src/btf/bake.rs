@@ -227,6 +227,13 @@ struct Tile {
     twist: f64,
 }
 
+/// An obvhs ray. Its traversal missed every ray straight up or down (x and y exactly 0); a
+/// tilt of 1e-7 rad changes nothing else.
+pub(super) fn tilted_ray(origin: glam::Vec3, dir: glam::Vec3, t_min: f32, t_max: f32) -> Ray {
+    let dir = dir.map(|c| if c.abs() < 1e-7 { 1e-7 } else { c });
+    Ray::new(origin.into(), dir.into(), t_min, t_max)
+}
+
 /// Triangles of one copy, before the copies and the BVH.
 #[derive(Default)]
 struct Mesh {
@@ -382,11 +389,7 @@ impl Tile {
     /// The ray's stretch [t0, t1] in the cell at `shift`, moved into the central tile (with a
     /// little overlap, so that no hit falls between two cells).
     fn local_ray(origin: DVec3, dir: DVec3, shift: DVec3, t0: f64, t1: f64) -> Ray {
-        let o = (origin - shift).as_vec3();
-        // obvhs's traversal missed every ray straight up or down (x and y exactly 0); a tilt of
-        // 1e-7 rad changes nothing else.
-        let dir = dir.as_vec3().map(|c| if c.abs() < 1e-7 { 1e-7 } else { c });
-        Ray::new(o.into(), dir.into(), (t0 - 1e-5).max(0.0) as f32, (t1 + 1e-5) as f32)
+        tilted_ray((origin - shift).as_vec3(), dir.as_vec3(), (t0 - 1e-5).max(0.0) as f32, (t1 + 1e-5) as f32)
     }
 
     /// The nearest triangle along the ray within `t_end`: its index and the hit point in the

@@ -8,6 +8,7 @@ pub mod bake;
 pub mod container;
 pub mod directions;
 pub mod gpu;
+pub mod hem;
 pub mod measured;
 pub mod pca;
 

@@ -33,6 +33,29 @@ pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync)
     done.into_iter().map(|(_, t)| t).collect()
 }
 
+/// `f(index, chunk)` for every `chunk_len`-long chunk of `out` (the last may be shorter), on
+/// `threads` threads (0: one per core); each chunk is written by one call alone, so the result
+/// does not depend on the thread count when `f` does not.
+pub fn for_each_chunk<T: Send>(out: &mut [T], chunk_len: usize, threads: usize, f: impl Fn(usize, &mut [T]) + Sync) {
+    let chunks: Vec<(usize, &mut [T])> = out.chunks_mut(chunk_len.max(1)).enumerate().collect();
+    let threads = match threads {
+        0 => std::thread::available_parallelism().map_or(1, |t| t.get()),
+        t => t,
+    }
+    .min(chunks.len().max(1));
+    let queue = std::sync::Mutex::new(chunks.into_iter());
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let Some((i, chunk)) = queue.lock().expect("a worker thread panicked").next() else { return };
+                    f(i, chunk);
+                }
+            });
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -41,5 +64,14 @@ mod tests {
             assert_eq!(super::map(10, threads, |i| i * i), (0..10).map(|i| i * i).collect::<Vec<_>>());
         }
         assert!(super::map(0, 3, |i| i).is_empty());
+    }
+
+    #[test]
+    fn every_chunk_is_written_once_for_any_thread_count() {
+        for threads in [0, 1, 3] {
+            let mut out = vec![0usize; 10];
+            super::for_each_chunk(&mut out, 3, threads, |i, chunk| chunk.iter_mut().for_each(|x| *x += i + 1));
+            assert_eq!(out, [1, 1, 1, 2, 2, 2, 3, 3, 3, 4]);
+        }
     }
 }

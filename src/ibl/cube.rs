@@ -39,6 +39,13 @@ pub fn dir_to_face(d: Vec3) -> (usize, f32, f32) {
     }
 }
 
+/// The texel of a `size`-wide cube map that direction `d` falls in: (face, column, row).
+pub fn nearest_texel(size: usize, d: Vec3) -> (usize, usize, usize) {
+    let (face, u, v) = dir_to_face(d);
+    let texel = |c: f32| (((c + 1.0) * 0.5 * size as f32) as usize).min(size - 1);
+    (face, texel(u), texel(v))
+}
+
 /// Face coordinate of the centre of texel `i` of a face `size` texels wide.
 pub fn texel_center(size: usize, i: usize) -> f32 {
     (2.0 * (i as f32 + 0.5)) / size as f32 - 1.0
