@@ -79,23 +79,28 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
     assert!((m.far_floor_cycles / analytic - 1.0).abs() < 0.05, "far floor {} against {analytic}", m.far_floor_cycles);
     // Today (docs/fidelity.md, "after"; 10.0% before the shadow atlas fitted its tiles to the
     // view and sized them by penumbra and SSAO mirrored off-screen samples, 8.0% before the
-    // PEMs' diffuse ends): relative MAE 7.0%; the bounds leave one point (8.0% fails).
-    assert!(m.rel_mae < 0.08, "relative MAE {:.1}% (today 7.0%)", 100.0 * m.rel_mae);
-    for (name, today) in [("torus", 0.138), ("floor", 0.056), ("ball", 0.108)] {
+    // PEMs' diffuse ends, 6.9% before the default graph's narrower atlas blur, lower
+    // bleed reduction and smaller SSAO radius): relative MAE 5.7%; 6.9% fails.
+    assert!(m.rel_mae < 0.065, "relative MAE {:.1}% (today 5.7%)", 100.0 * m.rel_mae);
+    for (name, today) in [("torus", 0.123), ("floor", 0.042), ("ball", 0.109)] {
         let e = item(&m, name).rel_mae;
         assert!(e < today + 0.01, "{name}: relative MAE {:.1}% (today {:.1}%)", 100.0 * e, 100.0 * today);
     }
     // The open floor: the diffuse ends give it the probe's irradiance (3.8% under the
     // analytic value before, with IBL alone); Cycles' far floor still has a little occlusion.
+    // Today 1.0% under Cycles' (0.3% against the render before the checker was filtered in
+    // linear values on both sides, which moved Cycles' floor and its noise).
     let floor = m.far_floor_werkstatt / m.far_floor_cycles;
     assert!(
-        (floor - 1.0).abs() < 0.01,
+        (floor - 1.0).abs() < 0.015,
         "far floor: werkstatt {:.4} against Cycles {:.4}",
         m.far_floor_werkstatt,
         m.far_floor_cycles
     );
-    // Region ratios: werkstatt's distance from Cycles, today's plus 0.02.
-    for (name, today) in [("under ball", 0.080), ("under torus", 0.025), ("shadow of torus", 0.054)] {
+    // Region ratios: werkstatt's distance from Cycles, today's plus 0.02 (the ball's sun shadow
+    // was 0.153 apart, under the ball 0.080, behind the torus 0.054 before the narrower blur).
+    let today = [("under ball", 0.026), ("under torus", 0.017), ("shadow of torus", 0.040), ("shadow of ball", 0.091)];
+    for (name, today) in today {
         let r = region(&m, name);
         let d = (r.werkstatt - r.cycles).abs();
         assert!(
@@ -107,10 +112,10 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
     }
     // SSAO's bands at the screen's left and right edges: open floor darker than Cycles' by
     // more than 5%, pixel by pixel (each image over its far floor's mean). 19.5% before SSAO
-    // mirrored its off-screen samples (3.1% without SSAO); today 3.0%.
+    // mirrored its off-screen samples (3.1% without SSAO); today 3.3%.
     assert!(
         m.edge_below_cycles < 0.05,
-        "open floor at the edges: {:.1}% below 0.95 of Cycles (today 3.0%)",
+        "open floor at the edges: {:.1}% below 0.95 of Cycles (today 3.3%)",
         100.0 * m.edge_below_cycles
     );
 }
@@ -129,7 +134,7 @@ fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
 fn screen_space_reflections_bring_the_glossy_ball_closer_to_cycles() {
     let m = measure_graph("default_glossy_ball", Some("graphs/ssr.ron"));
     let ball = item(&m, "ball");
-    assert!(ball.rel_mae < 0.175, "glossy ball with SSR: relative MAE {:.1}% (today 16.4%)", 100.0 * ball.rel_mae);
+    assert!(ball.rel_mae < 0.175, "glossy ball with SSR: relative MAE {:.1}% (today 16.1%)", 100.0 * ball.rel_mae);
     let (with, without) = (measure_graph("default_lambert", Some("graphs/ssr.ron")), measure_case("default_lambert"));
     assert_eq!(with.rel_mae, without.rel_mae, "SSR changed the Lambertian scene");
 }

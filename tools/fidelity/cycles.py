@@ -52,6 +52,12 @@ def main():
         "a check of the probe against the analytic open-floor value (scene.json open_floor_level)",
     )
     ap.add_argument("--threads", type=int, default=0, help="render threads (0: all cores)")
+    ap.add_argument(
+        "--albedo",
+        action="store_true",
+        help="write cycles_albedo.exr instead: every material emits its colour (texture included), the world "
+        "is black, one sample at each pixel's centre: Cycles' albedo, to set beside the export's albedo.exr",
+    )
     args = ap.parse_args()
     # This file is named cycles.py: keep its folder off the module path, or Blender's own
     # `cycles` add-on would import this script instead.
@@ -86,7 +92,26 @@ def phong_to_roughness(g):
     return math.sqrt(alpha)
 
 
-def make_material(bpy, mat, item, folder, hidden=False):
+def linear_float_image(bpy, path):
+    """The sRGB PNG at `path` as a linear float image. Cycles keeps an 8-bit sRGB image encoded and
+    converts after interpolating, so its bilinear filter would mix sRGB values; werkstatt's
+    G-buffer (an Rgba8UnormSrgb texture) mixes linear ones. At the checker's edges the two
+    differ by up to 20%; decoded to linear floats here, Cycles filters as werkstatt does."""
+    src = bpy.data.images.load(path)
+    w, h = src.size
+    pixels = list(src.pixels)  # sRGB-encoded, 0..1, RGBA
+    for i in range(len(pixels)):
+        if i % 4 != 3:
+            c = pixels[i]
+            pixels[i] = c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+    img = bpy.data.images.new(os.path.basename(path) + ".linear", w, h, alpha=True, float_buffer=True)
+    img.colorspace_settings.name = "Linear Rec.709"
+    img.pixels = pixels
+    bpy.data.images.remove(src)
+    return img
+
+
+def make_material(bpy, mat, item, folder, hidden=False, albedo=False):
     if mat.node_tree is None:
         mat.use_nodes = True
     nt = mat.node_tree
@@ -98,7 +123,10 @@ def make_material(bpy, mat, item, folder, hidden=False):
         nt.links.new(clear.outputs["BSDF"], out.inputs["Surface"])
         return
     g = float(item["glossiness"])
-    if g > 0.0:
+    if albedo:
+        bsdf = nt.nodes.new("ShaderNodeEmission")
+        bsdf.inputs["Strength"].default_value = 1.0
+    elif g > 0.0:
         bsdf = nt.nodes.new("ShaderNodeBsdfGlossy")
         bsdf.distribution = "MULTI_GGX"
         bsdf.inputs["Roughness"].default_value = phong_to_roughness(g)
@@ -113,8 +141,7 @@ def make_material(bpy, mat, item, folder, hidden=False):
         mapping.inputs["Scale"].default_value = (s, s, 1.0)
         mapping.inputs["Location"].default_value = (0.0, 1.0 - s, 0.0)
         tex = nt.nodes.new("ShaderNodeTexImage")
-        tex.image = bpy.data.images.load(os.path.join(folder, item["texture"]))
-        tex.image.colorspace_settings.name = "sRGB"
+        tex.image = linear_float_image(bpy, os.path.join(folder, item["texture"]))
         tex.interpolation = "Linear"
         tex.extension = "REPEAT"
         mul = nt.nodes.new("ShaderNodeVectorMath")
@@ -126,7 +153,7 @@ def make_material(bpy, mat, item, folder, hidden=False):
         nt.links.new(mul.outputs["Vector"], bsdf.inputs["Color"])
     else:
         bsdf.inputs["Color"].default_value = base
-    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
 
 
 def render_ids(bpy, scene, meshes, world, folder, scene_info):
@@ -176,7 +203,8 @@ def render(args):
             if not name.startswith("part_"):
                 raise SystemExit(f"cycles.py: unexpected material {slot.material.name}")
             item = items[int(name[5:])]
-            make_material(bpy, slot.material, item, folder, hidden=args.only is not None and item["name"] != args.only)
+            hidden = args.only is not None and item["name"] != args.only
+            make_material(bpy, slot.material, item, folder, hidden=hidden, albedo=args.albedo)
         # Smooth shading with the file's normals, as the G-buffer interpolates them.
         for poly in obj.data.polygons:
             poly.use_smooth = True
@@ -252,7 +280,7 @@ def render(args):
         nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
         nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
         nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
-        bg.inputs["Strength"].default_value = env["intensity"]
+        bg.inputs["Strength"].default_value = 0.0 if args.albedo else env["intensity"]
     else:
         bg.inputs["Strength"].default_value = 0.0
     nt.links.new(bg.outputs["Background"], wout.inputs["Surface"])
@@ -269,7 +297,10 @@ def render(args):
     c.sample_clamp_indirect = 0.0
     c.blur_glossy = 0.0
     c.seed = 0
-    if args.direct_only:
+    if args.albedo:
+        c.samples = 1
+        c.max_bounces = 0
+    elif args.direct_only:
         c.max_bounces = 0
     else:
         c.max_bounces = 16
@@ -293,13 +324,15 @@ def render(args):
     default_name = "cycles_direct.exr" if args.direct_only else "cycles.exr"
     if args.only is not None:
         default_name = f"cycles_only_{args.only}.exr"
+    if args.albedo:
+        default_name = "cycles_albedo.exr"
     name = args.out or default_name
     out_path = os.path.join(folder, name)
     scene.render.filepath = out_path
     t1 = time.time()
     bpy.ops.render.render(write_still=True)
     t2 = time.time()
-    if not args.no_ids:
+    if not (args.no_ids or args.albedo):
         render_ids(bpy, scene, meshes, world, folder, scene_info)
     report = {
         "file": name,
