@@ -545,6 +545,54 @@ fn draco_primitive(
     Ok((positions, uvs, normals, indices))
 }
 
+/// The instance transforms of a node with `EXT_mesh_gpu_instancing` (float TRANSLATION,
+/// ROTATION and SCALE, each optional), or None without the extension.
+fn gpu_instances(
+    doc: &gltf::Document,
+    buffers: &[gltf::buffer::Data],
+    node: &gltf::Node,
+) -> anyhow::Result<Option<Vec<glam::Mat4>>> {
+    let Some(ext) = node.extension_value("EXT_mesh_gpu_instancing") else { return Ok(None) };
+    let read = |name: &str, width: usize| -> anyhow::Result<Option<Vec<f32>>> {
+        let Some(index) = ext["attributes"].get(name) else { return Ok(None) };
+        let accessor = index
+            .as_u64()
+            .and_then(|i| doc.accessors().nth(i as usize))
+            .with_context(|| format!("{name}: no accessor {index}"))?;
+        let kind = if width == 4 { gltf::accessor::Dimensions::Vec4 } else { gltf::accessor::Dimensions::Vec3 };
+        anyhow::ensure!(
+            accessor.data_type() == gltf::accessor::DataType::F32 && accessor.dimensions() == kind,
+            "{name}: accessor {} is not float VEC{width}",
+            accessor.index()
+        );
+        // The gltf crate's iterator takes one element off an empty accessor's length.
+        anyhow::ensure!(accessor.count() > 0, "{name}: accessor {} is empty", accessor.index());
+        let data = |b: gltf::Buffer| buffers.get(b.index()).map(|d| &d[..]);
+        let unreadable = || format!("{name}: accessor {} cannot be read", accessor.index());
+        let floats: Vec<f32> = if width == 4 {
+            gltf::accessor::Iter::<[f32; 4]>::new(accessor.clone(), data).with_context(unreadable)?.flatten().collect()
+        } else {
+            gltf::accessor::Iter::<[f32; 3]>::new(accessor.clone(), data).with_context(unreadable)?.flatten().collect()
+        };
+        anyhow::ensure!(floats.len() == width * accessor.count(), "{name}: accessor {} is short", accessor.index());
+        Ok(Some(floats))
+    };
+    let (t, r, s) = (read("TRANSLATION", 3)?, read("ROTATION", 4)?, read("SCALE", 3)?);
+    let count = [t.as_ref().map(|v| v.len() / 3), r.as_ref().map(|v| v.len() / 4), s.as_ref().map(|v| v.len() / 3)];
+    let Some(n) = count.iter().flatten().next().copied() else { anyhow::bail!("no instance attributes") };
+    anyhow::ensure!(count.iter().flatten().all(|&c| c == n), "instance attributes differ in count: {count:?}");
+    Ok(Some(
+        (0..n)
+            .map(|i| {
+                let t = t.as_ref().map_or(Vec3::ZERO, |v| Vec3::from_slice(&v[3 * i..]));
+                let r = r.as_ref().map_or(glam::Quat::IDENTITY, |v| glam::Quat::from_slice(&v[4 * i..]).normalize());
+                let s = s.as_ref().map_or(Vec3::ONE, |v| Vec3::from_slice(&v[3 * i..]));
+                glam::Mat4::from_scale_rotation_translation(s, r, t)
+            })
+            .collect(),
+    ))
+}
+
 /// Loads every mesh of a glTF file's default scene (node transforms applied) with `gltf`;
 /// Draco-compressed primitives (`KHR_draco_mesh_compression`) with `draco-oxide-decoder`.
 pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
@@ -568,7 +616,9 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
         let children: Vec<_> = node.children().map(|c| (c, world)).collect();
         stack.extend(children.into_iter().rev());
         let Some(mesh) = node.mesh() else { continue };
-        let normal_matrix = glam::Mat3::from_mat4(world).inverse().transpose();
+        let instances = gpu_instances(&doc, &buffers, &node)
+            .with_context(|| format!("{}: node {} (EXT_mesh_gpu_instancing)", path.display(), node.index()))?;
+        let mut prims = Vec::new();
         for prim in mesh.primitives() {
             if prim.mode() != gltf::mesh::Mode::Triangles {
                 continue;
@@ -592,18 +642,26 @@ pub fn load_gltf(path: &std::path::Path) -> anyhow::Result<Mesh> {
                     )
                 }
             };
-            let base = positions.len() as u32;
-            part_starts.push(positions.len());
-            positions.extend(pos.iter().map(|p| world.transform_point3(*p)));
-            match prim_uvs {
-                Some(t) => uvs.extend(t),
-                None => all_uvs = false,
+            prims.push((pos, prim_uvs, prim_normals, prim_indices));
+        }
+        // Each instance (one without the extension) is a pattern piece per primitive.
+        for instance in instances.unwrap_or_else(|| vec![glam::Mat4::IDENTITY]) {
+            let world = world * instance;
+            let normal_matrix = glam::Mat3::from_mat4(world).inverse().transpose();
+            for (pos, prim_uvs, prim_normals, prim_indices) in &prims {
+                let base = positions.len() as u32;
+                part_starts.push(positions.len());
+                positions.extend(pos.iter().map(|p| world.transform_point3(*p)));
+                match prim_uvs {
+                    Some(t) => uvs.extend_from_slice(t),
+                    None => all_uvs = false,
+                }
+                match prim_normals {
+                    Some(n) => normals.extend(n.iter().map(|n| normal_matrix * *n)),
+                    None => all_normals = false,
+                }
+                indices.extend(prim_indices.iter().map(|i| i + base));
             }
-            match prim_normals {
-                Some(n) => normals.extend(n.iter().map(|n| normal_matrix * *n)),
-                None => all_normals = false,
-            }
-            indices.extend(prim_indices.iter().map(|i| i + base));
         }
     }
     if positions.is_empty() {

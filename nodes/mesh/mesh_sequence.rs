@@ -30,7 +30,7 @@ use crate::mesh::{self, Mesh};
 pub static MESH_SEQUENCE: NodeSpec = NodeSpec {
     kind: "MeshSequence",
     category: Category::Simulation,
-    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...), a USD mesh cache (.usda, .usdc or .usd; its time codes as frame numbers at its timeCodesPerSecond) or an Alembic cache (.abc, Ogawa; its sample times as frames) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object, USD Mesh prim or Alembic mesh; positions and normals are interpolated between frames. Frames load on worker threads; only the frames around the current time are held in memory (a .usda text cache is held whole).",
+    doc: "Plays an OBJ frame sequence (frame_0001.obj, ...), a USD mesh cache (.usda, .usdc or .usd; its time codes as frame numbers at its timeCodesPerSecond) or an Alembic cache (.abc, Ogawa; its sample times as frames) exported by a cloth simulator, with UVs as pattern coordinates and one pattern piece per OBJ object, USD Mesh prim or Alembic mesh; positions and normals are interpolated between frames. Frames load on worker threads; only the frames around the current time are held in memory.",
     inputs: &[],
     outputs: &[PortSpec::output(
         "surface",
@@ -79,23 +79,12 @@ pub struct SequenceIndex {
     /// Frame numbers and files (for a cache: labels `cache.abc|frame=...`, see
     /// [`load_cache_frame`]).
     pub frames: Vec<(i64, PathBuf)>,
-    /// A .usda cache's frames, parsed with the index (one per entry of `frames`).
-    pub cached: Option<CachedFrames>,
     /// A USD cache's frame rate (timeCodesPerSecond) or an .abc cache's sample rate, which
     /// replaces the node's `fps`.
     pub fps: Option<f64>,
     /// The frames come from one cache file (Alembic, USD), loaded with [`load_cache_frame`],
     /// and may differ in topology.
     pub cache: bool,
-}
-
-/// Frames parsed together with their index.
-pub struct CachedFrames(pub Vec<Arc<SeqFrame>>);
-
-impl std::fmt::Debug for CachedFrames {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} frames", self.0.len())
-    }
 }
 
 /// One loaded frame: the complete surface and its topology signature.
@@ -251,15 +240,9 @@ impl Node for MeshSequenceNode {
         }
         .map(|i| index.frames[i].1.clone());
         let (pa, pb) = (index.frames[a].1.clone(), index.frames[b].1.clone());
-        let (fa, mut fb) = match &index.cached {
-            Some(cached) => {
-                if self.reference.is_none() {
-                    self.reference = Some((first.clone(), cached.0[0].topology.clone()));
-                }
-                (cached.0[a].clone(), cached.0[b].clone())
-            }
-            None if index.cache => self.load_pair(cx, None, [pa.as_path(), pb.as_path()], next, load_cache_frame)?,
-            None => self.load_pair(cx, Some(&first), [pa.as_path(), pb.as_path()], next, load_frame)?,
+        let (fa, mut fb) = match index.cache {
+            true => self.load_pair(cx, None, [pa.as_path(), pb.as_path()], next, load_cache_frame)?,
+            false => self.load_pair(cx, Some(&first), [pa.as_path(), pb.as_path()], next, load_frame)?,
         };
         if index.cache {
             // A cache whose topology changes shows each frame as it is, without blending.
@@ -386,11 +369,11 @@ pub fn load_index(path: &Path) -> anyhow::Result<SequenceIndex> {
     if let Some(w) = frames.windows(2).find(|w| w[0].0 == w[1].0) {
         bail!("{} and {} have the same frame number {}", w[0].1.display(), w[1].1.display(), w[0].0);
     }
-    Ok(SequenceIndex { frames, cached: None, fps: None, cache: false })
+    Ok(SequenceIndex { frames, fps: None, cache: false })
 }
 
 /// A USD cache as a sequence: the time codes at which the chosen Mesh prims change, as frames
-/// (see [`usd::frames_of`]). A text cache's frames are made here, from the one parse.
+/// (see [`usd::frames_of`]).
 fn load_usd_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
     let mut stage = UsdFile::open(file)?;
     let meshes = select_meshes(&stage.mesh_names(), file, object)?;
@@ -409,18 +392,16 @@ fn load_usd_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
             w[0]
         );
     }
+    // One frame read now, so a file that cannot be played (no UVs, say) fails here.
+    if let Some(&first) = times.first() {
+        usd_frame(&mut stage, &meshes, first)?;
+    }
     let frames: Vec<(i64, PathBuf)> = numbers
         .iter()
         .zip(&times)
         .map(|(n, t)| (*n, part_path(file, &format!("frame={n},t={t},object={}", escape(object)))))
         .collect();
-    let cached = if matches!(stage, UsdFile::Text { .. }) {
-        let frames = times.iter().map(|&t| usd_frame(&mut stage, &meshes, t).map(Arc::new));
-        Some(CachedFrames(frames.collect::<anyhow::Result<_>>()?))
-    } else {
-        None
-    };
-    Ok(SequenceIndex { frames, cached, fps: Some(fps), cache: true })
+    Ok(SequenceIndex { frames, fps: Some(fps), cache: true })
 }
 
 /// The chosen Mesh prims of a USD file at time code `t`, each a pattern piece.
@@ -486,7 +467,7 @@ fn load_abc_index(file: &Path, object: &str) -> anyhow::Result<SequenceIndex> {
         let part = format!("frame={n},t={t},object={}", escape(object));
         frames.push((n as i64, part_path(file, &part)));
     }
-    Ok(SequenceIndex { frames, cached: None, fps, cache: true })
+    Ok(SequenceIndex { frames, fps, cache: true })
 }
 
 /// The meshes `object` names (see the `object` parameter) among a file's `names`, in file

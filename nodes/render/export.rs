@@ -24,6 +24,11 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
             "File format (PLY is binary little-endian; GLB is binary glTF 2.0 with materials; USDA is one animated cache of the frame range).",
         ),
         ParamSpec::new(
+            "attachments",
+            ParamKind::Choice { default: "realized", options: Attachments::OPTIONS },
+            "How .glb writes attachments: realized (a node per instance with its own vertices) or instanced (the detail mesh once, its instances' translations, rotations and scales as EXT_mesh_gpu_instancing; for point attachments without fur gravity, whose instances are rigid copies; other attachments stay realized). Other formats always realize.",
+        ),
+        ParamSpec::new(
             "warp",
             ParamKind::Choice { default: "auto", options: WarpDevice::OPTIONS },
             "Where the exported geometry is computed: on the GPU (attachments by the warp's compute pass, tessellations read back), or by the CPU twins of the same shaders (the same geometry); auto takes the CPU on a CPU adapter such as lavapipe, where it is faster (werkstatt bench export).",
@@ -37,6 +42,14 @@ pub static EXPORT_GEOMETRY: NodeSpec = NodeSpec {
     capabilities: Capabilities::OUTPUT,
     create: || Box::new(ExportNode::default()),
 };
+
+crate::choice!(
+    /// How a .glb holds attachment instances.
+    enum Attachments {
+        Realized = "realized",
+        Instanced = "instanced",
+    }
+);
 
 #[derive(Default)]
 struct ExportNode {
@@ -63,7 +76,8 @@ impl Node for ExportNode {
                     WarpDevice::Cpu => ExportDevice::Cpu,
                     _ => ExportDevice::Gpu,
                 };
-                let mut export = ExportCx { gpu, device, warper: &mut self.warper };
+                let placements = cx.choice::<Attachments>("attachments") == Attachments::Instanced;
+                let mut export = ExportCx { gpu, device, warper: &mut self.warper, placements };
                 let (mesh, parts) = crate::render::draw::export::flatten_parts(&mut export, &items)?;
                 (Arc::new(mesh), parts.into())
             }

@@ -7,6 +7,8 @@ use std::path::Path;
 
 use anyhow::Context as _;
 
+use glam::{Quat, Vec3};
+
 use crate::mesh::Mesh;
 
 crate::choice!(
@@ -36,6 +38,10 @@ pub struct GeometryPart {
     pub instances: Vec<Span>,
     /// The pattern piece of each of the item's triangles (a Surface's); empty otherwise.
     pub pieces: Vec<u32>,
+    /// An attachment whose instances are rigid copies of its detail mesh, where the export
+    /// asked for instancing: .glb writes the mesh once and the placements with
+    /// `EXT_mesh_gpu_instancing`; other formats realize every instance.
+    pub instancing: Option<std::sync::Arc<Instancing>>,
     /// Linear RGB.
     pub base_color: glam::Vec3,
     /// 0 = rough, 1 = mirror-like (the renderer's glossiness).
@@ -47,6 +53,25 @@ pub struct GeometryPart {
 pub struct Span {
     pub vertices: std::ops::Range<usize>,
     pub triangles: std::ops::Range<usize>,
+}
+
+/// An attachment's detail mesh and each instance's affine map of it, in instance order (an
+/// instance without triangles has any matrix).
+pub struct Instancing {
+    pub mesh: std::sync::Arc<Mesh>,
+    pub placements: Vec<glam::Mat4>,
+}
+
+impl PartialEq for Instancing {
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.mesh, &other.mesh) && self.placements == other.placements
+    }
+}
+
+impl std::fmt::Debug for Instancing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Instancing({} vertices, {} placements)", self.mesh.positions.len(), self.placements.len())
+    }
 }
 
 impl GeometryPart {
@@ -63,6 +88,7 @@ impl GeometryPart {
             triangles: 0..mesh.triangle_count(),
             instances: Vec::new(),
             pieces,
+            instancing: None,
             base_color: glam::Vec3::splat(0.8),
             glossiness: 0.2,
         }
@@ -160,17 +186,52 @@ pub fn write_geometry(path: &Path, mesh: &Mesh, parts: &[GeometryPart], format: 
     }
 }
 
+/// An instance's translation, rotation and scale.
+type Trs = (Vec3, Quat, Vec3);
+
+/// The translation, rotation and scale of each instance of `part` with triangles, where
+/// `instancing` reproduces every such instance's exported vertices (to 1e-5 of their size):
+/// the same vertex and triangle counts as the detail mesh, and a placement that is a
+/// rotation and per-axis scale (a mirror is a negative scale). None: write it realized.
+fn instance_trs(mesh: &Mesh, part: &GeometryPart, instancing: &Instancing) -> Option<Vec<Trs>> {
+    let detail = &instancing.mesh;
+    let (nv, nt) = (detail.positions.len(), detail.triangle_count());
+    if instancing.placements.len() != part.instances.len() || detail.normals.len() != nv || detail.uvs.len() != nv {
+        return None;
+    }
+    let kept = part.instances.iter().zip(&instancing.placements).filter(|(s, _)| !s.triangles.is_empty());
+    kept.map(|(span, placement)| {
+        if span.vertices.len() != nv || span.triangles.len() != nt {
+            return None;
+        }
+        let (scale, rotation, translation) = placement.to_scale_rotation_translation();
+        let trs = glam::Mat4::from_scale_rotation_translation(scale, rotation, translation);
+        let realized = &mesh.positions[span.vertices.clone()];
+        let size = realized.iter().fold(0.0f32, |m, p| m.max((*p - translation).length()));
+        let exact = detail.positions.iter().zip(realized).all(|(p, q)| {
+            let d = trs.transform_point3(*p).distance(*q);
+            d.is_finite() && d <= 1e-5 * size.max(1e-3)
+        });
+        exact.then_some((translation, rotation, scale))
+    })
+    .collect()
+}
+
 /// Writes binary glTF 2.0: one buffer (positions, then normals and UVs where every vertex has
 /// one, then u32 indices, each object's counted from its first vertex), a mesh and a node per
 /// object (an item drawn once, or an attachment instance as a child of a node named after its
 /// item; see [`objects`]) whose accessors view its range of the shared arrays, and a
 /// metallic-roughness material per item (base colour, metallic 0, roughness 1 - glossiness,
-/// double-sided: cloth is seen from both sides). `asset.extras` counts items, instances and
-/// objects. Positions are world space, Y up, as rendered. Parts whose objects do not cover
-/// the triangles exactly are an error (one default-grey item is used when `parts` is empty).
+/// double-sided: cloth is seen from both sides). An attachment with [`Instancing`] whose
+/// placements reproduce its instances ([`instance_trs`]) is instead one node named after it,
+/// holding the detail mesh once and the instances' translations, rotations and scales
+/// (`EXT_mesh_gpu_instancing`, listed in `extensionsUsed`). `asset.extras` counts items,
+/// instances and objects, and the instances written so as `instanced`. Positions are world
+/// space, Y up, as rendered. Parts whose objects do not cover the triangles exactly are an
+/// error (one default-grey item is used when `parts` is empty).
 pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Result<()> {
     use serde_json::json;
-    let (n, triangles) = (mesh.positions.len(), mesh.triangle_count());
+    let n = mesh.positions.len();
     let fallback = [GeometryPart::whole(mesh, "werkstatt")];
     let parts = if parts.is_empty() { &fallback[..] } else { parts };
     if mesh.indices.iter().any(|&i| i as usize >= n) {
@@ -180,19 +241,45 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
     check_objects(path, mesh, &objects)?;
     let with_normals = n > 0 && mesh.normals.len() == n;
     let with_uvs = n > 0 && mesh.uvs.len() == n;
+    let instanced: Vec<Option<(&Mesh, Vec<Trs>)>> = parts
+        .iter()
+        .map(|part| {
+            let instancing = part.instancing.as_deref()?;
+            instance_trs(mesh, part, instancing).map(|trs| (&*instancing.mesh, trs))
+        })
+        .collect();
+    // What the buffer holds, in order: each realized object's range of the mesh, or an
+    // instanced attachment's detail mesh once (at its first object).
+    let mut segments: Vec<(&Mesh, std::ops::Range<usize>, std::ops::Range<usize>, u32)> = Vec::new();
+    for (k, o) in objects.iter().enumerate() {
+        match &instanced[o.part] {
+            Some(_) if k > 0 && objects[k - 1].part == o.part => {}
+            Some((detail, _)) => segments.push((detail, 0..detail.positions.len(), 0..detail.triangle_count(), 0)),
+            None => segments.push((mesh, o.vertices.clone(), o.triangles.clone(), o.vertices.start as u32)),
+        }
+    }
+    let written = segments.iter().map(|s| s.1.len()).sum::<usize>();
+    let written_triangles = segments.iter().map(|s| s.2.len()).sum::<usize>();
+    let trs_floats: usize = instanced.iter().flatten().map(|(_, trs)| 10 * trs.len()).sum();
     // One view per array; each object's accessors start at its first vertex.
-    let mut views = vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": 12 * n, "target": 34962})];
-    let mut offset = 12 * n;
+    let mut views = vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": 12 * written, "target": 34962})];
+    let mut offset = 12 * written;
     let mut array_view = |width: usize| {
-        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * width * n, "target": 34962}));
-        offset += 4 * width * n;
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * width * written, "target": 34962}));
+        offset += 4 * width * written;
         views.len() - 1
     };
     let normal_view = with_normals.then(|| array_view(3));
     let uv_view = with_uvs.then(|| array_view(2));
     let index_view = views.len();
-    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12 * triangles, "target": 34963}));
-    let total = offset + 12 * triangles;
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12 * written_triangles, "target": 34963}));
+    offset += 12 * written_triangles;
+    // Instance translations, rotations and scales: not vertex data, so no target.
+    let trs_view = views.len();
+    if trs_floats > 0 {
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * trs_floats}));
+    }
+    let total = offset + 4 * trs_floats;
     // Materials are named by item index: tools/fidelity/cycles.py finds its items by them.
     let materials: Vec<_> = parts
         .iter()
@@ -208,12 +295,19 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
         })
         .collect();
     let (mut accessors, mut meshes, mut nodes, mut roots) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut item_node = None;
-    for o in &objects {
-        let (v0, count) = (o.vertices.start, o.vertices.len());
-        let (lo, hi) = mesh.positions[o.vertices.clone()]
+    let (mut item_node, mut segment, mut v0, mut t0, mut trs0, mut instances_written) = (None, 0, 0, 0, 0, 0);
+    for (k, o) in objects.iter().enumerate() {
+        let instanced = &instanced[o.part];
+        if instanced.is_some() && k > 0 && objects[k - 1].part == o.part {
+            // A later instance of an attachment written once.
+            continue;
+        }
+        let (source, vertices, tris, _) = segments[segment].clone();
+        segment += 1;
+        let count = vertices.len();
+        let (lo, hi) = source.positions[vertices.clone()]
             .iter()
-            .fold((glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let attribute = |accessors: &mut Vec<serde_json::Value>, view: usize, width: usize, kind: &str| {
             accessors.push(json!({"bufferView": view, "byteOffset": 4 * width * v0, "componentType": 5126,
                 "count": count, "type": kind}));
@@ -231,10 +325,30 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
         if let Some(view) = uv_view {
             attributes.insert("TEXCOORD_0".into(), attribute(&mut accessors, view, 2, "VEC2").into());
         }
-        accessors.push(json!({"bufferView": index_view, "byteOffset": 12 * o.triangles.start,
-            "componentType": 5125, "count": 3 * o.triangles.len(), "type": "SCALAR"}));
+        accessors.push(json!({"bufferView": index_view, "byteOffset": 12 * t0,
+            "componentType": 5125, "count": 3 * tris.len(), "type": "SCALAR"}));
+        v0 += count;
+        t0 += tris.len();
         let primitive =
             json!({"attributes": attributes, "indices": accessors.len() - 1, "material": o.part, "mode": 4});
+        if let Some((_, trs)) = instanced {
+            // One node for all instances: translations, then rotations, then scales.
+            let name = &parts[o.part].name;
+            meshes.push(json!({"name": name, "primitives": [primitive]}));
+            let mut trs_accessor = |width: usize, kind: &str| {
+                accessors.push(json!({"bufferView": trs_view, "byteOffset": 4 * trs0, "componentType": 5126,
+                    "count": trs.len(), "type": kind}));
+                trs0 += width * trs.len();
+                accessors.len() - 1
+            };
+            let attributes = json!({"TRANSLATION": trs_accessor(3, "VEC3"), "ROTATION": trs_accessor(4, "VEC4"),
+                "SCALE": trs_accessor(3, "VEC3")});
+            nodes.push(json!({"name": name, "mesh": meshes.len() - 1,
+                "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}}));
+            roots.push(nodes.len() - 1);
+            instances_written += trs.len();
+            continue;
+        }
         meshes.push(json!({"name": o.name, "primitives": [primitive]}));
         let node = json!({"name": o.name, "mesh": meshes.len() - 1});
         if parts[o.part].instances.is_empty() {
@@ -256,7 +370,7 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
         let child = nodes.len() - 1;
         nodes[parent]["children"].as_array_mut().expect("an item node has children").push(child.into());
     }
-    let doc = json!({
+    let mut doc = json!({
         "asset": {"version": "2.0", "generator": "werkstatt",
             "extras": {"items": counts.items, "attachment_instances": counts.instances, "objects": counts.objects}},
         "scene": 0,
@@ -268,6 +382,10 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
         "bufferViews": views,
         "accessors": accessors,
     });
+    if instances_written > 0 {
+        doc["asset"]["extras"]["instanced"] = instances_written.into();
+        doc["extensionsUsed"] = json!(["EXT_mesh_gpu_instancing"]);
+    }
     let mut json = serde_json::to_vec(&doc)?;
     // Chunks are 4-byte aligned: JSON padded with spaces; the binary chunk is whole floats.
     json.resize(json.len().next_multiple_of(4), b' ');
@@ -286,19 +404,30 @@ pub fn write_glb(path: &Path, mesh: &Mesh, parts: &[GeometryPart]) -> anyhow::Re
         let floats = |out: &mut std::io::BufWriter<std::fs::File>, v: &[f32]| -> std::io::Result<()> {
             v.iter().try_for_each(|f| out.write_all(&f.to_le_bytes()))
         };
-        floats(out, bytemuck::cast_slice(&mesh.positions))?;
+        for (source, vertices, _, _) in &segments {
+            floats(out, bytemuck::cast_slice(&source.positions[vertices.clone()]))?;
+        }
         if with_normals {
-            floats(out, bytemuck::cast_slice(&mesh.normals))?;
+            for (source, vertices, _, _) in &segments {
+                floats(out, bytemuck::cast_slice(&source.normals[vertices.clone()]))?;
+            }
         }
         if with_uvs {
             // The mesh's v runs down from the top of the image, as glTF's does.
-            floats(out, bytemuck::cast_slice(&mesh.uvs))?;
+            for (source, vertices, _, _) in &segments {
+                floats(out, bytemuck::cast_slice(&source.uvs[vertices.clone()]))?;
+            }
         }
-        objects.iter().try_for_each(|o| {
-            let base = o.vertices.start as u32;
-            let indices = &mesh.indices[3 * o.triangles.start..3 * o.triangles.end];
+        segments.iter().try_for_each(|(source, _, tris, base)| {
+            let indices = &source.indices[3 * tris.start..3 * tris.end];
             indices.iter().try_for_each(|i| out.write_all(&(i - base).to_le_bytes()))
-        })
+        })?;
+        for (_, trs) in instanced.iter().flatten() {
+            trs.iter().try_for_each(|(t, _, _)| floats(out, &t.to_array()))?;
+            trs.iter().try_for_each(|(_, r, _)| floats(out, &r.to_array()))?;
+            trs.iter().try_for_each(|(_, _, s)| floats(out, &s.to_array()))?;
+        }
+        Ok(())
     })
     .with_context(|| format!("cannot write {}", path.display()))
 }
@@ -514,6 +643,7 @@ mod tests {
             triangles,
             instances,
             pieces,
+            instancing: None,
             base_color: Vec3::ONE,
             glossiness: 0.0,
         };

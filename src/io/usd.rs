@@ -14,11 +14,12 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 use anyhow::{Context as _, bail};
 use glam::{DMat4, DQuat, DVec3, Vec2};
 
-use super::usda::{Val, val_value};
+use super::usda::{LazySpan, Val, val_value};
 use super::usdc::Crate;
 use super::{NONE, PolySample};
 
@@ -107,8 +108,17 @@ impl<H> Layer<H> {
 /// An open USD file: a text layer parsed whole, or a binary one whose values are read when
 /// asked for.
 pub enum UsdFile {
-    Text { path: PathBuf, layer: Layer<Val> },
-    Binary { path: PathBuf, layer: Layer<u64>, file: Box<Crate> },
+    /// Long numeric arrays are [`Val::Lazy`]: read from the file when asked for.
+    Text {
+        path: PathBuf,
+        layer: Arc<Layer<Val>>,
+        lazy: Arc<Vec<LazySpan>>,
+    },
+    Binary {
+        path: PathBuf,
+        layer: Layer<u64>,
+        file: Box<Crate>,
+    },
 }
 
 /// Whether a path names a USD file by its extension.
@@ -132,7 +142,8 @@ impl UsdFile {
             let (file, layer) = Crate::open(path)?;
             UsdFile::Binary { path: path.to_path_buf(), layer, file: Box::new(file) }
         } else {
-            UsdFile::Text { path: path.to_path_buf(), layer: super::usda::read_usda_layer(path)? }
+            let (layer, lazy) = text_layer(path)?;
+            UsdFile::Text { path: path.to_path_buf(), layer, lazy }
         };
         if file.mesh_names().is_empty() {
             bail!("{}: the stage holds no Mesh prim", path.display());
@@ -179,11 +190,43 @@ impl UsdFile {
     pub fn sample(&mut self, m: usize, t: f64) -> anyhow::Result<PolySample> {
         let name = self.mesh_names()[m].clone();
         let sample = match self {
-            UsdFile::Text { layer, .. } => sample_mesh(layer, &mut |v: &Val| val_value(v), m, t),
+            UsdFile::Text { path, layer, lazy } => {
+                let mut decode = |v: &Val| match v {
+                    Val::Lazy(k) => {
+                        let span = *lazy.get(*k).with_context(|| format!("no array {k} in the file"))?;
+                        val_value(&super::usda::read_lazy(path, span)?)
+                    }
+                    v => val_value(v),
+                };
+                sample_mesh(layer, &mut decode, m, t)
+            }
             UsdFile::Binary { layer, file, .. } => sample_mesh(layer, &mut |rep: &u64| file.value(*rep), m, t),
         };
         sample.with_context(|| format!("{}: Mesh {name} at time {t}", self.path().display()))
     }
+}
+
+/// A text layer and its lazy arrays' spans.
+type TextLayer = (Arc<Layer<Val>>, Arc<Vec<LazySpan>>);
+
+/// The text layer of `path`: read once and kept while the file keeps its size and time (a
+/// cache's frames load one at a time, each opening the file), so each frame reads only its
+/// arrays.
+fn text_layer(path: &Path) -> anyhow::Result<TextLayer> {
+    /// A file as last seen: its path, modification time and size.
+    type Seen = (PathBuf, std::time::SystemTime, u64);
+    static LAST: Mutex<Option<(Seen, TextLayer)>> = Mutex::new(None);
+    let meta = std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let key = (path.to_path_buf(), meta.modified().ok().unwrap_or(std::time::UNIX_EPOCH), meta.len());
+    if let Some((k, layer)) = &*LAST.lock().unwrap_or_else(|e| e.into_inner())
+        && *k == key
+    {
+        return Ok(layer.clone());
+    }
+    let (layer, lazy) = super::usda::read_usda_layer(path)?;
+    let layer = (Arc::new(layer), Arc::new(lazy));
+    *LAST.lock().unwrap_or_else(|e| e.into_inner()) = Some((key, layer.clone()));
+    Ok(layer)
 }
 
 fn mesh_prim<H>(layer: &Layer<H>, m: usize) -> &Prim<H> {

@@ -104,11 +104,161 @@ fn attribute(s: &mut String, decl: &str, meta: &str, frames: &[(i64, &Mesh)], va
 }
 
 /// Reads a .usda file's layer; every error names the file (and the line where the text is
-/// wrong).
-pub fn read_usda_layer(path: &Path) -> anyhow::Result<Layer<Val>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
-    parse_usda(text).map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))
+/// wrong). Numeric arrays longer than [`LAZY_BYTES`] are not parsed: the layer holds
+/// [`Val::Lazy`] for each, an index into the returned spans ([`read_lazy`] parses one), so
+/// the layer of a long cache stays small.
+pub fn read_usda_layer(path: &Path) -> anyhow::Result<(Layer<Val>, Vec<LazySpan>)> {
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (skeleton, spans) = skim(std::io::BufReader::with_capacity(1 << 20, file))
+        .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
+    let text = String::from_utf8(skeleton).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
+    let layer = parse_usda(&text).map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
+    Ok((layer, spans))
+}
+
+/// Numeric arrays at least this long (in bytes of text) are read when a value is asked for.
+pub const LAZY_BYTES: u64 = 4096;
+
+/// Where a numeric array left unparsed lies in a .usda file: its byte range and first line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LazySpan {
+    pub offset: u64,
+    pub len: u64,
+    pub line: usize,
+}
+
+/// The array at `span` of the .usda file at `path`, parsed.
+pub fn read_lazy(path: &Path, span: LazySpan) -> anyhow::Result<Val> {
+    use std::io::{Read as _, Seek as _};
+    let mut file = std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut bytes = Vec::new();
+    file.seek(std::io::SeekFrom::Start(span.offset))?;
+    file.take(span.len).read_to_end(&mut bytes)?;
+    anyhow::ensure!(bytes.len() as u64 == span.len, "line {}: the file ends inside an array (it changed?)", span.line);
+    let text = std::str::from_utf8(&bytes).map_err(|e| anyhow::anyhow!("line {}: not UTF-8 text ({e})", span.line))?;
+    let mut p = Parser { lex: Lexer { text, i: 0, line: span.line }, peeked: None };
+    let value = p.value()?;
+    match p.peek()? {
+        None if matches!(value, Val::Numbers(_)) => Ok(value),
+        _ => bail!("line {}: the array is not plain numbers", span.line),
+    }
+}
+
+/// The marker that stands for a lazy array in the skimmed text: `\x01<index>\x01`.
+const LAZY_MARK: u8 = 1;
+
+/// Copies USD text from `input` line by line, replacing each numeric array (only numbers,
+/// tuples, commas and blanks between its brackets) of at least [`LAZY_BYTES`] with a marker
+/// and its span, and keeping its line breaks so later lines keep their numbers. Strings and
+/// comments are copied as they are. Memory: the skeleton, and the longest line.
+fn skim(mut input: impl std::io::BufRead) -> anyhow::Result<(Vec<u8>, Vec<LazySpan>)> {
+    enum State {
+        Text,
+        /// Inside a string closed by `quote` repeated `count` times.
+        Quoted {
+            quote: u8,
+            count: usize,
+        },
+        /// Inside an array that may be lazy: where it starts, its line, the nesting depth,
+        /// and its bytes while it is short enough to be copied if it turns out not to be.
+        Array {
+            offset: u64,
+            line: usize,
+            depth: usize,
+            bytes: Vec<u8>,
+            breaks: usize,
+        },
+    }
+    let numeric = |c: u8| c.is_ascii_digit() || b".eE+-,()[] \t\r\ninfa".contains(&c);
+    let (mut out, mut spans, mut state) = (Vec::new(), Vec::new(), State::Text);
+    let (mut offset, mut line_number, mut line) = (0u64, 1usize, Vec::new());
+    loop {
+        line.clear();
+        if input.read_until(b'\n', &mut line)? == 0 {
+            break;
+        }
+        let mut i = 0;
+        while i < line.len() {
+            let c = line[i];
+            match &mut state {
+                State::Text => match c {
+                    b'#' => {
+                        out.extend_from_slice(&line[i..]);
+                        i = line.len();
+                        continue;
+                    }
+                    b'"' | b'\'' | b'@' => {
+                        let count = if line[i..].starts_with(&[c, c, c]) { 3 } else { 1 };
+                        out.extend_from_slice(&line[i..i + count]);
+                        i += count;
+                        state = State::Quoted { quote: c, count };
+                        continue;
+                    }
+                    b'[' => {
+                        state = State::Array {
+                            offset: offset + i as u64,
+                            line: line_number,
+                            depth: 1,
+                            bytes: vec![c],
+                            breaks: 0,
+                        };
+                    }
+                    LAZY_MARK => bail!("line {line_number}: unexpected character '\\x01'"),
+                    _ => out.push(c),
+                },
+                State::Quoted { quote, count } => {
+                    if c == b'\\' && *quote != b'@' {
+                        out.extend_from_slice(&line[i..(i + 2).min(line.len())]);
+                        i += 2;
+                        continue;
+                    }
+                    if line[i..].iter().take(*count).filter(|&&q| q == *quote).count() == *count {
+                        out.extend_from_slice(&line[i..i + *count]);
+                        i += *count;
+                        state = State::Text;
+                        continue;
+                    }
+                    out.push(c);
+                }
+                State::Array { offset: start, line: first, depth, bytes, breaks } => {
+                    if !numeric(c) {
+                        // Not a plain numeric array: copied, and this byte read as text.
+                        out.append(bytes);
+                        state = State::Text;
+                        continue;
+                    }
+                    bytes.push(c);
+                    *breaks += usize::from(c == b'\n');
+                    match c {
+                        b'[' => *depth += 1,
+                        b']' => *depth -= 1,
+                        _ => {}
+                    }
+                    if *depth == 0 {
+                        let len = offset + i as u64 + 1 - *start;
+                        if len >= LAZY_BYTES {
+                            out.push(LAZY_MARK);
+                            out.extend_from_slice(spans.len().to_string().as_bytes());
+                            out.push(LAZY_MARK);
+                            out.extend(std::iter::repeat_n(b'\n', *breaks));
+                            spans.push(LazySpan { offset: *start, len, line: *first });
+                        } else {
+                            out.append(bytes);
+                        }
+                        state = State::Text;
+                    }
+                }
+            }
+            i += 1;
+        }
+        offset += line.len() as u64;
+        line_number += 1;
+    }
+    if let State::Array { bytes, .. } = &mut state {
+        // An array the file ends in: the parser says where.
+        out.append(bytes);
+    }
+    Ok((out, spans))
 }
 
 /// Parses USD ASCII text (see [`read_usda_layer`]).
@@ -153,6 +303,8 @@ pub enum Val {
     Text(String),
     List(Vec<Val>),
     Samples(Vec<(f64, Val)>),
+    /// A numeric array left in the file: an index into the spans of [`read_usda_layer`].
+    Lazy(usize),
 }
 
 /// A parsed value as a [`Value`]: numbers, or a token or list of tokens.
@@ -167,6 +319,7 @@ pub fn val_value(v: &Val) -> anyhow::Result<Value> {
             .map(Value::Tokens)
             .context("a list of mixed values"),
         Val::Samples(_) => bail!("time samples where a value belongs"),
+        Val::Lazy(_) => bail!("an array not read from the file"),
     }
 }
 
@@ -176,6 +329,8 @@ enum Tok {
     Num(f64),
     Str(String),
     Punct(char),
+    /// A lazy array's marker.
+    Lazy(usize),
 }
 
 /// Tokens one at a time, with the line each starts on.
@@ -272,6 +427,13 @@ impl Lexer<'_> {
                         w => (Tok::Word(w.to_string()), line),
                     }));
                 }
+                LAZY_MARK => {
+                    let end = b[self.i + 1..].iter().position(|&x| x == LAZY_MARK).map(|e| self.i + 1 + e);
+                    let index = end.and_then(|end| text[self.i + 1..end].parse().ok());
+                    let (Some(end), Some(index)) = (end, index) else { bail!("line {line}: unexpected character") };
+                    self.i = end + 1;
+                    return Ok(Some((Tok::Lazy(index), line)));
+                }
                 b'(' | b')' | b'[' | b']' | b'{' | b'}' | b'=' | b',' | b':' | b';' => {
                     self.i += 1;
                     return Ok(Some((Tok::Punct(c as char), line)));
@@ -325,6 +487,7 @@ impl Parser<'_> {
         let line = self.line();
         Ok(match self.next()? {
             Tok::Num(n) => Val::Numbers(vec![n]),
+            Tok::Lazy(index) => Val::Lazy(index),
             Tok::Str(s) | Tok::Word(s) => Val::Text(s),
             Tok::Punct(open @ ('[' | '(')) => {
                 let close = if open == '[' { ']' } else { ')' };
@@ -519,7 +682,8 @@ mod tests {
     }
 
     fn open(text: &str) -> UsdFile {
-        UsdFile::Text { path: "test.usda".into(), layer: parse_usda(text).unwrap_or_else(|e| panic!("{e:#}")) }
+        let layer = parse_usda(text).unwrap_or_else(|e| panic!("{e:#}"));
+        UsdFile::Text { path: "test.usda".into(), layer: layer.into(), lazy: Default::default() }
     }
 
     /// Written and read back: the time codes, a sample per frame where points move, the
@@ -561,6 +725,47 @@ mod tests {
         assert_eq!(s.positions[2], Vec3::new(1.0, 2.0, -1.0));
         assert_eq!(s.corners.iter().map(|c| c[1]).collect::<Vec<_>>(), [3, 2, 1, 0]);
         assert_eq!(file.sample(0, 3.0).unwrap().positions[2], Vec3::new(1.0, 3.0, -1.0));
+    }
+
+    /// A file's long numeric arrays stay in the file until a frame asks for them, and come
+    /// back as the text parsed whole gives them; lines after them keep their numbers, and a
+    /// damaged array is an error naming its line when its frame is read.
+    #[test]
+    fn long_arrays_are_read_when_their_frame_is() {
+        let grid = |dx: f32| {
+            let positions: Vec<Vec3> =
+                (0..400).map(|i| Vec3::new((i % 20) as f32 * 0.1 + dx, (i / 20) as f32 * 0.1, 0.0)).collect();
+            let indices = (0..19 * 19).flat_map(|q| [q + q / 19, q + q / 19 + 1, q + q / 19 + 20]).collect();
+            Mesh::from_raw(positions, vec![Vec3::Z; 400], vec![Vec2::ZERO; 400], Vec::new(), Vec::new(), indices)
+        };
+        let (a, b) = (grid(0.0), grid(0.5));
+        let text = usda_text(24.0, &[(1, &a), (2, &b)]).unwrap();
+        let path = std::env::temp_dir().join(format!("werkstatt-lazy-{}.usda", std::process::id()));
+        std::fs::write(&path, &text).unwrap();
+        let mut lazy = UsdFile::open(&path).unwrap();
+        let UsdFile::Text { layer, lazy: spans, .. } = &lazy else { unreachable!() };
+        let points = &layer.prims.iter().find(|p| p.type_name == "Mesh").unwrap().attrs["points"];
+        assert!(points.samples.iter().all(|s| matches!(s.1, Val::Lazy(_))), "{:?}", points.samples.len());
+        assert!(spans.len() >= 5, "points, normals and indices: {spans:?}");
+        let mut whole = open(&text);
+        for t in [1.0, 2.0] {
+            let (l, w) = (lazy.sample(0, t).unwrap(), whole.sample(0, t).unwrap());
+            assert_eq!((l.positions, l.normals, l.corners), (w.positions, w.normals, w.corners));
+        }
+        // An error after the arrays names its own line.
+        let broken = text.clone() + "def Mesh \"late\" { int[] x = [1, }\n";
+        std::fs::write(&path, &broken).unwrap();
+        let e = format!("{:#}", UsdFile::open(&path).map(|_| ()).unwrap_err());
+        assert!(e.contains(&format!("line {}", text.lines().count() + 1)), "{e}");
+        // A damaged number inside a lazy array: found when its frame is read.
+        let at = text.rfind("(0.5").unwrap();
+        let mut damaged = text.clone().into_bytes();
+        damaged[at + 3] = b'.';
+        std::fs::write(&path, &damaged).unwrap();
+        let mut file = UsdFile::open(&path).unwrap();
+        let e = format!("{:#}", file.sample(0, 2.0).unwrap_err());
+        let _ = std::fs::remove_file(&path);
+        assert!(e.contains("werkstatt-lazy") && e.contains("line"), "{e}");
     }
 
     /// Errors name the line.

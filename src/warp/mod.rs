@@ -675,6 +675,23 @@ pub fn warp_instance_cpu(
     }
 }
 
+/// Each instance's placement as one affine map of the detail mesh, where the warp is one
+/// (a point attachment without fur gravity: one frame per instance, eqs. 4-5): the frame
+/// [t_u n t_v | p] after M_tan, as `warp_instance_cpu` places every vertex. None for other
+/// modes; an outlier instance (no frame) gets the zero matrix (it has no triangles).
+pub fn rigid_placements(texels: &MatrixTexels, s: &WarpSettings, instances: &[InstanceData]) -> Option<Vec<Mat4>> {
+    if !matches!(s.mode, WarpMode::Point | WarpMode::Unattached) || s.gravity > 0.0 {
+        return None;
+    }
+    let place = |inst: &InstanceData| {
+        frame_at(texels, s, inst, Vec2::ZERO).map_or(Mat4::ZERO, |sf| {
+            let f = sf.frame;
+            Mat4::from_cols(f.tu.extend(0.0), f.n.extend(0.0), f.tv.extend(0.0), f.p.extend(1.0)) * inst.m_tan_matrix()
+        })
+    };
+    Some(instances.iter().map(place).collect())
+}
+
 /// The CPU twin of `fur_bend` in shaders/warp/warp.wgsl (eqs. 11-12 in frame coordinates): the
 /// bent point and its derivative by the height.
 pub fn fur_bend(f: &TexelFrame, q: Vec3, c: f32) -> (Vec3, Vec3) {

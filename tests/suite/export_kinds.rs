@@ -23,7 +23,7 @@ use crate::common::{self, gpu};
 
 fn export(items: &[DrawItem], device: ExportDevice) -> anyhow::Result<Mesh> {
     let mut warper = GpuWarper::default();
-    flatten(&mut ExportCx { gpu: gpu(), device, warper: &mut warper }, items)
+    flatten(&mut ExportCx { gpu: gpu(), device, warper: &mut warper, placements: false }, items)
 }
 
 fn plain(mesh: Mesh, model: Mat4) -> DrawItem {

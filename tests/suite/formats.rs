@@ -166,6 +166,53 @@ fn glb_export_holds_the_obj_geometry_with_a_material_per_item() {
     );
 }
 
+/// `attachments: "instanced"`: the 20 buttons are one node holding the button mesh once and 20
+/// translations, rotations and scales (EXT_mesh_gpu_instancing); expanded by the project's
+/// reader they are the realized export's vertices (to 1e-5 m), normals and triangles, button
+/// for button, in a smaller file.
+#[test]
+fn instanced_glb_expands_to_the_realized_export() {
+    let dir = out_dir("formats-instanced");
+    let graph = dir.join("export.ron");
+    let instanced = GRAPH.replace(
+        r#""obj": (kind: "ExportGeometry", params: {"format": "obj"}),"#,
+        r#""inst": (kind: "ExportGeometry", params: {"format": "glb", "attachments": "instanced"}),"#,
+    );
+    std::fs::write(&graph, instanced.replace(r#"("scene.scene", "obj.scene")"#, r#"("scene.scene", "inst.scene")"#))
+        .unwrap();
+    render_graph(&graph, &dir, (0, 0), (8, 8), &[], &[]).unwrap();
+    let (realized, instanced) = (dir.join("glb_0000.glb"), dir.join("inst_0000.glb"));
+    let json = glb_json(&instanced);
+    assert_eq!(json["extensionsUsed"], serde_json::json!(["EXT_mesh_gpu_instancing"]));
+    assert_eq!(
+        json["asset"]["extras"],
+        serde_json::json!({"items": 2, "attachment_instances": 20, "objects": 21, "instanced": 20})
+    );
+    let names: Vec<&str> = json["nodes"].as_array().unwrap().iter().map(|n| n["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["draw", "buttons"]);
+    let attributes = &json["nodes"][1]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"];
+    for name in ["TRANSLATION", "ROTATION", "SCALE"] {
+        assert_eq!(json["accessors"][attributes[name].as_u64().unwrap() as usize]["count"], 20, "{name}");
+    }
+    assert!(glb_json(&realized).get("extensionsUsed").is_none());
+
+    let (a, b) =
+        (werkstatt::mesh::load_mesh_file(&realized).unwrap(), werkstatt::mesh::load_mesh_file(&instanced).unwrap());
+    assert_eq!((a.positions.len(), a.indices.len()), (b.positions.len(), b.indices.len()));
+    assert_eq!(a.indices, b.indices);
+    assert_eq!(a.piece_ids, b.piece_ids, "a pattern piece per button, in instance order");
+    let worst = |x: &[glam::Vec3], y: &[glam::Vec3]| x.iter().zip(y).map(|(p, q)| p.distance(*q)).fold(0.0, f32::max);
+    let (position, normal) = (worst(&a.positions, &b.positions), worst(&a.normals, &b.normals));
+    assert!(position < 1e-5 && normal < 1e-4, "largest differences: position {position}, normal {normal}");
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    assert!(size(&instanced) < size(&realized), "{} bytes, realized {}", size(&instanced), size(&realized));
+    eprintln!(
+        "instanced glb: {} bytes (realized {}); largest differences: position {position:e} m, normal {normal:e}",
+        size(&instanced),
+        size(&realized)
+    );
+}
+
 /// A flag with 40 buttons (a GridPlacement of 8 x 5 within its one piece): the OBJ holds one
 /// object for the flag and one per button, each button's with exactly the button mesh's
 /// vertices and triangles, and its header counts them; the .glb has a node per object of the
@@ -374,8 +421,8 @@ fn damaged_usda_and_glb_files_fail_with_the_file_named() {
     corruption_loop(&dir.join("usd.usda"), |p| UsdFile::open(p)?.sample(0, 0.0).map(|_| ()));
 }
 
-/// Blender reads the .glb and the .usda as written: the same triangles and bounds as the OBJ of
-/// the same frame. Needs Blender's Python module: set WERKSTATT_BPY to a python that can
+/// Blender reads the .glb (realized, and with the buttons instanced) and the .usda as written:
+/// the same triangles and bounds as the OBJ of the same frame. Needs Blender's Python module: set WERKSTATT_BPY to a python that can
 /// `import bpy` (`pip install bpy==5.0.*`, Python 3.11); without it the test says so and passes.
 #[test]
 fn blender_imports_the_glb_and_usda_exports() {
@@ -388,9 +435,13 @@ fn blender_imports_the_glb_and_usda_exports() {
     let with_usda = GRAPH
         .replace(
             r#""glb": (kind: "ExportGeometry", params: {"format": "glb"}),"#,
-            r#""glb": (kind: "ExportGeometry", params: {"format": "glb"}), "usd": (kind: "ExportGeometry", params: {"format": "usda"}),"#,
+            r#""glb": (kind: "ExportGeometry", params: {"format": "glb"}), "usd": (kind: "ExportGeometry", params: {"format": "usda"}),
+            "inst": (kind: "ExportGeometry", params: {"format": "glb", "attachments": "instanced"}),"#,
         )
-        .replace(r#"("scene.scene", "glb.scene")]"#, r#"("scene.scene", "glb.scene"), ("scene.scene", "usd.scene")]"#);
+        .replace(
+            r#"("scene.scene", "glb.scene")]"#,
+            r#"("scene.scene", "glb.scene"), ("scene.scene", "usd.scene"), ("scene.scene", "inst.scene")]"#,
+        );
     assert_ne!(with_usda, GRAPH);
     std::fs::write(&graph, with_usda).unwrap();
     render_graph(&graph, &dir, (0, 0), (16, 16), &[], &[]).unwrap();
@@ -398,7 +449,7 @@ fn blender_imports_the_glb_and_usda_exports() {
     let (lo, hi) = positions.iter().fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
         (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k])))
     });
-    let files = [dir.join("glb_0000.glb"), dir.join("usd.usda")];
+    let files = [dir.join("glb_0000.glb"), dir.join("usd.usda"), dir.join("inst_0000.glb")];
     let out = std::process::Command::new(&python)
         .arg(crate::common::root().join("tools/usd/import_check.py"))
         .args(&files)

@@ -24,7 +24,7 @@ fn data() -> PathBuf {
 fn the_binary_cloth_cache_equals_the_obj_sequence_vertex_by_vertex() {
     let index = load_index(&index_path(&data().join("cloth.usdc"), "Cloth")).unwrap();
     assert_eq!(index.fps, Some(24.0));
-    assert!(index.cached.is_none(), "binary frames load one at a time");
+    assert!(index.cache, "frames load one at a time");
     let frames = cache_frames(&data().join("cloth.usdc"), "Cloth");
     assert_eq!(frames.iter().map(|(n, _)| *n).collect::<Vec<_>>(), (1..=8).collect::<Vec<_>>());
     for (n, usd) in &frames {
@@ -43,7 +43,7 @@ fn the_binary_cloth_cache_equals_the_obj_sequence_vertex_by_vertex() {
 fn the_text_cloth_cache_equals_the_obj_sequence() {
     let index = load_index(&index_path(&data().join("cloth.usda"), "")).unwrap();
     assert_eq!(index.fps, Some(24.0));
-    assert_eq!(index.cached.as_ref().map(|c| c.0.len()), Some(8), "a text cache is parsed once");
+    assert!(index.cache, "frames load one at a time, as a binary cache's do");
     for (n, usd) in cache_frames(&data().join("cloth.usda"), "") {
         let obj = obj_frame(n);
         let [dp, duv, _] = differences(&usd, &obj);

@@ -159,7 +159,7 @@ pub fn capture(opts: &ExportOptions, gpu: &GpuContext) -> anyhow::Result<Capture
 
     // The geometry as drawn, one part per item.
     let mut warper = crate::warp::gpu::GpuWarper::default();
-    let mut export = ExportCx { gpu, device: ExportDevice::Cpu, warper: &mut warper };
+    let mut export = ExportCx { gpu, device: ExportDevice::Cpu, warper: &mut warper, placements: false };
     let (mesh, parts) = crate::render::draw::export::flatten_parts(&mut export, &items)?;
     if parts.len() != items.len() {
         bail!(

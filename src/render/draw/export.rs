@@ -4,7 +4,9 @@
 use glam::{DVec3, Mat3, Vec3};
 
 use crate::cuboid::{CuboidGrid, fast_path};
-use crate::io::geometry::{GeometryPart, Span};
+use std::sync::Arc;
+
+use crate::io::geometry::{GeometryPart, Instancing, Span};
 use crate::mesh::{Mesh, has_area};
 use crate::render::scene::DrawItem;
 
@@ -27,7 +29,10 @@ pub fn flatten_parts(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Resul
         let exported =
             item.kind.export(cx, item).map_err(|e| e.context(format!("exporting item {i} ({})", item.kind.name())))?;
         let (mesh, per_instance) = match exported {
-            Exported::Instances { mesh, per_instance } => (mesh, Some(per_instance)),
+            Exported::Instances { mesh, per_instance, placements } => {
+                let instancing = placements.map(|placements| Instancing { mesh: item.mesh.clone(), placements });
+                (mesh, Some((per_instance, instancing)))
+            }
             Exported::Local(mesh) => {
                 let (model, grid) = fast_path(item.model, item.cuboid.clone());
                 (place(&mesh, model, grid.as_deref()), None)
@@ -35,10 +40,14 @@ pub fn flatten_parts(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Resul
         };
         let count = mesh.triangle_count();
         if count > 0 {
-            let instances = per_instance.map_or_else(Vec::new, |n| instance_spans(&mesh, n, vertices, triangles));
+            let attached = per_instance.is_some();
+            let (instances, instancing) = match per_instance {
+                Some((n, instancing)) => (instance_spans(&mesh, n, vertices, triangles), instancing.map(Arc::new)),
+                None => (Vec::new(), None),
+            };
             // A placed mesh keeps its item's vertices, so the item's pattern pieces still apply.
             let piece_of = &item.mesh.piece_ids;
-            let pieces = if per_instance.is_none() && piece_of.len() == mesh.positions.len() {
+            let pieces = if !attached && piece_of.len() == mesh.positions.len() {
                 mesh.indices.chunks_exact(3).map(|t| piece_of[t[0] as usize]).collect()
             } else {
                 Vec::new()
@@ -50,6 +59,7 @@ pub fn flatten_parts(cx: &mut ExportCx<'_>, items: &[DrawItem]) -> anyhow::Resul
                 triangles: triangles..triangles + count,
                 instances,
                 pieces,
+                instancing,
                 base_color: m.base_color,
                 glossiness: m.glossiness,
             });

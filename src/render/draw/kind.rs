@@ -79,7 +79,9 @@ pub enum Exported {
     /// Instances of the item's mesh in world space, instance-major: instance k owns vertices
     /// `k * per_instance..(k + 1) * per_instance` and its triangles follow instance k - 1's.
     /// Exports keep each instance apart (an OBJ object, a glTF node).
-    Instances { mesh: Mesh, per_instance: usize },
+    /// `placements`: each instance's affine map of the item's mesh where the instances are
+    /// rigid copies of it (see [`crate::warp::rigid_placements`]) and the export asked for them.
+    Instances { mesh: Mesh, per_instance: usize, placements: Option<Vec<glam::Mat4>> },
 }
 
 /// Where an export computes what the GPU would: the GPU itself (read back), or the CPU twin of
@@ -96,6 +98,8 @@ pub struct ExportCx<'a> {
     pub device: ExportDevice,
     /// The attachment warp as a compute pass (kept between exports).
     pub warper: &'a mut GpuWarper,
+    /// Whether attachments report their instances' placements (glTF instancing).
+    pub placements: bool,
 }
 
 /// The targets a scene is drawn into.

@@ -9,7 +9,7 @@ use crate::render::draw::kind::{
     DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PipelineKey, PrepareCx, TargetKind,
 };
 use crate::render::scene::DrawItem;
-use crate::warp::gpu::{WarpDevice, assemble, warp_binds, warp_layout};
+use crate::warp::gpu::{WarpDevice, assemble, read_matrix, warp_binds, warp_layout};
 use crate::warp::{AttachedDraw, InstanceData};
 
 impl ItemKind for AttachedDraw {
@@ -69,7 +69,12 @@ impl ItemKind for AttachedDraw {
             ExportDevice::Cpu => WarpDevice::Cpu,
         };
         let warped = cx.warper.warp_layout_on(cx.gpu, &item.mesh, self, device)?;
-        Ok(Exported::Instances { mesh: assemble(&item.mesh, warped)?, per_instance: item.mesh.positions.len() })
+        let placements = match cx.placements {
+            true => crate::warp::rigid_placements(&read_matrix(cx.gpu, &self.matrix)?, &self.settings, &self.instances),
+            false => None,
+        };
+        let mesh = assemble(&item.mesh, warped)?;
+        Ok(Exported::Instances { mesh, per_instance: item.mesh.positions.len(), placements })
     }
 }
 
