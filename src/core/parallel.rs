@@ -3,14 +3,19 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// `f(0), f(1), ..., f(count - 1)` computed on `threads` threads (0: one per core), in index
-/// order. Items are handed out one at a time, so uneven items balance.
-pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+/// Threads for `items` items: `threads`, or one per core for 0, and never more than the items.
+fn workers(threads: usize, items: usize) -> usize {
     let threads = match threads {
         0 => std::thread::available_parallelism().map_or(1, |t| t.get()),
         t => t,
-    }
-    .min(count.max(1));
+    };
+    threads.min(items.max(1))
+}
+
+/// `f(0), f(1), ..., f(count - 1)` computed on `threads` threads (0: one per core), in index
+/// order. Items are handed out one at a time, so uneven items balance.
+pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let threads = workers(threads, count);
     let next = AtomicUsize::new(0);
     let mut done: Vec<(usize, T)> = std::thread::scope(|s| {
         let workers: Vec<_> = (0..threads)
@@ -38,11 +43,7 @@ pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync)
 /// does not depend on the thread count when `f` does not.
 pub fn for_each_chunk<T: Send>(out: &mut [T], chunk_len: usize, threads: usize, f: impl Fn(usize, &mut [T]) + Sync) {
     let chunks: Vec<(usize, &mut [T])> = out.chunks_mut(chunk_len.max(1)).enumerate().collect();
-    let threads = match threads {
-        0 => std::thread::available_parallelism().map_or(1, |t| t.get()),
-        t => t,
-    }
-    .min(chunks.len().max(1));
+    let threads = workers(threads, chunks.len());
     let queue = std::sync::Mutex::new(chunks.into_iter());
     std::thread::scope(|s| {
         for _ in 0..threads {
