@@ -1,6 +1,6 @@
 //! The `ClothSim` node: the built-in simulator as the pipeline's input stage.
 
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock, Mutex};
 
 use glam::{Mat4, Quat, Vec2, Vec3};
 
@@ -85,7 +85,10 @@ impl Node for ClothSimNode {
             None => true,
         };
         if rebuild {
-            self.state = Some((preset.build(), key.clone(), 0));
+            self.state = Some(match warm_state(&key, target) {
+                Some((cloth, step)) => (cloth, key.clone(), step),
+                None => (preset.build(), key.clone(), 0),
+            });
         }
         let (cloth, _, step) = self.state.as_mut().expect("built above");
         // A long warm-up reports progress; a cancel keeps the steps made (the state stays whole).
@@ -94,6 +97,10 @@ impl Node for ClothSimNode {
             cx.progress((*step - first) as usize, (target - first) as usize)?;
             cloth.step_frame(FRAME_DT);
             *step += 1;
+        }
+        cx.count("steps_simulated", (*step - first) as usize);
+        if *step - first >= WARM_KEEP_STEPS {
+            keep_warm_state(&key, *step, cloth);
         }
         let mesh = surface_mesh(cloth)
             .map_err(|e| NodeError::msg(format!("the simulation produced an invalid frame at step {step}: {e:#}")))?;
@@ -110,6 +117,33 @@ impl Node for ClothSimNode {
         cx.set("max_strain", strain);
         Ok(())
     }
+}
+
+/// States after a warm-up, shared by every ClothSim of the process: a graph rendered again
+/// (a second render, the editor reopening it, a test's variant of a figure) starts from the
+/// settled drape instead of simulating its `warmup` seconds again. Stepping is deterministic,
+/// so the frames are the same bytes either way. A few presets' worth (each a few MB at most).
+static WARM_STATES: LazyLock<Mutex<Vec<(String, u64, Cloth)>>> = LazyLock::new(Default::default);
+const WARM_STATES_KEPT: usize = 8;
+/// Runs shorter than this (a frame of playback) are not kept.
+const WARM_KEEP_STEPS: u64 = 30;
+
+/// The latest kept state of `key` at or before step `target`.
+fn warm_state(key: &str, target: u64) -> Option<(Cloth, u64)> {
+    let states = WARM_STATES.lock().unwrap_or_else(|e| e.into_inner());
+    let (_, step, cloth) = states.iter().filter(|(k, s, _)| k == key && *s <= target).max_by_key(|(_, s, _)| *s)?;
+    Some((cloth.clone(), *step))
+}
+
+fn keep_warm_state(key: &str, step: u64, cloth: &Cloth) {
+    let mut states = WARM_STATES.lock().unwrap_or_else(|e| e.into_inner());
+    if states.iter().any(|(k, s, _)| k == key && *s == step) {
+        return;
+    }
+    if states.len() >= WARM_STATES_KEPT {
+        states.remove(0);
+    }
+    states.push((key.to_string(), step, cloth.clone()));
 }
 
 fn preset_of(kind: PresetKind, triangles: usize, seed: u64, wind_speed: f32) -> Preset {

@@ -58,7 +58,8 @@ struct BounceUniform {
     view: [[f32; 4]; 4],
     size: [f32; 4],
     radius: f32,
-    samples: f32,
+    /// Was the sample count, now the shader's SAMPLES constant.
+    unused: f32,
     strength: f32,
     plane_tolerance: f32,
 }
@@ -80,12 +81,15 @@ impl Node for BounceNode {
             view: g.view.view.to_cols_array_2d(),
             size: [g.width() as f32, g.height() as f32, 0.0, 0.0],
             radius,
-            samples: cx.int("samples").clamp(1, 256) as f32,
+            unused: 0.0,
             strength: cx.f32("strength"),
             plane_tolerance: 0.1 * radius,
         };
         let passes = self.passes.get_or_insert_with(|| GatherResolve::new("bounce.wgsl"));
-        let out = passes.run(gpu, "bounce", &g, &image, bytemuck::bytes_of(&u), &[])?;
+        // A constant, not a uniform: lavapipe compiled the pass again on every draw whose loop
+        // bound was a uniform.
+        let samples = cx.int("samples").clamp(1, 256) as u32;
+        let out = passes.run(gpu, "bounce", &g, &image, bytemuck::bytes_of(&u), &[], &[("SAMPLES", samples)])?;
         cx.set("image", Arc::new(out));
         Ok(())
     }

@@ -43,7 +43,9 @@ impl GatherResolve {
         }
     }
 
-    /// Runs both passes at the G-buffer's size; returns the resolved image.
+    /// Runs both passes at the G-buffer's size, with the shader's `override` constants;
+    /// returns the resolved image.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn run(
         &mut self,
         gpu: &GpuContext,
@@ -52,6 +54,7 @@ impl GatherResolve {
         image: &GpuImage,
         uniform: &[u8],
         extra: &[Bind<'_>],
+        constants: &[(&str, u32)],
     ) -> Result<GpuImage, NodeError> {
         let format = gpu.formats().hdr;
         let gathered = GpuImage::target(gpu, label, g.width(), g.height(), format);
@@ -66,7 +69,8 @@ impl GatherResolve {
                 Bind::Texture(input),
             ];
             binds.extend_from_slice(extra);
-            pass.draw(gpu, &binds, &[&target.view], &[format]).map_err(|e| NodeError::msg(e.to_string()))?;
+            pass.draw_specialized(gpu, &binds, &[&target.view], &[format], constants)
+                .map_err(|e| NodeError::msg(e.to_string()))?;
         }
         Ok(out)
     }

@@ -121,7 +121,7 @@ impl Node for SsrNode {
             loops: [16, 4, 16, 0],
         };
         let passes = self.passes.get_or_insert_with(|| GatherResolve::new("ssr.wgsl"));
-        let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &[Bind::Texture(&env.cube)])?;
+        let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &[Bind::Texture(&env.cube)], &[])?;
         cx.set("image", Arc::new(out));
         Ok(())
     }

@@ -17,7 +17,8 @@ struct Bounce {
     // xy: G-buffer size in pixels.
     size: vec4<f32>,
     radius: f32,
-    samples: f32,
+    // Unused (the sample count is SAMPLES).
+    _unused: f32,
     strength: f32,
     // Of the resolve's edge test (world units).
     plane_tolerance: f32,
@@ -38,6 +39,9 @@ struct Bounce {
 
 // Steps per direction.
 const STEPS: u32 = 8u;
+// Directions per pixel (the node's `samples`): a pipeline constant, since lavapipe compiles a
+// shader again on every draw whose loop bound reads a uniform.
+override SAMPLES: u32 = 8u;
 
 @fragment
 fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
@@ -49,7 +53,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let p = view_pos(vec2<f32>(q) + 0.5, d);
     let n = view_normal(q);
     let frame = basis(n);
-    let count = u32(u.samples);
+    let count = SAMPLES;
     let b = pattern(q);
     let total = f32(count * 16u);
     let bias = 0.02 * u.radius;

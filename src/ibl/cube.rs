@@ -93,6 +93,18 @@ impl CubeImage {
         CubeImage { size, texels }
     }
 
+    /// [`CubeImage::from_fn`] with the rows computed on every core (the same texels).
+    pub fn from_fn_parallel(size: usize, f: impl Fn(usize, usize, usize) -> Vec4 + Sync) -> CubeImage {
+        let mut texels = vec![Vec4::ZERO; 6 * size * size];
+        crate::core::parallel::for_each_chunk(&mut texels, size.max(1), 0, |row, out| {
+            let (face, y) = (row / size, row % size);
+            for (x, t) in out.iter_mut().enumerate() {
+                *t = f(face, x, y);
+            }
+        });
+        CubeImage { size, texels }
+    }
+
     pub fn index(&self, face: usize, x: usize, y: usize) -> usize {
         (face * self.size + y) * self.size + x
     }
@@ -233,7 +245,7 @@ pub const SUPERSAMPLE: usize = 4;
 /// bilinear lookups spread evenly over it, times `intensity`.
 pub fn cube_from_equirect(eq: &EquirectImage, size: usize, rotation_deg: f32, intensity: f32) -> CubeImage {
     let n = SUPERSAMPLE;
-    CubeImage::from_fn(size, |face, x, y| {
+    CubeImage::from_fn_parallel(size, |face, x, y| {
         let mut sum = Vec3::ZERO;
         for j in 0..n {
             for i in 0..n {
@@ -249,6 +261,12 @@ pub fn cube_from_equirect(eq: &EquirectImage, size: usize, rotation_deg: f32, in
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_parallel_build_gives_the_serial_texels() {
+        let f = |face: usize, x: usize, y: usize| Vec4::new(face as f32, x as f32, y as f32, (x * y) as f32);
+        assert_eq!(CubeImage::from_fn_parallel(5, f), CubeImage::from_fn(5, f));
+    }
 
     #[test]
     fn face_dir_and_dir_to_face_are_inverse() {

@@ -332,6 +332,21 @@ struct LobeModel {
     responses: Vec<Vec<f32>>,
     /// Per level: the response's integral over the sphere.
     integrals: Vec<f64>,
+    /// Per level l: the texels that can hold the peak of a blend of levels l and l + 1 (see
+    /// [`peak_candidates`]); the bisections of [`LobeModel::level_for_volume`] ask for
+    /// hundreds of peaks.
+    peak_candidates: Vec<Vec<u32>>,
+}
+
+/// The texels where (1 - t) a + t b can peak for some t in [0, 1]: with a, b >= 0, a texel
+/// below half of both maxima stays below max((1 - t) max a, t max b), which the argmax of a
+/// (or of b) reaches. Every texel where a response is negative.
+fn peak_candidates(a: &[f32], b: &[f32]) -> Vec<u32> {
+    if a.iter().chain(b).any(|&v| v < 0.0) {
+        return (0..a.len() as u32).collect();
+    }
+    let (ha, hb) = (a.iter().fold(0.0f32, |m, &v| m.max(v)) * 0.5, b.iter().fold(0.0f32, |m, &v| m.max(v)) * 0.5);
+    (0..a.len()).filter(|&i| a[i] >= ha || b[i] >= hb).map(|i| i as u32).collect()
 }
 
 impl LobeModel {
@@ -357,7 +372,10 @@ impl LobeModel {
             chain.iter().map(|level| dirs.iter().map(|&d| level.sample(d).x).collect()).collect();
         let integrals =
             responses.iter().map(|r| r.iter().zip(&omegas).map(|(&v, &w)| v as f64 * w as f64).sum()).collect();
-        LobeModel { omegas, cosines, responses, integrals }
+        let top = responses.len() - 1;
+        let peak_candidates =
+            (0..top.max(1)).map(|l| peak_candidates(&responses[l], &responses[(l + 1).min(top)])).collect();
+        LobeModel { omegas, cosines, responses, integrals, peak_candidates }
     }
 
     fn top(&self) -> usize {
@@ -381,9 +399,9 @@ impl LobeModel {
     }
 
     fn peak(&self, level: f32) -> f32 {
-        let mut peak = 0.0f32;
-        self.for_each_response(level, |_, r| peak = peak.max(r));
-        peak
+        let (l, l1, t) = self.bracket(level);
+        let (a, b) = (&self.responses[l], &self.responses[l1]);
+        self.peak_candidates[l].iter().map(|&i| (1.0 - t) * a[i as usize] + t * b[i as usize]).fold(0.0, f32::max)
     }
 
     fn integral(&self, level: f32) -> f64 {
@@ -592,6 +610,22 @@ mod tests {
     fn integral(c: &CubeImage) -> f64 {
         let s = c.size;
         c.texels.iter().enumerate().map(|(i, t)| t.x as f64 * texel_solid_angle(s, i % s, (i / s) % s) as f64).sum()
+    }
+
+    #[test]
+    fn the_peak_of_a_level_blend_is_the_brute_force_maximum() {
+        for kernel in [Kernel::Phong, Kernel::SqrtCosine, Kernel::Box] {
+            let m = lobe_model(kernel, 16);
+            for i in 0..=40 {
+                let level = i as f32 * m.top() as f32 / 40.0;
+                let mut brute = 0.0f32;
+                m.for_each_response(level, |_, r| brute = brute.max(r));
+                assert_eq!(m.peak(level), brute, "{kernel:?} at level {level}");
+            }
+        }
+        // A blend can peak where neither level does.
+        assert_eq!(peak_candidates(&[1.0, 0.6, 0.0], &[0.0, 0.6, 1.0]), vec![0, 1, 2]);
+        assert_eq!(peak_candidates(&[1.0, 0.4, 0.0], &[0.0, 0.4, 1.0]), vec![0, 2]);
     }
 
     #[test]

@@ -148,3 +148,24 @@ fn image_write_exr_holds_the_pngs_pixels_as_floats() {
     let differing = exr.rgba.iter().zip(png.as_raw()).filter(|(f, b)| (*f * 255.0).round() as u8 != **b).count();
     assert_eq!(differing, 0, "{differing} channels of the EXR do not match the PNG");
 }
+
+/// A ClothSim warm-up is simulated once per process: rendering the graph again starts from
+/// the kept state (no steps) and gives the same bytes as the first, simulated, render.
+#[test]
+fn a_cloth_warm_up_is_simulated_once_and_then_reused_exactly() {
+    let graph = root().join("graphs/placements.ron");
+    // A seed no other test uses: the first render simulates.
+    let sets = ["cloth.seed=424242", "cloth.triangles=400", "cloth.warmup=1"];
+    let (a, b) = (out_dir("warm-state-a"), out_dir("warm-state-b"));
+    let first = render_graph(&graph, &a, (0, 0), (48, 48), &sets, &[]).unwrap();
+    let again = render_graph(&graph, &b, (0, 0), (48, 48), &sets, &[]).unwrap();
+    let steps = |s: &werkstatt::app::render::Stats| {
+        serde_json::to_value(s).unwrap()["frames"][0]["nodes"]["cloth"]["counts"]["steps_simulated"].as_u64()
+    };
+    assert_eq!(steps(&first), Some(60), "one second of warm-up at 60 steps per second");
+    assert_eq!(steps(&again), Some(0), "the second render starts from the kept state");
+    assert!(!first.files.is_empty() && first.files == again.files);
+    for f in &first.files {
+        assert!(std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(), "{f} differs");
+    }
+}

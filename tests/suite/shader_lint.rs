@@ -19,7 +19,6 @@ const ALLOWED: &[(&str, &str)] = &[
     ("tessellate.wgsl", "compute; inlining does not halve it, measured equal cold and warm (fig5_13..15)"),
     ("pem_phong.wgsl", "PEM builds: once per probe or kernel change"),
     ("vsm_blur.wgsl", "inlining the radius unrolls the loop (no halving); the atlas measured equal cold and warm"),
-    ("bounce.wgsl", "measured recompiling (graphs/bounce.ron): to be made constants"),
     ("ssr.wgsl", "measured recompiling (graphs/ssr.ron): to be made constants"),
     ("btf_shading.wgsl", "measured recompiling (graphs/btf_tablecloth.ron): to be made constants"),
 ];
