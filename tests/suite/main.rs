@@ -1,20 +1,15 @@
-//! The integration tests, as one test binary: every file of tests/ linked against wgpu (and
-//! egui) on its own dominated the build time of `cargo test`, so they are modules of this crate
-//! instead. Tests of different modules run on parallel threads of one process: a test must not
+//! The integration tests of the engine, the command line, the editor and the file formats, as
+//! one test binary; tests/suite/techniques.rs is the other, with the node families'
+//! techniques (the two build in parallel). Every file of tests/ linked against wgpu (and egui)
+//! on its own dominated the build time of `cargo test`, so they are modules of these two
+//! crates instead. Tests of different modules run on parallel threads of one process: a test must not
 //! change process-wide state (the environment, the current folder) and writes only into
 //! folders named after itself (see `common::out_dir`).
 
 mod common;
 
 mod alembic;
-mod avatar;
-mod bounce;
-mod btf;
-mod btf_render;
 mod cli;
-mod cloth;
-mod cloth_collision;
-mod cuboid;
 mod draco;
 #[cfg(feature = "editor")]
 mod editor;
@@ -22,15 +17,11 @@ mod editor;
 mod editor_shaders;
 mod evaluation;
 mod export_kinds;
-mod fidelity;
-mod figures;
 mod formats;
-mod garment;
 mod gl_backend;
 mod gpu_engine;
 mod graph_errors;
 mod graph_props;
-mod ibl;
 mod live_link;
 mod loaders;
 mod mesh;
@@ -40,18 +31,11 @@ mod placing;
 mod regression;
 mod render;
 mod roundtrip;
-mod scene_drawer;
 mod shader_lint;
-mod shadow;
-mod ssao;
-mod ssr;
-mod tessellation;
 mod usd;
-mod warping;
-mod woven;
 
 /// Cargo.toml sets `autotests = false`, so a test file put directly under tests/ would not be
-/// built at all, and one in tests/suite/ only when it is declared above.
+/// built at all, and one in tests/suite/ only when it is declared above or in techniques.rs.
 #[test]
 fn every_test_file_is_a_module_of_this_suite() {
     let tests = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests");
@@ -69,12 +53,15 @@ fn every_test_file_is_a_module_of_this_suite() {
         stray.is_empty(),
         "{stray:?} in tests/ would not be built: move them to tests/suite/ and declare them there"
     );
-    let main = std::fs::read_to_string(tests.join("suite/main.rs")).unwrap();
+    let roots = ["main.rs", "techniques.rs"];
+    let declared: Vec<String> =
+        roots.iter().map(|r| std::fs::read_to_string(tests.join("suite").join(r)).unwrap()).collect();
     for name in rust_files(&tests.join("suite")) {
         let module = name.trim_end_matches(".rs");
+        let count = declared.iter().filter(|d| d.lines().any(|l| l.trim() == format!("mod {module};"))).count();
         assert!(
-            name == "main.rs" || main.lines().any(|l| l.trim() == format!("mod {module};")),
-            "tests/suite/{name} is not declared in tests/suite/main.rs, so it is not built"
+            roots.contains(&name.as_str()) || count == 1 || (module == "common" && count == 2),
+            "tests/suite/{name} is declared in {count} of tests/suite/main.rs and techniques.rs: it must be in one"
         );
     }
 }
