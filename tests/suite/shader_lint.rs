@@ -21,7 +21,6 @@ const ALLOWED: &[(&str, &str)] = &[
     ("vsm_blur.wgsl", "inlining the radius unrolls the loop (no halving); the atlas measured equal cold and warm"),
     ("bounce.wgsl", "measured recompiling (graphs/bounce.ron): to be made constants"),
     ("ssr.wgsl", "measured recompiling (graphs/ssr.ron): to be made constants"),
-    ("btf_shading.wgsl", "measured recompiling (graphs/btf_tablecloth.ron): to be made constants"),
 ];
 
 /// What a condition reads.
