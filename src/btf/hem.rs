@@ -310,8 +310,7 @@ impl WeightTable {
     /// `U` of eq. 12 from the light sums `g` ([`Visibility::light_sums`]): per vertex, channel,
     /// view slot j and component k, `gamma*_kj = sum_i g_i P_ikj`, a product of the (vertices x
     /// 3) x n matrix of light sums with the table. Blocked so that the table is read once per
-    /// [`BLOCK_ROWS`] rows and each tile of output rows stays in the first-level cache; four
-    /// lights are added per pass over a tile.
+    /// [`BLOCK_ROWS`] rows and each tile of output rows stays in the first-level cache.
     pub fn weight_sets(&self, g: &[f32], threads: usize) -> Vec<f32> {
         let (n, row) = (self.lights, self.views * self.per_slot);
         let rows = g.len() / n.max(1);
@@ -320,25 +319,8 @@ impl WeightTable {
             let g = &g[block * BLOCK_ROWS * n..][..out.len() / row * n];
             for start in (0..row).step_by(TILE) {
                 let width = TILE.min(row - start);
-                let p = |i: usize| &self.coeffs[i * row + start..][..width];
-                // Four lights per pass over the output tile: a quarter of the loads and stores
-                // of the output per multiply-add (the loop is bound by them, not by arithmetic).
-                let quads = n / 4 * 4;
-                for i in (0..quads).step_by(4) {
-                    let (p0, p1, p2, p3) = (p(i), p(i + 1), p(i + 2), p(i + 3));
-                    for (r, out) in out.chunks_exact_mut(row).enumerate() {
-                        let [g0, g1, g2, g3] = [0, 1, 2, 3].map(|q| g[r * n + i + q]);
-                        if [g0, g1, g2, g3] == [0.0; 4] {
-                            continue;
-                        }
-                        let terms = p0.iter().zip(p1).zip(p2).zip(p3);
-                        for (x, (((&a, &b), &c), &d)) in out[start..][..width].iter_mut().zip(terms) {
-                            *x += g0 * a + g1 * b + g2 * c + g3 * d;
-                        }
-                    }
-                }
-                for i in quads..n {
-                    let p = p(i);
+                for i in 0..n {
+                    let p = &self.coeffs[i * row + start..][..width];
                     for (r, out) in out.chunks_exact_mut(row).enumerate() {
                         let gi = g[r * n + i];
                         if gi != 0.0 {
