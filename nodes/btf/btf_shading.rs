@@ -3,10 +3,12 @@
 use std::sync::Arc;
 
 use crate::btf::gpu::{GpuBtf, shadow_ramp};
+use crate::btf::hem::{Visibility, mesh_frames};
 use crate::core::node::prelude::*;
-use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuImage, SamplerKind};
-use crate::ibl::gpu::Lights;
-use crate::render::scene::GBuffer;
+use crate::gpu::pass::Bindings;
+use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
+use crate::ibl::gpu::{EnvMap, Lights};
+use crate::render::scene::{DrawItem, GBuffer};
 
 /// Texels of eq. 6's 1D texture (the paper's 1024).
 const RAMP_SIZE: usize = 1024;
@@ -14,7 +16,7 @@ const RAMP_SIZE: usize = 1024;
 pub static BTF_SHADING: NodeSpec = NodeSpec {
     kind: "BtfShading",
     category: Category::Lighting,
-    doc: "Deferred BTF shading (Sattler et al. 2003) of the pixels whose material's btf_id equals material_id: view and lights in the tangent frame of the item's UVs (the G-buffer's surface target), the 4 nearest view slots (eq. 5) and per light the 4 nearest light directions (eq. 3) with bilinear ring weights, coefficients blended before one pass over the mean and eigentextures (eqs. 3-4), times exposure (eq. 11). Lights: a directional sun with eq. 6's smooth shadow boundary (alpha and a blurred 1D texture), and the directional lights of a MedianCut (environment light through its median-cut lights, without visibility). The weave tiles `tiling` times per UV unit, turned by `rotation`. Other pixels show `base` (or the background colour).",
+    doc: "Deferred BTF shading (Sattler et al. 2003) of the pixels whose material's btf_id equals material_id: view and lights in the tangent frame of the item's UVs (the G-buffer's surface target), the 4 nearest view slots (eq. 5) and per light the 4 nearest light directions (eq. 3) with bilinear ring weights, coefficients blended before one pass over the mean and eigentextures (eqs. 3-4), times exposure (eq. 11). Lights: a directional sun with eq. 6's smooth shadow boundary (alpha and a blurred 1D texture), the directional lights of a MedianCut (environment light through its median-cut lights, without visibility), and an environment by the paper's per-vertex visibility and weight sets (HEM, eqs. 10-12) on the items of `scene`. The weave tiles `tiling` times per UV unit, turned by `rotation`. Other pixels show `base` (or the background colour).",
     inputs: &[
         PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer to shade."),
         PortSpec::required("btf", PortType::Btf, "The compressed BTF (Btf)."),
@@ -27,6 +29,16 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
             "lights",
             PortType::Lights,
             "Directional lights of an environment (MedianCut), each through the BTF; no visibility.",
+        ),
+        PortSpec::optional(
+            "scene",
+            PortType::Scene,
+            "HEM: the items lit by `environment` through per-vertex visibility and weight sets (eq. 12): those whose material's btf_id is material_id, each with its model matrix (a cuboid transform is not applied). Rebuilt when a mesh changes.",
+        ),
+        PortSpec::optional(
+            "environment",
+            PortType::Environment,
+            "HEM: the probe lighting `scene`'s items (its level 0 texels); a new one recomputes only the weight sets.",
         ),
     ],
     outputs: &[PortSpec::output("image", PortType::Texture, "Linear HDR radiance.")],
@@ -75,7 +87,12 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
         ParamSpec::new(
             "environment_intensity",
             ParamKind::Float { default: 1.0, min: 0.0, max: 1e5 },
-            "Scales the lights of the `lights` input.",
+            "Scales the lights of the `lights` input and the `environment`.",
+        ),
+        ParamSpec::new(
+            "hemicube",
+            ParamKind::Int { default: 16, min: 2, max: 128 },
+            "HEM: resolution of the per-vertex visibility hemicubes (3 res^2 rays per vertex; even).",
         ),
         ParamSpec::new(
             "background",
@@ -113,6 +130,9 @@ struct BtfShadingNode {
     lights: BufferRing,
     /// Eq. 6's texture and the blur it was made with.
     ramp: Option<(f32, GpuImage)>,
+    /// The HEM's per-vertex data, and the bindings of its triangle-id pass.
+    hem: Option<Hem>,
+    ids_pass: Bindings,
 }
 
 impl Default for BtfShadingNode {
@@ -121,7 +141,157 @@ impl Default for BtfShadingNode {
             pass: FullscreenPass::new("btf_shading.wgsl"),
             lights: BufferRing::new("btf lights", wgpu::BufferUsages::STORAGE),
             ramp: None,
+            hem: None,
+            ids_pass: Bindings::new(wgpu::ShaderStages::VERTEX),
         }
+    }
+}
+
+/// Environment light by the paper's HEM for the items of `scene`: visibility per vertex (kept
+/// while the meshes, their transforms, the rotation and the hemicube stay), and the weight sets
+/// U of eq. 12 on the GPU (recomputed for a new environment or BTF).
+struct Hem {
+    visibility_key: u64,
+    visibility: Vec<Visibility>,
+    sets_key: u64,
+    /// Per triangle corner: its world position (xyz, 1), and its vertex in `sets`.
+    corners: wgpu::Buffer,
+    vertices: wgpu::Buffer,
+    triangles: u32,
+    /// U of every vertex: view slot, component, channel (f32).
+    sets: wgpu::Buffer,
+}
+
+/// shaders/btf/btf_hem_ids.wgsl `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct IdParams {
+    view_proj: [[f32; 4]; 4],
+}
+
+fn hash_of(words: impl IntoIterator<Item = u64>) -> u64 {
+    let bytes: Vec<u8> = words.into_iter().flat_map(u64::to_le_bytes).collect();
+    crate::core::hash::fnv1a(&bytes)
+}
+
+impl BtfShadingNode {
+    /// Brings the HEM data up to date for `items` under `env` (CPU: visibility rays, light sums,
+    /// eq. 12's product; all cores).
+    fn update_hem(
+        &mut self,
+        gpu: &GpuContext,
+        items: &[&DrawItem],
+        env: &Arc<EnvMap>,
+        btf: &Arc<GpuBtf>,
+        rotation: f32,
+        hemicube: usize,
+    ) -> Result<(), NodeError> {
+        if !hemicube.is_multiple_of(2) {
+            return Err(NodeError::msg(format!("parameter \"hemicube\" must be even, not {hemicube}")));
+        }
+        let geometry = items.iter().flat_map(|item| {
+            let model = item.model.to_cols_array().map(|x| u64::from(x.to_bits()));
+            std::iter::once(Arc::as_ptr(&item.mesh) as u64).chain(model)
+        });
+        let visibility_key = hash_of(geometry.chain([
+            u64::from(rotation.to_bits()),
+            hemicube as u64,
+            env.size() as u64,
+            btf.sampling.len() as u64,
+        ]));
+        let sets_key = hash_of([visibility_key, Arc::as_ptr(env) as u64, Arc::as_ptr(btf) as u64]);
+        if self.hem.as_ref().is_some_and(|h| h.sets_key == sets_key) {
+            return Ok(());
+        }
+        let failed = |e: anyhow::Error| NodeError::msg(format!("environment light (HEM): {e:#}"));
+        let visibility = match self.hem.take() {
+            Some(h) if h.visibility_key == visibility_key => h.visibility,
+            _ => items
+                .iter()
+                .map(|item| {
+                    let (positions, frames) = mesh_frames(&item.mesh, item.model, f64::from(rotation));
+                    Visibility::compute(&positions, &frames, &item.mesh.indices, &btf.sampling, hemicube, env.size(), 0)
+                })
+                .collect::<anyhow::Result<_>>()
+                .map_err(failed)?,
+        };
+        let (mut corners, mut vertices, mut sets) = (Vec::new(), Vec::new(), Vec::new());
+        let set_len = btf.table.set_len();
+        for (item, vis) in items.iter().zip(&visibility) {
+            let first = (sets.len() / set_len) as u32;
+            let g = vis.light_sums(&env.texels, 0).map_err(failed)?;
+            // Channels innermost: the values a pixel reads per corner and view slot lie together.
+            let row = btf.table.views * btf.table.per_slot;
+            for set in btf.table.weight_sets(&g, 0).chunks_exact(set_len) {
+                sets.extend((0..row).flat_map(|jk| [set[jk], set[row + jk], set[2 * row + jk]]));
+            }
+            for &i in &item.mesh.indices {
+                corners.push(item.model.transform_point3(item.mesh.positions[i as usize]).extend(1.0));
+                vertices.push(first + i);
+            }
+        }
+        let bytes = (sets.len() * 4) as u64;
+        let limit = gpu.limits.max_storage_buffer_binding_size;
+        if bytes > limit {
+            return Err(NodeError::msg(format!(
+                "environment light (HEM): the weight sets of {} vertices take {bytes} bytes, more than the device's storage binding limit of {limit}: fewer vertices or components",
+                sets.len() / set_len
+            )));
+        }
+        let triangles = (vertices.len() / 3) as u32;
+        // A storage binding must not be empty.
+        corners.resize(corners.len().max(1), glam::Vec4::ZERO);
+        vertices.resize(vertices.len().max(1), 0);
+        sets.resize(sets.len().max(1), 0.0);
+        let storage = wgpu::BufferUsages::STORAGE;
+        self.hem = Some(Hem {
+            visibility_key,
+            visibility,
+            sets_key,
+            corners: gpu.create_buffer_init("btf hem corners", bytemuck::cast_slice(&corners), storage),
+            vertices: gpu.create_buffer_init("btf hem vertices", bytemuck::cast_slice(&vertices), storage),
+            triangles,
+            sets: gpu.create_buffer_init("btf hem sets", bytemuck::cast_slice(&sets), storage),
+        });
+        Ok(())
+    }
+
+    /// Per pixel, the HEM triangle it shows and its barycentrics (shaders/btf/btf_hem_ids.wgsl).
+    fn draw_ids(&mut self, gpu: &GpuContext, g: &GBuffer) -> Result<GpuImage, NodeError> {
+        let hem = self.hem.as_ref().expect("updated before");
+        let (w, h) = (g.width(), g.height());
+        let ids = GpuImage::target(gpu, "btf hem ids", w, h, wgpu::TextureFormat::Rgba32Uint);
+        let depth = GpuImage::target(gpu, "btf hem depth", w, h, gpu.formats().depth);
+        let params = IdParams { view_proj: g.view.view_proj.to_cols_array_2d() };
+        let binds = [Bind::Uniform(bytemuck::bytes_of(&params)), Bind::Storage(&hem.corners)];
+        let layout = self.ids_pass.layout(gpu, &binds);
+        let formats = [wgpu::TextureFormat::Rgba32Uint];
+        let pipeline = gpu
+            .render_pipeline(&RenderPipelineDesc {
+                depth: Some((gpu.formats().depth, wgpu::CompareFunction::Less)),
+                ..RenderPipelineDesc::new("btf_hem_ids.wgsl", &[Some(&layout)], &[], &formats)
+            })
+            .map_err(|e| NodeError::msg(e.to_string()))?;
+        let group = self.ids_pass.bind_group(gpu, &layout, &binds);
+        let vertices = 3 * hem.triangles;
+        gpu.record(|enc| {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("btf hem ids"),
+                color_attachments: &[ids.clear_attachment()],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth.view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: gpu.pass_timestamps(),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.draw(0..vertices, 0..1);
+        });
+        Ok(ids)
     }
 }
 
@@ -132,6 +302,8 @@ impl Node for BtfShadingNode {
         let btf: Arc<GpuBtf> = cx.input("btf")?;
         let base: Option<Arc<GpuImage>> = cx.optional("base");
         let env: Option<Arc<Lights>> = cx.optional("lights");
+        let hem_scene: Option<Arc<Vec<DrawItem>>> = cx.optional("scene");
+        let probe: Option<Arc<EnvMap>> = cx.optional("environment");
         let (w, h) = (g.width(), g.height());
         if let Some(b) = &base
             && (b.width, b.height) != (w, h)
@@ -175,21 +347,39 @@ impl Node for BtfShadingNode {
             );
             self.ramp = Some((blur, image));
         }
-        let (_, ramp) = self.ramp.as_ref().expect("made above");
         let rotation = cx.f32("rotation").to_radians();
+        let material_id = cx.int("material_id");
+        let ids = match (&hem_scene, &probe) {
+            (Some(scene), Some(probe)) => {
+                let items: Vec<&DrawItem> =
+                    scene.iter().filter(|item| i64::from(item.material.btf_id) == material_id).collect();
+                if items.is_empty() {
+                    return Err(NodeError::msg(format!(
+                        "no item of input \"scene\" has a material with btf_id {material_id} (parameter \"material_id\")"
+                    )));
+                }
+                self.update_hem(gpu, &items, probe, &btf, rotation, cx.int("hemicube") as usize)?;
+                Some(self.draw_ids(gpu, &g)?)
+            }
+            (None, None) => {
+                self.hem = None;
+                None
+            }
+            _ => {
+                return Err(NodeError::msg(
+                    "inputs \"scene\" and \"environment\" light by the environment together (HEM): connect both or neither",
+                ));
+            }
+        };
+        let (_, ramp) = self.ramp.as_ref().expect("made above");
         let background = cx.vec3("background");
         let params = Params {
             inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
             eye: g.view.eye.extend(1.0).to_array(),
-            size: [w as f32, h as f32, count as f32, cx.int("material_id") as f32],
-            btf: [
-                btf.sampling.len() as f32,
-                btf.layers_per_slot() as f32,
-                btf.sampling.rings.len() as f32,
-                cx.f32("exposure"),
-            ],
+            size: [w as f32, h as f32, scale, material_id as f32],
+            btf: [0.0, 0.0, 0.0, cx.f32("exposure")],
             tiling: [cx.f32("tiling"), rotation.cos(), rotation.sin(), cx.f32("alpha").to_radians()],
-            background: [background.x, background.y, background.z, if base.is_some() { 1.0 } else { 0.0 }],
+            background: background.extend(0.0).to_array(),
             rings: btf.rings_uniform(),
         };
         let light_buffer = self.lights.write(gpu, bytemuck::cast_slice(&lights)).clone();
@@ -207,8 +397,20 @@ impl Node for BtfShadingNode {
             Bind::Sampler(SamplerKind::LinearClamp),
             Bind::Storage(&btf.coeffs),
             Bind::Storage(&light_buffer),
+            // Unbound: the surface and the light buffer stand in (never read).
+            Bind::Texture(ids.as_ref().unwrap_or(&g.surface)),
+            Bind::Storage(self.hem.as_ref().map_or(&light_buffer, |h| &h.vertices)),
+            Bind::Storage(self.hem.as_ref().map_or(&light_buffer, |h| &h.sets)),
         ];
-        self.pass.draw(gpu, &binds, &[&out.view], &[out.format])?;
+        let constants = [
+            ("DIRECTIONS", btf.sampling.len() as u32),
+            ("PER_SLOT", btf.layers_per_slot() as u32),
+            ("RINGS", btf.sampling.rings.len() as u32),
+            ("LIGHTS", count as u32),
+            ("BASE", u32::from(base.is_some())),
+            ("HEM", u32::from(ids.is_some())),
+        ];
+        self.pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &constants)?;
         cx.count("lights", count);
         cx.set("image", Arc::new(out));
         Ok(())

@@ -5,6 +5,8 @@
 // `Sampling::weights` (src/btf/directions.rs) does, line for line below. Per view slot the
 // coefficients are blended over lights first (gamma_k, RGB with the lights' colours: eqs. 3, 10),
 // then the slot's mean and eigentextures are summed once (eq. 4); exposure f (eq. 11).
+// Environment light by the paper's per-vertex weight sets (HEM, eq. 12) where HEM is set: the
+// pixel's triangle and barycentrics (btf_hem_ids.wgsl) interpolate the corners' gamma*_kj.
 
 // #include "fullscreen.wgsl"
 // #include "surface.wgsl"
@@ -15,16 +17,28 @@ const MAX_RINGS: u32 = 16u;
 const DEG: f32 = 57.29577951308232;
 const PI: f32 = 3.14159265358979;
 
+// Fixed for many frames, so pipeline constants rather than uniforms (tests/suite/shader_lint.rs).
+// Directions of the sampling (views = lights), layers per view slot (c + 1), rings.
+override DIRECTIONS: u32 = 1u;
+override PER_SLOT: u32 = 1u;
+override RINGS: u32 = 1u;
+// The directional lights in `lights`.
+override LIGHTS: u32 = 0u;
+// Whether `base_image` is bound (else the background colour).
+override BASE: bool = false;
+// Whether the per-vertex weight sets (hem_ids, hem_corners, hem_sets) are bound.
+override HEM: bool = false;
+
 struct Params {
     inv_view_proj: mat4x4<f32>,
     eye: vec4<f32>,
-    // width, height, light count, material id
+    // width, height, environment intensity (HEM), material id
     size: vec4<f32>,
-    // directions n, layers per slot (c + 1), rings, exposure
+    // unused (the constants above), exposure in w
     btf: vec4<f32>,
     // tiles per UV unit, cos(rotation), sin(rotation), alpha of eq. 6 (radians)
     tiling: vec4<f32>,
-    // rgb: where nothing is shaded and no base image is bound; w: 1 if a base image is bound
+    // rgb: where nothing is shaded and no base image is bound
     background: vec4<f32>,
     // theta (degrees), count, first direction, 0
     rings: array<vec4<f32>, MAX_RINGS>,
@@ -48,6 +62,11 @@ struct Light {
 @group(0) @binding(8) var ramp_sampler: sampler;
 @group(0) @binding(9) var<storage, read> coeffs: array<f32>;
 @group(0) @binding(10) var<storage, read> lights: array<Light>;
+// HEM: per pixel the triangle (+1; 0: none) and the bits of its 2nd and 3rd barycentrics; per
+// triangle corner its vertex; per vertex its weight set U (view slot, component, channel).
+@group(0) @binding(11) var hem_ids: texture_2d<u32>;
+@group(0) @binding(12) var<storage, read> hem_corners: array<u32>;
+@group(0) @binding(13) var<storage, read> hem_sets: array<f32>;
 
 struct RingWeights {
     index: vec2<u32>,
@@ -80,7 +99,7 @@ fn on_ring(i: u32, phi: f32) -> RingWeights {
 // Sampling::weights: theta (clamped to the rings) bracketed between rings a and b, linear t;
 // on each ring linear in phi; weights (1-t)(1-s_a), (1-t)s_a, t(1-s_b), t s_b.
 fn direction_weights(theta_in: f32, phi: f32) -> Weights {
-    let last = u32(params.btf.z) - 1u;
+    let last = RINGS - 1u;
     let theta = clamp(theta_in, params.rings[0].x, params.rings[last].x);
     var b = last;
     for (var r = 0u; r <= last; r++) {
@@ -115,7 +134,7 @@ fn to_direction(v: vec3<f32>) -> vec2<f32> {
 // by cos(theta_i) / cos(theta_last): the data contain cos(theta_i), which this carries on to 0
 // at the horizon instead of a jump there. Below the horizon: 0.
 fn grazing(cos_l: f32) -> f32 {
-    let c_last = cos(params.rings[u32(params.btf.z) - 1u].x / DEG);
+    let c_last = cos(params.rings[RINGS - 1u].x / DEG);
     if cos_l <= 0.0 {
         return 0.0;
     }
@@ -139,7 +158,7 @@ fn smooth_shadow(cos_l: f32) -> f32 {
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
     var base = vec4<f32>(params.background.rgb, 1.0);
-    if params.background.w > 0.5 {
+    if BASE {
         base = textureLoad(base_image, px, 0);
     }
     let depth = textureLoad(g_depth, px, 0).r;
@@ -166,10 +185,19 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
 
     let vd = to_direction(vec3<f32>(dot(v, fx), dot(v, fy), dot(v, n)));
     let wv = direction_weights(vd.x, vd.y);
-    let directions = u32(params.btf.x);
-    let per_slot = u32(params.btf.y);
-    let light_count = u32(params.size.z);
     var radiance = vec3<f32>(0.0);
+    // HEM: the pixel's triangle corners and barycentric weights.
+    var hem_vertex = vec3<u32>(0u);
+    var hem_weight = vec3<f32>(0.0);
+    if HEM {
+        let id = textureLoad(hem_ids, px, 0);
+        if id.x > 0u {
+            let b = vec2<f32>(bitcast<f32>(id.y), bitcast<f32>(id.z));
+            let corner = 3u * (id.x - 1u);
+            hem_vertex = vec3<u32>(hem_corners[corner], hem_corners[corner + 1u], hem_corners[corner + 2u]);
+            hem_weight = vec3<f32>(1.0 - b.x - b.y, b.x, b.y) * params.size.z;
+        }
+    }
     for (var m = 0u; m < 4u; m++) {
         let wm = wv.weight[m];
         if wm <= 0.0 {
@@ -177,7 +205,17 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         }
         let j = wv.index[m];
         var gamma: array<vec3<f32>, MAX_LAYERS>;
-        for (var li = 0u; li < light_count; li++) {
+        if HEM {
+            // Eq. 12's gamma*_kj of the corners, interpolated (all zero where no triangle).
+            for (var c = 0u; c < 3u; c++) {
+                let at = 3u * PER_SLOT * (hem_vertex[c] * DIRECTIONS + j);
+                for (var k = 0u; k < PER_SLOT; k++) {
+                    let o = at + 3u * k;
+                    gamma[k] += hem_weight[c] * vec3<f32>(hem_sets[o], hem_sets[o + 1u], hem_sets[o + 2u]);
+                }
+            }
+        }
+        for (var li = 0u; li < LIGHTS; li++) {
             let light = lights[li];
             let l = light.dir.xyz;
             let cos_l = dot(n, l);
@@ -195,14 +233,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
                 if wq <= 0.0 {
                     continue;
                 }
-                let row = (j * directions + wl.index[q]) * per_slot;
-                for (var k = 0u; k < per_slot; k++) {
+                let row = (j * DIRECTIONS + wl.index[q]) * PER_SLOT;
+                for (var k = 0u; k < PER_SLOT; k++) {
                     gamma[k] += scale * (wq * coeffs[row + k]);
                 }
             }
         }
-        for (var k = 0u; k < per_slot; k++) {
-            let layer = i32(j * per_slot + k);
+        for (var k = 0u; k < PER_SLOT; k++) {
+            let layer = i32(j * PER_SLOT + k);
             radiance += wm * gamma[k] * textureSampleLevel(btf_images, btf_sampler, tex, layer, 0.0).rgb;
         }
     }

@@ -61,7 +61,7 @@ pub fn idle_overhead(nodes: usize, frames: usize) -> anyhow::Result<IdleOverhead
 }
 
 /// One untimed run of `work` (pipelines, uploads), then the median of `frames` timed ones, ms.
-fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
+pub(crate) fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
     work()?;
     let mut samples = Vec::new();
     for _ in 0..frames.max(1) {
@@ -290,7 +290,7 @@ pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
 
 /// Evaluates `frame` until nothing is pending (the light probe loads first), waiting for the
 /// GPU after each pass; a failed node or a load taking over 600 s is an error naming `what`.
-fn settle_frame(
+pub(crate) fn settle_frame(
     ev: &mut Evaluator,
     gpu: &crate::gpu::GpuContext,
     resources: &Resources,

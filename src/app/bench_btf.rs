@@ -258,3 +258,128 @@ const MIB: f64 = 1024.0 * 1024.0;
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
+
+/// One frame-rate row of Table 2 on this machine's GPU: a sphere of about `vertices` shaded
+/// by BtfShading under the sun alone (PLS) or under the forest probe through HEM, with the
+/// camera orbiting so that every frame draws the G-buffer and shades again.
+#[derive(Debug, Serialize)]
+pub struct FrameRow {
+    pub mesh: String,
+    pub vertices: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Median ms per frame (G-buffer, HEM triangle ids, BtfShading), and as frames per second.
+    pub pls_ms: f64,
+    pub pls_fps: f64,
+    pub hem_ms: f64,
+    pub hem_fps: f64,
+    /// The first HEM frame: visibility, light sums, U and its upload, then the frame.
+    pub hem_first_frame_ms: f64,
+    /// The paper's frame rates for the nearest mesh (PLS / HEM at 1280x960, Radeon 9700).
+    pub paper: &'static str,
+}
+
+impl MarkdownRow for FrameRow {
+    const HEADER: &'static str = "| mesh | vertices | size | PLS ms (fps) | HEM ms (fps) | first HEM frame ms | paper fps (PLS / HEM) |\n|---|---:|---|---:|---:|---:|---|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {}x{} | {:.0} ({:.2}) | {:.0} ({:.2}) | {:.0} | {} |",
+            self.mesh,
+            self.vertices,
+            self.width,
+            self.height,
+            self.pls_ms,
+            self.pls_fps,
+            self.hem_ms,
+            self.hem_fps,
+            self.hem_first_frame_ms,
+            self.paper
+        )
+    }
+}
+
+/// The frame-rate graph: a UV sphere of `u x v` segments filling most of the view, a
+/// Lambertian striped BTF of the paper's 81 x 81 directions with c = 16 (16² texels), the sun,
+/// and with `hem` the forest probe (32² cube) through per-vertex weight sets (16² hemicubes).
+fn frame_graph(u: usize, v: usize, hem: bool) -> anyhow::Result<crate::core::graph::Graph> {
+    let probe = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/hdri/forest.hdr");
+    let (nodes, links) = if hem {
+        (
+            format!(
+                r#""env": (kind: "EnvironmentMap", params: {{ "path": {:?}, "size": 32 }}),"#,
+                probe.display().to_string()
+            ),
+            r#"("env.environment", "shade.environment"), ("draw.scene", "shade.scene"),"#,
+        )
+    } else {
+        (String::new(), "")
+    };
+    let text = format!(
+        r#"(version: 2, nodes: {{
+            "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.5, "segments_u": {u}, "segments_v": {v} }}),
+            "fabric": (kind: "Material", params: {{ "btf_id": 1 }}),
+            "draw": (kind: "Draw"),
+            "camera": (kind: "OrbitCamera", params: {{ "distance": 1.6, "pitch": 20.0, "fov": 40.0, "orbit_speed": 30.0 }}),
+            "gbuffer": (kind: "GBufferPass"),
+            "btf": (kind: "Btf", params: {{ "source": "lambert", "resolution": 16, "stripes": 2, "components": 16 }}),
+            "shade": (kind: "BtfShading", params: {{ "hemicube": 16 }}),
+            "out": (kind: "Preview"),
+            {nodes}
+        }}, links: [
+            ("sphere.mesh", "draw.mesh"), ("fabric.material", "draw.material"), ("draw.scene", "gbuffer.scene"),
+            ("camera.camera", "gbuffer.camera"), ("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"),
+            ("shade.image", "out.image"), {links}
+        ])"#
+    );
+    crate::core::graph::Graph::load_str(&text, "bench-btf-frames.ron".as_ref()).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// Table 2's frame rates: spheres of 861 and 6161 vertices (the paper's 900-vertex shirt and
+/// 5222 / 9208-vertex meshes) at each of `sizes`, median of `frames` frames.
+pub fn frames(
+    gpu: &crate::gpu::GpuContext,
+    sizes: &[(u32, u32)],
+    frames: usize,
+    mut report: impl FnMut(&FrameRow),
+) -> anyhow::Result<Vec<FrameRow>> {
+    use crate::core::eval::{Evaluator, FrameSettings};
+    let meshes: &[(usize, usize, &str)] =
+        &[(40, 20, "shirt (900): 9.3 / 9.5"), (100, 60, "trousers (5222): 2.1 / 2.1; shirt (9208): 1.3 / 1.1")];
+    let resources = crate::core::resources::Resources::new(false);
+    let mut rows = Vec::new();
+    for &(w, h) in sizes {
+        for &(u, v, paper) in meshes {
+            let settings = FrameSettings { width: w, height: h, base_dir: std::env::temp_dir(), frames: None };
+            let time = |hem: bool| -> anyhow::Result<(f64, f64)> {
+                let mut ev = Evaluator::new(&frame_graph(u, v, hem)?, &[])?;
+                let mut frame = 0;
+                let mut step = || -> anyhow::Result<()> {
+                    super::bench::settle_frame(&mut ev, gpu, &resources, &settings, frame, "the BTF frame graph")?;
+                    frame += 1;
+                    Ok(())
+                };
+                let t = Instant::now();
+                step()?;
+                let first = ms(t);
+                Ok((first, super::bench::median_ms(frames, &mut step)?))
+            };
+            let (_, pls_ms) = time(false)?;
+            let (hem_first_frame_ms, hem_ms) = time(true)?;
+            let row = FrameRow {
+                mesh: format!("sphere {u}x{v}"),
+                vertices: (u + 1) * (v + 1),
+                width: w,
+                height: h,
+                pls_ms,
+                pls_fps: 1e3 / pls_ms,
+                hem_ms,
+                hem_fps: 1e3 / hem_ms,
+                hem_first_frame_ms,
+                paper,
+            };
+            report(&row);
+            rows.push(row);
+        }
+    }
+    Ok(rows)
+}

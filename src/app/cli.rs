@@ -459,6 +459,12 @@ enum BenchWhat {
         /// Also write the rows as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Frame rates (PLS and HEM) at these sizes on the GPU, median of `--frames` frames;
+        /// none: skipped.
+        #[arg(long, value_delimiter = ',', default_value = "640x480,1280x960")]
+        frame_sizes: Vec<String>,
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
     },
     /// Local occlusion (Ssao) on the spheres-on-a-plane scene of graphs/fig5_25_occlusion.ron:
     /// ms per frame of the Ssao passes for each mode at full and half resolution.
@@ -1099,14 +1105,23 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Btf { small, json } } => {
-            use crate::app::bench_btf::{HemRow, TierRow};
+        Command::Bench { what: BenchWhat::Btf { small, json, frame_sizes, frames } } => {
+            use crate::app::bench_btf::{FrameRow, HemRow, TierRow};
+            let sizes: Vec<(u32, u32)> =
+                frame_sizes.iter().filter(|s| !s.is_empty()).map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
+            let mut frame_rows = Vec::new();
+            if !sizes.is_empty() {
+                let gpu = GpuContext::headless(pick_backend(None)?)?;
+                println!("adapter: {}, median of {frames} frame(s)\n{}", gpu.adapter_name(), FrameRow::HEADER);
+                frame_rows = crate::app::bench_btf::frames(&gpu, &sizes, frames, |r| println!("{}", r.markdown()))?;
+                println!();
+            }
             println!("{}", HemRow::HEADER);
             let hem = crate::app::bench_btf::hem(small, |r| println!("{}", r.markdown()))?;
             println!("\n{}", TierRow::HEADER);
             let tiers = crate::app::bench_btf::tiers(|r| println!("{}", r.markdown()))?;
             if let Some(path) = json {
-                let rows = serde_json::json!({ "hem": hem, "tiers": tiers });
+                let rows = serde_json::json!({ "frames": frame_rows, "hem": hem, "tiers": tiers });
                 crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }
             Ok(ExitCode::SUCCESS)

@@ -31,6 +31,8 @@ pub struct GpuBtf {
     pub height: usize,
     /// GPU memory of the images and coefficients.
     pub bytes: u64,
+    /// The coefficients on the CPU, for the per-vertex weight sets of environment light (HEM).
+    pub table: super::hem::WeightTable,
 }
 
 impl GpuBtf {
@@ -143,6 +145,7 @@ pub fn upload(
         width,
         height,
         bytes: (rgba.len() * 2) as u64 + coeff_bytes,
+        table: super::hem::WeightTable::new(pca, sampling)?,
     })
 }
 

@@ -97,6 +97,29 @@ impl Frame {
     pub fn to_local(&self, world: DVec3) -> DVec3 {
         DVec3::new(world.dot(self.x), world.dot(self.y), world.dot(self.z))
     }
+
+    /// The frame with the weave turned by `radians` from x towards y about the normal, as
+    /// BtfShading's `rotation` turns it per pixel.
+    pub fn turned(&self, radians: f64) -> Frame {
+        let (s, c) = radians.sin_cos();
+        Frame { x: self.x * c + self.y * s, y: self.y * c - self.x * s, z: self.z }
+    }
+}
+
+/// A mesh's vertices in world space (`model` applied) and their BTF frames (from its normals
+/// and UV tangents), turned by the weave's `rotation` (radians): what [`Visibility::compute`]
+/// takes for the mesh as BtfShading draws it.
+pub fn mesh_frames(mesh: &crate::mesh::Mesh, model: glam::Mat4, rotation: f64) -> (Vec<Vec3>, Vec<Frame>) {
+    let normal_matrix = glam::Mat3::from_mat4(model).inverse().transpose();
+    let positions = mesh.positions.iter().map(|&p| model.transform_point3(p)).collect();
+    let frames = (0..mesh.positions.len())
+        .map(|v| {
+            let at = |t: &[Vec3]| t.get(v).map_or(Vec3::ZERO, |&t| model.transform_vector3(t));
+            let normal = mesh.normals.get(v).map_or(Vec3::Z, |&n| normal_matrix * n);
+            Frame::from_tangents(normal, at(&mesh.tangents_u), at(&mesh.tangents_v)).turned(rotation)
+        })
+        .collect();
+    (positions, frames)
 }
 
 /// The factor of a light at `cos_l` past the sampling's outermost ring: the weights clamp theta

@@ -51,6 +51,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("cuboid/cuboid_gbuffer.wgsl", include_str!("../../shaders/cuboid/cuboid_gbuffer.wgsl")),
     ("cuboid/cuboid_depth.wgsl", include_str!("../../shaders/cuboid/cuboid_depth.wgsl")),
     ("btf/btf_shading.wgsl", include_str!("../../shaders/btf/btf_shading.wgsl")),
+    ("btf/btf_hem_ids.wgsl", include_str!("../../shaders/btf/btf_hem_ids.wgsl")),
 ];
 
 /// The file name of every shader (`tonemap.wgsl`).

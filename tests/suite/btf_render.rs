@@ -253,6 +253,119 @@ fn a_white_furnace_of_median_cut_lights_gives_one() {
     assert!(worst < 0.02, "a furnace pixel is off by {worst}");
 }
 
+/// The sphere graph with a BtfShading node "shade" lit only by the probe `probe` through HEM
+/// (the Draw node's scene, an 8² hemicube per vertex); `btf` is the Btf node's parameters.
+fn hem_graph(probe: &std::path::Path, btf: &str, shade: &str) -> Graph {
+    let nodes = format!(
+        r#""btf": (kind: "Btf", params: {{ {btf} }}),
+        "env": (kind: "EnvironmentMap", params: {{ "path": {:?}, "size": 8 }}),
+        "shade": (kind: "BtfShading", params: {{ "sun_intensity": 0.0, "hemicube": 8, {shade} }}),"#,
+        probe.display().to_string()
+    );
+    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"), ("env.environment", "shade.environment"),
+        ("draw.scene", "shade.scene"), ("shade.image", "out.image"),"#;
+    sphere_graph(&nodes, links)
+}
+
+/// The closest triangle of `mesh` along the ray from `eye` towards `p`, with the barycentric
+/// weights of its three corners.
+fn hit_triangle(mesh: &werkstatt::mesh::Mesh, eye: DVec3, p: DVec3) -> Option<([u32; 3], DVec3)> {
+    let dir = (p - eye).normalize();
+    let mut best: Option<(f64, [u32; 3], DVec3)> = None;
+    for t in mesh.indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| mesh.positions[i as usize].as_dvec3());
+        let (e1, e2) = (b - a, c - a);
+        let q = dir.cross(e2);
+        let det = e1.dot(q);
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        let s = eye - a;
+        let (u, r) = (s.dot(q) / det, s.cross(e1));
+        let v = dir.dot(r) / det;
+        let dist = e2.dot(r) / det;
+        let inside = u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6 && dist > 0.0;
+        if inside && best.is_none_or(|(d, ..)| dist < d) {
+            best = Some((dist, [t[0], t[1], t[2]], DVec3::new(1.0 - u - v, u, v)));
+        }
+    }
+    best.map(|(_, t, b)| (t, b))
+}
+
+/// Environment light by the paper's per-vertex weight sets (HEM, eqs. 10-12): at sampled
+/// pixels, the GPU's result equals the CPU's `U` (Visibility, light sums, eq. 12 on the same
+/// mesh, probe and BTF) interpolated at the pixel's barycentrics (found by a ray here) and
+/// reconstructed by eq. 11 for the pixel's view (`WeightTable::vertex_texture`). The diagnostic
+/// BTF makes every view slot and component count; the weave is turned by 30 deg.
+#[test]
+fn hem_shading_matches_the_cpu_weight_sets() {
+    use werkstatt::btf::hem::{Visibility, WeightTable, mesh_frames};
+    use werkstatt::btf::pca::{Centring, compress};
+    let out = out_dir("btf-hem");
+    let probe = out.join("sky.hdr");
+    write_probe(&probe, 32, 16, |x, y| Vec3::new(0.2 + x as f32 / 16.0, 1.5 - y as f32 / 12.0, 0.5));
+    let btf = r#""source": "directions", "resolution": 2, "components": 16"#;
+    let ev = run_graph(&hem_graph(&probe, btf, r#""rotation": 30.0, "environment_intensity": 0.5"#), 48, 48);
+    let shaded = image(&ev, "shade");
+    let Some(Value::Surface(mesh)) = ev.output("sphere", "mesh") else { panic!("no mesh") };
+    let Some(Value::Environment(env)) = ev.output("env", "environment") else { panic!("no environment") };
+    let sampling = Sampling::h2();
+    let compressed =
+        compress(&werkstatt::nodes::btf::btf_resource::directions_btf(sampling.clone(), 2), 16, Centring::Mean);
+    let table = WeightTable::new(&compressed, &sampling).unwrap();
+    let (positions, frames) = mesh_frames(mesh, glam::Mat4::IDENTITY, 30f64.to_radians());
+    let vis = Visibility::compute(&positions, &frames, &mesh.indices, &sampling, 8, env.size(), 0).unwrap();
+    let u = table.weight_sets(&vis.light_sums(&env.texels, 0).unwrap(), 0);
+    let g = gbuffer_of(&ev);
+    let depth = read_back(gpu(), &g.depth).unwrap();
+    let (rot_c, rot_s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let (mut checked, mut worst, mut largest) = (0, 0.0f64, 0.0f64);
+    for (i, t) in texels(&g).iter().enumerate().step_by(5) {
+        let Some(t) = t else { continue };
+        if t.n.dot(t.v) < 0.1 {
+            continue;
+        }
+        let p =
+            werkstatt::occlusion::reference::world_position(&g.view, i as u32 % 48, i as u32 / 48, depth.rgba[i * 4]);
+        let Some((corners, bary)) = hit_triangle(mesh, g.view.eye.as_dvec3(), p.as_dvec3()) else { continue };
+        let len = table.set_len();
+        let mut set = vec![0.0f32; len];
+        for (&v, b) in corners.iter().zip(bary.to_array()) {
+            set.iter_mut().zip(&u[v as usize * len..][..len]).for_each(|(s, &x)| *s += b as f32 * x);
+        }
+        let turned = Texel { x: t.x * rot_c + t.y * rot_s, y: t.y * rot_c - t.x * rot_s, ..*t };
+        let want = table.vertex_texture(&compressed, &set, 0, local(&turned, t.v), 0.5);
+        for (&got, &want) in shaded.rgba[i * 4..][..3].iter().zip(&want) {
+            worst = worst.max((got as f64 - want as f64).abs());
+            largest = largest.max(want as f64);
+        }
+        checked += 1;
+    }
+    eprintln!("HEM: {checked} pixels, GPU against CPU off by up to {worst:.2e} of values up to {largest:.3}");
+    assert!(checked > 100, "only {checked} pixels checked");
+    // f16 eigentextures and output.
+    assert!(worst < 4e-3 * largest.max(1.0), "GPU and CPU HEM differ by up to {worst} (values up to {largest})");
+}
+
+/// A white Lambertian BTF lit through HEM by a white probe of radiance 1 gives 1 on the sphere
+/// (convex: every hemicube pixel open), up to the cosine's interpolation between rings.
+#[test]
+fn a_white_furnace_through_hem_gives_one() {
+    let out = out_dir("btf-hem-furnace");
+    let probe = out.join("white.hdr");
+    write_probe(&probe, 32, 16, |_, _| Vec3::ONE);
+    let btf = r#""source": "lambert", "albedo": [1.0, 1.0, 1.0], "resolution": 2"#;
+    let ev = run_graph(&hem_graph(&probe, btf, ""), 32, 32);
+    let img = image(&ev, "shade");
+    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let values: Vec<f32> = (0..32 * 32).filter(|&i| depth.rgba[i * 4] > 0.0).map(|i| img.rgba[i * 4 + 1]).collect();
+    let mean = values.iter().sum::<f32>() / values.len() as f32;
+    let worst = values.iter().map(|v| (v - 1.0).abs()).fold(0.0, f32::max);
+    eprintln!("HEM furnace: mean {mean:.4}, worst pixel off by {worst:.4}, {} pixels", values.len());
+    assert!(values.len() > 200);
+    assert!((mean - 1.0).abs() < 0.01 && worst < 0.02, "furnace mean {mean}, worst pixel off by {worst}");
+}
+
 fn failure(ev: &Evaluator, node: &str) -> String {
     match ev.report(node).map(|r| r.status) {
         Some(NodeStatus::Failed(m)) => m.clone(),
@@ -283,4 +396,10 @@ fn bad_btf_input_gives_errors_naming_the_parameter() {
         );
         assert!(!msg.contains("panicked"), "{msg}");
     }
+    // HEM needs both the scene and the environment.
+    let nodes = r#""btf": (kind: "Btf", params: { "resolution": 2 }), "shade": (kind: "BtfShading"),"#;
+    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"), ("draw.scene", "shade.scene"),
+        ("shade.image", "out.image"),"#;
+    let msg = failure(&evaluate_graph(&sphere_graph(nodes, links), 16, 16), "shade");
+    assert!(msg.contains("\"environment\"") && msg.contains("\"scene\""), "{msg}");
 }

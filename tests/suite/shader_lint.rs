@@ -20,7 +20,6 @@ const ALLOWED: &[(&str, &str)] = &[
     ("pem_phong.wgsl", "PEM builds: once per probe or kernel change"),
     ("vsm_blur.wgsl", "inlining the radius unrolls the loop (no halving); the atlas measured equal cold and warm"),
     ("ssr.wgsl", "measured recompiling (graphs/ssr.ron): to be made constants"),
-    ("btf_shading.wgsl", "measured recompiling (graphs/btf_tablecloth.ron): to be made constants"),
 ];
 
 /// What a condition reads.
