@@ -304,3 +304,62 @@ impl GpuWoven {
         Ok(out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::woven::panel::ControlGrid;
+    use crate::woven::weave::Weave;
+    use crate::woven::yarn::YarnParams;
+
+    fn flat(n: usize) -> Panel {
+        let points = (0..=n).flat_map(|j| (0..=n).map(move |i| DVec3::new(i as f64, 0.0, j as f64))).collect();
+        Panel::new(&ControlGrid::new(n + 1, n + 1, points).unwrap())
+    }
+
+    fn yarn() -> YarnParams {
+        YarnParams { nodes: 4, spacing: 0.25, crimp: 0.02, radius: 0.02, fibres: 3, migration: 0.3, twist: 0.5 }
+    }
+
+    /// The plan's counts are the CPU tessellation's, patch by patch, at every scale.
+    #[test]
+    fn planned_counts_are_the_tessellations() {
+        let (panel, weave, yarn) = (flat(1), Weave::plain(), yarn());
+        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        for l in [0.0, 1.5, 3.9, 4.2, 5.0, 6.5, 9.0, 9.5, 12.0] {
+            let t = w.tessellate(&[Some(l)]).unwrap();
+            let (scale, nv, ni) = patch_counts(&w, l);
+            let layer = if scale == Scale::Panel { &t.panel } else { &t.weft };
+            assert_eq!((layer.positions.len(), layer.indices.len()), (nv, ni), "L = {l}");
+            if scale != Scale::Panel {
+                assert_eq!((t.warp.positions.len(), t.warp.indices.len()), (nv, ni), "L = {l}");
+            }
+        }
+    }
+
+    /// A camera above patch (0, 0) looking straight down sees it and its neighbours' near
+    /// edges, not the far patches; a view away from the cloth culls everything.
+    #[test]
+    fn patches_outside_the_view_are_culled() {
+        let (panel, weave, yarn) = (flat(6), Weave::plain(), yarn());
+        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        let camera = |eye: glam::Vec3, target: glam::Vec3| {
+            let c = crate::render::scene::Camera {
+                eye,
+                target,
+                up: glam::Vec3::Z,
+                fov_y_degrees: 40.0,
+                near: 0.01,
+                far: 100.0,
+            };
+            crate::render::scene::View::new(&c, 64, 64).view_proj.as_dmat4()
+        };
+        let down = camera(glam::Vec3::new(0.5, 1.0, 0.5), glam::Vec3::new(0.5, 0.0, 0.5));
+        let culled = culled_patches(&w, Some(&down));
+        assert!(!culled[0] && !culled[1] && !culled[6], "{culled:?}");
+        assert!(culled[35] && culled[5 * 6 + 3], "{culled:?}");
+        let away = camera(glam::Vec3::new(3.0, 1.0, 3.0), glam::Vec3::new(3.0, 5.0, 3.0));
+        assert!(culled_patches(&w, Some(&away)).iter().all(|&c| c));
+        assert!(culled_patches(&w, None).iter().all(|&c| !c));
+    }
+}
