@@ -8,14 +8,23 @@ use glam::{Mat4, Vec2, Vec3};
 
 use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::render::draw::kinds::woven::WovenLayer;
-use crate::render::scene::{Camera, DrawItem, Material};
-use crate::woven::lod::{MAX_LEVEL, Morph, level_from_distance};
+use crate::render::draw::kinds::woven::{WovenGpu, WovenLayer};
+use crate::render::scene::{Camera, DrawItem, Material, View};
+use crate::woven::gpu::{GpuWoven, culled_patches, patch_levels};
+use crate::woven::lod::{MAX_LEVEL, Morph};
 use crate::woven::panel::Panel;
 use crate::woven::resample::resample;
 use crate::woven::tess::{Layer, Woven};
 use crate::woven::weave::Weave;
 use crate::woven::yarn::YarnParams;
+
+crate::choice!(
+    /// Where the patches are tessellated.
+    pub enum Evaluate {
+        Gpu = "gpu",
+        Cpu = "cpu",
+    }
+);
 
 crate::choice!(
     /// The weave pattern η.
@@ -30,7 +39,7 @@ crate::choice!(
 pub static WOVEN_CLOTH: NodeSpec = NodeSpec {
     kind: "WovenCloth",
     category: Category::Geometry,
-    doc: "Woven fabric at three scales (Zhang et al. 2012, IDSS): the surface resampled per pattern piece into a regular control grid of woven patches (16x16 nodes each by default), drawn as a smooth panel (L 0-4), swept yarns (5-9) or twisted fibres (10-14), geomorphed between levels and crack-free between patches. Evaluated on the CPU; outputs up to three items (panel, weft, warp).",
+    doc: "Woven fabric at three scales (Zhang et al. 2012, IDSS): the surface resampled per pattern piece into a regular control grid of woven patches (16x16 nodes each by default), drawn as a smooth panel (L 0-4), swept yarns (5-9) or twisted fibres (10-14), geomorphed between levels and crack-free between patches. Evaluated in compute shaders and drawn with indirect arguments (or on the CPU, the reference twin); patches outside the camera's view are culled. Outputs up to three items per pattern piece (panel, weft, warp).",
     inputs: &[
         PortSpec::required("surface", PortType::Mesh, "The cloth: a Surface (per pattern piece) or a mesh with UVs."),
         PortSpec::optional("camera", PortType::Camera, "The view the adaptive levels are chosen for (eq. 16)."),
@@ -120,7 +129,12 @@ pub static WOVEN_CLOTH: NodeSpec = NodeSpec {
         ParamSpec::new(
             "max_triangles",
             ParamKind::Int { default: 4_000_000, min: 1, max: 1 << 30 },
-            "A budget: the node fails, naming the levels, rather than evaluate more triangles than this on the CPU.",
+            "A budget: the node fails, naming the levels, rather than evaluate more triangles than this.",
+        ),
+        ParamSpec::new(
+            "evaluate",
+            ParamKind::Choice { default: "gpu", options: Evaluate::OPTIONS },
+            "gpu: compute shaders, drawn with indirect arguments, patches outside the view culled; cpu: the reference evaluation, drawn as plain meshes.",
         ),
         ParamSpec::new(
             "lod_c",
@@ -129,10 +143,13 @@ pub static WOVEN_CLOTH: NodeSpec = NodeSpec {
         ),
     ],
     capabilities: Capabilities::NONE,
-    create: || Box::new(WovenClothNode),
+    create: || Box::new(WovenClothNode::default()),
 };
 
-struct WovenClothNode;
+#[derive(Default)]
+struct WovenClothNode {
+    gpu: GpuWoven,
+}
 
 fn port_err(port: &str, e: impl std::fmt::Display) -> NodeError {
     NodeError::msg(format!("WovenCloth, port \"{port}\": {e}"))
@@ -169,41 +186,48 @@ impl Node for WovenClothNode {
             return Err(port_err("level", format!("{fixed} is above the finest level {MAX_LEVEL} (fibre scale)")));
         }
         let coef = cx.f64("lod_c");
+        let camera: Option<Camera> = cx.optional("camera");
         let eye = if fixed < 0.0 {
             if coef <= 0.0 {
                 return Err(port_err("lod_c", format!("must be positive for adaptive levels (got {coef})")));
             }
-            let camera: Camera = cx.optional("camera").ok_or_else(|| {
+            let camera = camera.as_ref().ok_or_else(|| {
                 port_err("camera", "adaptive levels (level < 0) need a camera; link one or set a fixed level")
             })?;
             Some(camera.eye.as_dvec3())
         } else {
             None
         };
+        let on_gpu = cx.choice::<Evaluate>("evaluate") == Evaluate::Gpu;
+        let view_proj = camera.map(|c| View::new(&c, cx.settings.width, cx.settings.height).view_proj.as_dmat4());
         let patch = yarn.nodes as f64 * yarn.spacing;
         let grids = resample(&mesh, patch).map_err(|e| port_err("surface", e))?;
         let budget = cx.int("max_triangles") as usize;
+        let wire_linked = cx.output_linked("wireframe");
+        let (weft, warp) = (cx.vec3("weft_color"), cx.vec3("warp_color"));
+        let cover = weave.weft_cover() as f32;
+        let gloss = cx.f32("glossiness");
+        let materials = [weft * cover + warp * (1.0 - cover), weft, warp]
+            .map(|color| Arc::new(Material { base_color: color, glossiness: gloss, ..Default::default() }));
+        let names = ["panel", "weft", "warp"];
         let mut planned = 0;
         let mut layers: [Layer; 3] = Default::default();
         let mut scales = [0; 3];
-        for pg in &grids {
-            let panel = Panel { flip: pg.flipped, ..Panel::new(&pg.grid) };
-            let levels: Vec<Option<f64>> = (0..panel.patches_v)
-                .flat_map(|pj| (0..panel.patches_u).map(move |pi| (pi, pj)))
-                .zip(&pg.inside)
-                .map(|((pi, pj), &inside)| {
-                    inside.then(|| match eye {
-                        None => fixed,
-                        Some(e) => {
-                            let c = panel.position(pi, pj, 0.0, 0.0).distance(panel.position(pi, pj, 1.0, 1.0))
-                                / std::f64::consts::SQRT_2;
-                            level_from_distance(c, coef, panel.position(pi, pj, 0.5, 0.5).distance(e))
-                        }
-                    })
-                })
-                .collect();
+        let mut culled_total = 0;
+        let mut gpu_items = Vec::new();
+        for (gi, pg) in grids.iter().enumerate() {
+            let panel = Arc::new(Panel { flip: pg.flipped, ..Panel::new(&pg.grid) });
+            let levels =
+                patch_levels(&panel, &pg.inside, eye.is_none().then_some(fixed), coef, eye.unwrap_or_default());
             let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
-            planned += levels.iter().flatten().map(|&l| woven.patch_triangles(l)).sum::<usize>();
+            // Only the GPU path culls: the CPU evaluation stays the whole reference.
+            let culled = culled_patches(&woven, view_proj.as_ref().filter(|_| on_gpu));
+            planned += levels
+                .iter()
+                .zip(&culled)
+                .filter_map(|(l, &c)| l.filter(|_| !c))
+                .map(|l| woven.patch_triangles(l))
+                .sum::<usize>();
             if planned > budget {
                 let port = if eye.is_some() { "lod_c" } else { "level" };
                 let top = levels.iter().flatten().fold(0.0f64, |a, &b| a.max(b));
@@ -214,36 +238,71 @@ impl Node for WovenClothNode {
                     ),
                 ));
             }
-            let t = woven.tessellate(&levels)?;
-            for (acc, l) in layers.iter_mut().zip([t.panel, t.weft, t.warp]) {
-                append(acc, l);
+            if on_gpu {
+                let frame = self.gpu.run(cx.gpu()?, &woven, &levels, &culled)?;
+                scales.iter_mut().zip(frame.scales).for_each(|(a, b)| *a += b);
+                culled_total += frame.culled;
+                let coarse = Arc::new(coarse_panel(&panel, &pg.inside));
+                for (k, layer) in frame.layers.into_iter().enumerate() {
+                    let Some(layer) = layer else { continue };
+                    let (panel, weave, yarn, levels, culled) =
+                        (panel.clone(), weave.clone(), yarn.clone(), levels.clone(), culled.clone());
+                    let cpu_reference = Box::new(move || {
+                        let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+                        let t = woven.tessellate_culled(&levels, &culled)?;
+                        Ok(to_mesh([t.panel, t.weft, t.warp].into_iter().nth(k).unwrap_or_default()))
+                    });
+                    let name = if grids.len() == 1 { names[k].to_string() } else { format!("{}_{gi}", names[k]) };
+                    let item = DrawItem::plain(coarse.clone(), materials[k].clone(), Mat4::IDENTITY)
+                        .with_kind(WovenLayer {
+                            layer: names[k],
+                            scales: [0; 3],
+                            culled: 0,
+                            gpu: Some(Arc::new(WovenGpu { layer, cpu_reference })),
+                        })
+                        .named(format!("{}_{name}", cx.node_id));
+                    gpu_items.push(item);
+                }
             }
-            scales.iter_mut().zip(t.scales).for_each(|(a, b)| *a += b);
+            if !on_gpu || wire_linked {
+                let t = woven.tessellate_culled(&levels, &culled)?;
+                if !on_gpu {
+                    scales.iter_mut().zip(t.scales).for_each(|(a, b)| *a += b);
+                }
+                for (acc, l) in layers.iter_mut().zip([t.panel, t.weft, t.warp]) {
+                    append(acc, l);
+                }
+            }
         }
-        let (weft, warp) = (cx.vec3("weft_color"), cx.vec3("warp_color"));
-        let cover = weave.weft_cover() as f32;
-        let colors = [weft * cover + warp * (1.0 - cover), weft, warp];
-        let gloss = cx.f32("glossiness");
+        let cpu_meshes: Vec<Mesh> = layers.into_iter().map(to_mesh).collect();
         let mut items = Vec::new();
-        for ((layer, name), color) in layers.into_iter().zip(["panel", "weft", "warp"]).zip(colors) {
-            if layer.indices.is_empty() {
-                continue;
+        if on_gpu {
+            for mut item in gpu_items {
+                if let Some(k) = item.kind_as::<WovenLayer>().cloned() {
+                    item = item.with_kind(WovenLayer { scales, culled: culled_total, ..k });
+                }
+                items.push(item);
             }
-            let material = Arc::new(Material { base_color: color, glossiness: gloss, ..Default::default() });
-            let item = DrawItem::plain(Arc::new(to_mesh(layer)), material, Mat4::IDENTITY)
-                .with_kind(WovenLayer { layer: name, scales })
-                .named(format!("{}_{name}", cx.node_id));
-            items.push(item);
+        } else {
+            for (k, m) in cpu_meshes.iter().enumerate() {
+                if m.indices.is_empty() {
+                    continue;
+                }
+                let item = DrawItem::plain(Arc::new(m.clone()), materials[k].clone(), Mat4::IDENTITY)
+                    .with_kind(WovenLayer { layer: names[k], scales, culled: 0, gpu: None })
+                    .named(format!("{}_{}", cx.node_id, names[k]));
+                items.push(item);
+            }
         }
         cx.count("patches_panel", scales[0]);
         cx.count("patches_yarn", scales[1]);
         cx.count("patches_fibre", scales[2]);
-        cx.count("triangles", items.iter().map(|i| i.mesh.triangle_count()).sum());
-        let wire = if cx.output_linked("wireframe") && !items.is_empty() {
+        cx.count("patches_culled", culled_total);
+        cx.count("triangles", items.iter().map(|i| i.kind.drawn_triangles(i)).sum());
+        let wire = if wire_linked && cpu_meshes.iter().any(|m| !m.indices.is_empty()) {
             let (mut vertices, mut indices) = (Vec::new(), Vec::new());
-            for item in &items {
+            for m in &cpu_meshes {
                 let base = vertices.len() as u32;
-                let m = &item.mesh;
                 vertices.extend(m.positions.iter().zip(&m.normals).map(|(p, n)| crate::mesh::Vertex {
                     position: p.to_array(),
                     normal: n.to_array(),
@@ -261,6 +320,23 @@ impl Node for WovenClothNode {
         cx.set("scene", Arc::new(items));
         Ok(())
     }
+}
+
+/// The panel at level 0, one quad per patch (the bounds and CPU shape of GPU-drawn items).
+fn coarse_panel(panel: &Panel, inside: &[bool]) -> Mesh {
+    let (mut positions, mut normals, mut uvs, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (pu, pv) = (panel.patches_u, panel.patches_v);
+    for (k, _) in inside.iter().enumerate().filter(|(_, i)| **i) {
+        let (pi, pj) = (k % pu, k / pu);
+        let base = positions.len() as u32;
+        for (s, t) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+            positions.push(panel.position(pi, pj, s, t).as_vec3());
+            normals.push(panel.frame(pi, pj, s, t).n.as_vec3());
+            uvs.push(Vec2::new((pi as f32 + s as f32) / pu as f32, (pj as f32 + t as f32) / pv as f32));
+        }
+        indices.extend_from_slice(&[base, base + 1, base + 3, base, base + 3, base + 2]);
+    }
+    Mesh::from_raw(positions, normals, uvs, Vec::new(), Vec::new(), indices)
 }
 
 fn append(acc: &mut Layer, l: Layer) {

@@ -362,7 +362,7 @@ impl GpuBench {
 #[derive(Subcommand)]
 enum BenchWhat {
     /// Every GPU bench (attachments, table1, cuboids, pem-memory, ibl, shadows, ssao,
-    /// tessellation, btf) in this order within a time budget: each bench's rows as JSON, all.json
+    /// tessellation, woven, btf) in this order within a time budget: each bench's rows as JSON, all.json
     /// (what ran, how long, each status) and summary.md (our tables beside the seeds' figures)
     /// into DIR. Exit code 1 when a bench failed.
     All {
@@ -446,6 +446,22 @@ enum BenchWhat {
         /// Timed frames per row (median reported).
         #[arg(long, default_value_t = 5)]
         frames: usize,
+        #[command(flatten)]
+        out: GpuBench,
+    },
+    /// Woven cloth (Zhang et al. 2012, IDSS, Table 1): a flat tablecloth of 4x4 to 32x32
+    /// patches tessellated in compute and drawn into the G-buffer at uniform L = 7, uniform
+    /// L = 9 and adaptive L, beside the paper's figures (NVIDIA 8400M).
+    Woven {
+        /// Table 1's rows to run (0-5).
+        #[arg(long, value_delimiter = ',', default_value = "0,1,2,3,4,5")]
+        rows: Vec<usize>,
+        /// Timed frames per row (median reported).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        /// Modes that would draw more triangles are skipped.
+        #[arg(long, default_value_t = 40_000_000)]
+        max_triangles: u64,
         #[command(flatten)]
         out: GpuBench,
     },
@@ -1103,6 +1119,17 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 println!("{}", r.markdown())
             })?;
             out.write_json(&serde_json::json!({ "rows": rows, "warp_cost": costs }))?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench { what: BenchWhat::Woven { rows, frames, max_triangles, out } } => {
+            use crate::app::bench_woven::WovenRow;
+            let (gpu, size) = out.open()?;
+            println!("adapter: {}, {}x{}, median of {frames} frame(s)", gpu.adapter_name(), size.0, size.1);
+            println!("{}", WovenRow::HEADER);
+            let rows = crate::app::bench_woven::woven(&gpu, &rows, frames, size, max_triangles, |r| {
+                println!("{}", r.markdown())
+            })?;
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Btf { small, json, frame_sizes, frames } } => {

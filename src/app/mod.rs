@@ -5,6 +5,7 @@
 mod bench;
 mod bench_all;
 mod bench_btf;
+mod bench_woven;
 pub mod cli;
 pub mod compare;
 pub mod contact_sheet;

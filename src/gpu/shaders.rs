@@ -27,6 +27,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("tessellation/tessellate.wgsl", include_str!("../../shaders/tessellation/tessellate.wgsl")),
     ("tessellation/pn.wgsl", include_str!("../../shaders/tessellation/pn.wgsl")),
     ("tessellation/gbuffer_pn.wgsl", include_str!("../../shaders/tessellation/gbuffer_pn.wgsl")),
+    ("tessellation/woven.wgsl", include_str!("../../shaders/tessellation/woven.wgsl")),
     ("common/instance_in.wgsl", include_str!("../../shaders/common/instance_in.wgsl")),
     ("common/item_in.wgsl", include_str!("../../shaders/common/item_in.wgsl")),
     ("warp/attach.wgsl", include_str!("../../shaders/warp/attach.wgsl")),

@@ -188,15 +188,25 @@ impl Woven<'_> {
     /// Tessellates every patch at its level (`levels[pj * patches_u + pi]`; `None`: a patch
     /// outside the pattern piece, not drawn, its edges outer boundary).
     pub fn tessellate(&self, levels: &[Option<f64>]) -> anyhow::Result<Tessellation> {
+        self.tessellate_culled(levels, &vec![false; levels.len()])
+    }
+
+    /// Like [`Woven::tessellate`], leaving out the patches with `culled[k]` set (outside the
+    /// view); they keep their level for their neighbours' edges.
+    pub fn tessellate_culled(&self, levels: &[Option<f64>], culled: &[bool]) -> anyhow::Result<Tessellation> {
         let (pu, pv) = (self.panel.patches_u, self.panel.patches_v);
-        anyhow::ensure!(levels.len() == pu * pv, "{} levels for {pu}x{pv} patches", levels.len());
+        anyhow::ensure!(
+            levels.len() == pu * pv && culled.len() == pu * pv,
+            "{} levels for {pu}x{pv} patches",
+            levels.len()
+        );
         if let Some(l) = levels.iter().flatten().find(|l| !(0.0..=MAX_LEVEL).contains(*l)) {
             anyhow::bail!("level of detail {l} is outside [0, {MAX_LEVEL}]");
         }
         let mut out = Tessellation::default();
         for pj in 0..pv {
             for pi in 0..pu {
-                if let Some(l) = levels[pj * pu + pi] {
+                if let (Some(l), false) = (levels[pj * pu + pi], culled[pj * pu + pi]) {
                     self.tessellate_patch(pi, pj, l, levels, &mut out);
                 }
             }

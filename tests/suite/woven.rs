@@ -40,7 +40,15 @@ fn evaluate(text: &str, overrides: &[(&str, &str)]) -> Evaluator {
 
 #[test]
 fn a_woven_item_exports_the_triangles_the_cpu_evaluation_gives() {
-    let ev = evaluate(GRAPH, &[]);
+    // The CPU path exports its own meshes; the GPU path reads back what the compute pass wrote.
+    for (evaluate_on, tolerance) in [("cpu", 1e-6), ("gpu", 1e-4)] {
+        exports_the_cpu_evaluation(evaluate_on, tolerance);
+    }
+}
+
+fn exports_the_cpu_evaluation(evaluate_on: &str, tolerance: f32) {
+    let with = format!(r#""level": 7.5, "evaluate": "{evaluate_on}""#);
+    let ev = evaluate(GRAPH, &[(r#""level": 7.5"#, &with)]);
     let status = ev.report("out").map(|r| r.status.clone());
     assert!(matches!(status, Some(NodeStatus::Ok)), "{status:?}");
     let (Some(Value::Mesh(exported)), Some(Value::Scene(items))) =
@@ -74,7 +82,7 @@ fn a_woven_item_exports_the_triangles_the_cpu_evaluation_gives() {
         indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).filter(|&t| has_area(&positions, t)).flatten().collect();
     assert_eq!(exported.positions.len(), positions.len());
     let worst = exported.positions.iter().zip(&positions).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
-    assert!(worst < 1e-6, "exported vertices differ from the CPU evaluation by up to {worst}");
+    assert!(worst < tolerance, "{evaluate_on}: exported vertices differ from the CPU evaluation by up to {worst}");
     assert_eq!(exported.indices, kept);
     // 8x8 nodes per patch at level 7: 2 x 8 yarns x 16 segments x 4 around x 2 triangles.
     assert_eq!(t.triangles(), 4 * 2 * 8 * 16 * 4 * 2);
@@ -103,4 +111,72 @@ fn bad_parameters_fail_naming_the_port() {
     );
     let ev = evaluate(&text, &[(r#""level": 7.5"#, r#""level": -1.0, "lod_c": 0.1"#)]);
     assert!(matches!(ev.report("woven").map(|r| r.status.clone()), Some(NodeStatus::Ok)));
+}
+
+/// The compute shader (shaders/tessellation/woven.wgsl) against its CPU twin (src/woven/tess.rs)
+/// on a curved 3x2-patch grid with every scale, morphs within and across scales and every kind
+/// of shared edge: vertex for vertex, the same triangles, and culled patches left out.
+#[test]
+fn the_gpu_tessellation_matches_the_cpu_twin() {
+    use werkstatt::woven::gpu::{GpuWoven, patch_counts};
+    use werkstatt::woven::panel::ControlGrid;
+    let points = (0..3)
+        .flat_map(|j| (0..4).map(move |i| (i as f64, j as f64)))
+        .map(|(x, z)| glam::DVec3::new(x, 0.3 * (0.9 * x).sin() * (0.7 * z).cos(), z))
+        .collect();
+    let grid = ControlGrid::new(4, 3, points).unwrap();
+    let panel = Panel { flip: true, ..Panel::new(&grid) };
+    let weave = Weave::twill(2, 1).unwrap();
+    let yarn = YarnParams { nodes: 4, spacing: 0.25, crimp: 0.04, radius: 0.05, fibres: 3, migration: 0.3, twist: 0.5 };
+    let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+    let g = gpu();
+    let mut runner = GpuWoven::default();
+    for levels in [[2.5, 3.7, 4.5, 6.3, 9.6, 10.2], [1.0, 0.4, 3.2, 5.5, 7.0, 8.75]] {
+        let levels: Vec<Option<f64>> = levels.iter().map(|&l| Some(l)).collect();
+        let cpu = woven.tessellate(&levels).unwrap();
+        let start = std::time::Instant::now();
+        let frame = runner.run(g, &woven, &levels, &[false; 6]).unwrap();
+        g.submit_checked().unwrap();
+        g.wait_idle();
+        println!("GPU run (with pipeline compiles the first time): {:.2} s", start.elapsed().as_secs_f64());
+        assert_eq!(frame.scales, cpu.scales, "{levels:?}");
+        for (k, layer) in [&cpu.panel, &cpu.weft, &cpu.warp].into_iter().enumerate() {
+            let Some(gl) = &frame.layers[k] else {
+                assert!(layer.indices.is_empty(), "layer {k} missing on the GPU");
+                continue;
+            };
+            let (v, i) = gl.read_back(g).unwrap();
+            assert_eq!(v.len(), layer.positions.len(), "layer {k} {levels:?}");
+            assert_eq!(i, layer.indices, "layer {k} {levels:?}");
+            let mut worst = [0.0f64; 3];
+            for (k2, gv) in v.iter().enumerate() {
+                let p = glam::Vec3::from(gv.position).as_dvec3();
+                let n = glam::Vec3::from(gv.normal).as_dvec3();
+                worst[0] = worst[0].max(p.distance(layer.positions[k2]));
+                worst[1] = worst[1].max(n.distance(layer.normals[k2].normalize()));
+                let uv = layer.uvs[k2];
+                worst[2] = worst[2].max((gv.uv[0] as f64 - uv[0]).abs().max((gv.uv[1] as f64 - uv[1]).abs()));
+            }
+            println!(
+                "layer {k} {levels:?}: {} vertices, position {:.2e}, normal {:.2e}, uv {:.2e}",
+                v.len(),
+                worst[0],
+                worst[1],
+                worst[2]
+            );
+            // Patches are 1 unit wide: single precision keeps 1e-4 of a patch.
+            assert!(worst[0] < 1e-4 && worst[1] < 2e-3 && worst[2] < 1e-6, "layer {k} {levels:?}: {worst:?}");
+        }
+        let counts: usize = levels.iter().flatten().map(|&l| patch_counts(&woven, l).2).sum();
+        assert!(counts > 0);
+    }
+    // A culled patch draws nothing but still sets its neighbours' edges.
+    let levels: Vec<Option<f64>> = [6.3; 6].iter().map(|&l| Some(l)).collect();
+    let mut culled = [false; 6];
+    culled[0] = true;
+    let frame = runner.run(g, &woven, &levels, &culled).unwrap();
+    g.submit_checked().unwrap();
+    assert_eq!((frame.culled, frame.scales), (1, [0, 5, 0]));
+    let one = patch_counts(&woven, 6.3);
+    assert_eq!(frame.layers[1].as_ref().unwrap().index_count as usize, 5 * one.2);
 }

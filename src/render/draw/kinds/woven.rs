@@ -1,12 +1,30 @@
 //! Woven cloth at the panel, yarn or fibre scale (Zhang et al. 2012; `WovenCloth`, src/woven/):
-//! the item's mesh is the tessellation the CPU evaluated this frame (panel quads, or the weft or
-//! warp tubes of one colour), drawn through the plain-mesh vertex stages like any mesh, and
-//! exported as exactly those triangles.
+//! one layer of the tessellation (panel quads, or the weft or warp tubes of one colour). On the
+//! GPU path the compute pass of `src/woven/gpu.rs` wrote the layer's vertices and indices and
+//! it is drawn with indirect arguments (the item's mesh is then the coarse panel, one quad per
+//! patch, for bounds and framing); on the CPU path the item's mesh is the tessellation itself.
+//! Either is exported as exactly the triangles drawn.
+
+use std::sync::Arc;
 
 use crate::render::draw::compose::VertexStage;
-use crate::render::draw::kind::{ExportCx, Exported, ItemKind, KindDraw, PrepareCx};
+use crate::render::draw::kind::{DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx};
 use crate::render::draw::kinds::mesh::mesh_draw;
 use crate::render::scene::DrawItem;
+use crate::woven::gpu::GpuLayer;
+
+/// A layer evaluated on the GPU and how to evaluate the same triangles on the CPU (for export
+/// on a CPU adapter).
+pub struct WovenGpu {
+    pub layer: GpuLayer,
+    pub cpu_reference: Box<dyn Fn() -> anyhow::Result<crate::mesh::Mesh> + Send + Sync>,
+}
+
+impl std::fmt::Debug for WovenGpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.layer.fmt(f)
+    }
+}
 
 /// The kind of a `WovenCloth` item: which layer it is, and how many patches each scale drew.
 #[derive(Clone, Debug)]
@@ -15,11 +33,26 @@ pub struct WovenLayer {
     pub layer: &'static str,
     /// Patches at the panel, yarn and fibre scales over the whole cloth.
     pub scales: [usize; 3],
+    /// Patches outside the view, not drawn.
+    pub culled: usize,
+    /// The layer's buffers when the compute pass evaluated it.
+    pub gpu: Option<Arc<WovenGpu>>,
 }
 
 impl ItemKind for WovenLayer {
     fn name(&self) -> &'static str {
         "woven"
+    }
+
+    fn leaves_mesh_bounds(&self) -> bool {
+        self.gpu.is_some()
+    }
+
+    fn drawn_triangles(&self, item: &DrawItem) -> usize {
+        match &self.gpu {
+            Some(g) => (g.layer.index_count / 3) as usize,
+            None => item.mesh.triangle_count(),
+        }
     }
 
     fn prepare(
@@ -28,21 +61,51 @@ impl ItemKind for WovenLayer {
         item: &DrawItem,
         stage: VertexStage,
     ) -> anyhow::Result<Option<KindDraw>> {
+        if let Some(g) = &self.gpu {
+            if g.layer.index_count == 0 {
+                return Ok(None);
+            }
+            // Written by the compute pass this frame; the counts are the plan's.
+            return Ok(Some(KindDraw {
+                pipeline: cx.pass.mesh_pipeline(stage)?,
+                group2: None,
+                mesh: Some(((*g.layer.vertices).clone(), (*g.layer.indices).clone())),
+                instances: None,
+                call: DrawCall::IndexedIndirect((*g.layer.indirect).clone()),
+            }));
+        }
         if item.mesh.indices.is_empty() {
             return Ok(None);
         }
         mesh_draw(cx, &item.mesh, stage).map(Some)
     }
 
-    fn export(&self, _: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
-        let m = &item.mesh;
-        Ok(Exported::Local(crate::mesh::Mesh::from_raw(
-            m.positions.clone(),
-            m.normals.clone(),
-            m.uvs.clone(),
-            Vec::new(),
-            Vec::new(),
-            m.indices.clone(),
-        )))
+    fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
+        let m = match (&self.gpu, cx.device) {
+            (Some(g), ExportDevice::Gpu) => {
+                let (vertices, indices) = g.layer.read_back(cx.gpu)?;
+                crate::mesh::Mesh::from_raw(
+                    vertices.iter().map(|v| v.position.into()).collect(),
+                    vertices.iter().map(|v| v.normal.into()).collect(),
+                    vertices.iter().map(|v| v.uv.into()).collect(),
+                    Vec::new(),
+                    Vec::new(),
+                    indices,
+                )
+            }
+            (Some(g), ExportDevice::Cpu) => (g.cpu_reference)()?,
+            (None, _) => {
+                let m = &item.mesh;
+                crate::mesh::Mesh::from_raw(
+                    m.positions.clone(),
+                    m.normals.clone(),
+                    m.uvs.clone(),
+                    Vec::new(),
+                    Vec::new(),
+                    m.indices.clone(),
+                )
+            }
+        };
+        Ok(Exported::Local(m))
     }
 }
