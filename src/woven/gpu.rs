@@ -343,16 +343,10 @@ mod tests {
     fn patches_outside_the_view_are_culled() {
         let (panel, weave, yarn) = (flat(6), Weave::plain(), yarn());
         let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        // The render layer's camera (wgpu's depth range), built here: woven sits below render.
         let camera = |eye: glam::Vec3, target: glam::Vec3| {
-            let c = crate::render::scene::Camera {
-                eye,
-                target,
-                up: glam::Vec3::Z,
-                fov_y_degrees: 40.0,
-                near: 0.01,
-                far: 100.0,
-            };
-            crate::render::scene::View::new(&c, 64, 64).view_proj.as_dmat4()
+            let proj = glam::Mat4::perspective_rh(40f32.to_radians(), 1.0, 0.01, 100.0);
+            (proj * glam::Mat4::look_at_rh(eye, target, glam::Vec3::Z)).as_dmat4()
         };
         let down = camera(glam::Vec3::new(0.5, 1.0, 0.5), glam::Vec3::new(0.5, 0.0, 0.5));
         let culled = culled_patches(&w, Some(&down));

@@ -76,7 +76,12 @@ fn fixture_params(kind: &str) -> Params {
             ("pattern", data("assets/patterns/garmentcode/shirt_mean_specification.json")),
             ("edge_length", ParamValue::Float(6.0)),
         ],
-        "Material" => vec![("texture_path", data("docs/default.png")), ("gloss_map_path", data("docs/default.png"))],
+        // btf_id 1: BtfShading's default material_id, so its HEM finds an item in the scene.
+        "Material" => vec![
+            ("texture_path", data("docs/default.png")),
+            ("gloss_map_path", data("docs/default.png")),
+            ("btf_id", ParamValue::Int(1)),
+        ],
         "MatrixTexture" => vec![("resolution", ParamValue::Int(64))],
         "EnvironmentMap" => vec![("path", data("assets/hdri/forest.hdr")), ("size", ParamValue::Int(8))],
         "MedianCut" => vec![("count", ParamValue::Int(5))],
