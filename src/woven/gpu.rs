@@ -7,7 +7,7 @@
 
 use glam::{DMat4, DVec3, DVec4};
 
-use super::lod::{LodState, MAX_LEVEL, Morph, Scale, along_points, level_from_distance};
+use super::lod::{LodState, Morph, Scale, along_points, level_from_distance};
 use super::panel::Panel;
 use super::tess::Woven;
 use crate::gpu::{Bind, ComputePass, GpuContext, PooledBuffer};
@@ -177,14 +177,7 @@ impl GpuWoven {
         use wgpu::BufferUsages as U;
         anyhow::ensure!(w.morph == Morph::Continuous, "the GPU evaluates the continuous morph only");
         let (pu, pv) = (w.panel.patches_u, w.panel.patches_v);
-        anyhow::ensure!(
-            levels.len() == pu * pv && culled.len() == pu * pv,
-            "{} levels for {pu}x{pv} patches",
-            levels.len()
-        );
-        if let Some(l) = levels.iter().flatten().find(|l| !(0.0..=MAX_LEVEL).contains(*l)) {
-            anyhow::bail!("level of detail {l} is outside [0, {MAX_LEVEL}]");
-        }
+        w.check_levels(levels, culled)?;
         let level_at = |i: isize, j: isize| {
             let inside = i >= 0 && j >= 0 && (i as usize) < pu && (j as usize) < pv;
             inside.then(|| levels[j as usize * pu + i as usize]).flatten().map_or(-1.0, |l| l as f32)

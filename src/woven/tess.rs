@@ -191,9 +191,9 @@ impl Woven<'_> {
         self.tessellate_culled(levels, &vec![false; levels.len()])
     }
 
-    /// Like [`Woven::tessellate`], leaving out the patches with `culled[k]` set (outside the
-    /// view); they keep their level for their neighbours' edges.
-    pub fn tessellate_culled(&self, levels: &[Option<f64>], culled: &[bool]) -> anyhow::Result<Tessellation> {
+    /// One level (or none) and one culled flag per patch, each level within [0, MAX_LEVEL]:
+    /// what the CPU and the GPU tessellation both take.
+    pub fn check_levels(&self, levels: &[Option<f64>], culled: &[bool]) -> anyhow::Result<()> {
         let (pu, pv) = (self.panel.patches_u, self.panel.patches_v);
         anyhow::ensure!(
             levels.len() == pu * pv && culled.len() == pu * pv,
@@ -203,6 +203,14 @@ impl Woven<'_> {
         if let Some(l) = levels.iter().flatten().find(|l| !(0.0..=MAX_LEVEL).contains(*l)) {
             anyhow::bail!("level of detail {l} is outside [0, {MAX_LEVEL}]");
         }
+        Ok(())
+    }
+
+    /// Like [`Woven::tessellate`], leaving out the patches with `culled[k]` set (outside the
+    /// view); they keep their level for their neighbours' edges.
+    pub fn tessellate_culled(&self, levels: &[Option<f64>], culled: &[bool]) -> anyhow::Result<Tessellation> {
+        let (pu, pv) = (self.panel.patches_u, self.panel.patches_v);
+        self.check_levels(levels, culled)?;
         let mut out = Tessellation::default();
         for pj in 0..pv {
             for pi in 0..pu {

@@ -92,8 +92,20 @@ fn gl_formats_are_renderable_where_lavapipe_uses_r32float() {
     }
 }
 
+// Every graph, in two tests that take every other graph: together they are the suite's longest
+// test, and two run on parallel threads.
 #[test]
-fn every_graph_renders_on_gl() {
+fn every_graph_renders_on_gl_part_1_of_2() {
+    every_graph_renders_on_gl(0, 2);
+}
+
+#[test]
+fn every_graph_renders_on_gl_part_2_of_2() {
+    every_graph_renders_on_gl(1, 2);
+}
+
+/// Graph `part`, `part + parts`, ... of the sorted graphs/ folder render on GL, none black.
+fn every_graph_renders_on_gl(part: usize, parts: usize) {
     let Some(gpu) = gl() else { return };
     let mut graphs: Vec<String> = std::fs::read_dir(root().join("graphs"))
         .unwrap()
@@ -105,7 +117,7 @@ fn every_graph_renders_on_gl() {
     // The regression manifest's overrides keep each graph small (fewer lights, smaller maps):
     // what this checks is that every node kind runs on GL, not the full-size figures.
     let manifest = werkstatt::app::regress::Manifest::load(&root().join("tests/references/manifest.ron")).unwrap();
-    for name in &graphs {
+    for name in graphs.iter().skip(part).step_by(parts) {
         if name == "livelink.ron" {
             render_livelink(&gpu);
             continue;
