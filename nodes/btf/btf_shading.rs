@@ -151,6 +151,9 @@ impl Default for BtfShadingNode {
 /// while the meshes, their transforms, the rotation and the hemicube stay), and the weight sets
 /// U of eq. 12 on the GPU (recomputed for a new environment or BTF).
 struct Hem {
+    /// The inputs the keys hash the addresses of, held so that a new input cannot take a freed
+    /// one's address and match a stale key.
+    _held: (Vec<Arc<crate::mesh::Mesh>>, Arc<EnvMap>, Arc<GpuBtf>),
     visibility_key: u64,
     visibility: Vec<Visibility>,
     sets_key: u64,
@@ -245,6 +248,7 @@ impl BtfShadingNode {
         sets.resize(sets.len().max(1), 0.0);
         let storage = wgpu::BufferUsages::STORAGE;
         self.hem = Some(Hem {
+            _held: (items.iter().map(|item| item.mesh.clone()).collect(), env.clone(), btf.clone()),
             visibility_key,
             visibility,
             sets_key,
