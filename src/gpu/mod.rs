@@ -282,6 +282,11 @@ fn keep_freed_memory() {
 impl GpuContext {
     /// Opens a device without a window. Fails with installation advice where no adapter exists.
     pub fn headless(backend: Backend) -> anyhow::Result<GpuContext> {
+        // One device opened at a time per process: drivers crashed when threads created
+        // instances, adapters and devices concurrently (wgpu issues #10010 and #10234; the
+        // parallel test harness did so, and a CI run died with SIGSEGV).
+        static OPENING: Mutex<()> = Mutex::new(());
+        let _one_at_a_time = lock(&OPENING);
         // Try Vulkan before GL: probing EGL prints noise and lavapipe is the better rasterizer.
         let order: &[Backend] = match backend {
             Backend::Auto => &[Backend::Vulkan, Backend::Gl],

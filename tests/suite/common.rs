@@ -9,18 +9,33 @@ use werkstatt::app::compare::ImageTolerance;
 use werkstatt::app::render::{RenderOptions, Stats, render};
 use werkstatt::gpu::{Backend, GpuContext, Pixels};
 
-/// One GPU context per test thread: a context serves one evaluator at a time (validation
+/// One GPU context per running test: a context serves one evaluator at a time (validation
 /// errors and pass timings are collected per device), and tests run in parallel threads.
+/// libtest starts a thread per test; each takes a context from a shared pool and gives it back
+/// when the thread ends, so the binary opens about as many devices as it runs tests at once.
+/// A device per test thread had left hundreds of devices alive and opened them concurrently.
 pub fn gpu() -> &'static GpuContext {
-    thread_local! {
-        static GPU: &'static GpuContext = {
-            let gpu = GpuContext::headless(Backend::from_env().unwrap())
-                .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}"));
-            skip_driver_teardown_at_exit();
-            Box::leak(Box::new(gpu))
-        };
+    static IDLE: std::sync::Mutex<Vec<&'static GpuContext>> = std::sync::Mutex::new(Vec::new());
+    struct Lease(&'static GpuContext);
+    impl Drop for Lease {
+        fn drop(&mut self) {
+            // Errors a failed test left outside node scopes must not fail the next test.
+            let _ = self.0.take_errors();
+            IDLE.lock().unwrap_or_else(|e| e.into_inner()).push(self.0);
+        }
     }
-    GPU.with(|g| *g)
+    thread_local! {
+        static GPU: Lease = Lease({
+            let idle = IDLE.lock().unwrap_or_else(|e| e.into_inner()).pop();
+            idle.unwrap_or_else(|| {
+                let gpu = GpuContext::headless(Backend::from_env().unwrap())
+                    .unwrap_or_else(|e| panic!("GPU tests need a software adapter (apt-get install mesa-vulkan-drivers): {e:#}"));
+                skip_driver_teardown_at_exit();
+                Box::leak(Box::new(gpu))
+            })
+        });
+    }
+    GPU.with(|g| g.0)
 }
 
 /// Ends the test process with its exit status as soon as `exit` starts, before the C
