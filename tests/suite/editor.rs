@@ -925,9 +925,10 @@ fn a_slow_node_keeps_the_ui_responsive_and_cancels() {
         frames.len()
     );
     // What the UI thread spends on a frame (immune to a loaded machine), and no frame waits for
-    // the evaluation (it would take seconds).
+    // the evaluation (it would take seconds). Wall times only against that: on a loaded CI
+    // machine the p95 was 44-49 ms, so a 33 ms wall bound failed without a UI fault.
     assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread during a slow evaluation");
-    assert!(wp < 33.0, "UI frames took p95 {wp:.1} ms during a slow evaluation");
+    assert!(wp < 500.0, "UI frames took p95 {wp:.1} ms during a 5 s evaluation: they wait for it");
     assert!(wx < 1000.0, "a UI frame took {wx:.0} ms: it waited for the evaluation");
     assert!(frames.len() >= 15, "only {} UI frames in 1.5 s", frames.len());
 
@@ -1141,9 +1142,15 @@ fn playback_keeps_the_ui_frames_short() {
         frames.len()
     );
     // The UI thread's own cost, and the wall time: a UI that waits for the GPU costs little CPU
-    // but long frames (the commit before this work: p95 2.2 s of wall time, 6.8 ms of CPU).
+    // but long frames (the commit before this work: p95 2.2 s of wall time, 6.8 ms of CPU). The
+    // wall time is held against the rendered frames' (a loaded machine slows both), not a fixed
+    // 33 ms, which a loaded CI machine broke without a UI fault.
+    let render_frame_ms = secs * 1e3 / shown as f64;
     assert!(cp < 33.0, "UI frames cost p95 {cp:.1} ms of the UI thread while playing");
-    assert!(wp < 33.0, "UI frames took p95 {wp:.1} ms while playing");
+    assert!(
+        wp < render_frame_ms / 2.0,
+        "UI frames took p95 {wp:.1} ms while playing, against {render_frame_ms:.0} ms per rendered frame: they wait for the renders"
+    );
     h.get_by_label("⏸ pause").click();
     settle(&mut h);
 }
