@@ -121,15 +121,15 @@ fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
 }
 
 /// graphs/default.ron copied into `dir`, its light probe path made absolute (it is relative
-/// to graphs/), with 8 median-cut lights instead of 16: the editor's tests evaluate it often,
+/// to graphs/), with 8 median-cut lights instead of 22: the editor's tests evaluate it often,
 /// and building its PEMs is most of its first frame on lavapipe.
 fn copy_default(dir: &Path) -> PathBuf {
     let path = dir.join("default.ron");
     let text = std::fs::read_to_string(root().join("graphs/default.ron")).unwrap();
     let assets = root().join("assets").display().to_string();
     assert!(text.contains("\"../assets/"), "default.ron no longer names ../assets/");
-    let lights = "\"count\": 16,";
-    assert!(text.contains(lights), "default.ron no longer has 16 median-cut lights");
+    let lights = "\"count\": 22,";
+    assert!(text.contains(lights), "default.ron no longer has 22 median-cut lights");
     let text = text.replace("\"../assets/", &format!("\"{assets}/")).replace(lights, "\"count\": 8,");
     std::fs::write(&path, text).unwrap();
     path

@@ -80,9 +80,10 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
     // Today (docs/fidelity.md, "after"; 10.0% before the shadow atlas fitted its tiles to the
     // view and sized them by penumbra and SSAO mirrored off-screen samples, 8.0% before the
     // PEMs' diffuse ends, 6.9% before the default graph's narrower atlas blur, lower
-    // bleed reduction and smaller SSAO radius): relative MAE 5.7%; 6.9% fails.
-    assert!(m.rel_mae < 0.065, "relative MAE {:.1}% (today 5.7%)", 100.0 * m.rel_mae);
-    for (name, today) in [("torus", 0.123), ("floor", 0.042), ("ball", 0.109)] {
+    // bleed reduction and smaller SSAO radius, 5.7% with 16 lights before 22): relative MAE
+    // 4.7%, under the aim of 5%, which is the bound.
+    assert!(m.rel_mae < 0.05, "relative MAE {:.1}% (today 4.7%, aim 5%)", 100.0 * m.rel_mae);
+    for (name, today) in [("torus", 0.124), ("floor", 0.029), ("ball", 0.110)] {
         let e = item(&m, name).rel_mae;
         assert!(e < today + 0.01, "{name}: relative MAE {:.1}% (today {:.1}%)", 100.0 * e, 100.0 * today);
     }
@@ -97,18 +98,14 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
         m.far_floor_werkstatt,
         m.far_floor_cycles
     );
-    // Region ratios: werkstatt's distance from Cycles, today's plus 0.02 (the ball's sun shadow
-    // was 0.153 apart, under the ball 0.080, behind the torus 0.054 before the narrower blur).
-    let today = [("under ball", 0.026), ("under torus", 0.017), ("shadow of torus", 0.040), ("shadow of ball", 0.091)];
+    // Region ratios: werkstatt's distance from Cycles within the aim, 0.05 (the ball's
+    // sun shadow was 0.153 apart, under the ball 0.080, behind the torus 0.054 before the
+    // narrower blur; the ball's shadow 0.091 with 16 lights).
+    let today = [("under ball", 0.019), ("under torus", 0.002), ("shadow of torus", 0.017), ("shadow of ball", 0.024)];
     for (name, today) in today {
         let r = region(&m, name);
         let d = (r.werkstatt - r.cycles).abs();
-        assert!(
-            d < today + 0.02,
-            "{name}: werkstatt {:.3} against Cycles {:.3} (today {today} apart)",
-            r.werkstatt,
-            r.cycles
-        );
+        assert!(d < 0.05, "{name}: werkstatt {:.3} against Cycles {:.3} (today {today} apart)", r.werkstatt, r.cycles);
     }
     // SSAO's bands at the screen's left and right edges: open floor darker than Cycles' by
     // more than 5%, pixel by pixel (each image over its far floor's mean). 19.5% before SSAO
@@ -124,7 +121,7 @@ fn the_default_scene_is_no_farther_from_cycles_than_today() {
 fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
     let m = measure_case("default_glossy_ball");
     let ball = item(&m, "ball");
-    assert!(ball.rel_mae < 0.29, "glossy ball: relative MAE {:.1}% (today 28.1%)", 100.0 * ball.rel_mae);
+    assert!(ball.rel_mae < 0.295, "glossy ball: relative MAE {:.1}% (today 28.6%)", 100.0 * ball.rel_mae);
 }
 
 /// graphs/ssr.ron: the default graph with ScreenSpaceReflections after HybridOcclusion. The
@@ -134,7 +131,7 @@ fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
 fn screen_space_reflections_bring_the_glossy_ball_closer_to_cycles() {
     let m = measure_graph("default_glossy_ball", Some("graphs/ssr.ron"));
     let ball = item(&m, "ball");
-    assert!(ball.rel_mae < 0.175, "glossy ball with SSR: relative MAE {:.1}% (today 16.1%)", 100.0 * ball.rel_mae);
+    assert!(ball.rel_mae < 0.175, "glossy ball with SSR: relative MAE {:.1}% (today 16.6%)", 100.0 * ball.rel_mae);
     let (with, without) = (measure_graph("default_lambert", Some("graphs/ssr.ron")), measure_case("default_lambert"));
     assert_eq!(with.rel_mae, without.rel_mae, "SSR changed the Lambertian scene");
 }
