@@ -85,7 +85,9 @@ pub fn parse_axis(text: &str) -> anyhow::Result<(String, Vec<String>)> {
     }
     let unique: BTreeSet<&String> = values.iter().collect();
     if unique.len() != values.len() {
-        bail!("--set \"{text}\": a value is repeated, so two variants would have one name");
+        let numbers = values.iter().all(|v| v.parse::<f64>().is_ok());
+        let hint = if numbers { " (a vector is written in brackets: node.param=[x,y,z])" } else { "" };
+        bail!("--set \"{text}\": a value is repeated, so two variants would have one name{hint}");
     }
     Ok((target.trim().to_string(), values))
 }
@@ -170,5 +172,19 @@ mod tests {
         assert_eq!(s.variants(), [["c.d=2"], ["c.d=3"]]);
         assert_eq!(variant_name(&s.variants()[1]), "c.d=3");
         assert_eq!(Sweep::parse(&[]).unwrap().variants(), [Vec::<String>::new()]);
+    }
+
+    /// A vector written without brackets is a sweep of its components: where that cannot be
+    /// meant (a repeated number), the error says how to write a vector, and a vector parameter
+    /// given one number says so too.
+    #[test]
+    fn a_vector_without_brackets_gets_an_error_naming_the_brackets() {
+        let repeated = parse_axis("draw.translate=0,7.7,0").unwrap_err().to_string();
+        assert!(repeated.contains("[x,y,z]"), "{repeated}");
+        assert!(!parse_axis("node.mode=a,a").unwrap_err().to_string().contains("[x,y,z]"));
+        let vec3 = crate::core::param::ParamKind::Vec3 { default: [0.0; 3] };
+        let one = vec3.parse_cli("7.7").unwrap_err();
+        assert!(one.contains("in brackets, [x,y,z]"), "{one}");
+        assert!(vec3.parse_cli("[0,7.7,0]").is_ok());
     }
 }

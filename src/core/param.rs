@@ -126,12 +126,19 @@ impl ParamKind {
                 ParamValue::Bool(text.parse().map_err(|_| format!("\"{text}\" is not true or false"))?)
             }
             ParamKind::Vec3 { .. } | ParamKind::Color { .. } => {
+                // In `--set`, unbracketed commas make a sweep, so a vector written 0,7.7,0 arrives
+                // here one number at a time.
+                if !text.contains(',') && text.trim().parse::<f64>().is_ok() {
+                    return Err(format!(
+                        "\"{text}\" is one number, not three: write a vector in brackets, [x,y,z] (in --set, a,b,c without brackets is a sweep of three values)"
+                    ));
+                }
                 let parts: Result<Vec<f64>, _> = text
                     .trim_matches(|c| c == '[' || c == ']' || c == '(' || c == ')')
                     .split(',')
                     .map(|p| p.trim().parse::<f64>())
                     .collect();
-                ParamValue::Vec(parts.map_err(|_| format!("\"{text}\" is not a list of numbers like 1,0.5,0"))?)
+                ParamValue::Vec(parts.map_err(|_| format!("\"{text}\" is not a list of numbers like [1,0.5,0]"))?)
             }
             ParamKind::Text { .. } | ParamKind::Path { .. } | ParamKind::Choice { .. } => {
                 ParamValue::Str(text.to_string())
