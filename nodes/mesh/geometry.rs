@@ -332,11 +332,8 @@ pub fn model_matrix(cx: &EvalCx<'_>) -> Result<glam::Mat4, NodeError> {
 /// Scale, then rotate about X, Y, Z in degrees, then translate. A scale component that is 0 or
 /// not finite is an error that names the scale; a tiny one is not (millimetres to metres).
 pub fn trs_matrix(translate: glam::Vec3, rotate: glam::Vec3, scale: glam::Vec3) -> Result<glam::Mat4, NodeError> {
-    if !scale.is_finite() || scale.cmpeq(glam::Vec3::ZERO).any() {
-        return Err(NodeError::msg(format!(
-            "the transform is degenerate: scale [{}, {}, {}] has a component that is 0 or not finite",
-            scale.x, scale.y, scale.z
-        )));
+    if let Some(why) = crate::core::param::degenerate_scale(scale.as_dvec3().to_array()) {
+        return Err(NodeError::msg(why));
     }
     let r = rotate;
     let rotation = glam::Quat::from_euler(glam::EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians());

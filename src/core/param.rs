@@ -148,6 +148,17 @@ impl ParamKind {
     }
 }
 
+/// Why a per-axis scale makes a transform degenerate (a component that is 0 or not finite),
+/// naming the scale; None where it is fine (a tiny one is: millimetres to metres). The graph
+/// check applies it to every vector parameter named `scale`, and the transform code alike.
+pub fn degenerate_scale(scale: [f64; 3]) -> Option<String> {
+    let [x, y, z] = scale;
+    scale
+        .iter()
+        .any(|c| *c == 0.0 || !c.is_finite())
+        .then(|| format!("the transform is degenerate: scale [{x}, {y}, {z}] has a component that is 0 or not finite"))
+}
+
 #[derive(Clone, Copy, Debug)]
 pub struct ParamSpec {
     pub name: &'static str,

@@ -88,6 +88,21 @@ fn param_out_of_range() {
     assert!(d.to_string().contains("120 is out of range [-89, 89]"), "{d}");
 }
 
+/// A zero scale component is an error of the graph, found by `check` with the value named,
+/// not only when the node runs; a tiny one is not (millimetres to metres).
+#[test]
+fn a_degenerate_scale_is_a_range_error_naming_its_value() {
+    let d = only("degenerate_scale.ron", ProblemKind::ParamRange);
+    assert_eq!(d.line, 13, "{d}");
+    assert_eq!(d.problem.node.as_deref(), Some("draw"));
+    assert!(
+        d.to_string().contains(
+            "parameter \"scale\": the transform is degenerate: scale [0.0001, 0.0001, 0] has a component that is 0"
+        ),
+        "{d}"
+    );
+}
+
 #[test]
 fn link_between_different_types() {
     let d = only("link_type.ron", ProblemKind::LinkTypeMismatch);
