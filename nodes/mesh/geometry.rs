@@ -244,6 +244,16 @@ pub static MESH_FILE: NodeSpec = NodeSpec {
             PortType::Surface,
             "The same mesh as a Surface (UVs are the pattern coordinates, v down); linking it requires UVs in the file.",
         ),
+        PortSpec::output(
+            "bounds_min",
+            PortType::Vector,
+            "Lowest corner of the mesh's bounding box, in the output's units (the file's, or normalized): to line meshes up, or place by height.",
+        ),
+        PortSpec::output(
+            "bounds_max",
+            PortType::Vector,
+            "Highest corner of the mesh's bounding box, in the output's units.",
+        ),
     ],
     params: &[
         ParamSpec::new(
@@ -299,6 +309,9 @@ impl Node for MeshFileNode {
             )));
         }
         cx.count("triangles", mesh.triangle_count());
+        let (lo, hi) = mesh.bounds();
+        cx.set("bounds_min", lo);
+        cx.set("bounds_max", hi);
         cx.set("surface", mesh.clone());
         cx.set("mesh", mesh);
         Ok(())

@@ -131,6 +131,13 @@ fn a_relative_mesh_path_is_resolved_against_the_graph_folder() {
         Some(werkstatt::core::port::Value::Mesh(m)) => assert_eq!(m.positions[1], glam::Vec3::X),
         _ => panic!("no mesh"),
     }
+    // Its bounds, in the file's units: what lines meshes up without reading the file.
+    for (port, expected) in [("bounds_min", glam::Vec3::ZERO), ("bounds_max", glam::Vec3::new(1.0, 1.0, 0.0))] {
+        match ev.output("mesh", port) {
+            Some(werkstatt::core::port::Value::Vector(v)) => assert_eq!(*v, expected, "{port}"),
+            _ => panic!("{port}: no vector"),
+        }
+    }
 }
 
 /// Meshes of one source normalized together keep lining up: a garment normalized by its body's
