@@ -180,3 +180,106 @@ fn the_gpu_tessellation_matches_the_cpu_twin() {
     let one = patch_counts(&woven, 6.3);
     assert_eq!(frame.layers[1].as_ref().unwrap().index_count as usize, 5 * one.2);
 }
+
+/// Background pixels of a `w` x `h` coverage mask that the image border cannot reach through
+/// background: holes inside the silhouette.
+fn holes(drawn: &[bool], w: usize, h: usize) -> usize {
+    let mut reached = vec![false; w * h];
+    let mut stack: Vec<usize> =
+        (0..w * h).filter(|&k| k % w == 0 || k % w == w - 1 || k < w || k >= w * (h - 1)).collect();
+    while let Some(k) = stack.pop() {
+        if drawn[k] || reached[k] {
+            continue;
+        }
+        reached[k] = true;
+        let (x, y) = (k % w, k / w);
+        if x > 0 {
+            stack.push(k - 1);
+        }
+        if x + 1 < w {
+            stack.push(k + 1);
+        }
+        if y > 0 {
+            stack.push(k - w);
+        }
+        if y + 1 < h {
+            stack.push(k + w);
+        }
+    }
+    (0..w * h).filter(|&k| !drawn[k] && !reached[k]).count()
+}
+
+/// Issue 33's render check of cracks: a curved 4x4 patch grid at random non-integer panel
+/// levels, evaluated by the compute pass and drawn as it is on screen, seen obliquely through an
+/// orthographic camera over an empty (the "red") background. Every background pixel must join
+/// the image border: none shows through inside the silhouette. Without eq. 21's snapping
+/// (`snap` in woven.wgsl returning its argument) the T-junctions open into holes.
+#[test]
+fn an_orthographic_render_of_random_levels_shows_no_background_inside() {
+    use std::sync::Arc;
+    use werkstatt::render::draw::kinds::woven::WovenGpu;
+    use werkstatt::render::scene::{Camera, DrawItem, Material, View};
+    use werkstatt::woven::gpu::GpuWoven;
+    use werkstatt::woven::panel::ControlGrid;
+    // A bumpy height field: the chords of coarse edges leave its fine neighbours' points.
+    let points = (0..5)
+        .flat_map(|j| (0..5).map(move |i| (i as f64, j as f64)))
+        .map(|(x, z)| glam::DVec3::new(x, 0.45 * (1.9 * x).sin() * (1.7 * z + 0.4).cos(), z))
+        .collect();
+    let panel = Panel::new(&ControlGrid::new(5, 5, points).unwrap());
+    let weave = Weave::plain();
+    let yarn = YarnParams { nodes: 4, spacing: 0.25, crimp: 0.04, radius: 0.05, fibres: 3, migration: 0.3, twist: 0.5 };
+    let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+    // Levels in (0, 4) from a fixed LCG, alternating low and high so neighbours differ.
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let levels: Vec<Option<f64>> = (0..16)
+        .map(|k| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let r = (state >> 11) as f64 / (1u64 << 53) as f64;
+            Some(if (k + k / 4) % 2 == 0 { 0.1 + 1.8 * r } else { 2.1 + 1.8 * r })
+        })
+        .collect();
+    assert!(levels.iter().flatten().all(|l| l.fract() != 0.0 && *l < 4.0));
+    let frame = GpuWoven::default().run(gpu(), &woven, &levels, &[false; 16]).unwrap();
+    let material = Arc::new(Material::default());
+    let items: Vec<DrawItem> = frame
+        .layers
+        .into_iter()
+        .flatten()
+        .map(|layer| {
+            let kind = WovenLayer {
+                layer: "panel",
+                scales: frame.scales,
+                culled: 0,
+                gpu: Some(Arc::new(WovenGpu { layer, cpu_reference: Box::new(|| anyhow::bail!("not exported")) })),
+            };
+            DrawItem::plain(Arc::new(werkstatt::mesh::Mesh::default()), material.clone(), glam::Mat4::IDENTITY)
+                .with_kind(kind)
+        })
+        .collect();
+    assert_eq!(items.len(), 1, "panel levels draw the panel layer only");
+    let (w, h) = (96u32, 72u32);
+    let camera = Camera {
+        eye: glam::Vec3::new(2.0, 4.0, 6.5),
+        target: glam::Vec3::new(2.0, 0.0, 2.0),
+        up: glam::Vec3::Y,
+        fov_y_degrees: 40.0,
+        near: 0.1,
+        far: 20.0,
+    };
+    let mut view = View::new(&camera, w, h);
+    view.proj = glam::Mat4::orthographic_rh(-2.3, 2.3, -1.725, 1.725, camera.near, camera.far);
+    view.view_proj = view.proj * view.view;
+    view.inv_proj = view.proj.inverse();
+    view.inv_view_proj = view.view_proj.inverse();
+    let mut drawer = werkstatt::render::draw::SceneDrawer::default();
+    let gb = drawer.gbuffer(gpu(), &items, camera, view).unwrap();
+    gpu().submit_checked().unwrap();
+    let depth = werkstatt::gpu::read_back(gpu(), &gb.depth).unwrap();
+    let drawn: Vec<bool> = depth.rgba.chunks(4).map(|d| d[0] > 0.0).collect();
+    let covered = drawn.iter().filter(|&&d| d).count();
+    let holes = holes(&drawn, w as usize, h as usize);
+    println!("levels {levels:?}: {covered} pixels drawn, {holes} background pixels inside");
+    assert!(covered > (w * h / 2) as usize, "the cloth covers only {covered} pixels");
+    assert_eq!(holes, 0, "background shows through {holes} pixels inside the silhouette");
+}
