@@ -14,7 +14,6 @@
 
 const TAU: f32 = 6.283185307179586;
 const PI: f32 = 3.141592653589793;
-const FLOATS: u32 = 14u;
 
 struct Params {
     patches_u: u32,
@@ -53,6 +52,8 @@ struct Plan {
 @group(0) @binding(3) var<storage, read> weave: array<i32>;
 @group(0) @binding(4) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(5) var<storage, read_write> out_indices: array<u32>;
+
+// #include "vertex_out.wgsl"
 
 // ---- panel.rs ----
 
@@ -492,22 +493,7 @@ fn snap(x: f32, g: f32) -> f32 {
 }
 
 fn write_vertex(v: u32, p: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) {
-    let o = v * FLOATS;
-    let nn = safe_normalize(n, vec3<f32>(0.0, 1.0, 0.0));
-    out_vertices[o] = p.x;
-    out_vertices[o + 1u] = p.y;
-    out_vertices[o + 2u] = p.z;
-    out_vertices[o + 3u] = nn.x;
-    out_vertices[o + 4u] = nn.y;
-    out_vertices[o + 5u] = nn.z;
-    for (var k = 6u; k < 9u; k++) {
-        out_vertices[o + k] = 0.0;
-    }
-    out_vertices[o + 9u] = uv.x;
-    out_vertices[o + 10u] = uv.y;
-    for (var k = 11u; k < 14u; k++) {
-        out_vertices[o + k] = 0.0;
-    }
+    store_vertex(v, p, safe_normalize(n, vec3<f32>(0.0, 1.0, 0.0)), vec3<f32>(0.0), uv, vec3<f32>(0.0));
 }
 
 fn patch_uv(pi: u32, pj: u32, s: f32, t: f32) -> vec2<f32> {
