@@ -141,6 +141,11 @@ pub static WOVEN_CLOTH: NodeSpec = NodeSpec {
             ParamKind::Float { default: 0.02, min: 0.0, max: 1e6 },
             "C of eq. 16, L = c / (C |p_c - p_e|): smaller C, finer levels.",
         ),
+        ParamSpec::new(
+            "snap",
+            ParamKind::Bool { default: true },
+            "Crack snapping at shared patch borders (eq. 21); off only to show the cracks it closes (Fig. 9).",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(WovenClothNode::default()),
@@ -186,6 +191,7 @@ impl Node for WovenClothNode {
             return Err(port_err("level", format!("{fixed} is above the finest level {MAX_LEVEL} (fibre scale)")));
         }
         let coef = cx.f64("lod_c");
+        let snap = cx.bool("snap");
         let camera: Option<Camera> = cx.optional("camera");
         let eye = if fixed < 0.0 {
             if coef <= 0.0 {
@@ -219,7 +225,7 @@ impl Node for WovenClothNode {
             let panel = Arc::new(Panel { flip: pg.flipped, ..Panel::new(&pg.grid) });
             let levels =
                 patch_levels(&panel, &pg.inside, eye.is_none().then_some(fixed), coef, eye.unwrap_or_default());
-            let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+            let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous, snap };
             // Only the GPU path culls: the CPU evaluation stays the whole reference.
             let culled = culled_patches(&woven, view_proj.as_ref().filter(|_| on_gpu));
             planned += levels
@@ -248,7 +254,7 @@ impl Node for WovenClothNode {
                     let (panel, weave, yarn, levels, culled) =
                         (panel.clone(), weave.clone(), yarn.clone(), levels.clone(), culled.clone());
                     let cpu_reference = Box::new(move || {
-                        let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+                        let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous, snap };
                         let t = woven.tessellate_culled(&levels, &culled)?;
                         Ok(to_mesh([t.panel, t.weft, t.warp].into_iter().nth(k).unwrap_or_default()))
                     });

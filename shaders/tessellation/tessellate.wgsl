@@ -29,8 +29,7 @@ struct Params {
 }
 
 // #include "pn.wgsl"
-
-const FLOATS: u32 = 14u;
+// #include "vertex_out.wgsl"
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
@@ -315,21 +314,7 @@ fn warp_edge(t: f32, la: f32, lb: f32) -> f32 {
 }
 
 fn write_vertex(p: vec3<f32>, n: vec3<f32>, tu: vec3<f32>, uv: vec2<f32>, tv: vec3<f32>) {
-    let o = next_vertex * FLOATS;
-    out_vertices[o] = p.x;
-    out_vertices[o + 1u] = p.y;
-    out_vertices[o + 2u] = p.z;
-    out_vertices[o + 3u] = n.x;
-    out_vertices[o + 4u] = n.y;
-    out_vertices[o + 5u] = n.z;
-    out_vertices[o + 6u] = tu.x;
-    out_vertices[o + 7u] = tu.y;
-    out_vertices[o + 8u] = tu.z;
-    out_vertices[o + 9u] = uv.x;
-    out_vertices[o + 10u] = uv.y;
-    out_vertices[o + 11u] = tv.x;
-    out_vertices[o + 12u] = tv.y;
-    out_vertices[o + 13u] = tv.z;
+    store_vertex(next_vertex, p, n, tu, uv, tv);
     next_vertex += 1u;
 }
 

@@ -3,7 +3,9 @@
 // arithmetic of its Rust original (f32 here, f64 there). The CPU plans the frame (src/woven/gpu.rs:
 // each drawn patch's level, its four edge levels, its first vertex and index); four entry points
 // fill one layer's buffers, one workgroup row per patch:
-//   panel_vertices, tube_vertices  the patch's geomorphed, crack-snapped vertices;
+//   panel_vertices  the patch's geomorphed, crack-snapped vertices, one invocation each;
+//   tube_vertices   the same, one invocation per ring: the ring's panel point, frames and morph
+//                   rings are evaluated once and shared by its vertices (they differ in θ only);
 //   panel_indices, tube_indices    its triangles.
 // The parameters (the tube layer's direction too) sit in a storage buffer, not a uniform block:
 // lavapipe specializes shaders on uniforms that branches read and would recompile this one per
@@ -12,7 +14,6 @@
 
 const TAU: f32 = 6.283185307179586;
 const PI: f32 = 3.141592653589793;
-const FLOATS: u32 = 14u;
 
 struct Params {
     patches_u: u32,
@@ -51,6 +52,8 @@ struct Plan {
 @group(0) @binding(3) var<storage, read> weave: array<i32>;
 @group(0) @binding(4) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(5) var<storage, read_write> out_indices: array<u32>;
+
+// #include "vertex_out.wgsl"
 
 // ---- panel.rs ----
 
@@ -122,10 +125,37 @@ fn from_derivatives(du: vec3<f32>, dv: vec3<f32>) -> Frame {
     return Frame(t, n, cross(n, t));
 }
 
-// Panel::frame: the cross derivative on a border is the mean of both patches'.
-fn panel_frame(pi: u32, pj: u32, s: f32, t: f32) -> Frame {
-    var du = deriv_u(pi, pj, s, t);
-    var dv = deriv_v(pi, pj, s, t);
+// The point and both derivatives of patch (pi, pj) at (s, t), each Bézier point read once
+// (the sums of position, deriv_u and deriv_v, term for term).
+struct Eval {
+    p: vec3<f32>,
+    du: vec3<f32>,
+    dv: vec3<f32>,
+}
+
+fn evaluate(pi: u32, pj: u32, s: f32, t: f32) -> Eval {
+    let pid = patch_id(pi, pj);
+    let bu = bernstein(s);
+    let bv = bernstein(t);
+    let du = bernstein_d(s);
+    let dv = bernstein_d(t);
+    var e = Eval(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var i = 0u; i < 4u; i++) {
+        for (var j = 0u; j < 4u; j++) {
+            let q = bezier[16u * pid + 4u * i + j].xyz;
+            e.p += bu[i] * bv[j] * q;
+            e.du += du[i] * bv[j] * q;
+            e.dv += bu[i] * dv[j] * q;
+        }
+    }
+    return e;
+}
+
+// Panel::frame from the patch's own derivatives at (s, t): the cross derivative on a border is
+// the mean of both patches'.
+fn panel_frame_of(pi: u32, pj: u32, s: f32, t: f32, du_own: vec3<f32>, dv_own: vec3<f32>) -> Frame {
+    var du = du_own;
+    var dv = dv_own;
     if s == 0.0 && pi > 0u {
         du = 0.5 * (du + deriv_u(pi - 1u, pj, 1.0, t));
     } else if s == 1.0 && pi + 1u < params.patches_u {
@@ -315,16 +345,17 @@ fn panel_bilinear(pi: u32, pj: u32, s: f32, t: f32, g: f32) -> vec3<f32> {
 }
 
 fn panel_vertex(pi: u32, pj: u32, s: f32, t: f32, st: LodState) -> Pn {
-    var p = position(pi, pj, s, t);
+    let e = evaluate(pi, pj, s, t);
+    var p = e.p;
     if st.alpha > 0.0 && st.grid > 0u {
         let g = f32(panel_res(st.grid) / 2u);
         p = (1.0 - st.alpha) * p + st.alpha * panel_bilinear(pi, pj, s, t, g);
     }
-    return Pn(p, panel_frame(pi, pj, s, t).n);
+    return Pn(p, panel_frame_of(pi, pj, s, t, e.du, e.dv).n);
 }
 
-fn panel_term(pi: u32, pj: u32, s: f32, t: f32, st: LodState) -> vec3<f32> {
-    let exact = position(pi, pj, s, t);
+// The panel term of eq. 19 from the exact point at (s, t).
+fn panel_term(pi: u32, pj: u32, s: f32, t: f32, st: LodState, exact: vec3<f32>) -> vec3<f32> {
     if st.alpha_panel > 0.0 {
         return (1.0 - st.alpha_panel) * exact + st.alpha_panel * panel_bilinear(pi, pj, s, t, 8.0);
     }
@@ -348,12 +379,25 @@ fn yarn_st(y: Yarn, u: f32) -> vec2<f32> {
     return vec2<f32>(across, along);
 }
 
-// Eq. 19 at a tube point (f < 0: no fibre), unmorphed.
-fn tube_point(y: Yarn, f: i32, u: f32, theta: f32, st: LodState, two_sided: bool) -> Pn {
+// Eq. 19 at a tube point (f < 0: no fibre), unmorphed, split as tess.rs's tube_point: the
+// ring's terms (the panel point and frames, which do not depend on θ) once per ring, then each
+// θ of the ring from them (ring_point).
+struct Ring {
+    // l_p + β_y M_p l_y + M_py l_f.
+    base: vec3<f32>,
+    // The frame the cross-section turns in (M_py, or M_pyf with fibres) and its radius.
+    m: Frame,
+    k: f32,
+    // M_py's normal: the normal of a two-sided (ribbon) ring.
+    n: vec3<f32>,
+}
+
+fn ring_at(y: Yarn, f: i32, u: f32, st: LodState) -> Ring {
     let nodes = params.nodes;
     let st2 = yarn_st(y, u);
-    let lp = panel_term(y.pi, y.pj, st2.x, st2.y, st);
-    let mp = panel_frame(y.pi, y.pj, st2.x, st2.y);
+    let e = evaluate(y.pi, y.pj, st2.x, st2.y);
+    let lp = panel_term(y.pi, y.pj, st2.x, st2.y, st, e.p);
+    let mp = panel_frame_of(y.pi, y.pj, st2.x, st2.y, e.du, e.dv);
     var line = y.pj * nodes + y.index;
     var first = y.pi * nodes;
     if y.dir == 1u {
@@ -375,62 +419,72 @@ fn tube_point(y: Yarn, f: i32, u: f32, theta: f32, st: LodState, two_sided: bool
         m = compose_frames(mpy, fp.frame);
         k = (1.0 - st.beta_f) * params.radius + st.beta_f * params.fibre_radius;
     }
-    let dir = apply(m, vec3<f32>(0.0, sin(theta), cos(theta)));
-    let p = lp + st.beta_y * apply(mp, ly) + apply(mpy, lf) + k * dir;
+    return Ring(lp + st.beta_y * apply(mp, ly) + apply(mpy, lf), m, k, mpy.n);
+}
+
+fn ring_point(r: Ring, theta: f32, two_sided: bool) -> Pn {
+    let dir = apply(r.m, vec3<f32>(0.0, sin(theta), cos(theta)));
+    let p = r.base + r.k * dir;
     if two_sided {
-        return Pn(p, mpy.n);
+        return Pn(p, r.n);
     }
     return Pn(p, dir);
 }
 
-// Eq. 17 on the composed position, toward the coarser tube grid (eq. 18 in u and θ). Tap 0 is
-// the point itself, taps 1-4 the coarse grid's corners around it.
-fn tube_vertex(y: Yarn, f: i32, u: f32, theta: f32, st: LodState) -> Pn {
-    let ring = tube_res(st.grid).y;
+// Eq. 17's coarser tube grid (eq. 18 in u) around along point u: the coarse ring counts, the
+// coarse along points u0, u1 that bracket u and u's weight between them. No morph: `taps` 1.
+struct Coarse {
+    res: vec2<u32>,
+    u0: f32,
+    u1: f32,
+    wu: f32,
+    taps: u32,
+}
+
+fn coarse_of(u: f32, st: LodState) -> Coarse {
     let morph = st.alpha > 0.0 && st.grid > 5u;
-    var coarse = vec2<u32>(1u, 2u);
+    var res = vec2<u32>(1u, 2u);
     var taps = 1u;
     if morph {
-        coarse = tube_res(st.grid - 1u);
+        res = tube_res(st.grid - 1u);
         taps = 5u;
     }
-    let i = bracket_index(coarse.x, u);
-    let u0 = along_point(coarse.x, i);
-    let u1 = along_point(coarse.x, i + 1u);
+    let i = bracket_index(res.x, u);
+    let u0 = along_point(res.x, i);
+    let u1 = along_point(res.x, i + 1u);
     let wu = clamp((u - u0) / (u1 - u0), 0.0, 1.0);
-    let cr = f32(coarse.y);
+    return Coarse(res, u0, u1, wu, taps);
+}
+
+// Eq. 17 on the composed position, toward the coarser tube grid (eq. 18 in u and θ): `own` is
+// the fine ring at u, `r0` and `r1` the coarse rings at c.u0 and c.u1. Tap 0 is the point
+// itself, taps 1-4 the coarse grid's corners around it; `ring`: the fine ring's vertices.
+fn tube_vertex(own: Ring, r0: Ring, r1: Ring, c: Coarse, ring: u32, theta: f32, st: LodState) -> Pn {
+    let cr = f32(c.res.y);
     let x = theta * cr / TAU;
     let k0 = floor(x);
     let wt = x - k0;
-    var own = Pn(vec3<f32>(0.0), vec3<f32>(0.0));
+    let q = ring_point(own, theta, ring == 2u);
+    if c.taps == 1u {
+        return q;
+    }
     var pb = vec3<f32>(0.0);
     var nb = vec3<f32>(0.0);
-    for (var k = 0u; k < taps; k++) {
-        var uu = u;
-        var th = theta;
-        var two_sided = ring == 2u;
-        var w = 1.0;
-        if k > 0u {
-            let a = (k - 1u) & 1u;
-            let b = (k - 1u) >> 1u;
-            uu = select(u0, u1, a == 1u);
-            th = (k0 + f32(b)) * TAU / cr;
-            two_sided = coarse.y == 2u;
-            w = select(1.0 - wu, wu, a == 1u) * select(1.0 - wt, wt, b == 1u);
+    for (var k = 1u; k < c.taps; k++) {
+        let a = (k - 1u) & 1u;
+        let b = (k - 1u) >> 1u;
+        let th = (k0 + f32(b)) * TAU / cr;
+        let w = select(1.0 - c.wu, c.wu, a == 1u) * select(1.0 - wt, wt, b == 1u);
+        var r = r0;
+        if a == 1u {
+            r = r1;
         }
-        let q = tube_point(y, f, uu, th, st, two_sided);
-        if k == 0u {
-            own = q;
-        } else {
-            pb += w * q.p;
-            nb += w * q.n;
-        }
-    }
-    if !morph {
-        return own;
+        let t = ring_point(r, th, c.res.y == 2u);
+        pb += w * t.p;
+        nb += w * t.n;
     }
     let a = st.alpha;
-    return Pn((1.0 - a) * own.p + a * pb, safe_normalize((1.0 - a) * own.n + a * nb, own.n));
+    return Pn((1.0 - a) * q.p + a * pb, safe_normalize((1.0 - a) * q.n + a * nb, q.n));
 }
 
 // Rust's round (halves away from zero) for x >= 0; WGSL's round takes halves to even.
@@ -439,22 +493,7 @@ fn snap(x: f32, g: f32) -> f32 {
 }
 
 fn write_vertex(v: u32, p: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) {
-    let o = v * FLOATS;
-    let nn = safe_normalize(n, vec3<f32>(0.0, 1.0, 0.0));
-    out_vertices[o] = p.x;
-    out_vertices[o + 1u] = p.y;
-    out_vertices[o + 2u] = p.z;
-    out_vertices[o + 3u] = nn.x;
-    out_vertices[o + 4u] = nn.y;
-    out_vertices[o + 5u] = nn.z;
-    for (var k = 6u; k < 9u; k++) {
-        out_vertices[o + k] = 0.0;
-    }
-    out_vertices[o + 9u] = uv.x;
-    out_vertices[o + 10u] = uv.y;
-    for (var k = 11u; k < 14u; k++) {
-        out_vertices[o + k] = 0.0;
-    }
+    store_vertex(v, p, safe_normalize(n, vec3<f32>(0.0, 1.0, 0.0)), vec3<f32>(0.0), uv, vec3<f32>(0.0));
 }
 
 fn patch_uv(pi: u32, pj: u32, s: f32, t: f32) -> vec2<f32> {
@@ -505,24 +544,26 @@ fn fibres_of(st: LodState) -> u32 {
     return 1u;
 }
 
-fn tube_vertex_at(plan: Plan, pi: u32, pj: u32, v: u32) {
+// One ring of a tube patch: its terms once (and the coarse rings' when it morphs), then each
+// of its vertices.
+fn tube_ring_at(plan: Plan, pi: u32, pj: u32, r: u32) {
     let st = lod_at(plan.level.x);
     let res = tube_res(st.grid);
     let count = along_count(res.x);
     let nf = fibres_of(st);
-    let ring = count * res.y;
-    let block = v / ring;
+    let block = r / count;
     let index = block / nf;
     var f = -1;
     if st.scale == FIBRE {
         f = i32(block % nf);
     }
-    let ai = (v % ring) / res.y;
-    let k = v % res.y;
+    let ai = r % count;
     let dir = params.dir;
     let y = Yarn(dir, pi, pj, index);
     let u = along_point(res.x, ai);
     let st2 = yarn_st(y, u);
+    let uv = patch_uv(pi, pj, st2.x, st2.y);
+    let first = plan.ids.y + r * res.y;
     // The edges a yarn crosses: weft left/right, warp bottom/top.
     var e = 4u;
     if ai == 0u {
@@ -533,31 +574,44 @@ fn tube_vertex_at(plan: Plan, pi: u32, pj: u32, v: u32) {
     // A ring on a shared edge takes the edge's state (eq. 21, one state per edge): θ snapped
     // to the edge's ring, or at the panel scale collapsed onto the panel's edge vertex.
     var s = st;
-    var theta = f32(k) * TAU / f32(res.y);
-    var drawn: Pn;
-    var on_panel = false;
+    var snapped = 0u;
     if e < 4u && plan.edges[e] >= 0.0 {
         s = edge_state(plan, e);
         if s.scale == PANEL {
-            on_panel = true;
             let ge = f32(panel_res(s.grid));
+            var drawn: Pn;
             if dir == 0u {
                 drawn = panel_vertex(pi, pj, st2.x, snap(st2.y, ge), s);
             } else {
                 drawn = panel_vertex(pi, pj, snap(st2.x, ge), st2.y, s);
             }
-        } else {
-            let re = f32(tube_res(s.grid).y);
-            theta = floor(theta * re / TAU + 0.5) * TAU / re;
-            if s.scale != FIBRE {
-                f = -1;
+            for (var k = 0u; k < res.y; k++) {
+                write_vertex(first + k, drawn.p, drawn.n, uv);
             }
+            return;
+        }
+        snapped = tube_res(s.grid).y;
+        if s.scale != FIBRE {
+            f = -1;
         }
     }
-    if !on_panel {
-        drawn = tube_vertex(y, f, u, theta, s);
+    let own = ring_at(y, f, u, s);
+    let c = coarse_of(u, s);
+    var r0 = own;
+    var r1 = own;
+    if c.taps > 1u {
+        r0 = ring_at(y, f, c.u0, s);
+        r1 = ring_at(y, f, c.u1, s);
     }
-    write_vertex(plan.ids.y + v, drawn.p, drawn.n, patch_uv(pi, pj, st2.x, st2.y));
+    for (var k = 0u; k < res.y; k++) {
+        var theta = f32(k) * TAU / f32(res.y);
+        if snapped > 0u {
+            let re = f32(snapped);
+            theta = floor(theta * re / TAU + 0.5) * TAU / re;
+        }
+        let drawn = tube_vertex(own, r0, r1, c, tube_res(s.grid).y, theta, s);
+        write_vertex(first + k, drawn.p, drawn.n, uv);
+    }
 }
 
 @compute @workgroup_size(64)
@@ -575,8 +629,9 @@ fn tube_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
     let plan = plans[wg.x];
     let pi = plan.ids.x % params.patches_u;
     let pj = plan.ids.x / params.patches_u;
-    for (var v = wg.y * 64u + lid; v < plan.ids.w; v += 64u * params.slices) {
-        tube_vertex_at(plan, pi, pj, v);
+    let rings = plan.ids.w / tube_res(lod_at(plan.level.x).grid).y;
+    for (var r = wg.y * 64u + lid; r < rings; r += 64u * params.slices) {
+        tube_ring_at(plan, pi, pj, r);
     }
 }
 

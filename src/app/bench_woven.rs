@@ -112,7 +112,7 @@ pub fn woven(
             .map(|(i, j)| DVec3::new(i as f64 * 0.16 - side / 2.0, 0.0, j as f64 * 0.16 - side / 2.0))
             .collect();
         let panel = Panel::new(&ControlGrid::new(n + 1, n + 1, points)?);
-        let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        let woven = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous, snap: true };
         let cam = camera(n, close);
         let view_proj = View::new(&cam, size.0, size.1).view_proj.as_dmat4();
         let inside = vec![true; n * n];

@@ -28,6 +28,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("tessellation/pn.wgsl", include_str!("../../shaders/tessellation/pn.wgsl")),
     ("tessellation/gbuffer_pn.wgsl", include_str!("../../shaders/tessellation/gbuffer_pn.wgsl")),
     ("tessellation/woven.wgsl", include_str!("../../shaders/tessellation/woven.wgsl")),
+    ("tessellation/vertex_out.wgsl", include_str!("../../shaders/tessellation/vertex_out.wgsl")),
     ("common/instance_in.wgsl", include_str!("../../shaders/common/instance_in.wgsl")),
     ("common/item_in.wgsl", include_str!("../../shaders/common/item_in.wgsl")),
     ("warp/attach.wgsl", include_str!("../../shaders/warp/attach.wgsl")),

@@ -164,8 +164,8 @@ impl Default for GpuWoven {
 const PER_ROW: usize = 64 * 16;
 
 impl GpuWoven {
-    /// Records the tessellation of `w` with `levels` (as [`Woven::tessellate`]) into the current
-    /// frame; patches with `culled[k]` set are not drawn but keep their level for their
+    /// Records the tessellation of `w` with `levels` (as [`Woven::tessellate`] with the levels
+    /// rounded to f32) into the current frame; patches with `culled[k]` set are not drawn but keep their level for their
     /// neighbours' edges. Nothing is read back.
     pub fn run(
         &mut self,
@@ -178,10 +178,7 @@ impl GpuWoven {
         anyhow::ensure!(w.morph == Morph::Continuous, "the GPU evaluates the continuous morph only");
         let (pu, pv) = (w.panel.patches_u, w.panel.patches_v);
         w.check_levels(levels, culled)?;
-        let level_at = |i: isize, j: isize| {
-            let inside = i >= 0 && j >= 0 && (i as usize) < pu && (j as usize) < pv;
-            inside.then(|| levels[j as usize * pu + i as usize]).flatten().map_or(-1.0, |l| l as f32)
-        };
+        let level_at = |i: isize, j: isize| w.neighbour(levels, i, j).map_or(-1.0, |l| l as f32);
         // Plans of the panel layer and of the tube layers (weft and warp share theirs).
         let mut plans: [Vec<Plan>; 2] = Default::default();
         let mut totals = [[0usize; 2]; 2];
@@ -192,6 +189,9 @@ impl GpuWoven {
             for pi in 0..pu {
                 let k = pj * pu + pi;
                 let Some(l) = levels[k] else { continue };
+                // The shader sees the level in f32: plan with that one, or a level just under an
+                // integer (3.9999999999) would be planned at one scale and drawn at the next.
+                let l = f64::from(l as f32);
                 if culled[k] {
                     out.culled += 1;
                     continue;
@@ -318,7 +318,7 @@ mod tests {
     #[test]
     fn planned_counts_are_the_tessellations() {
         let (panel, weave, yarn) = (flat(1), Weave::plain(), yarn());
-        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous, snap: true };
         for l in [0.0, 1.5, 3.9, 4.2, 5.0, 6.5, 9.0, 9.5, 12.0] {
             let t = w.tessellate(&[Some(l)]).unwrap();
             let (scale, nv, ni) = patch_counts(&w, l);
@@ -335,7 +335,7 @@ mod tests {
     #[test]
     fn patches_outside_the_view_are_culled() {
         let (panel, weave, yarn) = (flat(6), Weave::plain(), yarn());
-        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous };
+        let w = Woven { panel: &panel, weave: &weave, yarn: &yarn, morph: Morph::Continuous, snap: true };
         // The render layer's camera (wgpu's depth range), built here: woven sits below render.
         let camera = |eye: glam::Vec3, target: glam::Vec3| {
             let proj = glam::Mat4::perspective_rh(40f32.to_radians(), 1.0, 0.01, 100.0);

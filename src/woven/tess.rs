@@ -74,6 +74,9 @@ pub struct Woven<'a> {
     pub weave: &'a Weave,
     pub yarn: &'a YarnParams,
     pub morph: Morph,
+    /// Eq. 21's crack snapping at shared patch borders; off (for Fig. 9 only), every border is
+    /// evaluated as an outer one and T-junctions open.
+    pub snap: bool,
 }
 
 impl Woven<'_> {
@@ -236,10 +239,11 @@ impl Woven<'_> {
         }
     }
 
-    /// The level of the neighbour across an edge, if there is one.
-    fn neighbour(&self, levels: &[Option<f64>], pi: isize, pj: isize) -> Option<f64> {
+    /// The level of the neighbour across an edge, if there is one (none without snapping).
+    pub fn neighbour(&self, levels: &[Option<f64>], pi: isize, pj: isize) -> Option<f64> {
         let (pu, pv) = (self.panel.patches_u as isize, self.panel.patches_v as isize);
-        (pi >= 0 && pj >= 0 && pi < pu && pj < pv).then(|| levels[(pj * pu + pi) as usize]).flatten()
+        let inside = self.snap && pi >= 0 && pj >= 0 && pi < pu && pj < pv;
+        inside.then(|| levels[(pj * pu + pi) as usize]).flatten()
     }
 
     fn tessellate_patch(&self, pi: usize, pj: usize, l: f64, levels: &[Option<f64>], out: &mut Tessellation) {

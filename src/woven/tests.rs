@@ -197,7 +197,7 @@ fn composition_on_a_flat_panel_matches_the_closed_form() {
     let panel = Panel::new(&ControlGrid::new(4, 4, pts).unwrap());
     let weave = Weave::plain();
     let p = params();
-    let woven = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous };
+    let woven = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous, snap: true };
     let st = LodState::at(8.0, Morph::Continuous);
     assert_eq!((st.beta_y, st.alpha), (1.0, 1.0));
     let mut r = SplitMix64::new(5);
@@ -313,7 +313,7 @@ fn geomorphing_does_not_pop_across_levels_and_scales() {
     // Lipschitz bound: the patch size (1) per unit L; a pop is a step of ~d * 10 or more.
     let k = 1.0;
     for morph in [Morph::Continuous, Morph::Literal] {
-        let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph };
+        let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph, snap: true };
         let mut worst: f64 = 0.0;
         for (s, t) in [(0.3125, 0.5625), (0.71875, 0.15625), (0.5, 0.5)] {
             let (j, at) = max_step(&|l| panel_surface(&w, s, t, l, morph), 0.0, 3.999, d);
@@ -335,7 +335,7 @@ fn geomorphing_does_not_pop_across_levels_and_scales() {
         }
     }
     // Across L = 4 the ribbons' centre lines start on the panel as drawn just below 4.
-    let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous };
+    let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous, snap: true };
     for index in [0, 7, 15] {
         for u in [-0.5, 0.0, 3.0, 9.0, 15.5] {
             let y = YarnRef { dir: Dir::Warp, pi: 1, pj: 1, index };
@@ -392,7 +392,7 @@ fn inner_open_edges(layers: &[&Layer]) -> usize {
 /// the edges that only one triangle uses lie on the outer boundary after welding.
 fn assert_no_inner_cracks(weave: &Weave, p: &YarnParams, range: (f64, f64), seed: u64, trials: usize) {
     let panel = Panel::new(&curved_grid(5, 0.3, 33));
-    let w = Woven { panel: &panel, weave, yarn: p, morph: Morph::Continuous };
+    let w = Woven { panel: &panel, weave, yarn: p, morph: Morph::Continuous, snap: true };
     let mut r = SplitMix64::new(seed);
     let (lo, hi) = range;
     for _ in 0..trials {
@@ -428,7 +428,7 @@ fn no_cracks_between_patches_of_random_levels() {
     // Panel next to yarns: every yarn end on that edge lands on a vertex of the panel's edge.
     let levels = vec![Some(2.5), Some(6.5), Some(3.7), Some(4.2)];
     let small = Panel::new(&curved_grid(3, 0.3, 34));
-    let w = Woven { panel: &small, weave: &weave, yarn: &p, morph: Morph::Continuous };
+    let w = Woven { panel: &small, weave: &weave, yarn: &p, morph: Morph::Continuous, snap: true };
     let t = w.tessellate(&levels).unwrap();
     assert_eq!(t.scales, [2, 2, 0]);
     let key = |p: &DVec3| (*p * 1e9).round().as_i64vec3().to_array();
@@ -447,7 +447,7 @@ fn triangle_counts_follow_the_papers_pattern() {
     let panel = Panel::new(&ControlGrid::new(3, 3, pts).unwrap());
     let weave = Weave::plain();
     let p = params();
-    let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous };
+    let w = Woven { panel: &panel, weave: &weave, yarn: &p, morph: Morph::Continuous, snap: true };
     for (l, per_patch) in [(7.0, 8192), (9.0, 32768), (7.5, 8192), (3.0, 2 * 8 * 8)] {
         let t = w.tessellate(&[Some(l); 4]).unwrap();
         assert_eq!(t.triangles(), 4 * per_patch, "L = {l}");
