@@ -13,6 +13,7 @@ pub mod curve;
 pub mod drape;
 pub mod freesewing;
 pub mod garmentcode;
+pub mod sleeves;
 
 use glam::{DMat3, DVec2, DVec3, Vec2, Vec3};
 
