@@ -7,12 +7,14 @@
 //! stitches pairing whole edges. [`Pattern::sew`] resamples every edge by arc length at a target
 //! length (a stitched pair gets the count of the longer edge, so both sides have equal vertex
 //! counts), triangulates the panels into one [`PatternMesh`] whose seams are the stitched vertex
-//! pairs, and places each vertex in 3D by its panel's placement. See docs/garments.md.
+//! pairs, and places each vertex in 3D by its panel's placement; [`sleeves`] then slides the
+//! sleeves along the body's arms. See docs/garments.md.
 
 pub mod curve;
 pub mod drape;
 pub mod freesewing;
 pub mod garmentcode;
+pub mod sleeves;
 
 use glam::{DMat3, DVec2, DVec3, Vec2, Vec3};
 

@@ -1,0 +1,127 @@
+//! Fitting sleeves to the body's arms along the arm axis.
+//!
+//! A pattern placed for another body may hold its sleeves at the right angle but at the wrong
+//! height on the arm: GarmentCode's shirt, scaled to MakeHuman, has its sleeve caps about 15 cm
+//! down the upper arm while the torso's armholes start at the shoulder, so the seams begin 10 cm
+//! or more apart with the arm between their sewn vertices. [`fit_sleeves`] slides each sleeve
+//! along its arm's axis (shoulder joint to elbow joint) until the top of its cap (the point of
+//! the edges sewn to non-sleeve panels nearest the shoulder along the axis) is level with the
+//! top of the armhole it is sewn to. See docs/garments.md.
+
+use glam::Vec3;
+
+use super::Sewn;
+use crate::avatar::rig::Skeleton;
+
+/// One arm of the body a garment is fitted to: the shoulder joint (the upper arm's head) and the
+/// elbow joint (the forearm's head), in the garment's world frame (metres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ArmAxis {
+    pub shoulder: Vec3,
+    pub elbow: Vec3,
+}
+
+impl ArmAxis {
+    /// Both arms of a MakeHuman default skeleton (`upperarm01` and `lowerarm01`, left then
+    /// right) from its bones' global head positions `heads` (`Skeleton::globals`, mesh units),
+    /// each placed into the world by `place`.
+    pub fn makehuman_arms(
+        skeleton: &Skeleton,
+        heads: &[glam::DVec3],
+        place: impl Fn(Vec3) -> Vec3,
+    ) -> anyhow::Result<[ArmAxis; 2]> {
+        let head = |name: &str| -> anyhow::Result<Vec3> {
+            let i = skeleton.index(name).ok_or_else(|| anyhow::anyhow!("the skeleton has no bone \"{name}\""))?;
+            Ok(place(heads[i].as_vec3()))
+        };
+        Ok([
+            ArmAxis { shoulder: head("upperarm01.L")?, elbow: head("lowerarm01.L")? },
+            ArmAxis { shoulder: head("upperarm01.R")?, elbow: head("lowerarm01.R")? },
+        ])
+    }
+
+    fn direction(&self) -> Vec3 {
+        (self.elbow - self.shoulder).normalize_or_zero()
+    }
+
+    /// Distance from `p` to the segment shoulder-elbow.
+    fn distance(&self, p: Vec3) -> f32 {
+        let d = self.elbow - self.shoulder;
+        let t = ((p - self.shoulder).dot(d) / d.length_squared().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
+        p.distance(self.shoulder + d * t)
+    }
+}
+
+/// Whether a panel is a sleeve: its name contains "sleeve" (GarmentCode's `left_sleeve_f`,
+/// FreeSewing sidecars' `sleeve_left`), in any case.
+pub fn is_sleeve(name: &str) -> bool {
+    name.to_ascii_lowercase().contains("sleeve")
+}
+
+/// A sleeve slid along its arm by [`fit_sleeves`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SleeveFit {
+    /// The sleeve's panels (names).
+    pub panels: Vec<String>,
+    /// Index of the arm in the `arms` given.
+    pub arm: usize,
+    /// How far the sleeve moved towards the shoulder along the arm axis (m; negative: towards
+    /// the elbow).
+    pub slide: f32,
+}
+
+/// Slides the sleeves of `sewn` along `arms` (see the module docs). Each sleeve panel goes with
+/// the arm nearest its centroid; all sleeve panels of one arm move together (the slide is
+/// measured over all their cap edges), so the seams between them stay as placed. Arms without a
+/// sleeve, and sleeves with no edge sewn to a non-sleeve panel, are left alone. Returns the
+/// slides, one per arm that has a sleeve.
+pub fn fit_sleeves(sewn: &mut Sewn, arms: &[ArmAxis]) -> Vec<SleeveFit> {
+    if arms.is_empty() {
+        return Vec::new();
+    }
+    let piece = |v: u32| sewn.mesh.piece_ids()[v as usize] as usize;
+    let ranges: Vec<std::ops::Range<usize>> =
+        sewn.mesh.piece_meshes().iter().map(|m| m.vertices.start as usize..m.vertices.end as usize).collect();
+    // The arm of each sleeve panel.
+    let arm_of: Vec<Option<usize>> = (0..ranges.len())
+        .map(|p| {
+            if !is_sleeve(&sewn.piece_names[p]) {
+                return None;
+            }
+            let c = sewn.positions[ranges[p].clone()].iter().sum::<Vec3>() / ranges[p].len().max(1) as f32;
+            (0..arms.len()).min_by(|&a, &b| arms[a].distance(c).total_cmp(&arms[b].distance(c)))
+        })
+        .collect();
+    let mut fits = Vec::new();
+    let mut moves = Vec::new();
+    for (k, arm) in arms.iter().enumerate() {
+        let axis = arm.direction();
+        let along = |v: u32| (sewn.positions[v as usize] - arm.shoulder).dot(axis);
+        // Tops (nearest the shoulder along the axis) of the caps and of the armholes they meet.
+        let (mut cap, mut hole) = (f32::INFINITY, f32::INFINITY);
+        for (a, b) in &sewn.stitched {
+            let (Some(&va), Some(&vb)) = (a.first(), b.first()) else { continue };
+            let (sa, sb) = (arm_of[piece(va)] == Some(k), arm_of[piece(vb)] == Some(k));
+            let (sleeve_side, other) = match (sa, sb) {
+                (true, false) if arm_of[piece(vb)].is_none() => (a, b),
+                (false, true) if arm_of[piece(va)].is_none() => (b, a),
+                _ => continue,
+            };
+            cap = sleeve_side.iter().map(|&v| along(v)).fold(cap, f32::min);
+            hole = other.iter().map(|&v| along(v)).fold(hole, f32::min);
+        }
+        if !(cap.is_finite() && hole.is_finite()) || axis == Vec3::ZERO {
+            continue;
+        }
+        let slide = cap - hole;
+        let members: Vec<usize> = (0..ranges.len()).filter(|&p| arm_of[p] == Some(k)).collect();
+        moves.extend(members.iter().map(|&p| (ranges[p].clone(), axis * slide)));
+        fits.push(SleeveFit { panels: members.iter().map(|&p| sewn.piece_names[p].clone()).collect(), arm: k, slide });
+    }
+    for (r, by) in moves {
+        for x in &mut sewn.positions[r] {
+            *x -= by;
+        }
+    }
+    fits
+}
