@@ -121,8 +121,9 @@ fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
 }
 
 /// graphs/default.ron copied into `dir`, its light probe path made absolute (it is relative
-/// to graphs/), with 8 median-cut lights instead of 22: the editor's tests evaluate it often,
-/// and building its PEMs is most of its first frame on lavapipe.
+/// to graphs/), with 8 median-cut lights instead of 22 and the cheaper sqrt_cosine PEM kernel
+/// instead of phong: the editor's tests evaluate it often, and building its PEMs is most of its
+/// first frame on lavapipe.
 fn copy_default(dir: &Path) -> PathBuf {
     let path = dir.join("default.ron");
     let text = std::fs::read_to_string(root().join("graphs/default.ron")).unwrap();
@@ -130,7 +131,11 @@ fn copy_default(dir: &Path) -> PathBuf {
     assert!(text.contains("\"../assets/"), "default.ron no longer names ../assets/");
     let lights = "\"count\": 22,";
     assert!(text.contains(lights), "default.ron no longer has 22 median-cut lights");
-    let text = text.replace("\"../assets/", &format!("\"{assets}/")).replace(lights, "\"count\": 8,");
+    let pems = "kind: \"Pems\",\n            pos: (720.0, 560.0),\n            params: {},";
+    assert!(text.contains(pems), "default.ron's Pems node moved or has parameters");
+    let cheap = pems.replace("params: {},", "params: {\"kernel\": \"sqrt_cosine\"},");
+    let text =
+        text.replace("\"../assets/", &format!("\"{assets}/")).replace(lights, "\"count\": 8,").replace(pems, &cheap);
     std::fs::write(&path, text).unwrap();
     path
 }
