@@ -175,12 +175,12 @@ mod tests {
     fn the_default_graph_is_estimated_and_2200_lights_refused() {
         let mut g = default_graph();
         let e = estimate(&g, &limits());
-        // 17 cubes of 6 x (128² + 64² + ... + 1) texels of 8 bytes, and the 128 x 768 ids.
+        // 23 cubes of 6 x (128² + 64² + ... + 1) texels of 8 bytes, and the 128 x 768 ids.
         let cube = 6 * (128 * 128 + 64 * 64 + 32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) * 8;
-        assert_eq!(e["pems"].bytes, 17 * cube + 128 * 768 * 4);
-        assert!(e["pems"].detail.contains("16 PEMs (median_cut.count)"), "{}", e["pems"].detail);
-        // 16 tiles of 64 (default.ron) on a 4 x 4 grid: 256², 12 bytes per texel.
-        assert_eq!(e["shadow_atlas"].bytes, 256 * 256 * 12);
+        assert_eq!(e["pems"].bytes, 23 * cube + 128 * 768 * 4);
+        assert!(e["pems"].detail.contains("22 PEMs (median_cut.count)"), "{}", e["pems"].detail);
+        // 22 tiles of 64 (default.ron) on a 5 x 5 grid: 320², 12 bytes per texel.
+        assert_eq!(e["shadow_atlas"].bytes, 320 * 320 * 12);
         assert!(refusals(&e, &limits()).is_empty(), "the default graph fits");
 
         g.nodes.get_mut("median_cut").unwrap().params.insert("count".into(), ParamValue::Int(2200));
