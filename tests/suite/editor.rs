@@ -133,7 +133,8 @@ fn copy_default(dir: &Path) -> PathBuf {
     assert!(text.contains(lights), "default.ron no longer has 22 median-cut lights");
     let pems = "kind: \"Pems\",\n            pos: (720.0, 560.0),\n            params: {},";
     assert!(text.contains(pems), "default.ron's Pems node moved or has parameters");
-    let cheap = pems.replace("params: {},", "params: {\"kernel\": \"sqrt_cosine\"},");
+    // In canonical form: a test saves the graph and compares the text.
+    let cheap = pems.replace("params: {},", "params: {\n                \"kernel\": \"sqrt_cosine\",\n            },");
     let text =
         text.replace("\"../assets/", &format!("\"{assets}/")).replace(lights, "\"count\": 8,").replace(pems, &cheap);
     std::fs::write(&path, text).unwrap();
