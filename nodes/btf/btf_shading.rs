@@ -85,6 +85,11 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
             "Blur of eq. 6's 1D texture, in its 1024 texels (0: a hard boundary).",
         ),
         ParamSpec::new(
+            "sun_boundary",
+            ParamKind::Choice { default: "smooth", options: SunBoundary::OPTIONS },
+            "smooth: eq. 6's boundary (alpha, shadow_blur) on the surface the interpolated normals describe; faces: the hard boundary a shadow volume gives, dark where the triangle itself faces away from the sun (the zigzag of the paper's Fig. 8, left).",
+        ),
+        ParamSpec::new(
             "environment_intensity",
             ParamKind::Float { default: 1.0, min: 0.0, max: 1e5 },
             "Scales the lights of the `lights` input and the `environment`.",
@@ -103,6 +108,13 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
     capabilities: Capabilities::NONE,
     create: || Box::new(BtfShadingNode::default()),
 };
+
+crate::choice!(
+    enum SunBoundary {
+        Smooth = "smooth",
+        Faces = "faces",
+    }
+);
 
 /// shaders/btf/btf_shading.wgsl `Params`.
 #[repr(C)]
@@ -324,7 +336,12 @@ impl Node for BtfShadingNode {
                 .vec3("sun_direction")
                 .try_normalize()
                 .ok_or_else(|| NodeError::msg("parameter \"sun_direction\" must not be zero"))?;
-            lights.push(GpuLight { dir: towards.extend(1.0).to_array(), color: sun.extend(0.0).to_array() });
+            // The shader's boundary code: 1 eq. 6, 2 the triangles' own facing.
+            let boundary = match cx.choice::<SunBoundary>("sun_boundary") {
+                SunBoundary::Smooth => 1.0,
+                SunBoundary::Faces => 2.0,
+            };
+            lights.push(GpuLight { dir: towards.extend(boundary).to_array(), color: sun.extend(0.0).to_array() });
         }
         let scale = cx.f32("environment_intensity");
         for l in env.iter().flat_map(|e| &e.lights) {

@@ -44,7 +44,8 @@ struct Params {
     rings: array<vec4<f32>, MAX_RINGS>,
 };
 
-// A directional light: dir.xyz towards the light, dir.w 1 where eq. 6's boundary applies;
+// A directional light: dir.xyz towards the light, dir.w 1 where eq. 6's boundary applies, 2
+// where the triangles' facing cuts it (a shadow volume's hard boundary, Fig. 8 left);
 // color.rgb its irradiance on a surface facing it.
 struct Light {
     dir: vec4<f32>,
@@ -154,6 +155,56 @@ fn smooth_shadow(cos_l: f32) -> f32 {
     return textureSampleLevel(shadow_ramp, ramp_sampler, vec2<f32>(u, 0.5), 0.0).r;
 }
 
+// The world position of pixel q from its view depth (0: nothing there).
+fn world_at(q: vec2<i32>) -> vec3<f32> {
+    let ndc = vec2<f32>((f32(q.x) + 0.5) / params.size.x * 2.0 - 1.0, 1.0 - (f32(q.y) + 0.5) / params.size.y * 2.0);
+    let far_h = params.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let near_h = params.inv_view_proj * vec4<f32>(ndc, 0.0, 1.0);
+    let near = near_h.xyz / near_h.w;
+    let dir = normalize(far_h.xyz / far_h.w - near);
+    // The view axis: the ray through the centre of the screen.
+    let c_far = params.inv_view_proj * vec4<f32>(0.0, 0.0, 1.0, 1.0);
+    let c_near = params.inv_view_proj * vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    let axis = normalize(c_far.xyz / c_far.w - c_near.xyz / c_near.w);
+    let depth = textureLoad(g_depth, q, 0).r;
+    return near + dir * ((depth - dot(near - params.eye.xyz, axis)) / dot(dir, axis));
+}
+
+// Whether pixel q shows this node's material (inside the image).
+fn shaded_here(q: vec2<i32>) -> bool {
+    if any(q < vec2<i32>(0)) || q.x >= i32(params.size.x) || q.y >= i32(params.size.y) {
+        return false;
+    }
+    let id = textureLoad(g_surface, q, 0).w & SURFACE_ID_MASK;
+    return textureLoad(g_depth, q, 0).r > 0.0 && id == u32(params.size.w);
+}
+
+// The geometric normal at pixel px (towards the side of `n`): the plane through its world
+// position and those of a horizontal and a vertical neighbour on the same material (right or
+// left, below or above). Within a triangle that is the triangle's plane; a pixel beside an edge
+// may take a chord across it. 0 where the pixel has no such neighbours.
+fn face_normal(px: vec2<i32>, n: vec3<f32>) -> vec3<f32> {
+    let p = world_at(px);
+    var sx = 1;
+    if !shaded_here(px + vec2<i32>(1, 0)) {
+        sx = -1;
+    }
+    var sy = 1;
+    if !shaded_here(px + vec2<i32>(0, 1)) {
+        sy = -1;
+    }
+    let qx = px + vec2<i32>(sx, 0);
+    let qy = px + vec2<i32>(0, sy);
+    if !shaded_here(qx) || !shaded_here(qy) {
+        return vec3<f32>(0.0);
+    }
+    let f = cross(world_at(qx) - p, world_at(qy) - p);
+    if dot(f, f) < 1e-30 {
+        return vec3<f32>(0.0);
+    }
+    return normalize(f) * select(1.0, -1.0, dot(f, n) < 0.0);
+}
+
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(frag.xy);
@@ -186,6 +237,14 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let vd = to_direction(vec3<f32>(dot(v, fx), dot(v, fy), dot(v, n)));
     let wv = direction_weights(vd.x, vd.y);
     var radiance = vec3<f32>(0.0);
+    // The shadow volume's test (Fig. 8 left) for lights whose boundary is the triangles' facing.
+    var face = vec3<f32>(0.0);
+    for (var li = 0u; li < LIGHTS; li++) {
+        if lights[li].dir.w > 1.5 {
+            face = face_normal(px, n);
+            break;
+        }
+    }
     // HEM: the pixel's triangle corners and barycentric weights.
     var hem_vertex = vec3<u32>(0u);
     var hem_weight = vec3<f32>(0.0);
@@ -220,7 +279,9 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             let l = light.dir.xyz;
             let cos_l = dot(n, l);
             var scale = light.color.rgb * grazing(cos_l);
-            if light.dir.w > 0.5 {
+            if light.dir.w > 1.5 {
+                scale = scale * select(0.0, 1.0, dot(face, l) > 0.0);
+            } else if light.dir.w > 0.5 {
                 scale = scale * smooth_shadow(cos_l);
             }
             if all(scale <= vec3<f32>(0.0)) {

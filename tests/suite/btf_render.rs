@@ -19,12 +19,17 @@ use werkstatt::render::scene::GBuffer;
 /// A sphere drawn with a material of btf_id 1, seen by `gbuffer`; `nodes` and `links` add the
 /// shading (a node "out" of kind Preview must show the result).
 fn sphere_graph(nodes: &str, links: &str) -> Graph {
+    sphere_graph_of(48, 24, 20.0, 25.0, nodes, links)
+}
+
+/// `sphere_graph` with `segments` around and along the sphere, seen from `yaw` and `pitch`.
+fn sphere_graph_of(around: u32, along: u32, yaw: f64, pitch: f64, nodes: &str, links: &str) -> Graph {
     let text = format!(
         r#"(version: 2, nodes: {{
-            "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.5, "segments_u": 48, "segments_v": 24 }}),
+            "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.5, "segments_u": {around}, "segments_v": {along} }}),
             "fabric": (kind: "Material", params: {{ "base_color": [0.6, 0.5, 0.4], "glossiness": 0.0, "btf_id": 1 }}),
             "draw": (kind: "Draw"),
-            "camera": (kind: "OrbitCamera", params: {{ "distance": 2.0, "yaw": 20.0, "pitch": 25.0, "fov": 40.0 }}),
+            "camera": (kind: "OrbitCamera", params: {{ "distance": 2.0, "yaw": {yaw:?}, "pitch": {pitch:?}, "fov": 40.0 }}),
             "gbuffer": (kind: "GBufferPass"),
             "out": (kind: "Preview"),
             {nodes}
@@ -220,6 +225,67 @@ fn a_lambertian_btf_shades_like_lambert() {
     let bound = 0.0086 * 0.6 * 3.0 / std::f32::consts::PI + 2e-3;
     assert!(covered > 1000, "only {covered} pixels covered");
     assert!(worst < bound, "BTF Lambert and DirectLight differ by {worst} (bound {bound})");
+}
+
+/// Eq. 6 and Fig. 8 on a coarse sphere (7 x 5 segments) lit from the side, seen head-on. With a
+/// Lambertian BTF the sun's boundary factor is the ratio of two renders against a hard eq. 6
+/// boundary at alpha = 0 ("flat": 1 wherever the interpolated normal faces the sun):
+/// - smooth, alpha = 30 deg, blur 256 texels: at every lit pixel the factor is the 1D texture
+///   (`shadow_ramp`, linearly filtered) at u = (1 + cos(alpha + angle(n, l))) / 2 of the
+///   G-buffer's normal, over the blurred stretch 45.5-74.5 deg as well as beyond it;
+/// - faces: the factor is 0 or 1 (a step), and it cuts off lit pixels near the terminator where
+///   a triangle faces away while its interpolated normal faces the sun (the zigzag).
+#[test]
+fn the_sun_boundary_follows_eq_6_or_steps_at_the_triangles() {
+    let sun = r#""sun_direction": [-1.0, -0.45, 0.1], "sun_intensity": 2.0"#;
+    let nodes = format!(
+        r#""btf": (kind: "Btf", params: {{ "source": "lambert", "albedo": [0.8, 0.8, 0.8], "resolution": 2 }}),
+        "flat": (kind: "BtfShading", params: {{ {sun}, "alpha": 0.0, "shadow_blur": 0.0 }}),
+        "soft": (kind: "BtfShading", params: {{ {sun}, "alpha": 30.0, "shadow_blur": 256.0 }}),
+        "faces": (kind: "BtfShading", params: {{ {sun}, "sun_boundary": "faces" }}),
+        "out2": (kind: "Preview"), "out3": (kind: "Preview"),"#
+    );
+    let links = r#"("gbuffer.gbuffer", "flat.gbuffer"), ("gbuffer.gbuffer", "soft.gbuffer"), ("gbuffer.gbuffer", "faces.gbuffer"),
+        ("btf.btf", "flat.btf"), ("btf.btf", "soft.btf"), ("btf.btf", "faces.btf"),
+        ("flat.image", "out.image"), ("soft.image", "out2.image"), ("faces.image", "out3.image"),"#;
+    let ev = run_graph(&sphere_graph_of(7, 5, 0.0, 0.0, &nodes, links), 64, 64);
+    let (flat, soft, faces) = (image(&ev, "flat"), image(&ev, "soft"), image(&ev, "faces"));
+    let g = gbuffer_of(&ev);
+    let normals = read_back(gpu(), &g.normal).unwrap();
+    let depth = read_back(gpu(), &g.depth).unwrap();
+    let l = DVec3::new(1.0, 0.45, -0.1).normalize();
+    let ramp = werkstatt::btf::gpu::shadow_ramp(1024, 256.0);
+    // The texture as the sampler reads it: linear between texel centres, clamped at the ends.
+    let texture = |u: f64| {
+        let x = (u * 1024.0 - 0.5).clamp(0.0, 1023.0);
+        let (k, s) = (x.floor() as usize, x.fract());
+        ramp[k] as f64 * (1.0 - s) + ramp[(k + 1).min(1023)] as f64 * s
+    };
+    let (mut blurred, mut cut, mut worst) = (0, 0, 0.0f64);
+    for i in 0..64 * 64 {
+        let reference = flat.rgba[i * 4] as f64;
+        if depth.rgba[i * 4] <= 0.0 || reference < 0.02 {
+            continue;
+        }
+        let n = DVec3::new(normals.rgba[i * 4] as f64, normals.rgba[i * 4 + 1] as f64, normals.rgba[i * 4 + 2] as f64)
+            .normalize();
+        let angle = n.dot(l).clamp(-1.0, 1.0).acos();
+        let u = (1.0 + (30f64.to_radians() + angle).min(std::f64::consts::PI).cos()) / 2.0;
+        let expected = texture(u);
+        worst = worst.max((soft.rgba[i * 4] as f64 / reference - expected).abs());
+        if expected > 0.05 && expected < 0.95 {
+            blurred += 1;
+        }
+        let step = faces.rgba[i * 4] as f64 / reference;
+        assert!(step < 0.01 || (step - 1.0).abs() < 0.01, "pixel {i}: faces gives {step} of the lit value");
+        if step < 0.01 {
+            cut += 1;
+            assert!(n.dot(l) < 0.7, "pixel {i}: cut at cos {} far from the terminator", n.dot(l));
+        }
+    }
+    assert!(blurred > 100, "only {blurred} pixels on the blurred stretch");
+    assert!(worst < 0.01, "the smooth boundary departs from eq. 6's texture by {worst}");
+    assert!(cut > 20, "faces cut only {cut} lit pixels: no zigzag");
 }
 
 /// A white BTF (rho = 1) under a white environment of radiance 1, as 256 median-cut lights:
