@@ -18,13 +18,31 @@ use werkstatt::core::resources::Resources;
 use werkstatt::gpu::{Backend, GpuContext, read_back};
 use werkstatt::nodes::mesh::live_link::{encode_frame, encode_topology};
 
+/// A GL context held by one test at a time. llvmpipe's GL crashed (SIGSEGV inside
+/// swrast_dri.so during a queue submit, with a second GL context working on the other test
+/// thread) when two of these tests ran at once, so each holds the lock until its context is gone.
+struct Gl {
+    gpu: GpuContext,
+    // Declared after `gpu`: fields drop in order, so the context is gone before the lock opens.
+    _one_at_a_time: std::sync::MutexGuard<'static, ()>,
+}
+
+impl std::ops::Deref for Gl {
+    type Target = GpuContext;
+    fn deref(&self) -> &GpuContext {
+        &self.gpu
+    }
+}
+
 /// The GL context, or `None` (test skipped) where the machine has no EGL library.
-fn gl() -> Option<GpuContext> {
+fn gl() -> Option<Gl> {
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     match GpuContext::headless(Backend::Gl) {
         Ok(gpu) => {
             assert_eq!(gpu.info.backend, wgpu::Backend::Gl);
             crate::common::skip_driver_teardown_at_exit();
-            Some(gpu)
+            Some(Gl { gpu, _one_at_a_time: guard })
         }
         Err(e) => {
             let egl = [
