@@ -78,7 +78,7 @@ pub static CUBOID: NodeSpec = NodeSpec {
     params: &[
         ParamSpec::new("translate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Translation."),
         ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees."),
-        ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis."),
+        ParamSpec::new("scale", ParamKind::Scale { default: [1.0, 1.0, 1.0] }, "Scale per axis."),
         offset_param!("offset0", "0"),
         offset_param!("offset1", "1"),
         offset_param!("offset2", "2"),

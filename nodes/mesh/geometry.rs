@@ -335,7 +335,7 @@ pub const TRANSLATE: ParamSpec =
 pub const ROTATE: ParamSpec =
     ParamSpec::new("rotate", ParamKind::Vec3 { default: [0.0, 0.0, 0.0] }, "Rotation about X, Y, Z in degrees.");
 pub const SCALE: ParamSpec =
-    ParamSpec::new("scale", ParamKind::Vec3 { default: [1.0, 1.0, 1.0] }, "Scale per axis (applied first).");
+    ParamSpec::new("scale", ParamKind::Scale { default: [1.0, 1.0, 1.0] }, "Scale per axis (applied first).");
 
 /// The model matrix of the `translate`, `rotate`, `scale` parameters (see [`trs_matrix`]).
 pub fn model_matrix(cx: &EvalCx<'_>) -> Result<glam::Mat4, NodeError> {

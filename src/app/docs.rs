@@ -14,6 +14,7 @@ fn kind_text(k: &ParamKind) -> (String, String) {
         ParamKind::Int { default, min, max } => ("int".into(), format!("{default} in [{min}, {max}]")),
         ParamKind::Bool { default } => ("bool".into(), default.to_string()),
         ParamKind::Vec3 { default } => ("vec3".into(), list(default)),
+        ParamKind::Scale { default } => ("vec3, no component 0".into(), list(default)),
         ParamKind::Color { default } => ("color".into(), list(default)),
         ParamKind::Text { default } => ("string".into(), format!("\"{default}\"")),
         ParamKind::Path { default, extensions } => {
@@ -144,6 +145,7 @@ fn param_json(p: &crate::core::param::ParamSpec) -> serde_json::Value {
         ParamKind::Int { default, min, max } => json!({"type": "int", "default": default, "min": min, "max": max}),
         ParamKind::Bool { default } => json!({"type": "bool", "default": default}),
         ParamKind::Vec3 { default } => json!({"type": "vec3", "default": default}),
+        ParamKind::Scale { default } => json!({"type": "vec3", "default": default, "nonzero": true}),
         ParamKind::Color { default } => json!({"type": "color", "default": default}),
         ParamKind::Text { default } => json!({"type": "string", "default": default}),
         ParamKind::Path { default, extensions } => {

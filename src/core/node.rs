@@ -335,7 +335,11 @@ impl<'a> EvalCx<'a> {
     }
     /// A vector or colour parameter.
     pub fn vec3(&self, name: &str) -> glam::Vec3 {
-        match self.param_of(name, |k| matches!(k, ParamKind::Vec3 { .. } | ParamKind::Color { .. }), "a vector") {
+        match self.param_of(
+            name,
+            |k| matches!(k, ParamKind::Vec3 { .. } | ParamKind::Scale { .. } | ParamKind::Color { .. }),
+            "a vector",
+        ) {
             Some(ParamValue::Vec(v)) if v.len() == 3 => glam::Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32),
             _ => glam::Vec3::ZERO,
         }

@@ -22,6 +22,11 @@ pub enum ParamKind {
     Vec3 {
         default: [f64; 3],
     },
+    /// A per-axis scale: a vector whose components are finite and not 0 (a transform with a zero
+    /// scale is degenerate; a tiny one is not: millimetres to metres).
+    Scale {
+        default: [f64; 3],
+    },
     /// Linear RGB, each channel in [0, inf) (HDR colours are allowed).
     Color {
         default: [f64; 3],
@@ -47,6 +52,7 @@ impl ParamKind {
             ParamKind::Int { .. } => "integer",
             ParamKind::Bool { .. } => "bool",
             ParamKind::Vec3 { .. } => "vector [x, y, z]",
+            ParamKind::Scale { .. } => "scale [x, y, z]",
             ParamKind::Color { .. } => "colour [r, g, b]",
             ParamKind::Text { .. } => "string",
             ParamKind::Path { .. } => "path string",
@@ -59,7 +65,9 @@ impl ParamKind {
             ParamKind::Float { default, .. } => ParamValue::Float(default),
             ParamKind::Int { default, .. } => ParamValue::Int(default),
             ParamKind::Bool { default } => ParamValue::Bool(default),
-            ParamKind::Vec3 { default } | ParamKind::Color { default } => ParamValue::Vec(default.to_vec()),
+            ParamKind::Vec3 { default } | ParamKind::Scale { default } | ParamKind::Color { default } => {
+                ParamValue::Vec(default.to_vec())
+            }
             ParamKind::Text { default } | ParamKind::Path { default, .. } | ParamKind::Choice { default, .. } => {
                 ParamValue::Str(default.to_string())
             }
@@ -88,7 +96,7 @@ impl ParamKind {
                 Ok(value.clone())
             }
             (ParamKind::Bool { .. }, ParamValue::Bool(_)) => Ok(value.clone()),
-            (ParamKind::Vec3 { .. } | ParamKind::Color { .. }, ParamValue::Vec(v)) => {
+            (ParamKind::Vec3 { .. } | ParamKind::Scale { .. } | ParamKind::Color { .. }, ParamValue::Vec(v)) => {
                 if v.len() != 3 {
                     return Err(format!("expected 3 components, found {}", v.len()));
                 }
@@ -97,6 +105,9 @@ impl ParamKind {
                 }
                 if matches!(self, ParamKind::Color { .. }) && v.iter().any(|c| *c < 0.0) {
                     return Err("colour channels must not be negative".into());
+                }
+                if let (ParamKind::Scale { .. }, Some(why)) = (self, degenerate_scale([v[0], v[1], v[2]])) {
+                    return Err(why);
                 }
                 Ok(value.clone())
             }
@@ -125,7 +136,7 @@ impl ParamKind {
             ParamKind::Bool { .. } => {
                 ParamValue::Bool(text.parse().map_err(|_| format!("\"{text}\" is not true or false"))?)
             }
-            ParamKind::Vec3 { .. } | ParamKind::Color { .. } => {
+            ParamKind::Vec3 { .. } | ParamKind::Scale { .. } | ParamKind::Color { .. } => {
                 // In `--set`, unbracketed commas make a sweep, so a vector written 0,7.7,0 arrives
                 // here one number at a time.
                 if !text.contains(',') && text.trim().parse::<f64>().is_ok() {
@@ -149,8 +160,8 @@ impl ParamKind {
 }
 
 /// Why a per-axis scale makes a transform degenerate (a component that is 0 or not finite),
-/// naming the scale; None where it is fine (a tiny one is: millimetres to metres). The graph
-/// check applies it to every vector parameter named `scale`, and the transform code alike.
+/// naming the scale; None where it is fine (a tiny one is: millimetres to metres). Checked for
+/// every [`ParamKind::Scale`] value, and by the transform code alike.
 pub fn degenerate_scale(scale: [f64; 3]) -> Option<String> {
     let [x, y, z] = scale;
     scale

@@ -593,6 +593,7 @@ fn value_text(kind: Option<&ParamKind>, v: &GenValue) -> String {
                 .to_string(),
             Some(ParamKind::Bool { .. }) => (t < 0.5).to_string(),
             Some(ParamKind::Vec3 { .. }) => format!("[{t:?}, {:?}, -1.0]", t * 2.0),
+            Some(ParamKind::Scale { .. }) => format!("[{:?}, {:?}, -1.0]", 1.0 + t, t * 2.0 + 0.5),
             Some(ParamKind::Color { .. }) => format!("[{t:?}, {t:?}, 1.0]"),
             Some(ParamKind::Text { .. }) => format!("{:?}", format!("text {t}")),
             Some(ParamKind::Path { .. }) => "\"no/such/file.obj\"".into(),

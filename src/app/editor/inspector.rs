@@ -151,7 +151,7 @@ impl Inspector {
                 let mut v = matches!(current, ParamValue::Bool(true));
                 ui.checkbox(&mut v, "").on_hover_text(tip).changed().then_some(ParamValue::Bool(v))
             }
-            ParamKind::Vec3 { .. } => {
+            ParamKind::Vec3 { .. } | ParamKind::Scale { .. } => {
                 let mut v = vec3(current);
                 let mut changed = false;
                 for (i, axis) in ["x", "y", "z"].iter().enumerate() {
@@ -254,6 +254,7 @@ fn describe(kind: &ParamKind) -> String {
         ParamKind::Int { default, min, max } => format!("integer in [{min}, {max}], default {default}"),
         ParamKind::Bool { default } => format!("bool, default {default}"),
         ParamKind::Vec3 { default } => format!("vector, default {default:?}"),
+        ParamKind::Scale { default } => format!("scale per axis, no component 0, default {default:?}"),
         ParamKind::Color { default } => format!("linear RGB colour, default {default:?}"),
         ParamKind::Text { default } => format!("text, default \"{default}\""),
         ParamKind::Path { extensions, .. } => format!("file ({}), relative to the graph", extensions.join(", ")),

@@ -56,8 +56,8 @@ impl Graph {
                         });
                         problems.push(p);
                     }
-                    Some((_, ps)) => match ps.kind.check(value) {
-                        Err(msg) => {
+                    Some((_, ps)) => {
+                        if let Err(msg) = ps.kind.check(value) {
                             let kind = if msg.starts_with("expected") {
                                 ProblemKind::ParamType
                             } else {
@@ -65,19 +65,7 @@ impl Graph {
                             };
                             problems.push(Problem::new(kind, place, format!("parameter \"{name}\": {msg}")));
                         }
-                        // Every vector `scale` is a transform's per-axis scale: a zero component
-                        // fails here, in `check`, not only when the node runs.
-                        Ok(ParamValue::Vec(v)) if name == "scale" && v.len() == 3 => {
-                            if let Some(why) = crate::core::param::degenerate_scale([v[0], v[1], v[2]]) {
-                                problems.push(Problem::new(
-                                    ProblemKind::ParamRange,
-                                    place,
-                                    format!("parameter \"{name}\": {why}"),
-                                ));
-                            }
-                        }
-                        Ok(_) => {}
-                    },
+                    }
                 }
             }
         }
