@@ -3,6 +3,8 @@
 // kernel over the level above (filter), taps spaced one source texel apart around the
 // destination texel's centre, each a bilinear lookup along its direction, so the kernel
 // crosses cube edges into the neighbouring faces. src/ibl/pem.rs filter_level is the CPU twin.
+// The plain chain (kernel none) is the 2x2 box: its one tap at the destination texel's centre
+// falls on the corner of four source texels of the same face, so box reads those four.
 //
 // cs_*: one compute dispatch per level for all six faces (z = face); as six render passes per
 // level, the per-pass cost of a software rasterizer dominated. fs_*: a render pass per face,
@@ -53,6 +55,14 @@ fn filtered(face: u32, xy: vec2<u32>) -> vec4<f32> {
     return sum;
 }
 
+fn box(face: u32, xy: vec2<u32>) -> vec4<f32> {
+    let at = vec2<i32>(xy) * 2;
+    let f = i32(face);
+    let sum = textureLoad(src, at, f, 0) + textureLoad(src, at + vec2<i32>(1, 0), f, 0)
+        + textureLoad(src, at + vec2<i32>(0, 1), f, 0) + textureLoad(src, at + vec2<i32>(1, 1), f, 0);
+    return 0.25 * sum;
+}
+
 fn masked(face: u32, xy: vec2<u32>) -> vec4<f32> {
     let at = vec2<i32>(xy);
     let id = textureLoad(regions, vec2<i32>(at.x, at.y + i32(face * p.src_size)), 0).r;
@@ -68,6 +78,13 @@ fn cs_filter(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 @compute @workgroup_size(8, 8, 1)
+fn cs_box(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x < p.src_size / 2u && id.y < p.src_size / 2u {
+        textureStore(dst, id.xy, id.z, box(id.z, id.xy));
+    }
+}
+
+@compute @workgroup_size(8, 8, 1)
 fn cs_mask(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x < p.src_size && id.y < p.src_size {
         textureStore(dst, id.xy, id.z, masked(id.z, id.xy));
@@ -77,6 +94,11 @@ fn cs_mask(@builtin(global_invocation_id) id: vec3<u32>) {
 @fragment
 fn fs_filter(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     return filtered(p.face, vec2<u32>(frag.xy));
+}
+
+@fragment
+fn fs_box(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    return box(p.face, vec2<u32>(frag.xy));
 }
 
 @fragment

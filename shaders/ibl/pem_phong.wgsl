@@ -2,7 +2,10 @@
 // the lobe max(0, r.w)^s times each sample's solid angle, normalized, over a source level of
 // the plain chain: every texel of all faces (small destinations) or a window of source texel
 // centres around the one holding the destination texel's centre, extended past the face's
-// edges on its plane and read there with the seamless bilinear lookup.
+// edges on its plane and read there with the seamless bilinear lookup. cs_pad makes those
+// lookups once per level: the windowed levels read a copy of the source level padded by the
+// window's half-width on every side, holding the lookup at each tap past a face's edge, so
+// every tap is one load (the lookups across edges were three quarters of a PEM's cost).
 //
 // The normalization (the sum of the weights) depends only on the geometry, so fs_phong_norm
 // computes it once per level and fs_phong sums only the source texels inside `bounds`: a PEM
@@ -30,7 +33,8 @@ struct Phong {
 };
 
 @group(0) @binding(0) var<uniform> ph: Phong;
-// The source level (one mip of the plain chain, all six faces).
+// The source level (one mip of the plain chain, all six faces); on the windowed levels of
+// cs_phong and fs_phong, padded by `window` texels on every side (cs_pad's output).
 @group(0) @binding(1) var src: texture_2d_array<f32>;
 // fs_phong on whole-sphere levels: fs_phong_norm's output for this level (one mip).
 @group(0) @binding(2) var norm: texture_2d_array<f32>;
@@ -145,7 +149,7 @@ fn phong(face: u32, xy: vec2<u32>) -> vec4<f32> {
             for (var x = lo.x; x <= hi.x; x++) {
                 let tap = window_tap(face, r, centre, x - centre.x, y - centre.y);
                 if tap.w > 0.0 {
-                    sum += tap.w * textureLoad(src, vec2<u32>(u32(x), u32(y)), face, 0);
+                    sum += tap.w * textureLoad(src, vec2<i32>(x, y) + ph.window, face, 0);
                 }
             }
         }
@@ -155,11 +159,39 @@ fn phong(face: u32, xy: vec2<u32>) -> vec4<f32> {
         for (var a = -ph.window; a <= ph.window; a++) {
             let tap = window_tap(face, r, centre, a, b);
             if tap.w > 0.0 {
-                sum += tap.w * cube_bilinear(src, ph.src_size, tap.d);
+                sum += tap.w * textureLoad(src, centre + vec2<i32>(a, b) + ph.window, face, 0);
             }
         }
     }
     return sum / total;
+}
+
+// Texel `xy` of face `face` of the source level padded by `window` texels: the texel itself
+// inside the face, past its edges the seamless lookup at the tap there (window_tap's d).
+fn padded(face: u32, xy: vec2<u32>) -> vec4<f32> {
+    let at = vec2<i32>(xy) - ph.window;
+    let n = i32(ph.src_size);
+    if all(at >= vec2<i32>(0)) && all(at < vec2<i32>(n)) {
+        return textureLoad(src, at, face, 0);
+    }
+    let h = 2.0 / f32(ph.src_size);
+    let uv = (vec2<f32>(at) + 0.5) * h - 1.0;
+    return cube_bilinear(src, ph.src_size, normalize(face_dir(face, uv.x, uv.y)));
+}
+
+// The padded copy of a windowed level's source, all six faces (z); `dst` is
+// src_size + 2 window texels wide.
+@compute @workgroup_size(8, 8, 1)
+fn cs_pad(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = ph.src_size + 2u * u32(ph.window);
+    if id.x < size && id.y < size {
+        textureStore(dst, id.xy, id.z, padded(id.z, id.xy));
+    }
+}
+
+@fragment
+fn fs_pad(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
+    return padded(ph.face, vec2<u32>(frag.xy));
 }
 
 // One dispatch per level for all six faces (z); GL, whose storage writes into these arrays

@@ -283,9 +283,13 @@ pub struct CubePasses {
     /// shaders/ibl/pem_filter.wgsl: the filter and the mask, as compute (one dispatch per
     /// level) or, on GL, as a render pass per face.
     filter: (ComputePass, FullscreenPass),
+    /// The plain chain's 2x2 box (kernel none).
+    boxed: (ComputePass, FullscreenPass),
     mask: (ComputePass, FullscreenPass),
     /// The Phong levels and diffuse ends (compute, or a render pass per face on GL).
     phong: (ComputePass, FullscreenPass),
+    /// The padded source of a windowed Phong level (pem_phong.wgsl cs_pad).
+    pad: (ComputePass, FullscreenPass),
     phong_norm: FullscreenPass,
     /// fs_phong_norm's output for the whole-sphere levels of one face size, kept: it depends
     /// only on the geometry, and every PEM of a set shares it.
@@ -302,6 +306,10 @@ impl Default for CubePasses {
                 ComputePass::new("pem_filter.wgsl", "cs_filter"),
                 FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_filter"),
             ),
+            boxed: (
+                ComputePass::new("pem_filter.wgsl", "cs_box"),
+                FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_box"),
+            ),
             mask: (
                 ComputePass::new("pem_filter.wgsl", "cs_mask"),
                 FullscreenPass::new("pem_filter.wgsl").with_fragment_entry("fs_mask"),
@@ -309,6 +317,10 @@ impl Default for CubePasses {
             phong: (
                 ComputePass::new("pem_phong.wgsl", "cs_phong"),
                 FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong"),
+            ),
+            pad: (
+                ComputePass::new("pem_phong.wgsl", "cs_pad"),
+                FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_pad"),
             ),
             phong_norm: FullscreenPass::new("pem_phong.wgsl").with_fragment_entry("fs_phong_norm"),
             norms: None,
@@ -381,7 +393,8 @@ impl CubePasses {
             let params = FilterParams { face: 0, src_size: cube.width >> (mip - 1), region: 0, pad: 0, weights };
             let sample_type = cube.desc.sample_type(false);
             let binds = [Bind::View(&source, wgpu::TextureViewDimension::D2Array, sample_type)];
-            faces_pass(gpu, &mut self.filter, params, &binds, (cube, mip, 0))?;
+            let pass = if kernel == Kernel::None { &mut self.boxed } else { &mut self.filter };
+            faces_pass(gpu, pass, params, &binds, (cube, mip, 0))?;
         }
         Ok(())
     }
@@ -433,13 +446,37 @@ impl CubePasses {
                 cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, window) },
                 tap_cone: if full_sphere == 1 { NO_CONE } else { footprint.cone(src, 0) },
             };
-            let binds = [
-                Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type),
-                Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false)),
-            ];
+            let norm_bind = Bind::View(&norm_view, wgpu::TextureViewDimension::D2Array, norms.desc.sample_type(false));
+            if full_sphere == 1 {
+                let binds = [Bind::View(&view, wgpu::TextureViewDimension::D2Array, sample_type), norm_bind];
+                faces_pass(gpu, &mut self.phong, params, &binds, (cube, mip, 0))?;
+                continue;
+            }
+            let padded = self.padded_source(gpu, &view, sample_type, params, &norm_bind)?;
+            let binds = [Bind::Texture(&padded), norm_bind];
             faces_pass(gpu, &mut self.phong, params, &binds, (cube, mip, 0))?;
         }
         Ok(())
+    }
+
+    /// The source level `view` of a windowed Phong level padded by the window's half-width
+    /// (pem_phong.wgsl cs_pad), in a pooled texture.
+    fn padded_source(
+        &mut self,
+        gpu: &GpuContext,
+        view: &wgpu::TextureView,
+        sample_type: wgpu::TextureSampleType,
+        params: PhongParams,
+        norm_bind: &Bind<'_>,
+    ) -> anyhow::Result<GpuImage> {
+        let size = params.src_size + 2 * params.window as u32;
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::STORAGE_BINDING;
+        let padded = gpu.acquire("padded Phong source", TextureDesc::array(size, size, 6, CUBE_FORMAT, usage));
+        let binds = [Bind::View(view, wgpu::TextureViewDimension::D2Array, sample_type), *norm_bind];
+        faces_pass(gpu, &mut self.pad, params, &binds, (&padded, 0, 0))?;
+        Ok(padded)
     }
 
     /// The diffuse end (src/ibl/pem.rs diffuse_end): the cosine lobe summed over the whole

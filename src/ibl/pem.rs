@@ -104,6 +104,20 @@ pub fn filter_level(src: &CubeImage, kernel: Kernel) -> CubeImage {
     let n = src.size / 2;
     let h = 2.0 / src.size as f32;
     let mut out = CubeImage::new(n);
+    if kernel == Kernel::None {
+        // The one tap at the texel's centre lies on the corner of four source texels of the
+        // same face: their average (shaders/ibl/pem_filter.wgsl box).
+        for (face, texels) in out.texels.chunks_mut(n * n).enumerate() {
+            let at = |x: usize, y: usize| src.texels[(face * src.size + y) * src.size + x];
+            for y in 0..n {
+                for x in 0..n {
+                    let sum = at(2 * x, 2 * y) + at(2 * x + 1, 2 * y) + at(2 * x, 2 * y + 1) + at(2 * x + 1, 2 * y + 1);
+                    texels[y * n + x] = 0.25 * sum;
+                }
+            }
+        }
+        return out;
+    }
     let run = |face: usize, texels: &mut [Vec4]| {
         for y in 0..n {
             let vc = texel_center(n, y);
