@@ -563,12 +563,41 @@ impl Calibration {
 
 static CALIBRATIONS: Memo<Calibration> = LazyLock::new(Default::default);
 
-/// [`Calibration::compute`], memoized per (kernel, size).
+/// Tables of [`Calibration::compute`] as f32 bits, for the kernels and face sizes the bundled
+/// graphs use: computing one takes a CPU Phong filter of an impulse and lookups along every
+/// texel (about 0.2 s in a release build, on the first frame). A test recomputes each.
+const PRECOMPUTED: &[(Kernel, usize, [u32; TABLE])] = &[
+    (
+        Kernel::Phong,
+        128,
+        [
+            1084227108, 1083889752, 1083478148, 1083004528, 1082372032, 1081957178, 1081664076, 1081323944, 1080898868,
+            1080366806, 1079699528, 1078860622, 1077901744, 1077560556, 1077136586, 1076609670, 1075954686, 1075140322,
+            1074127496, 1073314911, 1072551139, 1071600711, 1070417421, 1068943306, 1067105478, 1065332806, 1065297216,
+            1065253020, 1065198132, 1065129970, 1065045318, 1064940188, 1064809626,
+        ],
+    ),
+    (
+        Kernel::SqrtCosine,
+        128,
+        [
+            1086550428, 1086288406, 1086173346, 1086023202, 1085824560, 1085556916, 1085187290, 1084659048, 1084162704,
+            1083987494, 1083757034, 1083448918, 1083027864, 1082434940, 1081924456, 1081557944, 1081093802, 1080503078,
+            1079746444, 1078769358, 1077803572, 1077472916, 1077060302, 1076544812, 1075899840, 1075091370, 1074075604,
+            1073170047, 1072472183, 1071604401, 1070524987, 1069181802, 1067509566,
+        ],
+    ),
+];
+
+/// [`Calibration::compute`], memoized per (kernel, size), from [`PRECOMPUTED`] where it holds one.
 pub fn calibration(kernel: Kernel, size: usize) -> Arc<Calibration> {
     if let Some(c) = CALIBRATIONS.lock().unwrap().get(&(kernel, size)) {
         return c.clone();
     }
-    let c = Arc::new(Calibration::compute(kernel, size));
+    let c = match PRECOMPUTED.iter().find(|(k, n, _)| (*k, *n) == (kernel, size)) {
+        Some((_, _, bits)) => Arc::new(Calibration { kernel, size, levels: bits.map(f32::from_bits).to_vec() }),
+        None => Arc::new(Calibration::compute(kernel, size)),
+    };
     CALIBRATIONS.lock().unwrap().entry((kernel, size)).or_insert(c).clone()
 }
 
@@ -620,6 +649,29 @@ pub fn pem_memory_bytes(n: u64, res: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each precomputed table is what Calibration::compute gives (to the bit where it was made;
+    /// libm's powf may differ by an ulp elsewhere). On failure it prints the tables to paste
+    /// into PRECOMPUTED.
+    #[test]
+    fn the_precomputed_calibrations_are_computed_ones() {
+        let computed: Vec<(Kernel, usize, Vec<u32>)> = [(Kernel::Phong, 128), (Kernel::SqrtCosine, 128)]
+            .iter()
+            .map(|&(k, n)| (k, n, Calibration::compute(k, n).levels.iter().map(|l| l.to_bits()).collect()))
+            .collect();
+        let literal: String = computed.iter().map(|(k, n, b)| format!("    (Kernel::{k:?}, {n}, {b:?}),\n")).collect();
+        assert_eq!(PRECOMPUTED.len(), computed.len(), "PRECOMPUTED should be:\n{literal}");
+        for ((k, n, bits), (ck, cn, cbits)) in PRECOMPUTED.iter().zip(&computed) {
+            assert_eq!((k, n), (ck, cn), "PRECOMPUTED should be:\n{literal}");
+            for (a, b) in bits.iter().zip(cbits) {
+                let (a, b) = (f32::from_bits(*a), f32::from_bits(*b));
+                assert!(
+                    (a - b).abs() <= 1e-5 * b.abs(),
+                    "{k:?} {n}: {a} against {b}; PRECOMPUTED should be:\n{literal}"
+                );
+            }
+        }
+    }
 
     fn integral(c: &CubeImage) -> f64 {
         let s = c.size;
