@@ -9,8 +9,11 @@
 //! - **Rings**: the sampling's rings (theta, count, first direction) for the shader's copy of
 //!   [`Sampling::weights`](super::directions::Sampling::weights).
 
+use std::sync::Arc;
+
 use anyhow::ensure;
 
+use super::Btf;
 use super::directions::Sampling;
 use super::pca::{Centring, Compressed};
 use crate::gpu::{GpuContext, GpuImage, TextureDesc};
@@ -33,6 +36,9 @@ pub struct GpuBtf {
     pub bytes: u64,
     /// The coefficients on the CPU, for the per-vertex weight sets of environment light (HEM).
     pub table: super::hem::WeightTable,
+    /// The uncompressed BTF it was made from (shared, not copied), for the figures that compare
+    /// against it (`BtfSlot`).
+    pub source: Arc<Btf>,
 }
 
 impl GpuBtf {
@@ -53,17 +59,10 @@ impl GpuBtf {
     }
 }
 
-/// Uploads `pca`, the per-view PCA (centred on the mean) of a `width` x `height` BTF on
-/// `sampling`, with `components` eigentextures per slot. Fails, saying which limit, where the
-/// device cannot hold it.
-pub fn upload(
-    gpu: &GpuContext,
-    pca: &Compressed,
-    sampling: &Sampling,
-    width: usize,
-    height: usize,
-    components: usize,
-) -> anyhow::Result<GpuBtf> {
+/// Uploads `pca`, the per-view PCA (centred on the mean) of `btf`, with `components`
+/// eigentextures per slot. Fails, saying which limit, where the device cannot hold it.
+pub fn upload(gpu: &GpuContext, pca: &Compressed, btf: &Arc<Btf>, components: usize) -> anyhow::Result<GpuBtf> {
+    let (sampling, width, height) = (&btf.sampling, btf.width, btf.height);
     let n = sampling.len();
     ensure!(pca.centring == Centring::Mean, "the GPU BTF expects a PCA centred on the mean");
     ensure!(pca.slots.len() == n, "{} PCA slots for {n} directions", pca.slots.len());
@@ -146,6 +145,7 @@ pub fn upload(
         height,
         bytes: (rgba.len() * 2) as u64 + coeff_bytes,
         table: super::hem::WeightTable::new(pca, sampling)?,
+        source: btf.clone(),
     })
 }
 

@@ -469,3 +469,78 @@ fn bad_btf_input_gives_errors_naming_the_parameter() {
     let msg = failure(&evaluate_graph(&sphere_graph(nodes, links), 16, 16), "shade");
     assert!(msg.contains("\"environment\"") && msg.contains("\"scene\""), "{msg}");
 }
+
+/// Figs. 6 and 7 (`BtfSlot`): the original image is the bake's (view, light) image at the
+/// metric's exposure, a full-rank reconstruction has no 8-bit error (all green), c = 5 has
+/// some, and the eigenvalues written to stats.json sum to the slot's centred energy.
+#[test]
+fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
+    use werkstatt::btf::bake::{BakeParams, Pattern, Tier, bake};
+    use werkstatt::core::node::Product;
+    let slot = |id: &str, c: usize| {
+        format!(
+            r#""{id}": (kind: "BtfSlot", params: {{ "view_theta": 15.0, "view_phi": 60.0, "light_theta": 30.0, "light_phi": 90.0, "components": {c} }}),"#
+        )
+    };
+    let text = format!(
+        r#"(version: 2, nodes: {{
+            "btf": (kind: "Btf", params: {{ "source": "bake", "weave": "twill", "resolution": 8, "sampling": "h2_tests", "supersample": 1, "components": 4 }}),
+            {} {}
+        }}, links: [("btf.btf", "full.btf"), ("btf.btf", "five.btf")])"#,
+        slot("full", 19),
+        slot("five", 5)
+    );
+    let graph = Graph::load_str(&text, "btf-slot-test.ron".as_ref()).unwrap();
+    let ev = run_graph(&graph, 8, 8);
+    let scalar = |id: &str, port: &str| match ev.output(id, port) {
+        Some(Value::Scalar(x)) => *x,
+        _ => panic!("{id}.{port} is not a scalar"),
+    };
+    let read =
+        |id: &str, port: &str| read_back(gpu(), ev.output(id, port).and_then(Value::as_texture).unwrap()).unwrap();
+
+    let params = BakeParams {
+        size: 8,
+        sampling: Sampling::h2_tests(),
+        supersample: 1,
+        ..BakeParams::tier(Pattern::Twill, Tier::Test)
+    };
+    let btf = bake(&params, 2).unwrap();
+    let (view, light) = (
+        btf.direction_index(Dir { theta: 15.0, phi: 60.0 }).unwrap(),
+        btf.direction_index(Dir { theta: 30.0, phi: 90.0 }).unwrap(),
+    );
+    let (n, dim) = (btf.sampling.len(), btf.image_len());
+    let exposure = werkstatt::btf::exposure8(&btf.data);
+    let expected = &btf.slot(view)[light * dim..][..dim];
+    let original = read("full", "original");
+    for (t, rgb) in expected.chunks_exact(3).enumerate() {
+        for ch in 0..3 {
+            let want = (f64::from(rgb[ch]) * exposure / 255.0) as f32;
+            let got = original.rgba[t * 4 + ch];
+            assert!((got - want).abs() <= 2e-3 * want.max(1.0), "texel {t}, channel {ch}: {got} against {want}");
+        }
+    }
+    // Full rank: exact up to f32 rounding, so every texel is green.
+    assert!(scalar("full", "error_max") < 0.5, "full rank error {}", scalar("full", "error_max"));
+    let heat = read("full", "error");
+    assert!(heat.rgba.chunks_exact(4).all(|p| p[0] < 0.01 && p[1] > 0.99), "the full-rank heatmap is not all green");
+    let (mean5, p99, max5) = (scalar("five", "error_mean"), scalar("five", "error_p99"), scalar("five", "error_max"));
+    eprintln!("c = 5: 8-bit error mean {mean5:.2}, p99 {p99:.2}, max {max5:.2}");
+    assert!(mean5 > 0.5 && p99 <= max5);
+
+    // The eigenvalues: all n, descending, summing to the trace of the centred Gram matrix.
+    let values: Vec<f64> =
+        ev.products("five").iter().filter_map(|p| if let Product::Value(v) = p { Some(*v) } else { None }).collect();
+    assert_eq!(values.len(), n);
+    assert!(values.windows(2).all(|w| w[0] >= w[1]));
+    let images = btf.slot(view);
+    let mean: Vec<f64> =
+        (0..dim).map(|t| (0..n).map(|i| f64::from(images[i * dim + t])).sum::<f64>() / n as f64).collect();
+    let energy: f64 = (0..n)
+        .flat_map(|i| (0..dim).map(move |t| (i, t)))
+        .map(|(i, t)| (f64::from(images[i * dim + t]) - mean[t]).powi(2))
+        .sum();
+    let sum: f64 = values.iter().sum();
+    assert!((sum - energy).abs() <= 1e-6 * energy, "eigenvalues sum to {sum}, the slot's centred energy is {energy}");
+}
