@@ -515,8 +515,8 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
     let expected = &btf.slot(view)[light * dim..][..dim];
     let original = read("full", "original");
     for (t, rgb) in expected.chunks_exact(3).enumerate() {
-        for ch in 0..3 {
-            let want = (f64::from(rgb[ch]) * exposure / 255.0) as f32;
+        for (ch, &value) in rgb.iter().enumerate() {
+            let want = (f64::from(value) * exposure / 255.0) as f32;
             let got = original.rgba[t * 4 + ch];
             assert!((got - want).abs() <= 2e-3 * want.max(1.0), "texel {t}, channel {ch}: {got} against {want}");
         }
@@ -543,4 +543,39 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
         .sum();
     let sum: f64 = values.iter().sum();
     assert!((sum - energy).abs() <= 1e-6 * energy, "eigenvalues sum to {sum}, the slot's centred energy is {energy}");
+}
+
+/// Mip maps of the eigentextures: a weave of stripes 1 texel wide, tiled 64 times per UV unit on
+/// the sphere (several texels per pixel), shades like Lambert with the stripes' mean albedo,
+/// where sampling level 0 alone aliases to one stripe or the other (an error of about 0.2).
+#[test]
+fn a_minified_weave_shows_its_mean_colour() {
+    // The stripes' mean, [0.6, 0.5, 0.4], is the sphere material's colour that DirectLight uses.
+    let nodes = r#""btf": (kind: "Btf", params: { "source": "lambert", "albedo": [0.9, 0.7, 0.5], "stripe_albedo": [0.3, 0.3, 0.3],
+            "stripes": 4, "resolution": 8 }),
+        "direct": (kind: "DirectLight", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
+            "sky_color": [0.0, 0.0, 0.0], "ground_color": [0.0, 0.0, 0.0] }),
+        "shade": (kind: "BtfShading", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
+            "alpha": 0.0, "shadow_blur": 0.0, "tiling": 64.0 }),"#;
+    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("gbuffer.gbuffer", "direct.gbuffer"), ("btf.btf", "shade.btf"),
+        ("direct.image", "shade.base"), ("shade.image", "out.image"),"#;
+    let ev = run_graph(&sphere_graph(nodes, links), 48, 48);
+    let (btf, direct) = (image(&ev, "shade"), image(&ev, "direct"));
+    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let (mut covered, mut worst, mut sum) = (0, 0.0f32, 0.0f32);
+    for i in (0..48 * 48).filter(|&i| depth.rgba[i * 4] > 0.0) {
+        covered += 1;
+        for c in 0..3 {
+            let d = (btf.rgba[i * 4 + c] - direct.rgba[i * 4 + c]).abs();
+            worst = worst.max(d);
+            sum += d;
+        }
+    }
+    eprintln!(
+        "minified weave against Lambert of the mean: worst {worst:.4}, mean {:.5}, {covered} pixels",
+        sum / (3 * covered) as f32
+    );
+    assert!(covered > 500, "only {covered} pixels covered");
+    // The cosine's interpolation between rings (0.0086 rho E / pi) and f16, as for Lambert.
+    assert!(worst < 0.0086 * 0.6 * 3.0 / std::f32::consts::PI + 4e-3, "the minified weave is off by {worst}");
 }
