@@ -471,11 +471,13 @@ fn bad_btf_input_gives_errors_naming_the_parameter() {
 }
 
 /// Figs. 6 and 7 (`BtfSlot`): the original image is the bake's (view, light) image at the
-/// metric's exposure, a full-rank reconstruction has no 8-bit error (all green), c = 5 has
-/// some, and the eigenvalues written to stats.json sum to the slot's centred energy.
+/// metric's exposure, a full-rank reconstruction (18 components: the rank of 19 images less
+/// their mean) is the original and has no 8-bit error (all green), c = 5 has some, and the
+/// eigenvalues written to stats.json sum to the slot's centred energy.
 #[test]
 fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
     use werkstatt::btf::bake::{BakeParams, Pattern, Tier, bake};
+    use werkstatt::btf::pca::{Centring, compress_slot};
     use werkstatt::core::node::Product;
     let slot = |id: &str, c: usize| {
         format!(
@@ -487,7 +489,7 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
             "btf": (kind: "Btf", params: {{ "source": "bake", "weave": "twill", "resolution": 8, "sampling": "h2_tests", "supersample": 1, "components": 4 }}),
             {} {}
         }}, links: [("btf.btf", "full.btf"), ("btf.btf", "five.btf")])"#,
-        slot("full", 19),
+        slot("full", 18),
         slot("five", 5)
     );
     let graph = Graph::load_str(&text, "btf-slot-test.ron".as_ref()).unwrap();
@@ -513,12 +515,17 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
     let (n, dim) = (btf.sampling.len(), btf.image_len());
     let exposure = werkstatt::btf::exposure8(&btf.data);
     let expected = &btf.slot(view)[light * dim..][..dim];
-    let original = read("full", "original");
+    let (original, rebuilt) = (read("full", "original"), read("full", "reconstruction"));
     for (t, rgb) in expected.chunks_exact(3).enumerate() {
         for (ch, &value) in rgb.iter().enumerate() {
             let want = (f64::from(value) * exposure / 255.0) as f32;
-            let got = original.rgba[t * 4 + ch];
-            assert!((got - want).abs() <= 2e-3 * want.max(1.0), "texel {t}, channel {ch}: {got} against {want}");
+            for (name, image) in [("original", &original), ("reconstruction", &rebuilt)] {
+                let got = image.rgba[t * 4 + ch];
+                assert!(
+                    (got - want).abs() <= 2e-3 * want.max(1.0),
+                    "{name}, texel {t}, channel {ch}: {got} against {want}"
+                );
+            }
         }
     }
     // Full rank: exact up to f32 rounding, so every texel is green.
@@ -528,6 +535,18 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
     let (mean5, p99, max5) = (scalar("five", "error_mean"), scalar("five", "error_p99"), scalar("five", "error_max"));
     eprintln!("c = 5: 8-bit error mean {mean5:.2}, p99 {p99:.2}, max {max5:.2}");
     assert!(mean5 > 0.5 && p99 <= max5);
+    // c = 5 is the library's PCA of the slot with 5 components, and its error the metric's.
+    let pca = compress_slot(btf.slot(view), dim, 5, Centring::Mean);
+    let five = pca.reconstruct(light);
+    let image5 = read("five", "reconstruction");
+    for (t, &value) in five.iter().enumerate() {
+        let want = (f64::from(value) * exposure / 255.0) as f32;
+        let got = image5.rgba[t / 3 * 4 + t % 3];
+        assert!((got - want).abs() <= 2e-3 * want.abs().max(1.0), "c = 5, value {t}: {got} against {want}");
+    }
+    let errors = werkstatt::btf::error8(expected, &five, exposure);
+    let want = errors.iter().sum::<f64>() / errors.len() as f64;
+    assert!((mean5 - want).abs() < 1e-6 * want, "c = 5: mean error {mean5} against {want}");
 
     // The eigenvalues: all n, descending, summing to the trace of the centred Gram matrix.
     let values: Vec<f64> =
