@@ -265,6 +265,20 @@ mod tests {
     use super::*;
     use crate::btf::directions::Sampling;
 
+    #[test]
+    fn the_eigenvalue_plot_has_a_curve_per_slot_without_zero_eigenvalues() {
+        let curves = vec![("a".to_string(), vec![10.0, 1.0, 0.1, 0.0]), ("b".to_string(), vec![5.0, 0.5, 0.05, 0.005])];
+        let svg = eigenvalue_svg(&curves, "t");
+        let lines: Vec<&str> = svg.lines().filter(|l| l.starts_with("<polyline")).collect();
+        assert_eq!(lines.len(), 2);
+        // The zero eigenvalue has no place on the log scale: 3 points, then 4.
+        let points = |l: &str| l.split("points=\"").nth(1).unwrap().split('"').next().unwrap().split(' ').count();
+        assert_eq!((points(lines[0]), points(lines[1])), (3, 4));
+        // Decades from 1e-3 (below 0.005) to 1e1 (above 10).
+        assert!(svg.contains(">1e-3<") && svg.contains(">1e1<") && !svg.contains(">1e2<"));
+        assert!(svg.ends_with("</svg>\n"));
+    }
+
     /// A deterministic pseudo-random slot: n images of dim values in [0, 1).
     fn noise(n: usize, dim: usize, seed: u64) -> Vec<f32> {
         let mut s = seed;
