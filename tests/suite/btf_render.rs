@@ -598,3 +598,24 @@ fn a_minified_weave_shows_its_mean_colour() {
     // The cosine's interpolation between rings (0.0086 rho E / pi) and f16, as for Lambert.
     assert!(worst < 0.0086 * 0.6 * 3.0 / std::f32::consts::PI + 4e-3, "the minified weave is off by {worst}");
 }
+
+/// A BtfSlot direction the BTF did not measure, more components than lights, and a tile too
+/// large for the node to bake are errors naming the parameters.
+#[test]
+fn btf_slot_and_the_bake_name_their_bad_parameters() {
+    let text = r#"(version: 2, nodes: {
+        "btf": (kind: "Btf", params: { "source": "lambert", "sampling": "h2_tests", "resolution": 2 }),
+        "off_grid": (kind: "BtfSlot", params: { "view_theta": 20.0 }),
+        "too_many": (kind: "BtfSlot", params: { "components": 20 }),
+        "big": (kind: "Btf", params: { "source": "bake", "resolution": 64 }),
+        "big_slot": (kind: "BtfSlot"),
+    }, links: [("btf.btf", "off_grid.btf"), ("btf.btf", "too_many.btf"), ("big.btf", "big_slot.btf")])"#;
+    let graph = Graph::load_str(text, "btf-slot-errors.ron".as_ref()).unwrap();
+    let ev = evaluate_graph(&graph, 8, 8);
+    let m = failure(&ev, "off_grid");
+    assert!(m.contains("\"view_theta\"") && m.contains("(20, 0)") && m.contains("30 deg x 12"), "{m}");
+    let m = failure(&ev, "too_many");
+    assert!(m.contains("\"components\" is 20") && m.contains("19 light directions"), "{m}");
+    let m = failure(&ev, "big");
+    assert!(m.contains("\"resolution\" is 64") && m.contains("werkstatt btf bake"), "{m}");
+}
