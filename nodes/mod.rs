@@ -69,6 +69,7 @@ pub static ALL: &[&NodeSpec] = &[
     &ibl::ibl_shading::IBL_SHADING,
     &btf::btf_resource::BTF,
     &btf::btf_shading::BTF_SHADING,
+    &btf::btf_slot::BTF_SLOT,
     &occlusion::ssao::SSAO,
     &occlusion::hybrid_occlusion::HYBRID_OCCLUSION,
     &occlusion::bounce::BOUNCE,

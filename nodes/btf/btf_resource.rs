@@ -19,8 +19,24 @@ crate::choice!(
         /// A diagnostic BTF: every (view, light) image one flat colour, distinct per pair, so a
         /// render shows which images the interpolation blends and how much.
         Directions = "directions",
+        /// Baked from woven yarn geometry (src/btf/bake.rs) while the node runs: small tiles only.
+        Bake = "bake",
     }
 );
+
+crate::choice!(
+    /// The weave of a baked BTF.
+    pub enum BtfWeave {
+        Plain = "plain",
+        Twill = "twill",
+        Satin = "satin",
+    }
+);
+
+/// The largest tile the node bakes itself (32^2 with 81 directions: 11 s with one ray per texel
+/// on two shared cores, four times that with 2x2); larger ones are baked once by
+/// `werkstatt btf bake` and read with source = file.
+const MAX_BAKE_SIZE: usize = 32;
 
 crate::choice!(
     /// The directions of an analytic BTF.
@@ -42,7 +58,7 @@ pub static BTF: NodeSpec = NodeSpec {
         ParamSpec::new(
             "source",
             ParamKind::Choice { default: "lambert", options: BtfSource::OPTIONS },
-            "file: the BTF file at `path`; lambert: rho/pi cos theta_i with `albedo` (stripes of `stripe_albedo`); directions: flat colours per (view, light) pair, for checking the interpolation.",
+            "file: the BTF file at `path`; lambert: rho/pi cos theta_i with `albedo` (stripes of `stripe_albedo`); directions: flat colours per (view, light) pair, for checking the interpolation; bake: a `weave` baked from yarn geometry at `resolution` (at most 32) and `sampling` (the bake's red warp and blue weft).",
         ),
         ParamSpec::new(
             "path",
@@ -71,6 +87,17 @@ pub static BTF: NodeSpec = NodeSpec {
             "Lambert: pairs of stripes along the tile's u (x) axis, the second of each pair in `stripe_albedo`; 0: uniform.",
         ),
         ParamSpec::new("stripe_albedo", ParamKind::Color { default: [0.2, 0.2, 0.6] }, "Lambert: the stripes' rho."),
+        ParamSpec::new(
+            "weave",
+            ParamKind::Choice { default: "plain", options: BtfWeave::OPTIONS },
+            "Bake: plain, 2/1 twill or 5-satin (one repeat per tile).",
+        ),
+        ParamSpec::new("supersample", ParamKind::Int { default: 2, min: 1, max: 4 }, "Bake: n x n rays per texel."),
+        ParamSpec::new(
+            "frontal",
+            ParamKind::Bool { default: false },
+            "Replace the BTF by the plain texture of its frontal view (the paper's comparison in Figs. 2 and 13): every image the frontal view and light's, times cos theta_i; no parallax, self-shadowing or highlights.",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(BtfNode),
@@ -100,6 +127,7 @@ impl Node for BtfNode {
                 let size = cx.int("resolution") as usize;
                 Arc::new(match source {
                     BtfSource::Directions => directions_btf(sampling, size),
+                    BtfSource::Bake => bake(cx, sampling, size)?,
                     _ => {
                         let (a, b, stripes) = (cx.vec3("albedo"), cx.vec3("stripe_albedo"), cx.int("stripes") as usize);
                         Btf::lambertian(sampling, size, size, |x, _| {
@@ -110,6 +138,11 @@ impl Node for BtfNode {
                 })
             }
         };
+        let btf = if cx.bool("frontal") {
+            Arc::new(btf.frontal().map_err(|e| NodeError::msg(format!("parameter \"frontal\": {e:#}")))?)
+        } else {
+            btf
+        };
         let components = cx.int("components") as usize;
         let lights = btf.sampling.len();
         if components > lights {
@@ -118,12 +151,36 @@ impl Node for BtfNode {
             )));
         }
         let pca = compress(&btf, components, Centring::Mean);
-        let gpu_btf = crate::btf::gpu::upload(gpu, &pca, &btf.sampling, btf.width, btf.height, components)
+        let gpu_btf = crate::btf::gpu::upload(gpu, &pca, &btf, components)
             .map_err(|e| NodeError::msg(format!("uploading the BTF: {e:#}")))?;
         cx.count("btf_bytes", gpu_btf.bytes as usize);
         cx.set("btf", Arc::new(gpu_btf));
         Ok(())
     }
+}
+
+/// Bakes the `weave` at `size` texels on `sampling` with all cores (the bytes do not depend
+/// on the thread count).
+fn bake(cx: &EvalCx<'_>, sampling: Sampling, size: usize) -> Result<Btf, NodeError> {
+    use crate::btf::bake::{BakeParams, Pattern, Tier};
+    if size > MAX_BAKE_SIZE {
+        return Err(NodeError::msg(format!(
+            "parameter \"resolution\" is {size}: the node bakes tiles of at most {MAX_BAKE_SIZE} texels; bake larger ones once with `werkstatt btf bake` and read them with source = \"file\""
+        )));
+    }
+    let pattern = match cx.choice::<BtfWeave>("weave") {
+        BtfWeave::Plain => Pattern::Plain,
+        BtfWeave::Twill => Pattern::Twill,
+        BtfWeave::Satin => Pattern::Satin,
+    };
+    let params = BakeParams {
+        size,
+        sampling,
+        supersample: cx.int("supersample") as usize,
+        ..BakeParams::tier(pattern, Tier::Test)
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    crate::btf::bake::bake(&params, threads).map_err(|e| NodeError::msg(format!("baking the BTF: {e:#}")))
 }
 
 /// The diagnostic BTF: image (view j, light i) is one flat colour from a hash of (j, i), each

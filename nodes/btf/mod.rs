@@ -2,3 +2,4 @@
 
 pub mod btf_resource;
 pub mod btf_shading;
+pub mod btf_slot;

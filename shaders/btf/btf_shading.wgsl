@@ -179,6 +179,45 @@ fn shaded_here(q: vec2<i32>) -> bool {
     return textureLoad(g_depth, q, 0).r > 0.0 && id == u32(params.size.w);
 }
 
+// The weave's texture coordinates at a surface texel: the UV tiled and turned by the rotation
+// from the tangent (u) towards the BTF's y (up its images, decreasing v).
+fn weave_coords(uv: vec2<f32>) -> vec2<f32> {
+    let c = params.tiling.y;
+    let sn = params.tiling.z;
+    let p = vec2<f32>(uv.x, -uv.y) * params.tiling.x;
+    let w = vec2<f32>(c * p.x + sn * p.y, -sn * p.x + c * p.y);
+    return vec2<f32>(w.x, -w.y);
+}
+
+// The step of the weave's coordinates (in texels) from pixel px to its neighbour px + d or
+// px - d, whichever is shorter among those on this material (a UV seam on one side does not
+// count); a very long step where neither is.
+fn texel_step(px: vec2<i32>, d: vec2<i32>, tex: vec2<f32>, size: vec2<f32>) -> f32 {
+    var best = 1e30;
+    for (var side = -1; side <= 1; side += 2) {
+        let q = px + d * side;
+        if shaded_here(q) {
+            let bits = textureLoad(g_surface, q, 0);
+            let t = weave_coords(vec2<f32>(bitcast<f32>(bits.x), bitcast<f32>(bits.y)));
+            best = min(best, length((t - tex) * size));
+        }
+    }
+    return best;
+}
+
+// The mip level of the eigentextures at pixel px, as trilinear filtering picks it (log2 of the
+// longer texel step per pixel), from the G-buffer's UVs at the neighbours: a deferred pass has
+// no derivatives of the weave's coordinates, and the branch on the material is not uniform.
+// 0 (the finest) where the pixel has no neighbour on this material.
+fn mip_level(px: vec2<i32>, tex: vec2<f32>) -> f32 {
+    let size = vec2<f32>(textureDimensions(btf_images).xy);
+    let rho = max(texel_step(px, vec2<i32>(1, 0), tex, size), texel_step(px, vec2<i32>(0, 1), tex, size));
+    if rho > 1e29 {
+        return 0.0;
+    }
+    return max(log2(max(rho, 1e-8)), 0.0);
+}
+
 // The geometric normal at pixel px (towards the side of `n`): the plane through its world
 // position and those of a horizontal and a vertical neighbour on the same material (right or
 // left, below or above). Within a triangle that is the triangle's plane; a pixel beside an edge
@@ -228,9 +267,8 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let s = decode_surface(bits, n);
     let c = params.tiling.y;
     let sn = params.tiling.z;
-    let p = vec2<f32>(s.uv.x, -s.uv.y) * params.tiling.x;
-    let w = vec2<f32>(c * p.x + sn * p.y, -sn * p.x + c * p.y);
-    let tex = vec2<f32>(w.x, -w.y);
+    let tex = weave_coords(s.uv);
+    let lod = mip_level(px, tex);
     let fx = c * s.x + sn * s.y;
     let fy = -sn * s.x + c * s.y;
 
@@ -302,7 +340,7 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         }
         for (var k = 0u; k < PER_SLOT; k++) {
             let layer = i32(j * PER_SLOT + k);
-            radiance += wm * gamma[k] * textureSampleLevel(btf_images, btf_sampler, tex, layer, 0.0).rgb;
+            radiance += wm * gamma[k] * textureSampleLevel(btf_images, btf_sampler, tex, layer, lod).rgb;
         }
     }
     return vec4<f32>(radiance * params.btf.w, 1.0);

@@ -185,6 +185,10 @@ enum BtfWhat {
         /// Decompose the light images as they are (eq. 1 literally) instead of around their mean.
         #[arg(long)]
         no_centre: bool,
+        /// Plot the eigenvalues of the view slots (0, 0), (45, 300) and (75, 45) (those the BTF
+        /// has) as an SVG: the paper's Fig. 7.
+        #[arg(long, value_name = "SVG")]
+        eigenvalues_svg: Option<PathBuf>,
     },
     /// Write the analytic Lambertian BTF (rho / pi cos theta_i, a checkerboard albedo): an input
     /// to try the tools on.
@@ -219,6 +223,9 @@ enum BtfWhat {
         /// n: n x n samples per texel (default 2).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8))]
         supersample: Option<u32>,
+        /// Texels per side instead of the tier's (its directions stay).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        size: Option<u32>,
         /// Tracing threads (0: one per core); the result does not depend on them.
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -896,7 +903,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Btf { what: BtfWhat::Compress { file, components, no_centre } } => {
+        Command::Btf { what: BtfWhat::Compress { file, components, no_centre, eigenvalues_svg } } => {
             use crate::btf::pca::{Centring, compress};
             anyhow::ensure!(components > 0, "--components must be at least 1");
             let start = std::time::Instant::now();
@@ -932,6 +939,20 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let worst = packed.slots.iter().map(captured).fold(1.0, f64::min);
             println!("captured eigenvalue energy: worst slot {worst:.6}");
+            if let Some(path) = eigenvalues_svg {
+                use crate::btf::directions::Dir;
+                let curves: Vec<(String, Vec<f64>)> = [(0.0, 0.0), (45.0, 300.0), (75.0, 45.0)]
+                    .into_iter()
+                    .filter_map(|(theta, phi)| {
+                        let j = btf.direction_index(Dir { theta, phi })?;
+                        Some((format!("view ({theta}, {phi})"), packed.slots[j].eigenvalues.clone()))
+                    })
+                    .collect();
+                let name = file.file_name().map_or(String::new(), |n| n.to_string_lossy().replace(['<', '&'], "_"));
+                let title = format!("Eigenvalues per view slot (Fig. 7): {name}");
+                crate::io::atomic::write_atomic(&path, crate::btf::pca::eigenvalue_svg(&curves, &title).as_bytes())?;
+                println!("wrote {}", path.display());
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Btf { what: BtfWhat::Lambertian { out, size, full } } => {
@@ -946,7 +967,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Btf {
-            what: BtfWhat::Bake { weave, tier, out, warp, weft, supersample, threads, cache_dir, no_cache },
+            what: BtfWhat::Bake { weave, tier, out, warp, weft, supersample, size, threads, cache_dir, no_cache },
         } => {
             use crate::btf::bake::{BakeParams, Baker, Pattern, Tier};
             let pattern = match weave {
@@ -969,6 +990,9 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             }
             if let Some(n) = supersample {
                 params.supersample = n as usize;
+            }
+            if let Some(n) = size {
+                params.size = n as usize;
             }
             let start = std::time::Instant::now();
             let key = params.cache_key();

@@ -9,8 +9,11 @@
 //! - **Rings**: the sampling's rings (theta, count, first direction) for the shader's copy of
 //!   [`Sampling::weights`](super::directions::Sampling::weights).
 
+use std::sync::Arc;
+
 use anyhow::ensure;
 
+use super::Btf;
 use super::directions::Sampling;
 use super::pca::{Centring, Compressed};
 use crate::gpu::{GpuContext, GpuImage, TextureDesc};
@@ -33,6 +36,9 @@ pub struct GpuBtf {
     pub bytes: u64,
     /// The coefficients on the CPU, for the per-vertex weight sets of environment light (HEM).
     pub table: super::hem::WeightTable,
+    /// The uncompressed BTF it was made from (shared, not copied), for the figures that compare
+    /// against it (`BtfSlot`).
+    pub source: Arc<Btf>,
 }
 
 impl GpuBtf {
@@ -53,17 +59,10 @@ impl GpuBtf {
     }
 }
 
-/// Uploads `pca`, the per-view PCA (centred on the mean) of a `width` x `height` BTF on
-/// `sampling`, with `components` eigentextures per slot. Fails, saying which limit, where the
-/// device cannot hold it.
-pub fn upload(
-    gpu: &GpuContext,
-    pca: &Compressed,
-    sampling: &Sampling,
-    width: usize,
-    height: usize,
-    components: usize,
-) -> anyhow::Result<GpuBtf> {
+/// Uploads `pca`, the per-view PCA (centred on the mean) of `btf`, with `components`
+/// eigentextures per slot. Fails, saying which limit, where the device cannot hold it.
+pub fn upload(gpu: &GpuContext, pca: &Compressed, btf: &Arc<Btf>, components: usize) -> anyhow::Result<GpuBtf> {
+    let (sampling, width, height) = (&btf.sampling, btf.width, btf.height);
     let n = sampling.len();
     ensure!(pca.centring == Centring::Mean, "the GPU BTF expects a PCA centred on the mean");
     ensure!(pca.slots.len() == n, "{} PCA slots for {n} directions", pca.slots.len());
@@ -83,8 +82,8 @@ pub fn upload(
     let max_side = limits.max_texture_dimension_2d as usize;
     ensure!(width <= max_side && height <= max_side, "{width}x{height} images exceed the device's {max_side}");
     let texels = width * height;
-    // f16 bits (the half crate is built without bytemuck).
-    let mut rgba = vec![0u16; layers * texels * 4];
+    // Level 0 of every layer, RGBA f32; then the mip chain.
+    let mut rgba = vec![0.0f32; layers * texels * 4];
     for (j, slot) in pca.slots.iter().enumerate() {
         ensure!(slot.dim == texels * 3, "slot {j} holds images of {} values, not {}", slot.dim, texels * 3);
         let kept = slot.components().min(components);
@@ -92,12 +91,11 @@ pub fn upload(
         for (s, image) in images.enumerate() {
             let layer = &mut rgba[(j * per_slot + s) * texels * 4..][..texels * 4];
             for (out, rgb) in layer.chunks_exact_mut(4).zip(image.chunks_exact(3)) {
-                for (o, &x) in out.iter_mut().zip(rgb) {
-                    *o = half::f16::from_f32(x).to_bits();
-                }
+                out[..3].copy_from_slice(rgb);
             }
         }
     }
+    let levels = mip_chain(rgba, width, height, layers);
     let mut coeffs = vec![0.0f32; n * n * per_slot];
     for (j, slot) in pca.slots.iter().enumerate() {
         let (kept, stored) = (slot.components().min(components), slot.components());
@@ -118,23 +116,30 @@ pub fn upload(
         layers as u32,
         wgpu::TextureFormat::Rgba16Float,
         wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-    );
+    )
+    .with_mips(levels.len() as u32);
     let images = GpuImage::create(gpu, "btf images", desc);
-    gpu.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &images.texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytemuck::cast_slice(&rgba),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(8 * width as u32),
-            rows_per_image: Some(height as u32),
-        },
-        desc.extent(),
-    );
+    let mut image_bytes = 0;
+    for (m, (w, h, level)) in levels.iter().enumerate() {
+        // f16 bits (the half crate is built without bytemuck).
+        let bits: Vec<u16> = level.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
+        image_bytes += bits.len() as u64 * 2;
+        gpu.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &images.texture,
+                mip_level: m as u32,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(&bits),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(8 * *w as u32),
+                rows_per_image: Some(*h as u32),
+            },
+            wgpu::Extent3d { width: *w as u32, height: *h as u32, depth_or_array_layers: layers as u32 },
+        );
+    }
     let coeffs_buffer =
         gpu.create_buffer_init("btf coefficients", bytemuck::cast_slice(&coeffs), wgpu::BufferUsages::STORAGE);
     Ok(GpuBtf {
@@ -144,9 +149,46 @@ pub fn upload(
         components,
         width,
         height,
-        bytes: (rgba.len() * 2) as u64 + coeff_bytes,
+        bytes: image_bytes + coeff_bytes,
         table: super::hem::WeightTable::new(pca, sampling)?,
+        source: btf.clone(),
     })
+}
+
+/// The mip chain of `layers` RGBA f32 images of `width` x `height` (layer-major), down to 1x1
+/// by 2x2 box averages while both sides are even: (width, height, texels) per level, level 0
+/// first. Each level's average equals level 0's, so a minified weave shows its mean colour
+/// instead of aliasing, and since a pixel's image is linear in the mean and eigentextures,
+/// filtering them equals filtering the reconstructed images. A side that turns odd ends the chain.
+pub fn mip_chain(level0: Vec<f32>, width: usize, height: usize, layers: usize) -> Vec<(usize, usize, Vec<f32>)> {
+    let mut levels = vec![(width, height, level0)];
+    loop {
+        let (w, h, prev) = levels.last().expect("level 0");
+        let (w, h) = (*w, *h);
+        if w < 2 && h < 2 || w % 2 == 1 && w > 1 || h % 2 == 1 && h > 1 {
+            break;
+        }
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let (sx, sy) = (w / nw, h / nh);
+        let mut next = vec![0.0f32; layers * nw * nh * 4];
+        for l in 0..layers {
+            for y in 0..nh {
+                for x in 0..nw {
+                    for c in 0..4 {
+                        let mut sum = 0.0f32;
+                        for dy in 0..sy {
+                            for dx in 0..sx {
+                                sum += prev[((l * h + y * sy + dy) * w + x * sx + dx) * 4 + c];
+                            }
+                        }
+                        next[((l * nh + y) * nw + x) * 4 + c] = sum / (sx * sy) as f32;
+                    }
+                }
+            }
+        }
+        levels.push((nw, nh, next));
+    }
+    levels
 }
 
 /// The smooth shadow boundary's 1D texture (eq. 6): `size` texels, black below the middle and
@@ -166,6 +208,28 @@ pub fn shadow_ramp(size: usize, blur: f32) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_mip_chain_averages_2x2_blocks_down_to_one_texel() {
+        // Two layers of 4 x 2 texels: stripes of period 2 along x.
+        let level0: Vec<f32> =
+            (0..2 * 4 * 2).flat_map(|t| [if t % 2 == 0 { 1.0 } else { 0.0 }, t as f32, 0.5, 1.0]).collect();
+        let chain = mip_chain(level0.clone(), 4, 2, 2);
+        let sizes: Vec<(usize, usize)> = chain.iter().map(|(w, h, _)| (*w, *h)).collect();
+        assert_eq!(sizes, [(4, 2), (2, 1), (1, 1)]);
+        // Level 1: the stripes average to 0.5; every level keeps each layer's mean.
+        assert!(chain[1].2.chunks_exact(4).all(|p| p[0] == 0.5 && p[2] == 0.5));
+        for (w, h, level) in &chain {
+            for l in 0..2 {
+                let mean = |data: &[f32], n: usize| {
+                    data[l * n * 4..][..n * 4].iter().skip(1).step_by(4).sum::<f32>() / n as f32
+                };
+                assert!((mean(level, w * h) - mean(&level0, 8)).abs() < 1e-5, "level {w}x{h}, layer {l}");
+            }
+        }
+        // An odd side stops the chain.
+        assert_eq!(mip_chain(vec![0.0; 3 * 2 * 4], 3, 2, 1).len(), 1);
+    }
 
     #[test]
     fn the_shadow_ramp_steps_at_the_middle_and_blurs_symmetrically() {

@@ -60,6 +60,33 @@ impl Btf {
         Btf { width, height, sampling, data }
     }
 
+    /// The plain texture of the frontal view that the paper compares against (Figs. 2, 13): the
+    /// image of the frontal view and light, `N(0, 0)`, lit by cos(theta_i) alone in every view,
+    /// i.e. [`Btf::lambertian`] with albedo `pi N(0, 0)` (the stored values include cos 0 = 1).
+    /// The mesostructure's parallax, self-shadowing and highlights are gone. Fails without a
+    /// frontal direction (a first ring at theta 0).
+    pub fn frontal(&self) -> anyhow::Result<Btf> {
+        anyhow::ensure!(
+            self.sampling.rings.first().is_some_and(|r| r.theta == 0.0),
+            "the BTF has no frontal direction (its first ring is not at theta 0)"
+        );
+        // View 0 and light 0 are both the pole.
+        let image = &self.data[..self.image_len()];
+        let width = self.width;
+        Ok(Btf::lambertian(self.sampling.clone(), self.width, self.height, |x, y| {
+            let t = &image[(y * width + x) * 3..][..3];
+            [t[0], t[1], t[2]].map(|v| v * std::f32::consts::PI)
+        }))
+    }
+
+    /// The index of the direction of the sampling at `d` (within 0.5 deg; any phi at the pole).
+    pub fn direction_index(&self, d: Dir) -> Option<usize> {
+        self.sampling.directions().iter().position(|m| {
+            let dphi = (m.phi - d.phi).rem_euclid(360.0);
+            (m.theta - d.theta).abs() < 0.5 && (m.theta == 0.0 || dphi.min(360.0 - dphi) < 0.5)
+        })
+    }
+
     /// The image at any view and light direction from the uncompressed images: the light weights
     /// of eq. 3 inside the view weights of eq. 5, both from [`Sampling::weights`].
     pub fn blend(&self, view: Dir, light: Dir) -> Vec<f32> {
@@ -97,4 +124,49 @@ pub fn error8(a: &[f32], b: &[f32], exposure: f64) -> Vec<f64> {
         .zip(b.chunks_exact(3))
         .map(|(p, q)| p.iter().zip(q).map(|(&x, &y)| (to8(x) - to8(y)).powi(2)).sum::<f64>().sqrt())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_frontal_texture_is_the_frontal_image_lit_by_the_cosine() {
+        // Every image differs: the frontal one must be picked, and only its texels kept.
+        let sampling = Sampling::h2_tests();
+        let n = sampling.len();
+        let data: Vec<f32> = (0..n * n * 2 * 2 * 3).map(|k| (k % 97) as f32 / 97.0).collect();
+        let btf = Btf { width: 2, height: 2, sampling, data };
+        let plain = btf.frontal().unwrap();
+        let dirs = plain.sampling.directions();
+        for (j, _) in dirs.iter().enumerate() {
+            for (i, light) in dirs.iter().enumerate() {
+                let cos = light.theta.to_radians().cos() as f32;
+                let got = &plain.data[(j * n + i) * 12..][..12];
+                for (g, f) in got.iter().zip(&btf.data[..12]) {
+                    assert!((g - f * cos).abs() < 1e-6, "view {j}, light {i}: {g} against {}", f * cos);
+                }
+            }
+        }
+        let no_pole = Btf {
+            width: 1,
+            height: 1,
+            sampling: Sampling { rings: vec![directions::Ring { theta: 10.0, count: 2 }] },
+            data: vec![0.0; 12],
+        };
+        assert!(no_pole.frontal().is_err());
+    }
+
+    #[test]
+    fn directions_are_found_within_half_a_degree_and_at_the_pole_at_any_phi() {
+        let btf = Btf { width: 1, height: 1, sampling: Sampling::h2(), data: Vec::new() };
+        assert_eq!(btf.direction_index(Dir { theta: 0.0, phi: 123.0 }), Some(0));
+        assert_eq!(btf.direction_index(Dir { theta: 15.0, phi: 60.2 }), Some(2));
+        // The wrap: 359.8 deg is 0 on the 15 deg ring.
+        assert_eq!(btf.direction_index(Dir { theta: 15.0, phi: 359.8 }), Some(1));
+        let i = btf.direction_index(Dir { theta: 75.0, phi: 45.0 }).unwrap();
+        assert_eq!(btf.sampling.directions()[i], Dir { theta: 75.0, phi: 45.0 });
+        assert_eq!(btf.direction_index(Dir { theta: 15.0, phi: 30.0 }), None);
+        assert_eq!(btf.direction_index(Dir { theta: 20.0, phi: 0.0 }), None);
+    }
 }

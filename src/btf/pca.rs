@@ -200,10 +200,84 @@ pub fn compress_slot(images: &[f32], dim: usize, c: usize, centring: Centring) -
     SlotPca { dim, mean: mean.into_iter().map(|x| x as f32).collect(), basis, coeffs, eigenvalues: values }
 }
 
+/// The paper's Fig. 7: eigenvalue curves (descending, one per view slot) on a log scale, as SVG.
+/// Eigenvalues at or below 1e-12 of the largest are left off (the log scale has no zero).
+pub fn eigenvalue_svg(curves: &[(String, Vec<f64>)], title: &str) -> String {
+    let (w, h, left, right, top, bottom) = (720.0f64, 420.0f64, 70.0f64, 150.0f64, 40.0f64, 50.0f64);
+    let largest = curves.iter().flat_map(|c| c.1.iter().copied()).fold(0.0f64, f64::max).max(1e-30);
+    let floor = largest * 1e-12;
+    let smallest = curves.iter().flat_map(|c| c.1.iter().copied()).filter(|&l| l > floor).fold(largest, f64::min);
+    let (hi, lo) = (largest.log10().ceil(), smallest.log10().floor().min(largest.log10().ceil() - 1.0));
+    let count = curves.iter().map(|c| c.1.len()).max().unwrap_or(1).max(2);
+    let x = |k: usize| left + k as f64 / (count - 1) as f64 * (w - left - right);
+    let y = |l: f64| top + (hi - l.log10()) / (hi - lo) * (h - top - bottom);
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{:.1}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
+        (left + w - right) / 2.0
+    );
+    let mut e = lo;
+    while e <= hi + 1e-9 {
+        let yy = y(10f64.powf(e));
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{:.1}\" y2=\"{yy:.1}\" stroke=\"#ddd\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">1e{e}</text>\n",
+            w - right,
+            left - 6.0,
+            yy + 4.0
+        );
+        e += 1.0;
+    }
+    for k in (0..count).step_by(10) {
+        svg += &format!("<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{k}</text>\n", x(k), h - bottom + 16.0);
+    }
+    svg += &format!(
+        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">component k</text>\n<text x=\"16\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {:.1})\">eigenvalue (log)</text>\n",
+        (left + w - right) / 2.0,
+        h - 12.0,
+        (top + h - bottom) / 2.0,
+        (top + h - bottom) / 2.0
+    );
+    for (i, (name, values)) in curves.iter().enumerate() {
+        let colour = ["#1f4fd6", "#d62728", "#2ca02c", "#000000"][i % 4];
+        let points: Vec<String> = values
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| **l > floor)
+            .map(|(k, &l)| format!("{:.1},{:.1}", x(k), y(l)))
+            .collect();
+        svg += &format!(
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n",
+            points.join(" ")
+        );
+        let ly = top + 10.0 + 20.0 * i as f64;
+        svg += &format!(
+            "<line x1=\"{0:.1}\" y1=\"{ly:.1}\" x2=\"{1:.1}\" y2=\"{ly:.1}\" stroke=\"{colour}\" stroke-width=\"2\"/><text x=\"{2:.1}\" y=\"{3:.1}\">{name}</text>\n",
+            w - right + 10.0,
+            w - right + 34.0,
+            w - right + 40.0,
+            ly + 4.0
+        );
+    }
+    svg + "</svg>\n"
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::btf::directions::Sampling;
+
+    #[test]
+    fn the_eigenvalue_plot_has_a_curve_per_slot_without_zero_eigenvalues() {
+        let curves = vec![("a".to_string(), vec![10.0, 1.0, 0.1, 0.0]), ("b".to_string(), vec![5.0, 0.5, 0.05, 0.005])];
+        let svg = eigenvalue_svg(&curves, "t");
+        let lines: Vec<&str> = svg.lines().filter(|l| l.starts_with("<polyline")).collect();
+        assert_eq!(lines.len(), 2);
+        // The zero eigenvalue has no place on the log scale: 3 points, then 4.
+        let points = |l: &str| l.split("points=\"").nth(1).unwrap().split('"').next().unwrap().split(' ').count();
+        assert_eq!((points(lines[0]), points(lines[1])), (3, 4));
+        // Decades from 1e-3 (below 0.005) to 1e1 (above 10).
+        assert!(svg.contains(">1e-3<") && svg.contains(">1e1<") && !svg.contains(">1e2<"));
+        assert!(svg.ends_with("</svg>\n"));
+    }
 
     /// A deterministic pseudo-random slot: n images of dim values in [0, 1).
     fn noise(n: usize, dim: usize, seed: u64) -> Vec<f32> {

@@ -469,3 +469,153 @@ fn bad_btf_input_gives_errors_naming_the_parameter() {
     let msg = failure(&evaluate_graph(&sphere_graph(nodes, links), 16, 16), "shade");
     assert!(msg.contains("\"environment\"") && msg.contains("\"scene\""), "{msg}");
 }
+
+/// Figs. 6 and 7 (`BtfSlot`): the original image is the bake's (view, light) image at the
+/// metric's exposure, a full-rank reconstruction (18 components: the rank of 19 images less
+/// their mean) is the original and has no 8-bit error (all green), c = 5 has some, and the
+/// eigenvalues written to stats.json sum to the slot's centred energy.
+#[test]
+fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
+    use werkstatt::btf::bake::{BakeParams, Pattern, Tier, bake};
+    use werkstatt::btf::pca::{Centring, compress_slot};
+    use werkstatt::core::node::Product;
+    let slot = |id: &str, c: usize| {
+        format!(
+            r#""{id}": (kind: "BtfSlot", params: {{ "view_theta": 15.0, "view_phi": 60.0, "light_theta": 30.0, "light_phi": 90.0, "components": {c} }}),"#
+        )
+    };
+    let text = format!(
+        r#"(version: 2, nodes: {{
+            "btf": (kind: "Btf", params: {{ "source": "bake", "weave": "twill", "resolution": 8, "sampling": "h2_tests", "supersample": 1, "components": 4 }}),
+            {} {}
+        }}, links: [("btf.btf", "full.btf"), ("btf.btf", "five.btf")])"#,
+        slot("full", 18),
+        slot("five", 5)
+    );
+    let graph = Graph::load_str(&text, "btf-slot-test.ron".as_ref()).unwrap();
+    let ev = run_graph(&graph, 8, 8);
+    let scalar = |id: &str, port: &str| match ev.output(id, port) {
+        Some(Value::Scalar(x)) => *x,
+        _ => panic!("{id}.{port} is not a scalar"),
+    };
+    let read =
+        |id: &str, port: &str| read_back(gpu(), ev.output(id, port).and_then(Value::as_texture).unwrap()).unwrap();
+
+    let params = BakeParams {
+        size: 8,
+        sampling: Sampling::h2_tests(),
+        supersample: 1,
+        ..BakeParams::tier(Pattern::Twill, Tier::Test)
+    };
+    let btf = bake(&params, 2).unwrap();
+    let (view, light) = (
+        btf.direction_index(Dir { theta: 15.0, phi: 60.0 }).unwrap(),
+        btf.direction_index(Dir { theta: 30.0, phi: 90.0 }).unwrap(),
+    );
+    let (n, dim) = (btf.sampling.len(), btf.image_len());
+    let exposure = werkstatt::btf::exposure8(&btf.data);
+    let expected = &btf.slot(view)[light * dim..][..dim];
+    let (original, rebuilt) = (read("full", "original"), read("full", "reconstruction"));
+    for (t, rgb) in expected.chunks_exact(3).enumerate() {
+        for (ch, &value) in rgb.iter().enumerate() {
+            let want = (f64::from(value) * exposure / 255.0) as f32;
+            for (name, image) in [("original", &original), ("reconstruction", &rebuilt)] {
+                let got = image.rgba[t * 4 + ch];
+                assert!(
+                    (got - want).abs() <= 2e-3 * want.max(1.0),
+                    "{name}, texel {t}, channel {ch}: {got} against {want}"
+                );
+            }
+        }
+    }
+    // Full rank: exact up to f32 rounding, so every texel is green.
+    assert!(scalar("full", "error_max") < 0.5, "full rank error {}", scalar("full", "error_max"));
+    let heat = read("full", "error");
+    assert!(heat.rgba.chunks_exact(4).all(|p| p[0] < 0.01 && p[1] > 0.99), "the full-rank heatmap is not all green");
+    let (mean5, p99, max5) = (scalar("five", "error_mean"), scalar("five", "error_p99"), scalar("five", "error_max"));
+    eprintln!("c = 5: 8-bit error mean {mean5:.2}, p99 {p99:.2}, max {max5:.2}");
+    assert!(mean5 > 0.5 && p99 <= max5);
+    // c = 5 is the library's PCA of the slot with 5 components, and its error the metric's.
+    let pca = compress_slot(btf.slot(view), dim, 5, Centring::Mean);
+    let five = pca.reconstruct(light);
+    let image5 = read("five", "reconstruction");
+    for (t, &value) in five.iter().enumerate() {
+        let want = (f64::from(value) * exposure / 255.0) as f32;
+        let got = image5.rgba[t / 3 * 4 + t % 3];
+        assert!((got - want).abs() <= 2e-3 * want.abs().max(1.0), "c = 5, value {t}: {got} against {want}");
+    }
+    let errors = werkstatt::btf::error8(expected, &five, exposure);
+    let want = errors.iter().sum::<f64>() / errors.len() as f64;
+    assert!((mean5 - want).abs() < 1e-6 * want, "c = 5: mean error {mean5} against {want}");
+
+    // The eigenvalues: all n, descending, summing to the trace of the centred Gram matrix.
+    let values: Vec<f64> =
+        ev.products("five").iter().filter_map(|p| if let Product::Value(v) = p { Some(*v) } else { None }).collect();
+    assert_eq!(values.len(), n);
+    assert!(values.windows(2).all(|w| w[0] >= w[1]));
+    let images = btf.slot(view);
+    let mean: Vec<f64> =
+        (0..dim).map(|t| (0..n).map(|i| f64::from(images[i * dim + t])).sum::<f64>() / n as f64).collect();
+    let energy: f64 = (0..n)
+        .flat_map(|i| (0..dim).map(move |t| (i, t)))
+        .map(|(i, t)| (f64::from(images[i * dim + t]) - mean[t]).powi(2))
+        .sum();
+    let sum: f64 = values.iter().sum();
+    assert!((sum - energy).abs() <= 1e-6 * energy, "eigenvalues sum to {sum}, the slot's centred energy is {energy}");
+}
+
+/// Mip maps of the eigentextures: a weave of stripes 1 texel wide, tiled 64 times per UV unit on
+/// the sphere (several texels per pixel), shades like Lambert with the stripes' mean albedo,
+/// where sampling level 0 alone aliases to one stripe or the other (an error of about 0.2).
+#[test]
+fn a_minified_weave_shows_its_mean_colour() {
+    // The stripes' mean, [0.6, 0.5, 0.4], is the sphere material's colour that DirectLight uses.
+    let nodes = r#""btf": (kind: "Btf", params: { "source": "lambert", "albedo": [0.9, 0.7, 0.5], "stripe_albedo": [0.3, 0.3, 0.3],
+            "stripes": 4, "resolution": 8 }),
+        "direct": (kind: "DirectLight", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
+            "sky_color": [0.0, 0.0, 0.0], "ground_color": [0.0, 0.0, 0.0] }),
+        "shade": (kind: "BtfShading", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
+            "alpha": 0.0, "shadow_blur": 0.0, "tiling": 64.0 }),"#;
+    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("gbuffer.gbuffer", "direct.gbuffer"), ("btf.btf", "shade.btf"),
+        ("direct.image", "shade.base"), ("shade.image", "out.image"),"#;
+    let ev = run_graph(&sphere_graph(nodes, links), 48, 48);
+    let (btf, direct) = (image(&ev, "shade"), image(&ev, "direct"));
+    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let (mut covered, mut worst, mut sum) = (0, 0.0f32, 0.0f32);
+    for i in (0..48 * 48).filter(|&i| depth.rgba[i * 4] > 0.0) {
+        covered += 1;
+        for c in 0..3 {
+            let d = (btf.rgba[i * 4 + c] - direct.rgba[i * 4 + c]).abs();
+            worst = worst.max(d);
+            sum += d;
+        }
+    }
+    eprintln!(
+        "minified weave against Lambert of the mean: worst {worst:.4}, mean {:.5}, {covered} pixels",
+        sum / (3 * covered) as f32
+    );
+    assert!(covered > 500, "only {covered} pixels covered");
+    // The cosine's interpolation between rings (0.0086 rho E / pi) and f16, as for Lambert.
+    assert!(worst < 0.0086 * 0.6 * 3.0 / std::f32::consts::PI + 4e-3, "the minified weave is off by {worst}");
+}
+
+/// A BtfSlot direction the BTF did not measure, more components than lights, and a tile too
+/// large for the node to bake are errors naming the parameters.
+#[test]
+fn btf_slot_and_the_bake_name_their_bad_parameters() {
+    let text = r#"(version: 2, nodes: {
+        "btf": (kind: "Btf", params: { "source": "lambert", "sampling": "h2_tests", "resolution": 2 }),
+        "off_grid": (kind: "BtfSlot", params: { "view_theta": 20.0 }),
+        "too_many": (kind: "BtfSlot", params: { "components": 20 }),
+        "big": (kind: "Btf", params: { "source": "bake", "resolution": 64 }),
+        "big_slot": (kind: "BtfSlot"),
+    }, links: [("btf.btf", "off_grid.btf"), ("btf.btf", "too_many.btf"), ("big.btf", "big_slot.btf")])"#;
+    let graph = Graph::load_str(text, "btf-slot-errors.ron".as_ref()).unwrap();
+    let ev = evaluate_graph(&graph, 8, 8);
+    let m = failure(&ev, "off_grid");
+    assert!(m.contains("\"view_theta\"") && m.contains("(20, 0)") && m.contains("30 deg x 12"), "{m}");
+    let m = failure(&ev, "too_many");
+    assert!(m.contains("\"components\" is 20") && m.contains("19 light directions"), "{m}");
+    let m = failure(&ev, "big");
+    assert!(m.contains("\"resolution\" is 64") && m.contains("werkstatt btf bake"), "{m}");
+}
