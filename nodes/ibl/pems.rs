@@ -121,10 +121,11 @@ impl Node for PemsNode {
     }
 }
 
-/// Bytes of a one-mip texture array.
+/// Bytes of a one-mip texture array's layers (GL's spare layer, see `GpuImage::create`, is
+/// not the PEMs').
 fn array_bytes(t: &GpuImage) -> u64 {
     let texel = t.format.block_copy_size(None).unwrap_or(8) as u64;
-    (t.width as u64).pow(2) * t.texture.depth_or_array_layers() as u64 * texel
+    (t.width as u64).pow(2) * t.desc.layers as u64 * texel
 }
 
 /// Bytes of one cube map with its whole mip chain.
