@@ -76,25 +76,8 @@ fn image(
     format: wgpu::TextureFormat,
     bytes: &[u8],
 ) -> GpuImage {
-    let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC;
-    let img = GpuImage::new(gpu, label, w as u32, h as u32, format, usage);
     let texel = (bytes.len() / (w * h)) as u32;
-    gpu.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &img.texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        bytes,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(texel * w as u32),
-            rows_per_image: Some(h as u32),
-        },
-        wgpu::Extent3d { width: w as u32, height: h as u32, depth_or_array_layers: 1 },
-    );
-    img
+    GpuImage::upload(gpu, label, w as u32, h as u32, format, texel, bytes)
 }
 
 /// RGB values times `scale` as Rgba16Float bits (alpha 1).
