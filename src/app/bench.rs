@@ -459,16 +459,16 @@ pub fn pem_lobes_markdown(rows: &[PemLobeRow]) -> String {
 pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
     use crate::core::param::Choice as _;
     use crate::ibl::pem::Kernel;
-    let (w, h, left, right, top, bottom) = (760.0f32, 440.0f32, 70.0f32, 170.0f32, 40.0f32, 50.0f32);
-    let max_err = rows.iter().map(|r| 100.0 * r.error.shape_error).fold(10.0f32, f32::max);
+    let chart =
+        crate::io::svg::Chart { width: 760.0, height: 440.0, left: 70.0, right: 170.0, top: 40.0, bottom: 50.0 };
+    let (w, h, left, right, top, bottom) =
+        (chart.width, chart.height, chart.left, chart.right, chart.top, chart.bottom);
+    let max_err = rows.iter().map(|r| 100.0 * r.error.shape_error as f64).fold(10.0f64, f64::max);
     let y_max = ((max_err / 10.0).ceil() * 10.0).min(200.0);
-    let x = |s: f32| left + (s.log10() / 3.0) * (w - left - right);
-    let y = |e: f32| top + (1.0 - (e / y_max).min(1.0)) * (h - top - bottom);
-    let mut svg = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
-        (left + w - right) / 2.0
-    );
-    for s in [1.0f32, 10.0, 100.0, 1000.0] {
+    let x = |s: f64| left + (s.log10() / 3.0) * (w - left - right);
+    let y = |e: f64| top + (1.0 - (e / y_max).min(1.0)) * (h - top - bottom);
+    let mut svg = chart.open(title);
+    for s in [1.0f64, 10.0, 100.0, 1000.0] {
         svg += &format!(
             "<line x1=\"{0:.1}\" y1=\"{top}\" x2=\"{0:.1}\" y2=\"{1:.1}\" stroke=\"#ccc\"/><text x=\"{0:.1}\" y=\"{2:.1}\" text-anchor=\"middle\">{s}</text>\n",
             x(s),
@@ -488,43 +488,23 @@ pub fn pem_lobes_svg(rows: &[PemLobeRow], title: &str) -> String {
         );
         e += step;
     }
-    svg += &format!(
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">Phong exponent s (log)</text>\n<text x=\"16\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {:.1})\">shape error at equal volume</text>\n",
-        (left + w - right) / 2.0,
-        h - 12.0,
-        (top + h - bottom) / 2.0,
-        (top + h - bottom) / 2.0
-    );
+    svg += &chart.axis_titles("Phong exponent s (log)", "shape error at equal volume");
     for (i, k) in Kernel::ALL.iter().enumerate() {
         let (colour, dash) = match k {
-            Kernel::None => ("#8a2be2", " stroke-dasharray=\"3 3\""),
+            Kernel::None => ("#8a2be2", "3 3"),
             Kernel::Box => ("#d62728", ""),
             Kernel::Gaussian => ("#000000", ""),
             Kernel::Cosine => ("#2ca02c", ""),
             Kernel::SqrtCosine => ("#1f4fd6", ""),
             Kernel::Phong => ("#ff7f0e", ""),
         };
-        let points: Vec<String> = rows
+        let points = rows
             .iter()
             .filter(|r| r.kernel == k.name())
-            .map(|r| format!("{:.1},{:.1}", x(r.s), y(100.0 * r.error.shape_error)))
-            .collect();
-        svg += &format!(
-            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\"{dash} points=\"{}\"/>\n",
-            points.join(" ")
-        );
-        let ly = top + 10.0 + 20.0 * i as f32;
-        svg += &format!(
-            "<line x1=\"{0:.1}\" y1=\"{ly:.1}\" x2=\"{1:.1}\" y2=\"{ly:.1}\" stroke=\"{colour}\" stroke-width=\"2\"{dash}/><text x=\"{2:.1}\" y=\"{3:.1}\">{4}</text>\n",
-            w - right + 12.0,
-            w - right + 40.0,
-            w - right + 46.0,
-            ly + 4.0,
-            k.name()
-        );
+            .map(|r| (x(r.s as f64), y(100.0 * r.error.shape_error as f64)));
+        svg += &chart.series(i, k.name(), colour, dash, points);
     }
-    svg += "</svg>\n";
-    svg
+    svg + "</svg>\n"
 }
 
 /// The default kernel's calibration table at face size `size` as Markdown (s -> level).

@@ -203,7 +203,10 @@ pub fn compress_slot(images: &[f32], dim: usize, c: usize, centring: Centring) -
 /// The paper's Fig. 7: eigenvalue curves (descending, one per view slot) on a log scale, as SVG.
 /// Eigenvalues at or below 1e-12 of the largest are left off (the log scale has no zero).
 pub fn eigenvalue_svg(curves: &[(String, Vec<f64>)], title: &str) -> String {
-    let (w, h, left, right, top, bottom) = (720.0f64, 420.0f64, 70.0f64, 150.0f64, 40.0f64, 50.0f64);
+    let chart =
+        crate::io::svg::Chart { width: 720.0, height: 420.0, left: 70.0, right: 150.0, top: 40.0, bottom: 50.0 };
+    let (w, h, left, right, top, bottom) =
+        (chart.width, chart.height, chart.left, chart.right, chart.top, chart.bottom);
     let largest = curves.iter().flat_map(|c| c.1.iter().copied()).fold(0.0f64, f64::max).max(1e-30);
     let floor = largest * 1e-12;
     let smallest = curves.iter().flat_map(|c| c.1.iter().copied()).filter(|&l| l > floor).fold(largest, f64::min);
@@ -211,10 +214,7 @@ pub fn eigenvalue_svg(curves: &[(String, Vec<f64>)], title: &str) -> String {
     let count = curves.iter().map(|c| c.1.len()).max().unwrap_or(1).max(2);
     let x = |k: usize| left + k as f64 / (count - 1) as f64 * (w - left - right);
     let y = |l: f64| top + (hi - l.log10()) / (hi - lo) * (h - top - bottom);
-    let mut svg = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n<text x=\"{:.1}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n",
-        (left + w - right) / 2.0
-    );
+    let mut svg = chart.open(title);
     let mut e = lo;
     while e <= hi + 1e-9 {
         let yy = y(10f64.powf(e));
@@ -229,33 +229,11 @@ pub fn eigenvalue_svg(curves: &[(String, Vec<f64>)], title: &str) -> String {
     for k in (0..count).step_by(10) {
         svg += &format!("<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{k}</text>\n", x(k), h - bottom + 16.0);
     }
-    svg += &format!(
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">component k</text>\n<text x=\"16\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 16 {:.1})\">eigenvalue (log)</text>\n",
-        (left + w - right) / 2.0,
-        h - 12.0,
-        (top + h - bottom) / 2.0,
-        (top + h - bottom) / 2.0
-    );
+    svg += &chart.axis_titles("component k", "eigenvalue (log)");
     for (i, (name, values)) in curves.iter().enumerate() {
         let colour = ["#1f4fd6", "#d62728", "#2ca02c", "#000000"][i % 4];
-        let points: Vec<String> = values
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| **l > floor)
-            .map(|(k, &l)| format!("{:.1},{:.1}", x(k), y(l)))
-            .collect();
-        svg += &format!(
-            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n",
-            points.join(" ")
-        );
-        let ly = top + 10.0 + 20.0 * i as f64;
-        svg += &format!(
-            "<line x1=\"{0:.1}\" y1=\"{ly:.1}\" x2=\"{1:.1}\" y2=\"{ly:.1}\" stroke=\"{colour}\" stroke-width=\"2\"/><text x=\"{2:.1}\" y=\"{3:.1}\">{name}</text>\n",
-            w - right + 10.0,
-            w - right + 34.0,
-            w - right + 40.0,
-            ly + 4.0
-        );
+        let points = values.iter().enumerate().filter(|(_, l)| **l > floor).map(|(k, &l)| (x(k), y(l)));
+        svg += &chart.series(i, name, colour, "", points);
     }
     svg + "</svg>\n"
 }

@@ -1,4 +1,4 @@
-//! Writing files: atomically, images (PNG, EXR) and geometry (OBJ, PLY, glTF, USD ASCII); reading
+//! Writing files: atomically, images (PNG, EXR), charts (SVG) and geometry (OBJ, PLY, glTF, USD ASCII); reading
 //! mesh caches: USD (text and binary) and Alembic.
 
 use glam::{Vec2, Vec3};
@@ -7,6 +7,7 @@ pub mod alembic;
 pub mod atomic;
 pub mod geometry;
 pub mod image;
+pub mod svg;
 pub mod usd;
 pub mod usda;
 pub mod usdc;
