@@ -285,7 +285,14 @@ impl Woven<'_> {
                 for b in 0..g as u32 {
                     for a in 0..g as u32 {
                         let v = base + b * row + a;
-                        layer.indices.extend_from_slice(&[v, v + 1, v + row + 1, v, v + row + 1, v + row]);
+                        // Fronts along cross(du, dv), or reversed where the panel's normals
+                        // are flipped: the fronts face the way the normals do.
+                        let quad = if self.panel.flip {
+                            [v, v + row + 1, v + 1, v, v + row, v + row + 1]
+                        } else {
+                            [v, v + 1, v + row + 1, v, v + row + 1, v + row]
+                        };
+                        layer.indices.extend_from_slice(&quad);
                     }
                 }
             }
@@ -335,7 +342,13 @@ impl Woven<'_> {
                                     let k1 = (k + 1) % r;
                                     let (v00, v10) = (base + ai * r + k, base + (ai + 1) * r + k);
                                     let (v01, v11) = (base + ai * r + k1, base + (ai + 1) * r + k1);
-                                    layer.indices.extend_from_slice(&[v00, v10, v11, v00, v11, v01]);
+                                    // The weft's rings run the other way round its tubes:
+                                    // wound alike, its fronts would face inwards.
+                                    let quad = match dir {
+                                        Dir::Weft => [v00, v11, v10, v00, v01, v11],
+                                        Dir::Warp => [v00, v10, v11, v00, v11, v01],
+                                    };
+                                    layer.indices.extend_from_slice(&quad);
                                 }
                             }
                         }
