@@ -637,7 +637,8 @@ fn tube_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
 
 // Quad corners: 0 (0,0), 1 (1,0), 2 (0,1), 3 (1,1); triangles 0 1 3, 0 3 2 (fronts along
 // cross(du, dv)), or wound the other way, 0 3 1, 0 2 3, so that the fronts face the way the
-// normals do: the panel where its normals are flipped, the weft's tubes always (as tess.rs).
+// normals do: the panel where its normals are flipped, the weft's tubes always, the warp's
+// where the panel is not flipped (as tess.rs).
 const QUAD_CORNERS = array<u32, 6>(0u, 1u, 3u, 0u, 3u, 2u);
 const QUAD_CORNERS_REVERSED = array<u32, 6>(0u, 3u, 1u, 0u, 2u, 3u);
 
@@ -669,7 +670,7 @@ fn tube_indices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
     for (var i = wg.y * 64u + lid; i < count; i += 64u * params.slices) {
         let q = i / 6u;
         var corners = QUAD_CORNERS;
-        if params.dir == 0u {
+        if params.dir == 0u || params.flip == 0u {
             corners = QUAD_CORNERS_REVERSED;
         }
         let c = corners[i % 6u];

@@ -342,11 +342,14 @@ impl Woven<'_> {
                                     let k1 = (k + 1) % r;
                                     let (v00, v10) = (base + ai * r + k, base + (ai + 1) * r + k);
                                     let (v01, v11) = (base + ai * r + k1, base + (ai + 1) * r + k1);
-                                    // The weft's rings run the other way round its tubes:
-                                    // wound alike, its fronts would face inwards.
-                                    let quad = match dir {
-                                        Dir::Weft => [v00, v11, v10, v00, v01, v11],
-                                        Dir::Warp => [v00, v10, v11, v00, v11, v01],
+                                    // Fronts outwards: the weft's rings run round its tubes
+                                    // the other way than the warp's, and the warp's along
+                                    // -dv, against its rings' order, where the panel is not
+                                    // flipped.
+                                    let quad = if dir == Dir::Weft || !self.panel.flip {
+                                        [v00, v11, v10, v00, v01, v11]
+                                    } else {
+                                        [v00, v10, v11, v00, v11, v01]
                                     };
                                     layer.indices.extend_from_slice(&quad);
                                 }
