@@ -26,6 +26,10 @@ pub struct ItemError {
     pub brightest_werkstatt: [u32; 2],
     pub brightest_cycles: [u32; 2],
     pub brightest_distance: f64,
+    /// The item's rows on screen cut into five bands of equal height, top to bottom: in each,
+    /// mean luminance werkstatt over Cycles (1 where the band has no pixel): where on the item
+    /// light is missing (an underside the floor lights, a top the sky lights).
+    pub fifths: [f64; 5],
 }
 
 #[derive(Serialize, Clone, Debug)]
@@ -125,13 +129,26 @@ pub fn measure(scene: &SceneInfo, ids: &PixelIds, w: &Pixels, c: &Pixels) -> any
         }
     }
     let at = |i: usize| [i as u32 % width, i as u32 / width];
+    let fifths = |k: usize| {
+        let rows: Vec<usize> = (0..n).filter(|&i| ids.id[i] == k as i32).map(|i| i / width as usize).collect();
+        let (top, bottom) = (rows.iter().min().copied().unwrap_or(0), rows.iter().max().copied().unwrap_or(0));
+        let mut bands = [(0.0f64, 0.0f64); 5];
+        for i in (0..n).filter(|&i| ids.id[i] == k as i32) {
+            let band = (5 * (i / width as usize - top) / (bottom - top + 1)).min(4);
+            bands[band].0 += luminance(rgb(w, i)) as f64;
+            bands[band].1 += luminance(rgb(c, i)) as f64;
+        }
+        bands.map(|(lw, lc)| if lc > 0.0 { lw / lc } else { 1.0 })
+    };
     let items = scene
         .items
         .iter()
         .zip(items)
-        .map(|(info, (e, s, p, lw, lc, bw, bc))| {
+        .enumerate()
+        .map(|(k, (info, (e, s, p, lw, lc, bw, bc)))| {
             let (pw, pc) = (at(bw.1), at(bc.1));
             ItemError {
+                fifths: fifths(k),
                 name: info.name.clone(),
                 pixels: p,
                 rel_mae: e / s.max(1e-12),
@@ -224,6 +241,16 @@ impl Metrics {
                 it.brightest_werkstatt,
                 it.brightest_distance
             );
+        }
+        let _ = writeln!(
+            s,
+            "\n| item: werkstatt / Cycles luminance, fifths of its height top to bottom | 1 | 2 | 3 | 4 | 5 |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|");
+        for it in &self.items {
+            let f = it.fifths;
+            let _ =
+                writeln!(s, "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |", it.name, f[0], f[1], f[2], f[3], f[4]);
         }
         let _ = writeln!(s, "\n| region (floor shading / far floor's) | pixels | Cycles | werkstatt |");
         let _ = writeln!(s, "|---|---|---|---|");
@@ -334,19 +361,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn relative_errors_and_region_ratios_follow_their_definitions() {
-        // Four pixels: two floor pixels (one far, one under the ball), one ball pixel, one
-        // background pixel.
-        let scene = SceneInfo {
+    fn scene_of(
+        width: u32,
+        height: u32,
+        items: Vec<ItemInfo>,
+        floor_item: Option<usize>,
+        regions: Vec<Region>,
+    ) -> SceneInfo {
+        SceneInfo {
             conventions: String::new(),
             graph: String::new(),
             sets: Vec::new(),
             unlinks: Vec::new(),
             frame: 0,
             fps: 30.0,
-            width: 4,
-            height: 1,
+            width,
+            height,
             camera: CameraInfo {
                 eye: [0.0; 3],
                 target: [0.0, 0.0, -1.0],
@@ -357,15 +387,23 @@ mod tests {
             },
             environment: None,
             sun: None,
-            floor_item: Some(0),
-            floor_y: Some(0.0),
+            floor_item,
+            floor_y: floor_item.map(|_| 0.0),
             open_floor_level: None,
-            items: vec![item(0, "floor"), item(1, "ball")],
-            regions: vec![Region { name: "under ball".into(), item: 1, kind: "under".into() }],
+            items,
+            regions,
             far_margin: 1.5,
             ids_gbuffer_mismatch: None,
             check_points: Vec::new(),
-        };
+        }
+    }
+
+    #[test]
+    fn relative_errors_and_region_ratios_follow_their_definitions() {
+        // Four pixels: two floor pixels (one far, one under the ball), one ball pixel, one
+        // background pixel.
+        let regions = vec![Region { name: "under ball".into(), item: 1, kind: "under".into() }];
+        let scene = scene_of(4, 1, vec![item(0, "floor"), item(1, "ball")], Some(0), regions);
         let ids = PixelIds {
             width: 4,
             height: 1,
@@ -390,5 +428,34 @@ mod tests {
         let under = &m.regions[0];
         assert!((under.cycles - 0.5).abs() < 1e-6 && (under.werkstatt - 0.8).abs() < 1e-6);
         assert_eq!(m.background_rel_mae, 0.0);
+        // One row: the ball's one pixel is its top fifth (1 / 2); bands without pixels are 1.
+        assert_eq!(m.items[1].fifths, [0.5, 1.0, 1.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn fifths_cut_an_item_into_bands_of_rows_top_to_bottom() {
+        // A one-column item ten rows high: werkstatt's row r is (r + 1) / 10 of Cycles'.
+        let ids = PixelIds {
+            width: 1,
+            height: 10,
+            id: vec![0; 10],
+            position: vec![Vec3::ZERO; 10],
+            albedo: vec![Vec3::splat(0.5); 10],
+            regions: vec![0; 10],
+        };
+        let px = |f: &dyn Fn(usize) -> f32| Pixels {
+            width: 1,
+            height: 10,
+            rgba: (0..10).flat_map(|r| [f(r), f(r), f(r), 1.0]).collect(),
+            is_ldr: false,
+        };
+        let c = px(&|_| 1.0);
+        let w = px(&|r| (r + 1) as f32 / 10.0);
+        let scene = scene_of(1, 10, vec![item(0, "ball")], None, Vec::new());
+        let m = measure(&scene, &ids, &w, &c).unwrap();
+        let want = [0.15, 0.35, 0.55, 0.75, 0.95];
+        for (got, want) in m.items[0].fifths.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{:?}", m.items[0].fifths);
+        }
     }
 }
