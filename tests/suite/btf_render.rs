@@ -195,24 +195,37 @@ fn btf_shading_blends_views_and_lights_as_the_cpu_weights_do() {
     assert!(worst < 4e-3, "GPU and CPU blends differ by up to {worst}");
 }
 
+/// `BtfShading` with `btf` params and `shade` params beside `DirectLight` (sun from
+/// (-0.4, -1, -0.6) at intensity 3, no ambient) on the test sphere at `size`^2, `DirectLight`
+/// as the base image: the two images and, per pixel, whether the sphere covers it.
+fn shade_against_direct(btf: &str, shade: &str, size: usize) -> (Pixels, Pixels, Vec<bool>) {
+    let nodes = format!(
+        r#""btf": (kind: "Btf", params: {{ {btf} }}),
+        "direct": (kind: "DirectLight", params: {{ "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
+            "sky_color": [0.0, 0.0, 0.0], "ground_color": [0.0, 0.0, 0.0] }}),
+        "shade": (kind: "BtfShading", params: {{ "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0, {shade} }}),"#
+    );
+    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("gbuffer.gbuffer", "direct.gbuffer"), ("btf.btf", "shade.btf"),
+        ("direct.image", "shade.base"), ("shade.image", "out.image"),"#;
+    let ev = run_graph(&sphere_graph(&nodes, links), size as u32, size as u32);
+    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let covered = (0..size * size).map(|i| depth.rgba[i * 4] > 0.0).collect();
+    (image(&ev, "shade"), image(&ev, "direct"), covered)
+}
+
 /// rho / pi cos(theta_i) under the sun against DirectLight's Lambert term (no ambient, no
 /// gloss): equal up to the linear interpolation of the cosine between the 15 deg rings,
 /// (15 deg)^2 / 8 = 0.0086 of rho E / pi, and f16 rounding.
 #[test]
 fn a_lambertian_btf_shades_like_lambert() {
-    let nodes = r#""btf": (kind: "Btf", params: { "source": "lambert", "albedo": [0.6, 0.5, 0.4], "resolution": 2 }),
-        "direct": (kind: "DirectLight", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
-            "sky_color": [0.0, 0.0, 0.0], "ground_color": [0.0, 0.0, 0.0] }),
-        "shade": (kind: "BtfShading", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
-            "alpha": 0.0, "shadow_blur": 0.0, "rotation": 10.0 }),"#;
-    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("gbuffer.gbuffer", "direct.gbuffer"), ("btf.btf", "shade.btf"),
-        ("direct.image", "shade.base"), ("shade.image", "out.image"),"#;
-    let ev = run_graph(&sphere_graph(nodes, links), 64, 64);
-    let (btf, direct) = (image(&ev, "shade"), image(&ev, "direct"));
-    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let (btf, direct, lit) = shade_against_direct(
+        r#""source": "lambert", "albedo": [0.6, 0.5, 0.4], "resolution": 2"#,
+        r#""alpha": 0.0, "shadow_blur": 0.0, "rotation": 10.0"#,
+        64,
+    );
     let (mut covered, mut worst) = (0, 0.0f32);
-    for i in 0..64 * 64 {
-        if depth.rgba[i * 4] <= 0.0 {
+    for (i, &lit) in lit.iter().enumerate() {
+        if !lit {
             // The base image shows through where nothing is shaded.
             assert_eq!(&btf.rgba[i * 4..][..3], &direct.rgba[i * 4..][..3], "pixel {i}");
             continue;
@@ -570,19 +583,13 @@ fn btf_slot_shows_the_image_its_reconstruction_and_the_eigenvalues() {
 #[test]
 fn a_minified_weave_shows_its_mean_colour() {
     // The stripes' mean, [0.6, 0.5, 0.4], is the sphere material's colour that DirectLight uses.
-    let nodes = r#""btf": (kind: "Btf", params: { "source": "lambert", "albedo": [0.9, 0.7, 0.5], "stripe_albedo": [0.3, 0.3, 0.3],
-            "stripes": 4, "resolution": 8 }),
-        "direct": (kind: "DirectLight", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
-            "sky_color": [0.0, 0.0, 0.0], "ground_color": [0.0, 0.0, 0.0] }),
-        "shade": (kind: "BtfShading", params: { "sun_direction": [-0.4, -1.0, -0.6], "sun_intensity": 3.0,
-            "alpha": 0.0, "shadow_blur": 0.0, "tiling": 64.0 }),"#;
-    let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("gbuffer.gbuffer", "direct.gbuffer"), ("btf.btf", "shade.btf"),
-        ("direct.image", "shade.base"), ("shade.image", "out.image"),"#;
-    let ev = run_graph(&sphere_graph(nodes, links), 48, 48);
-    let (btf, direct) = (image(&ev, "shade"), image(&ev, "direct"));
-    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let (btf, direct, lit) = shade_against_direct(
+        r#""source": "lambert", "albedo": [0.9, 0.7, 0.5], "stripe_albedo": [0.3, 0.3, 0.3], "stripes": 4, "resolution": 8"#,
+        r#""alpha": 0.0, "shadow_blur": 0.0, "tiling": 64.0"#,
+        48,
+    );
     let (mut covered, mut worst, mut sum) = (0, 0.0f32, 0.0f32);
-    for i in (0..48 * 48).filter(|&i| depth.rgba[i * 4] > 0.0) {
+    for i in (0..48 * 48).filter(|&i| lit[i]) {
         covered += 1;
         for c in 0..3 {
             let d = (btf.rgba[i * 4 + c] - direct.rgba[i * 4 + c]).abs();
