@@ -452,7 +452,7 @@ impl CubePasses {
                 faces_pass(gpu, &mut self.phong, params, &binds, (cube, mip, 0))?;
                 continue;
             }
-            let padded = self.padded_source(gpu, &view, sample_type, params, &norm_bind)?;
+            let padded = self.padded_source(gpu, &view, sample_type, params)?;
             let binds = [Bind::Texture(&padded), norm_bind];
             faces_pass(gpu, &mut self.phong, params, &binds, (cube, mip, 0))?;
         }
@@ -467,14 +467,13 @@ impl CubePasses {
         view: &wgpu::TextureView,
         sample_type: wgpu::TextureSampleType,
         params: PhongParams,
-        norm_bind: &Bind<'_>,
     ) -> anyhow::Result<GpuImage> {
         let size = params.src_size + 2 * params.window as u32;
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
             | wgpu::TextureUsages::TEXTURE_BINDING
             | wgpu::TextureUsages::STORAGE_BINDING;
         let padded = gpu.acquire("padded Phong source", TextureDesc::array(size, size, 6, CUBE_FORMAT, usage));
-        let binds = [Bind::View(view, wgpu::TextureViewDimension::D2Array, sample_type), *norm_bind];
+        let binds = [Bind::View(view, wgpu::TextureViewDimension::D2Array, sample_type)];
         faces_pass(gpu, &mut self.pad, params, &binds, (&padded, 0, 0))?;
         Ok(padded)
     }
