@@ -130,11 +130,13 @@ pub fn measure(scene: &SceneInfo, ids: &PixelIds, w: &Pixels, c: &Pixels) -> any
     }
     let at = |i: usize| [i as u32 % width, i as u32 / width];
     let fifths = |k: usize| {
-        let rows: Vec<usize> = (0..n).filter(|&i| ids.id[i] == k as i32).map(|i| i / width as usize).collect();
-        let (top, bottom) = (rows.iter().min().copied().unwrap_or(0), rows.iter().max().copied().unwrap_or(0));
+        let mine: Vec<usize> = (0..n).filter(|&i| ids.id[i] == k as i32).collect();
+        let row = |i: usize| i / width as usize;
+        // Pixel indices grow row by row: the first and last are the top and bottom rows.
+        let (top, bottom) = (mine.first().map_or(0, |&i| row(i)), mine.last().map_or(0, |&i| row(i)));
         let mut bands = [(0.0f64, 0.0f64); 5];
-        for i in (0..n).filter(|&i| ids.id[i] == k as i32) {
-            let band = (5 * (i / width as usize - top) / (bottom - top + 1)).min(4);
+        for &i in &mine {
+            let band = (5 * (row(i) - top) / (bottom - top + 1)).min(4);
             bands[band].0 += luminance(rgb(w, i)) as f64;
             bands[band].1 += luminance(rgb(c, i)) as f64;
         }
