@@ -44,6 +44,9 @@ pub struct BodyMesh {
     cand_start: Vec<u32>,
     cand: Vec<u32>,
     query: Vec<Aabb>,
+    /// Per cloth edge, the candidate triangles (CSR) for edge contacts.
+    edge_cand_start: Vec<u32>,
+    edge_cand: Vec<u32>,
     /// Tree over the cloth triangles (built on the first frame), their boxes,
     /// and the `(body vertex, cloth triangle, side)` pairs of this frame and
     /// the last, sorted.
@@ -65,6 +68,10 @@ pub struct BodyStats {
     pub contacts: usize,
     /// Body-vertex / cloth-triangle pairs gathered.
     pub vertex_pairs: usize,
+    /// Cloth-edge / body-triangle candidates gathered.
+    pub edge_candidates: usize,
+    /// Cloth edges pushed off a body edge (summed over substeps).
+    pub edge_contacts: usize,
     /// Cloth triangles pushed off a body vertex (summed over substeps).
     pub triangle_contacts: usize,
 }
@@ -121,6 +128,38 @@ pub fn closest_point_feature(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> (Vec3, [f32;
     (a + ab * v + ac * w, [1.0 - v - w, v, w], Feature::Face)
 }
 
+/// Closest points of segments `ab` and `cd` (Ericson, Real-Time Collision Detection, 5.1.9):
+/// their parameters along `ab` and `cd`, and their squared distance.
+pub fn segment_closest_params(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> (f32, f32, f32) {
+    let (d1, d2, r) = (b - a, d - c, a - c);
+    let (aa, ee, f) = (d1.dot(d1), d2.dot(d2), d2.dot(r));
+    let eps = 1e-12;
+    let (s, t) = if aa <= eps && ee <= eps {
+        (0.0, 0.0)
+    } else if aa <= eps {
+        (0.0, (f / ee).clamp(0.0, 1.0))
+    } else {
+        let cc = d1.dot(r);
+        if ee <= eps {
+            ((-cc / aa).clamp(0.0, 1.0), 0.0)
+        } else {
+            let bb = d1.dot(d2);
+            let denom = aa * ee - bb * bb;
+            let mut s = if denom > eps { ((bb * f - cc * ee) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut t = (bb * s + f) / ee;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-cc / aa).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((bb - cc) / aa).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    (s, t, (a + d1 * s).distance_squared(c + d2 * t))
+}
+
 /// Face normals (unit) and angle-weighted vertex normals of a mesh.
 fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec<Vec3>) {
     face.clear();
@@ -172,6 +211,8 @@ impl BodyMesh {
             cand_start: Vec::new(),
             cand: Vec::new(),
             query: Vec::new(),
+            edge_cand_start: Vec::new(),
+            edge_cand: Vec::new(),
             cloth_tree: None,
             cloth_boxes: Vec::new(),
             vt_pairs: Vec::new(),
@@ -213,6 +254,7 @@ impl BodyMesh {
         v: &[Vec3],
         inv_mass: &[f32],
         cloth_triangles: &[[u32; 3]],
+        cloth_edges: &[[u32; 2]],
         dt: f32,
         thickness: f32,
         radius: f32,
@@ -245,6 +287,27 @@ impl BodyMesh {
             self.cand_start.push(self.cand.len() as u32);
         }
         self.stats.candidates = self.cand.len();
+        // Edges: the union of their ends' sweeps. Only edges with an end near the body can
+        // cross it between their ends (a chord sags L^2 / 8R, under the slack for the
+        // edge lengths a body-sized garment has).
+        self.edge_cand_start.clear();
+        self.edge_cand.clear();
+        self.edge_cand_start.push(0);
+        for &[a, b] in cloth_edges {
+            let (a, b) = (a as usize, b as usize);
+            let near = |i: usize| self.cand_start[i] < self.cand_start[i + 1];
+            if (inv_mass[a] > 0.0 || inv_mass[b] > 0.0) && (near(a) || near(b)) {
+                let q = self.query[a].union(self.query[b]);
+                let (boxes, cand) = (&self.boxes, &mut self.edge_cand);
+                self.tree.query(&q, |t| {
+                    if boxes[t as usize].overlaps(&q) {
+                        cand.push(t)
+                    }
+                });
+            }
+            self.edge_cand_start.push(self.edge_cand.len() as u32);
+        }
+        self.stats.edge_candidates = self.edge_cand.len();
         self.gather_vertex_pairs(x, v, inv_mass, cloth_triangles, dt, thickness, radius);
     }
 
@@ -347,6 +410,56 @@ impl BodyMesh {
         }
     }
 
+    /// Pushes cloth edges off the body at time `s`: where a body edge (a ridge of the body)
+    /// comes within `thickness` of a cloth edge between its ends, or pokes through it, the
+    /// point of the cloth edge nearest that body edge is moved out to `thickness` (inside or
+    /// outside decided as for vertices, by the nearest feature's pseudo-normal), the two
+    /// cloth vertices sharing the move by their barycentric weight and inverse mass.
+    pub(crate) fn push_edges(&mut self, x: &mut [Vec3], w: &[f32], edges: &[[u32; 2]], s: f32, thickness: f32) {
+        for (k, &[ia, ib]) in edges.iter().enumerate() {
+            let (lo, hi) = (self.edge_cand_start[k] as usize, self.edge_cand_start[k + 1] as usize);
+            if lo == hi {
+                continue;
+            }
+            let (ia, ib) = (ia as usize, ib as usize);
+            let (a, b) = (x[ia], x[ib]);
+            let reach = 0.25 * a.distance(b) + thickness;
+            // The body edge that goes deepest through the cloth edge, or comes nearest it from
+            // outside, judged by the body edge's pseudo-normal; the nearest feature decides below.
+            let mut best: Option<(f32, f32)> = None;
+            for &t in &self.edge_cand[lo..hi] {
+                let c = self.triangles[t as usize].map(|i| self.corner(i, s));
+                for j in 0..3 {
+                    let (f, g, d2) = segment_closest_params(a, b, c[j], c[(j + 1) % 3]);
+                    // At an end of the cloth edge the vertex contacts act; a body edge farther
+                    // than a chord can sag over a limb is another part of the body.
+                    if !(0.01..=0.99).contains(&f) || d2 > reach * reach {
+                        continue;
+                    }
+                    let q = c[j].lerp(c[(j + 1) % 3], g);
+                    let n = self.pseudo_normal(t, Feature::Edge(j as u8), s).normalize_or_zero();
+                    let signed = (a.lerp(b, f) - q).dot(n);
+                    if signed < thickness && best.is_none_or(|(_, bs)| signed < bs) {
+                        best = Some((f, signed));
+                    }
+                }
+            }
+            let Some((f, _)) = best else { continue };
+            let p = a.lerp(b, f);
+            let Some((d, n, ..)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied()) else {
+                continue;
+            };
+            let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
+            if d >= thickness || wsum == 0.0 {
+                continue;
+            }
+            let k = (thickness - d) / wsum;
+            x[ia] += n * (w[ia] * (1.0 - f) * k);
+            x[ib] += n * (w[ib] * f * k);
+            self.stats.edge_contacts += 1;
+        }
+    }
+
     /// The frame is done: its end pose is the next frame's start.
     pub(crate) fn end_frame(&mut self) {
         self.start.copy_from_slice(&self.end);
@@ -411,7 +524,24 @@ impl BodyMesh {
         thickness: f32,
         friction: f32,
     ) {
-        for i in 0..x.len() {
+        self.collide_some(0..x.len() as u32, x, prev, inv_mass, s0, s1, thickness, friction);
+    }
+
+    /// [`BodyMesh::collide`] for the vertices `which` only.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn collide_some(
+        &mut self,
+        which: impl Iterator<Item = u32>,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        inv_mass: &[f32],
+        s0: f32,
+        s1: f32,
+        thickness: f32,
+        friction: f32,
+    ) {
+        for i in which {
+            let i = i as usize;
             if inv_mass[i] == 0.0 {
                 continue;
             }
@@ -574,6 +704,21 @@ mod tests {
     /// Signed volume: positive when the mesh is closed and wound CCW outside.
     fn volume(pos: &[Vec3], tris: &[[u32; 3]]) -> f32 {
         tris.iter().map(|t| pos[t[0] as usize].dot(pos[t[1] as usize].cross(pos[t[2] as usize])) / 6.0).sum()
+    }
+
+    #[test]
+    fn segment_closest_points() {
+        // Skew perpendicular segments: nearest at (0.25, 0, 0) and (0.25, 0, 1).
+        let (s, t, d2) =
+            segment_closest_params(Vec3::ZERO, Vec3::X, Vec3::new(0.25, -1.0, 1.0), Vec3::new(0.25, 3.0, 1.0));
+        assert!((s - 0.25).abs() < 1e-6 && (t - 0.25).abs() < 1e-6 && (d2 - 1.0).abs() < 1e-6, "{s} {t} {d2}");
+        // Past the end of the first: clamped to its end.
+        let (s, t, d2) =
+            segment_closest_params(Vec3::ZERO, Vec3::X, Vec3::new(2.0, -1.0, 0.0), Vec3::new(2.0, 1.0, 0.0));
+        assert!(s == 1.0 && (t - 0.5).abs() < 1e-6 && (d2 - 1.0).abs() < 1e-6, "{s} {t} {d2}");
+        // Parallel: any pair at the common distance.
+        let (.., d2) = segment_closest_params(Vec3::ZERO, Vec3::X, Vec3::new(0.5, 0.0, 2.0), Vec3::new(1.5, 0.0, 2.0));
+        assert!((d2 - 4.0).abs() < 1e-6, "{d2}");
     }
 
     #[test]

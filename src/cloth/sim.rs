@@ -196,6 +196,8 @@ pub struct Cloth {
     shear_area: Vec<f32>,
     seams: Vec<[u32; 2]>,
     seam_gap: Vec<f32>,
+    /// Vertices joined by seams, transitively (four at a corner where four panels meet).
+    seam_groups: Vec<Vec<u32>>,
     /// `(vertex, anchor pin, max distance)`, rebuilt when pins change.
     tethers: Vec<(u32, u32, f32)>,
     loops: Vec<LengthLoop>,
@@ -289,6 +291,7 @@ impl Cloth {
         let seams = mesh.seam_pairs().to_vec();
         let seam_gap = seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
+        let seam_groups = seam_groups(&seams, n);
         let n_constraints = edges.len() + bends.len() + shears.len() + seams.len();
         Cloth {
             mesh,
@@ -310,6 +313,7 @@ impl Cloth {
             shear_area,
             seams,
             seam_gap,
+            seam_groups,
             tethers: Vec::new(),
             loops: Vec::new(),
             lambda: vec![0.0; n_constraints],
@@ -500,7 +504,7 @@ impl Cloth {
         let slack = 2.0 * self.params.body_thickness.max(self.params.self_thickness);
         if let Some(body) = &mut self.body {
             let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
-            body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, dt, th, th + slack);
+            body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, &self.edges, dt, th, th + slack);
         }
         if self.params.self_collision {
             let tris = self.mesh.triangles();
@@ -545,6 +549,7 @@ impl Cloth {
         } else {
             0.0
         };
+        let welded = seam_scale == 0.0 && self.params.seam_compliance == 0.0;
         for _ in 0..self.params.iterations {
             let (l_edge, rest) = self.lambda.split_at_mut(self.edges.len());
             let (l_bend, rest) = rest.split_at_mut(self.bends.len());
@@ -556,7 +561,14 @@ impl Cloth {
             let shear = ShearSet { tris: &self.shears, inv: &self.shear_inv, area: &self.shear_area };
             solve_shear(x, w, &shear, l_shear, p.shear_compliance, h);
             solve_bending(x, w, &self.bends, &self.bend_k, l_bend, p.bend_compliance, h);
-            solve_distances(x, w, &self.seams, |k| self.seam_gap[k] * seam_scale, l_seam, p.seam_compliance, h);
+            if welded {
+                // Closed rigid seams: the exact projection of each group at once. Pair by pair,
+                // a corner where three or four panels meet stays millimetres open against the
+                // cloth's stretch at the sweep counts used here.
+                weld(x, w, &self.seam_groups);
+            } else {
+                solve_distances(x, w, &self.seams, |k| self.seam_gap[k] * seam_scale, l_seam, p.seam_compliance, h);
+            }
             if p.tethers {
                 solve_tethers(x, &self.tethers);
             }
@@ -588,6 +600,14 @@ impl Cloth {
                 0.5 * p.body_thickness,
             );
             body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
+            body.push_edges(&mut self.x, &self.inv_mass, &self.edges, s1, 0.5 * p.body_thickness);
+            if welded {
+                // The contacts above moved sewn vertices apart; join them again and keep the
+                // joined point out of the body (without friction, so they move as one).
+                weld(&mut self.x, &self.inv_mass, &self.seam_groups);
+                let sewn = self.seam_groups.iter().flatten().copied();
+                body.collide_some(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0);
+            }
         }
         self.timings.body_collision_ms += t2.elapsed().as_secs_f64() * 1e3;
         let inv_h = 1.0 / h;
@@ -979,6 +999,54 @@ fn solve_bending(
             if w[v[j]] > 0.0 {
                 x[v[j]] += n * (w[v[j]] * kw[j] * dl);
             }
+        }
+    }
+}
+
+/// Groups of two or more vertices connected through `pairs` (union-find), sorted.
+fn seam_groups(pairs: &[[u32; 2]], n: usize) -> Vec<Vec<u32>> {
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            parent[i as usize] = parent[parent[i as usize] as usize];
+            i = parent[i as usize];
+        }
+        i
+    }
+    for &[a, b] in pairs {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+    let mut members: std::collections::BTreeMap<u32, Vec<u32>> = std::collections::BTreeMap::new();
+    for &v in pairs.iter().flatten() {
+        members.entry(root(&mut parent, v)).or_default().push(v);
+    }
+    members
+        .into_values()
+        .map(|mut g| {
+            g.sort_unstable();
+            g.dedup();
+            g
+        })
+        .collect()
+}
+
+/// Moves every group's vertices to their mass-weighted centroid (to the pinned member
+/// where the group has one): a zero-length rigid constraint among them, solved exactly.
+fn weld(x: &mut [Vec3], w: &[f32], groups: &[Vec<u32>]) {
+    for g in groups {
+        let target = match g.iter().find(|&&v| w[v as usize] == 0.0) {
+            Some(&pinned) => x[pinned as usize],
+            None => {
+                let (sum, mass) = g.iter().fold((Vec3::ZERO, 0.0), |(s, m), &v| {
+                    let mv = 1.0 / w[v as usize];
+                    (s + x[v as usize] * mv, m + mv)
+                });
+                sum / mass
+            }
+        };
+        for &v in g {
+            x[v as usize] = target;
         }
     }
 }

@@ -390,7 +390,6 @@ fn sleeves_slide_up_the_arms_to_the_armholes() {
 }
 
 #[test]
-#[ignore = "known failure: with the sleeves slid up the arms a stitch stays 12 mm open after 40 frames and 42 cloth edges cross the body: the shoulder seams' sewn pairs straddle MakeHuman's shoulders (their straight segments pass through the body), so the seams pull cloth through it (docs/garments.md, Fitting to MakeHuman)"]
 fn a_short_drape_on_the_avatar_closes_the_seams() {
     let drape = drape_shirt(true, &DrapeParams::default(), 40);
     let c = &drape.cloth;
@@ -413,5 +412,5 @@ fn a_short_drape_on_the_avatar_closes_the_seams() {
     );
     assert!(gap < 0.001, "sewn vertices {gap} m apart after 40 frames");
     assert_eq!(c.body_crossings(), 0, "cloth edges crossing the body");
-    assert!(clearance > 0.0, "a vertex {clearance} m inside the body");
+    assert!(clearance >= 0.9 * th, "a vertex {clearance} m from the body (thickness {th} m)");
 }
