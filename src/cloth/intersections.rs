@@ -35,8 +35,10 @@ pub fn segment_hits_triangle(a: Vec3, b: Vec3, p0: Vec3, p1: Vec3, p2: Vec3) -> 
 }
 
 /// Number of `edges` of a mesh that cross one of its `triangles` not sharing
-/// a vertex with the edge (self-intersections of a cloth).
-pub fn count_self_crossings(x: &[Vec3], edges: &[[u32; 2]], triangles: &[[u32; 3]]) -> usize {
+/// a vertex with the edge (self-intersections of a cloth). `rep` maps each
+/// vertex to a representative: vertices sewn together share one, so an edge
+/// does not cross the triangles around its own seam.
+pub fn count_self_crossings(x: &[Vec3], rep: &[u32], edges: &[[u32; 2]], triangles: &[[u32; 3]]) -> usize {
     let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(|i| x[i as usize]))).collect();
     let tree = AabbTree::build(&boxes);
     let mut n = 0;
@@ -44,9 +46,10 @@ pub fn count_self_crossings(x: &[Vec3], edges: &[[u32; 2]], triangles: &[[u32; 3
         let (a, b) = (x[e[0] as usize], x[e[1] as usize]);
         let q = Aabb::from_points(&[a, b]);
         let mut hit = false;
+        let ends = e.map(|v| rep[v as usize]);
         tree.query(&q, |t| {
-            let tri = triangles[t as usize];
-            if hit || tri.contains(&e[0]) || tri.contains(&e[1]) || !boxes[t as usize].overlaps(&q) {
+            let tri = triangles[t as usize].map(|v| rep[v as usize]);
+            if hit || tri.contains(&ends[0]) || tri.contains(&ends[1]) || !boxes[t as usize].overlaps(&q) {
                 return;
             }
             let [p0, p1, p2] = tri.map(|i| x[i as usize]);
@@ -73,5 +76,15 @@ mod tests {
         assert!(segment_hits_triangle(c + Vec3::Z, c - Vec3::Z, p0, p1, p2));
         assert!(!segment_hits_triangle(c + Vec3::Z, c + Vec3::Z * 0.1, p0, p1, p2));
         assert!(!segment_hits_triangle(Vec3::new(1.0, 1.0, 1.0), Vec3::new(1.0, 1.0, -1.0), p0, p1, p2));
+    }
+
+    #[test]
+    fn sewn_vertices_do_not_count_as_crossings() {
+        // Two panels folded at a seam, vertices 1 and 3 sewn together (one place): the other
+        // panel's edge 3-4 touches triangle 0-1-2 only at the sewn point.
+        let x = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::X, Vec3::new(1.0, 0.5, 1.0)];
+        let (edges, tris) = ([[3, 4]], [[0, 1, 2]]);
+        assert_eq!(count_self_crossings(&x, &[0, 1, 2, 3, 4], &edges, &tris), 1, "apart, the touch counts");
+        assert_eq!(count_self_crossings(&x, &[0, 1, 2, 1, 4], &edges, &tris), 0, "sewn, it does not");
     }
 }

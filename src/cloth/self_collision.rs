@@ -54,6 +54,7 @@ impl SelfCollision {
         x: &[Vec3],
         v: &[Vec3],
         inv_mass: &[f32],
+        rep: &[u32],
         triangles: &[[u32; 3]],
         dt: f32,
         thickness: f32,
@@ -77,7 +78,8 @@ impl SelfCollision {
             let pairs = &mut self.pairs;
             self.tree.query(&q, |t| {
                 let tri = triangles[t as usize];
-                if tri.contains(&(i as u32)) || !boxes[t as usize].overlaps(&q) {
+                // Not its own triangles, nor those of the vertices it is sewn to.
+                if tri.iter().any(|&j| rep[j as usize] == rep[i]) || !boxes[t as usize].overlaps(&q) {
                     return;
                 }
                 if inv_mass[i] == 0.0 && tri.iter().all(|&j| inv_mass[j as usize] == 0.0) {

@@ -198,6 +198,8 @@ pub struct Cloth {
     seam_gap: Vec<f32>,
     /// Vertices joined by seams, transitively (four at a corner where four panels meet).
     seam_groups: Vec<Vec<u32>>,
+    /// Per vertex, the first vertex of its seam group (itself when not sewn).
+    seam_rep: Vec<u32>,
     /// `(vertex, anchor pin, max distance)`, rebuilt when pins change.
     tethers: Vec<(u32, u32, f32)>,
     loops: Vec<LengthLoop>,
@@ -292,6 +294,12 @@ impl Cloth {
         let seam_gap = seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
         let seam_groups = seam_groups(&seams, n);
+        let mut seam_rep: Vec<u32> = (0..n as u32).collect();
+        for g in &seam_groups {
+            for &v in g {
+                seam_rep[v as usize] = g[0];
+            }
+        }
         let n_constraints = edges.len() + bends.len() + shears.len() + seams.len();
         Cloth {
             mesh,
@@ -314,6 +322,7 @@ impl Cloth {
             seams,
             seam_gap,
             seam_groups,
+            seam_rep,
             tethers: Vec::new(),
             loops: Vec::new(),
             lambda: vec![0.0; n_constraints],
@@ -509,7 +518,8 @@ impl Cloth {
         if self.params.self_collision {
             let tris = self.mesh.triangles();
             let sc = self.self_collision.get_or_insert_with(|| SelfCollision::new(&self.x, tris));
-            sc.begin_frame(&self.x, &self.v, &self.inv_mass, tris, dt, self.params.self_thickness, slack);
+            let (th, rep) = (self.params.self_thickness, &self.seam_rep);
+            sc.begin_frame(&self.x, &self.v, &self.inv_mass, rep, tris, dt, th, slack);
         }
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
@@ -778,7 +788,7 @@ impl Cloth {
     }
     /// Cloth edges crossing cloth triangles that do not share a vertex with them.
     pub fn self_crossings(&self) -> usize {
-        super::intersections::count_self_crossings(&self.x, &self.edges, self.mesh.triangles())
+        super::intersections::count_self_crossings(&self.x, &self.seam_rep, &self.edges, self.mesh.triangles())
     }
     /// Smallest signed distance (m) of a free vertex to the body, among those
     /// within `max_distance`; `None` without a body or with none that close.
