@@ -47,6 +47,9 @@ pub struct BodyMesh {
     /// Per cloth edge, the candidate triangles (CSR) for edge contacts.
     edge_cand_start: Vec<u32>,
     edge_cand: Vec<u32>,
+    /// Per cloth vertex, its distance to the body after this substep's vertex contact
+    /// (infinite where it has no candidate triangles).
+    clearance: Vec<f32>,
     /// Tree over the cloth triangles (built on the first frame), their boxes,
     /// and the `(body vertex, cloth triangle, side)` pairs of this frame and
     /// the last, sorted.
@@ -160,6 +163,14 @@ pub fn segment_closest_params(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> (f32, f32, 
     (s, t, (a + d1 * s).distance_squared(c + d2 * t))
 }
 
+/// Distance from `p` to the segment `ab`.
+fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    p.distance(a + ab * t)
+}
+
 /// Face normals (unit) and angle-weighted vertex normals of a mesh.
 fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec<Vec3>) {
     face.clear();
@@ -213,6 +224,7 @@ impl BodyMesh {
             query: Vec::new(),
             edge_cand_start: Vec::new(),
             edge_cand: Vec::new(),
+            clearance: Vec::new(),
             cloth_tree: None,
             cloth_boxes: Vec::new(),
             vt_pairs: Vec::new(),
@@ -298,9 +310,14 @@ impl BodyMesh {
             let near = |i: usize| self.cand_start[i] < self.cand_start[i + 1];
             if (inv_mass[a] > 0.0 || inv_mass[b] > 0.0) && (near(a) || near(b)) {
                 let q = self.query[a].union(self.query[b]);
+                // The box of a slanted edge is mostly far from it: keep the triangles whose
+                // bounding sphere comes within reach of the segment (its ends' sweeps included).
+                let sweep = (v[a].length().max(v[b].length())) * (1.25 * dt) + radius;
+                let (pa, pb) = (x[a], x[b]);
                 let (boxes, cand) = (&self.boxes, &mut self.edge_cand);
                 self.tree.query(&q, |t| {
-                    if boxes[t as usize].overlaps(&q) {
+                    let bx = &boxes[t as usize];
+                    if bx.overlaps(&q) && point_segment_distance(bx.center(), pa, pb) <= bx.half_diagonal() + sweep {
                         cand.push(t)
                     }
                 });
@@ -308,6 +325,8 @@ impl BodyMesh {
             self.edge_cand_start.push(self.edge_cand.len() as u32);
         }
         self.stats.edge_candidates = self.edge_cand.len();
+        self.clearance.clear();
+        self.clearance.resize(x.len(), f32::INFINITY);
         self.gather_vertex_pairs(x, v, inv_mass, cloth_triangles, dt, thickness, radius);
     }
 
@@ -424,12 +443,29 @@ impl BodyMesh {
             let (ia, ib) = (ia as usize, ib as usize);
             let (a, b) = (x[ia], x[ib]);
             let reach = 0.25 * a.distance(b) + thickness;
+            // An edge whose ends are both farther from the body than it can sag is clear of it
+            // (a body ridge sharp enough to poke through it anyway meets the cloth triangles
+            // as body-vertex contacts).
+            if self.clearance[ia].min(self.clearance[ib]) > reach {
+                continue;
+            }
             // The body edge that goes deepest through the cloth edge, or comes nearest it from
             // outside, judged by the body edge's pseudo-normal; the nearest feature decides below.
             let mut best: Option<(f32, f32)> = None;
-            for &t in &self.edge_cand[lo..hi] {
+            let cands = &self.edge_cand[lo..hi];
+            for &t in cands {
                 let c = self.triangles[t as usize].map(|i| self.corner(i, s));
+                let centre = (c[0] + c[1] + c[2]) / 3.0;
+                let r = centre.distance(c[0]).max(centre.distance(c[1])).max(centre.distance(c[2]));
+                if point_segment_distance(centre, a, b) > r + reach {
+                    continue;
+                }
                 for j in 0..3 {
+                    // A body edge shared by two candidates: once.
+                    let other = self.adjacent[t as usize][j];
+                    if other < t && cands.contains(&other) {
+                        continue;
+                    }
                     let (f, g, d2) = segment_closest_params(a, b, c[j], c[(j + 1) % 3]);
                     // At an end of the cloth edge the vertex contacts act; a body edge farther
                     // than a chord can sag over a limb is another part of the body.
@@ -542,6 +578,7 @@ impl BodyMesh {
     ) {
         for i in which {
             let i = i as usize;
+            self.clearance[i] = f32::INFINITY;
             if inv_mass[i] == 0.0 {
                 continue;
             }
@@ -571,6 +608,7 @@ impl BodyMesh {
             let Some((dist, n, t, bary)) = hit else {
                 continue;
             };
+            self.clearance[i] = dist.max(thickness);
             if dist >= thickness {
                 continue;
             }

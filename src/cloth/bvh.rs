@@ -47,8 +47,12 @@ impl Aabb {
     pub fn overlaps(&self, o: &Aabb) -> bool {
         self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
     }
-    fn center(&self) -> Vec3 {
+    pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5
+    }
+    /// Half the diagonal: the radius of a sphere around [`Aabb::center`] holding the box.
+    pub fn half_diagonal(&self) -> f32 {
+        0.5 * self.min.distance(self.max)
     }
 }
 

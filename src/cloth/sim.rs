@@ -207,6 +207,8 @@ pub struct Cloth {
 
     time: f64,
     frame: u64,
+    /// The running substep's number within its frame.
+    substep_index: u32,
 
     body: Option<BodyMesh>,
     self_collision: Option<SelfCollision>,
@@ -328,6 +330,7 @@ impl Cloth {
             lambda: vec![0.0; n_constraints],
             time: 0.0,
             frame: 0,
+            substep_index: 0,
             body: None,
             self_collision: None,
             timings: StepTimings::default(),
@@ -524,6 +527,7 @@ impl Cloth {
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
         for k in 0..n {
+            self.substep_index = k;
             self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32);
             self.time += h as f64;
         }
@@ -610,7 +614,11 @@ impl Cloth {
                 0.5 * p.body_thickness,
             );
             body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
-            body.push_edges(&mut self.x, &self.inv_mass, &self.edges, s1, 0.5 * p.body_thickness);
+            // Chords sag into the body slowly (they move with their vertices, which the
+            // contacts above hold every substep): every fourth substep and the frame's last.
+            if self.substep_index % 4 == 3 || s1 == 1.0 {
+                body.push_edges(&mut self.x, &self.inv_mass, &self.edges, s1, 0.5 * p.body_thickness);
+            }
             if welded {
                 // The contacts above moved sewn vertices apart; join them again and keep the
                 // joined point out of the body (without friction, so they move as one).

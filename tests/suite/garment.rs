@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use werkstatt::avatar::rig::{Pose, Skeleton};
 use werkstatt::avatar::{Body, collision_mesh};
-use werkstatt::cloth::BodyMesh;
+use werkstatt::cloth::{BodyMesh, SimParams};
 use werkstatt::garment::drape::{Drape, DrapeParams};
 use werkstatt::garment::sleeves::{ArmAxis, SleeveFit, fit_sleeves};
 use werkstatt::garment::{Fit, GarmentError, Pattern, Sewn, freesewing, garmentcode};
@@ -413,4 +413,62 @@ fn a_short_drape_on_the_avatar_closes_the_seams() {
     assert!(gap < 0.001, "sewn vertices {gap} m apart after 40 frames");
     assert_eq!(c.body_crossings(), 0, "cloth edges crossing the body");
     assert!(clearance >= 0.9 * th, "a vertex {clearance} m from the body (thickness {th} m)");
+}
+
+/// The rest-pose avatar's collision vertices along the bundled walk at `seconds`.
+fn walking_body() -> impl Fn(f64) -> Vec<Vec3> {
+    use werkstatt::avatar::bvh::Bvh;
+    use werkstatt::avatar::retarget::{JointMap, Retarget};
+    use werkstatt::avatar::rig::{Skinning, Weights, skin};
+    let a = |n: &str| root().join("assets/avatar").join(n);
+    let body = Body::load(&a("makehuman-base.obj")).unwrap();
+    let text = std::fs::read_to_string(a("default.mhskel")).unwrap();
+    let skeleton = Skeleton::from_mhskel(&text, "default.mhskel", &body.obj.positions).unwrap();
+    let text = std::fs::read_to_string(a("default_weights.mhw")).unwrap();
+    let weights = Weights::from_mhw(&text, "default_weights.mhw", &skeleton, body.obj.positions.len()).unwrap();
+    let bvh = Bvh::load(&a("walk1.bvh")).unwrap();
+    let (map, text) = JointMap::load(&a("makehuman-old-rig.ron")).unwrap();
+    let rt = Retarget::new(&map, "makehuman-old-rig.ron", &text, &bvh, "walk1.bvh", &skeleton).unwrap();
+    move |seconds: f64| {
+        let pose = rt.pose(&bvh, &skeleton, seconds / bvh.frame_time, true, 1.0);
+        let posed = skin(&body.obj.positions, &weights, &skeleton.skinning(&pose), Skinning::Linear);
+        let floor = body.floor();
+        collision_mesh(&body, &posed, |p| (p - Vec3::Y * floor) * 0.1).unwrap().positions
+    }
+}
+
+#[test]
+#[ignore = "known failure: on the walking avatar cloth edges cross the body at the armpits, pinched between arm and torso (2 in the first frame with self-collision on, up to 32 during the walk; a vertex got 16 cm inside): docs/garments.md, On the walking avatar"]
+fn the_shirt_stays_outside_the_body_through_the_walk() {
+    let pose_at = walking_body();
+    let (rest_body, arms) = rest_avatar();
+    let rest = rest_body.positions().to_vec();
+    let (sewn, _) = shirt_on(Some(&arms));
+    let params =
+        DrapeParams { sim: SimParams { self_collision: true, ..DrapeParams::default().sim }, ..DrapeParams::default() };
+    let mut drape = Drape::new(&sewn, &params, Some(rest_body));
+    for _ in 0..40 {
+        drape.step(None);
+    }
+    // Half a second from the rest pose to the walk's first frame, then two seconds of walking.
+    let first = pose_at(0.0);
+    let th = params.sim.body_thickness;
+    for f in 0..150 {
+        let body: Vec<Vec3> = if f < 30 {
+            rest.iter().zip(&first).map(|(r, w)| r.lerp(*w, (f + 1) as f32 / 30.0)).collect()
+        } else {
+            pose_at((f - 30) as f64 / 60.0)
+        };
+        drape.step(Some(&body));
+        let c = &drape.cloth;
+        let (gap, crossings, clearance) = (drape.max_seam_gap(), c.body_crossings(), c.body_clearance(0.05));
+        eprintln!(
+            "frame {f}: seam gap {gap} m, body crossings {crossings}, clearance {clearance:?} m, max speed {}",
+            c.max_speed()
+        );
+        assert!(c.positions().iter().chain(c.velocities()).all(|v| v.is_finite()), "NaN at frame {f}");
+        assert!(gap < 0.001, "frame {f}: sewn vertices {gap} m apart");
+        assert_eq!(crossings, 0, "frame {f}: cloth edges crossing the body");
+        assert!(clearance.is_none_or(|d| d >= 0.9 * th), "frame {f}: a vertex {clearance:?} m from the body");
+    }
 }
