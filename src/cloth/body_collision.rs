@@ -546,26 +546,11 @@ impl BodyMesh {
         Some(if outside { (d, n, t, bary) } else { (-d, -n, t, bary) })
     }
 
-    /// Pushes free vertices out to `thickness` at time `s1` and applies
-    /// friction to their motion since `prev` relative to the body's motion
-    /// since `s0`.
+    /// Pushes the free vertices `which` out to `thickness` at time `s1` and
+    /// applies friction to their motion since `prev` relative to the body's
+    /// motion since `s0`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn collide(
-        &mut self,
-        x: &mut [Vec3],
-        prev: &[Vec3],
-        inv_mass: &[f32],
-        s0: f32,
-        s1: f32,
-        thickness: f32,
-        friction: f32,
-    ) {
-        self.collide_some(0..x.len() as u32, x, prev, inv_mass, s0, s1, thickness, friction);
-    }
-
-    /// [`BodyMesh::collide`] for the vertices `which` only.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn collide_some(
         &mut self,
         which: impl Iterator<Item = u32>,
         x: &mut [Vec3],

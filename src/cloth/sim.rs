@@ -613,7 +613,8 @@ impl Cloth {
                 s1,
                 0.5 * p.body_thickness,
             );
-            body.collide(&mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
+            let all = 0..self.x.len() as u32;
+            body.collide(all, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
             // Chords sag into the body slowly (they move with their vertices, which the
             // contacts above hold every substep): every fourth substep and the frame's last.
             if self.substep_index % 4 == 3 || s1 == 1.0 {
@@ -624,7 +625,7 @@ impl Cloth {
                 // joined point out of the body (without friction, so they move as one).
                 weld(&mut self.x, &self.inv_mass, &self.seam_groups);
                 let sewn = self.seam_groups.iter().flatten().copied();
-                body.collide_some(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0);
+                body.collide(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0);
             }
         }
         self.timings.body_collision_ms += t2.elapsed().as_secs_f64() * 1e3;
