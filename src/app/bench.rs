@@ -1759,3 +1759,195 @@ impl MarkdownRow for ShadowRow {
         )
     }
 }
+
+/// `werkstatt bench drape` on a sewn garment: a GarmentCode pattern sewn at `edge_cm`,
+/// fitted to MakeHuman (the `Garment` node's default scale and offset, sleeves slid up the
+/// arms), draped with self-collision on the avatar at rest until settled, then walked: half a
+/// second from the rest pose to the walk's first frame, then `walk_frames` timed frames.
+#[derive(Debug, Default, serde::Serialize)]
+pub struct GarmentDrapeReport {
+    pub edge_cm: f64,
+    pub particles: usize,
+    pub triangles: usize,
+    pub body_triangles: usize,
+    /// Frames until at most 1.5 % of the particles move more than 0.3 mm in a frame
+    /// (GarmentCode's criterion) after the seams closed, or `settle_frames` when never.
+    pub settled_after_frames: usize,
+    pub settle_ms: f64,
+    /// Mean over the timed walking frames (ms per 1/60 s frame, 20 substeps).
+    pub frame_ms: f64,
+    pub detection_ms: f64,
+    pub constraints_ms: f64,
+    pub self_collision_ms: f64,
+    pub body_collision_ms: f64,
+    /// At the end of the settling, and the worst over the walk (checked every
+    /// `check_every` frames).
+    pub settled_body_crossings: usize,
+    pub settled_self_crossings: usize,
+    pub max_body_crossings: usize,
+    pub max_self_crossings: usize,
+    pub max_seam_gap_mm: f32,
+    pub min_clearance_mm: f32,
+    pub max_speed: f32,
+}
+
+/// Writes `positions` (and triangles, and `lines` as OBJ line elements) as OBJ into `dir`.
+fn write_obj(
+    dir: &std::path::Path,
+    name: &str,
+    positions: &[glam::Vec3],
+    tris: &[[u32; 3]],
+    lines: &[[u32; 2]],
+) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    for v in positions {
+        writeln!(s, "v {} {} {}", v.x, v.y, v.z)?;
+    }
+    for f in tris {
+        writeln!(s, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1)?;
+    }
+    for l in lines {
+        writeln!(s, "l {} {}", l[0] + 1, l[1] + 1)?;
+    }
+    Ok(crate::io::atomic::write_atomic(&dir.join(name), s.as_bytes())?)
+}
+
+#[allow(clippy::too_many_arguments)] // the command line's options
+pub fn drape_garment(
+    avatar_dir: &std::path::Path,
+    pattern: &std::path::Path,
+    edge_cm: f64,
+    settle_frames: usize,
+    walk_frames: usize,
+    check_every: usize,
+    obj_dir: Option<&std::path::Path>,
+) -> anyhow::Result<GarmentDrapeReport> {
+    use crate::avatar::walk::WalkingAvatar;
+    use crate::cloth::FRAME_DT;
+    use crate::garment::drape::{Drape, DrapeParams};
+    use crate::garment::{Fit, garmentcode, sleeves::fit_sleeves};
+    let avatar = WalkingAvatar::load(avatar_dir)?;
+    let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
+    let mut sewn = garmentcode::load(pattern)?.sew(edge_cm, fit)?;
+    fit_sleeves(&mut sewn, &avatar.rest_arms()?);
+    let body = avatar.rest_body();
+    let rest = body.positions().to_vec();
+    let body_tris = body.triangles().to_vec();
+    let params = DrapeParams {
+        sim: crate::cloth::SimParams { self_collision: true, ..DrapeParams::default().sim },
+        ..DrapeParams::default()
+    };
+    let mut drape = Drape::new(&sewn, &params, Some(body));
+    let mut r = GarmentDrapeReport {
+        edge_cm,
+        particles: drape.cloth.vertex_count(),
+        triangles: drape.cloth.triangle_count(),
+        body_triangles: body_tris.len(),
+        min_clearance_mm: f32::INFINITY,
+        ..Default::default()
+    };
+    if let Some(dir) = obj_dir {
+        std::fs::create_dir_all(dir)?;
+        let tris = sewn.mesh.triangles();
+        write_obj(dir, "garment_rest.obj", &sewn.positions, tris, drape.cloth.seam_pairs())?;
+        write_obj(dir, "body_rest.obj", &rest, &body_tris, &[])?;
+    }
+
+    let t0 = Instant::now();
+    r.settled_after_frames = settle_frames;
+    let sewing = params.sewing_frames as usize;
+    for f in 0..settle_frames {
+        let before = drape.cloth.positions().to_vec();
+        drape.step(None);
+        let moving = before.iter().zip(drape.cloth.positions()).filter(|(a, b)| a.distance(**b) > 3e-4).count();
+        if f >= sewing && moving as f64 <= 0.015 * before.len() as f64 {
+            r.settled_after_frames = f + 1;
+            break;
+        }
+    }
+    r.settle_ms = t0.elapsed().as_secs_f64() * 1e3;
+    r.settled_body_crossings = drape.cloth.body_crossings();
+    r.settled_self_crossings = drape.cloth.self_crossings();
+    if let Some(dir) = obj_dir {
+        write_obj(dir, "garment_settled.obj", drape.cloth.positions(), sewn.mesh.triangles(), &[])?;
+    }
+
+    // The body's poses: a blend from rest to the walk's first frame, then the walk.
+    let blend = 30;
+    let first = avatar.collision_vertices(&avatar.walk_pose(0.0));
+    let poses: Vec<Vec<glam::Vec3>> = (0..blend + walk_frames)
+        .map(|f| {
+            if f < blend {
+                let s = (f + 1) as f32 / blend as f32;
+                rest.iter().zip(&first).map(|(a, b)| a.lerp(*b, s)).collect()
+            } else {
+                avatar.collision_vertices(&avatar.walk_pose((f - blend) as f64 * FRAME_DT as f64))
+            }
+        })
+        .collect();
+    if let Some(dir) = obj_dir {
+        // Little-endian f32 triples, one block of body vertices per frame, for the peer.
+        let bytes: Vec<u8> = poses.iter().flatten().flat_map(|v| v.to_array()).flat_map(f32::to_le_bytes).collect();
+        crate::io::atomic::write_atomic(&dir.join("body_frames.f32"), &bytes)?;
+    }
+    let mut total = 0.0;
+    for (f, pose) in poses.iter().enumerate() {
+        let t0 = Instant::now();
+        drape.step(Some(pose));
+        if f < blend {
+            continue;
+        }
+        total += t0.elapsed().as_secs_f64() * 1e3;
+        let c = &drape.cloth;
+        let s = c.timings();
+        r.detection_ms += s.detection_ms;
+        r.constraints_ms += s.constraints_ms;
+        r.self_collision_ms += s.self_collision_ms;
+        r.body_collision_ms += s.body_collision_ms;
+        r.max_speed = r.max_speed.max(c.max_speed());
+        let k = f - blend + 1;
+        if check_every > 0 && (k % check_every == 0 || k == walk_frames) {
+            r.max_body_crossings = r.max_body_crossings.max(c.body_crossings());
+            r.max_self_crossings = r.max_self_crossings.max(c.self_crossings());
+            r.max_seam_gap_mm = r.max_seam_gap_mm.max(drape.max_seam_gap() * 1e3);
+            if let Some(d) = c.body_clearance(0.05) {
+                r.min_clearance_mm = r.min_clearance_mm.min(d * 1e3);
+            }
+        }
+    }
+    if let Some(dir) = obj_dir {
+        write_obj(dir, "garment_walked.obj", drape.cloth.positions(), sewn.mesh.triangles(), &[])?;
+    }
+    let n = walk_frames.max(1) as f64;
+    r.frame_ms = total / n;
+    r.detection_ms /= n;
+    r.constraints_ms /= n;
+    r.self_collision_ms /= n;
+    r.body_collision_ms /= n;
+    Ok(r)
+}
+
+impl MarkdownRow for GarmentDrapeReport {
+    const HEADER: &'static str = "| edge cm | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm |\n|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|";
+    fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} |",
+            self.edge_cm,
+            self.particles,
+            self.settled_after_frames,
+            self.settle_ms,
+            self.frame_ms,
+            self.detection_ms,
+            self.constraints_ms,
+            self.self_collision_ms,
+            self.body_collision_ms,
+            self.settled_body_crossings,
+            self.max_body_crossings,
+            self.settled_self_crossings,
+            self.max_self_crossings,
+            self.min_clearance_mm,
+            self.max_seam_gap_mm
+        )
+    }
+}

@@ -404,13 +404,27 @@ enum BenchWhat {
         #[arg(long, default_value_t = 60)]
         frames: usize,
     },
-    /// Draping with body and self collision: a skirt (about 10k particles) settling on a body
-    /// mesh, then the body walking; ms per 1/60 s frame split into collision detection,
-    /// constraints, self-collision and body collision, settling time, crossings and clearance.
+    /// Draping with body and self collision: by default the GarmentCode shirt sewn at each
+    /// `--edges` length on the MakeHuman avatar, settled at rest and then walking; with
+    /// `--capsules`, a skirt of `--triangles` on a body of capsules swinging its legs. Reports
+    /// ms per 1/60 s frame split into collision detection, constraints, self-collision and
+    /// body collision, settling time, crossings and clearance.
     Drape {
+        /// The old benchmark: a skirt on a capsule body.
+        #[arg(long)]
+        capsules: bool,
+        /// Target edge lengths (cm) of the sewn garment.
+        #[arg(long, default_value = "1,0.5", value_delimiter = ',')]
+        edges: Vec<f64>,
+        /// The GarmentCode pattern (default: the bundled shirt).
+        #[arg(long, default_value = "assets/patterns/garmentcode/shirt_mean_specification.json")]
+        pattern: PathBuf,
+        /// The avatar's files (base mesh, skeleton, weights, walk and joint map).
+        #[arg(long, default_value = "assets/avatar")]
+        avatar: PathBuf,
         #[arg(long, default_value_t = 20000)]
         triangles: usize,
-        /// Most frames to wait for the skirt to settle on the standing body.
+        /// Most frames to wait for the garment to settle on the standing body.
         #[arg(long, default_value_t = 120)]
         settle: usize,
         /// Timed frames of walking.
@@ -1226,7 +1240,39 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { what: BenchWhat::Drape { triangles, settle, frames, swing, check_every, obj_dir, json } } => {
+        Command::Bench {
+            what:
+                BenchWhat::Drape {
+                    capsules: false, edges, pattern, avatar, settle, frames, check_every, obj_dir, json, ..
+                },
+        } => {
+            println!(
+                "{} on the walking MakeHuman avatar, self-collision on, 20 substeps per 1/60 s frame, {frames} timed frames of walking",
+                pattern.display()
+            );
+            let mut rows = Vec::new();
+            for edge in edges {
+                let dir = obj_dir.as_ref().map(|d| d.join(format!("edge_{edge}cm")));
+                let r = crate::app::bench::drape_garment(
+                    &avatar,
+                    &pattern,
+                    edge,
+                    settle,
+                    frames,
+                    check_every,
+                    dir.as_deref(),
+                )?;
+                rows.push(r);
+            }
+            print!("{}", crate::app::bench::markdown_table(&rows));
+            if let Some(path) = json {
+                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench {
+            what: BenchWhat::Drape { triangles, settle, frames, swing, check_every, obj_dir, json, .. },
+        } => {
             let r = crate::app::bench::drape(triangles, settle, frames, swing, check_every, obj_dir.as_deref())?;
             println!(
                 "skirt on a walking capsule body: {} particles, {} triangles, body {} triangles, self-collision on",

@@ -8,6 +8,7 @@ pub mod mhclo;
 pub mod obj;
 pub mod retarget;
 pub mod rig;
+pub mod walk;
 
 use std::path::Path;
 
