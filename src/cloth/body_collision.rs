@@ -434,7 +434,18 @@ impl BodyMesh {
     /// point of the cloth edge nearest that body edge is moved out to `thickness` (inside or
     /// outside decided as for vertices, by the nearest feature's pseudo-normal), the two
     /// cloth vertices sharing the move by their barycentric weight and inverse mass.
-    pub(crate) fn push_edges(&mut self, x: &mut [Vec3], w: &[f32], edges: &[[u32; 2]], s: f32, thickness: f32) {
+    #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
+    pub(crate) fn push_edges(
+        &mut self,
+        x: &mut [Vec3],
+        prev: &[Vec3],
+        w: &[f32],
+        edges: &[[u32; 2]],
+        s0: f32,
+        s: f32,
+        thickness: f32,
+        friction: f32,
+    ) {
         for (k, &[ia, ib]) in edges.iter().enumerate() {
             let (lo, hi) = (self.edge_cand_start[k] as usize, self.edge_cand_start[k + 1] as usize);
             if lo == hi {
@@ -482,16 +493,30 @@ impl BodyMesh {
             }
             let Some((f, _)) = best else { continue };
             let p = a.lerp(b, f);
-            let Some((d, n, ..)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied()) else {
+            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied()) else {
                 continue;
             };
             let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
             if d >= thickness || wsum == 0.0 {
                 continue;
             }
-            let k = (thickness - d) / wsum;
-            x[ia] += n * (w[ia] * (1.0 - f) * k);
-            x[ib] += n * (w[ib] * f * k);
+            // The edge point moves by `delta`, its vertices by their share of it.
+            let apply = |delta: Vec3, x: &mut [Vec3]| {
+                x[ia] += delta * (w[ia] * (1.0 - f) / wsum);
+                x[ib] += delta * (w[ib] * f / wsum);
+            };
+            let depth = thickness - d;
+            apply(n * depth, x);
+            // Friction as for vertices: the edge point's motion this substep relative to the
+            // body under it, its tangential part cut by up to `friction` times the push.
+            let tri = self.triangles[t as usize];
+            let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s) - self.corner(tri[k], s0)) * bary[k]).sum();
+            let rel = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f) - body_motion;
+            let tangential = rel - n * rel.dot(n);
+            let tl = tangential.length();
+            if tl > 0.0 {
+                apply(-tangential * (friction * depth / tl).min(1.0), x);
+            }
             self.stats.edge_contacts += 1;
         }
     }

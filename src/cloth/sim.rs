@@ -618,7 +618,8 @@ impl Cloth {
             // Chords sag into the body slowly (they move with their vertices, which the
             // contacts above hold every substep): every fourth substep and the frame's last.
             if self.substep_index % 4 == 3 || s1 == 1.0 {
-                body.push_edges(&mut self.x, &self.inv_mass, &self.edges, s1, 0.5 * p.body_thickness);
+                let (x, prev, w) = (&mut self.x, &self.prev, &self.inv_mass);
+                body.push_edges(x, prev, w, &self.edges, s0, s1, 0.5 * p.body_thickness, p.body_friction);
             }
             if welded {
                 // The contacts above moved sewn vertices apart; join them again and keep the

@@ -59,7 +59,6 @@ fn cloth_dropped_on_a_sphere_body_stays_outside() {
 }
 
 #[test]
-#[ignore = "known failure: 1 cloth edge crosses a box edge at frame 80 (no edge-edge contacts yet)"]
 fn cloth_dropped_on_a_box_body_stays_outside() {
     let c = drop_onto(box_mesh(Vec3::ZERO, Vec3::new(0.15, 0.2, 0.12), Quat::from_rotation_y(0.5), 24), 90);
     let top = c.positions().iter().map(|p| p.y).fold(f32::MIN, f32::max);
@@ -110,7 +109,7 @@ impl LimbScene {
 }
 
 #[test]
-#[ignore = "known failure: 7 cloth edges cross the limb at frame 10 (no edge-edge contacts yet)"]
+#[ignore = "known failure: 5 cloth edges cross the limb at frame 10 (edge contacts are discrete: a limb at 9 m/s passes a cloth edge between two of them)"]
 fn a_fast_limb_swinging_through_a_curtain_never_crosses_it() {
     let peak_tip_speed = 0.9 * SWING_AMPLITUDE * std::f32::consts::TAU * SWING_HZ;
     assert!(peak_tip_speed > 9.0);
