@@ -207,8 +207,6 @@ pub struct Cloth {
 
     time: f64,
     frame: u64,
-    /// The running substep's number within its frame.
-    substep_index: u32,
 
     body: Option<BodyMesh>,
     self_collision: Option<SelfCollision>,
@@ -330,7 +328,6 @@ impl Cloth {
             lambda: vec![0.0; n_constraints],
             time: 0.0,
             frame: 0,
-            substep_index: 0,
             body: None,
             self_collision: None,
             timings: StepTimings::default(),
@@ -527,8 +524,10 @@ impl Cloth {
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
         for k in 0..n {
-            self.substep_index = k;
-            self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32);
+            // Chords sag into the body slowly (they move with their vertices, which the vertex
+            // contacts hold every substep): edge contacts every fourth substep and the last.
+            let edge_contacts = k % 4 == 3 || k + 1 == n;
+            self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32, edge_contacts);
             self.time += h as f64;
         }
         if let Some(body) = &mut self.body {
@@ -537,8 +536,9 @@ impl Cloth {
         self.frame += 1;
     }
 
-    /// One substep from `s0` to `s1` (fractions of the frame, for the body's motion).
-    fn substep(&mut self, h: f32, s0: f32, s1: f32) {
+    /// One substep from `s0` to `s1` (fractions of the frame, for the body's motion), with
+    /// or without the body's edge contacts.
+    fn substep(&mut self, h: f32, s0: f32, s1: f32, edge_contacts: bool) {
         let t0 = Instant::now();
         self.apply_wind();
         let g = self.params.gravity;
@@ -615,9 +615,7 @@ impl Cloth {
             );
             let all = 0..self.x.len() as u32;
             body.collide(all, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
-            // Chords sag into the body slowly (they move with their vertices, which the
-            // contacts above hold every substep): every fourth substep and the frame's last.
-            if self.substep_index % 4 == 3 || s1 == 1.0 {
+            if edge_contacts {
                 let (x, prev, w) = (&mut self.x, &self.prev, &self.inv_mass);
                 body.push_edges(x, prev, w, &self.edges, s0, s1, 0.5 * p.body_thickness, p.body_friction);
             }
