@@ -1762,7 +1762,8 @@ impl MarkdownRow for ShadowRow {
 
 /// `werkstatt bench drape` on a sewn garment: a GarmentCode pattern sewn at `edge_cm`,
 /// fitted to MakeHuman (the `Garment` node's default scale and offset, sleeves slid up the
-/// arms), draped with self-collision on the avatar at rest until settled, then walked: half a
+/// arms), draped with self-collision (`substeps` per frame, `iterations` sweeps each) on the
+/// avatar at rest until settled, then walked: half a
 /// second from the rest pose to the walk's first frame, then `walk_frames` timed frames.
 #[derive(Debug, Default, serde::Serialize)]
 pub struct GarmentDrapeReport {
@@ -1818,6 +1819,7 @@ pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
+    (substeps, iterations): (u32, u32),
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1835,7 +1837,7 @@ pub fn drape_garment(
     let rest = body.positions().to_vec();
     let body_tris = body.triangles().to_vec();
     let params = DrapeParams {
-        sim: crate::cloth::SimParams { self_collision: true, ..DrapeParams::default().sim },
+        sim: crate::cloth::SimParams { self_collision: true, substeps, iterations, ..DrapeParams::default().sim },
         ..DrapeParams::default()
     };
     let mut drape = Drape::new(&sewn, &params, Some(body));

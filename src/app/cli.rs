@@ -422,6 +422,11 @@ enum BenchWhat {
         /// The avatar's files (base mesh, skeleton, weights, walk and joint map).
         #[arg(long, default_value = "assets/avatar")]
         avatar: PathBuf,
+        /// Solver substeps per 1/60 s frame, and constraint sweeps per substep, of the garment.
+        #[arg(long, default_value_t = 20)]
+        substeps: u32,
+        #[arg(long, default_value_t = 2)]
+        iterations: u32,
         #[arg(long, default_value_t = 20000)]
         triangles: usize,
         /// Most frames to wait for the garment to settle on the standing body.
@@ -1243,11 +1248,22 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Bench {
             what:
                 BenchWhat::Drape {
-                    capsules: false, edges, pattern, avatar, settle, frames, check_every, obj_dir, json, ..
+                    capsules: false,
+                    edges,
+                    pattern,
+                    avatar,
+                    substeps,
+                    iterations,
+                    settle,
+                    frames,
+                    check_every,
+                    obj_dir,
+                    json,
+                    ..
                 },
         } => {
             println!(
-                "{} on the walking MakeHuman avatar, self-collision on, 20 substeps per 1/60 s frame, {frames} timed frames of walking",
+                "{} on the walking MakeHuman avatar, self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking",
                 pattern.display()
             );
             let mut rows = Vec::new();
@@ -1257,6 +1273,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
+                    (substeps, iterations),
                     settle,
                     frames,
                     check_every,
