@@ -1561,69 +1561,89 @@ pub fn drape(
         ..Default::default()
     };
     cloth.set_body(Some(BodyMesh::new(pos.clone(), tris.clone())));
-    let write = |name: &str, p: &[glam::Vec3], t: &[u32]| -> anyhow::Result<()> {
-        let Some(dir) = obj_dir else { return Ok(()) };
+    let cloth_tris = cloth.pattern().triangles().to_vec();
+    if let Some(dir) = obj_dir {
         std::fs::create_dir_all(dir)?;
-        let mut s = String::new();
-        for v in p {
-            s += &format!("v {} {} {}\n", v.x, v.y, v.z);
-        }
-        for f in t.chunks(3) {
-            s += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
-        }
-        crate::io::atomic::write_atomic(&dir.join(name), s.as_bytes())?;
-        Ok(())
-    };
-    let cloth_indices: Vec<u32> = cloth.pattern().triangles().iter().flatten().copied().collect();
-    write("cloth_start.obj", cloth.positions(), &cloth_indices)?;
-    let t0 = Instant::now();
-    r.settled_after_frames = settle_frames;
-    for f in 0..settle_frames {
-        let before = cloth.positions().to_vec();
-        cloth.step_frame(FRAME_DT);
-        let moving = before.iter().zip(cloth.positions()).filter(|(a, b)| a.distance(**b) > 3e-4).count();
-        if f >= 10 && moving as f64 <= 0.015 * before.len() as f64 {
-            r.settled_after_frames = f + 1;
-            break;
-        }
+        write_obj(dir, "cloth_start.obj", cloth.positions(), &cloth_tris, &[])?;
+        write_obj(dir, "body_0000.obj", &pos, &tris, &[])?;
     }
+    let t0 = Instant::now();
+    r.settled_after_frames = settle(&mut cloth, settle_frames, 10, |c| c.step_frame(FRAME_DT), |c| c.positions());
     r.settle_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let body_indices: Vec<u32> = tris.iter().flatten().copied().collect();
-    write("cloth_settled.obj", cloth.positions(), &cloth_indices)?;
-    let mut total = 0.0;
+    if let Some(dir) = obj_dir {
+        write_obj(dir, "cloth_settled.obj", cloth.positions(), &cloth_tris, &[])?;
+    }
     for f in 0..walk_frames {
         let t = (f + 1) as f32 * FRAME_DT;
         let (pose, _) = drape_body_mesh(t, swing_deg);
-        if f == 0 {
-            write("body_0000.obj", &pos, &body_indices)?;
+        if let Some(dir) = obj_dir {
+            write_obj(dir, &format!("body_{:04}.obj", f + 1), &pose, &tris, &[])?;
         }
-        write(&format!("body_{:04}.obj", f + 1), &pose, &body_indices)?;
         cloth.body_mut().expect("set above").move_to(&pose);
         let t0 = Instant::now();
         cloth.step_frame(FRAME_DT);
-        total += t0.elapsed().as_secs_f64() * 1e3;
+        let check = check_every > 0 && ((f + 1) % check_every == 0 || f + 1 == walk_frames);
+        r.record_frame(&cloth, t0.elapsed().as_secs_f64() * 1e3, check);
+    }
+    if let Some(dir) = obj_dir {
+        write_obj(dir, "cloth_walked.obj", cloth.positions(), &cloth_tris, &[])?;
+    }
+    r.finish(walk_frames);
+    Ok(r)
+}
+
+impl DrapeReport {
+    /// Adds a timed frame of `cloth`; `check` also counts crossings and clearance.
+    fn record_frame(&mut self, cloth: &crate::cloth::Cloth, ms: f64, check: bool) {
         let s = cloth.timings();
-        r.detection_ms += s.detection_ms;
-        r.constraints_ms += s.constraints_ms;
-        r.self_collision_ms += s.self_collision_ms;
-        r.body_collision_ms += s.body_collision_ms;
-        r.max_speed = r.max_speed.max(cloth.max_speed());
-        if check_every > 0 && ((f + 1) % check_every == 0 || f + 1 == walk_frames) {
-            r.max_body_crossings = r.max_body_crossings.max(cloth.body_crossings());
-            r.max_self_crossings = r.max_self_crossings.max(cloth.self_crossings());
+        self.frame_ms += ms;
+        self.detection_ms += s.detection_ms;
+        self.constraints_ms += s.constraints_ms;
+        self.self_collision_ms += s.self_collision_ms;
+        self.body_collision_ms += s.body_collision_ms;
+        self.max_speed = self.max_speed.max(cloth.max_speed());
+        if check {
+            self.max_body_crossings = self.max_body_crossings.max(cloth.body_crossings());
+            self.max_self_crossings = self.max_self_crossings.max(cloth.self_crossings());
             if let Some(c) = cloth.body_clearance(0.05) {
-                r.min_clearance_mm = r.min_clearance_mm.min(c * 1e3);
+                self.min_clearance_mm = self.min_clearance_mm.min(c * 1e3);
             }
         }
     }
-    write("cloth_walked.obj", cloth.positions(), &cloth_indices)?;
-    let n = walk_frames.max(1) as f64;
-    r.frame_ms = total / n;
-    r.detection_ms /= n;
-    r.constraints_ms /= n;
-    r.self_collision_ms /= n;
-    r.body_collision_ms /= n;
-    Ok(r)
+
+    /// Turns the sums of [`DrapeReport::record_frame`] into means over `frames`.
+    fn finish(&mut self, frames: usize) {
+        let n = frames.max(1) as f64;
+        for v in [
+            &mut self.frame_ms,
+            &mut self.detection_ms,
+            &mut self.constraints_ms,
+            &mut self.self_collision_ms,
+            &mut self.body_collision_ms,
+        ] {
+            *v /= n;
+        }
+    }
+}
+
+/// Steps `state` until at most 1.5 % of the particles move more than 0.3 mm in a frame
+/// (GarmentCode's criterion), not before `min_frames`; the frames taken, or `max_frames`.
+fn settle<S>(
+    state: &mut S,
+    max_frames: usize,
+    min_frames: usize,
+    step: impl Fn(&mut S),
+    positions: impl Fn(&S) -> &[glam::Vec3],
+) -> usize {
+    for f in 0..max_frames {
+        let before = positions(state).to_vec();
+        step(state);
+        let moving = before.iter().zip(positions(state)).filter(|(a, b)| a.distance(**b) > 3e-4).count();
+        if f >= min_frames && moving as f64 <= 0.015 * before.len() as f64 {
+            return f + 1;
+        }
+    }
+    max_frames
 }
 
 /// A bench row as one line of a markdown table: the `werkstatt bench` commands print these, and
@@ -1768,28 +1788,14 @@ impl MarkdownRow for ShadowRow {
 #[derive(Debug, Default, serde::Serialize)]
 pub struct GarmentDrapeReport {
     pub edge_cm: f64,
-    pub particles: usize,
-    pub triangles: usize,
-    pub body_triangles: usize,
-    /// Frames until at most 1.5 % of the particles move more than 0.3 mm in a frame
-    /// (GarmentCode's criterion) after the seams closed, or `settle_frames` when never.
-    pub settled_after_frames: usize,
-    pub settle_ms: f64,
-    /// Mean over the timed walking frames (ms per 1/60 s frame, 20 substeps).
-    pub frame_ms: f64,
-    pub detection_ms: f64,
-    pub constraints_ms: f64,
-    pub self_collision_ms: f64,
-    pub body_collision_ms: f64,
-    /// At the end of the settling, and the worst over the walk (checked every
-    /// `check_every` frames).
+    /// Settling and the timed walk, as for the skirt.
+    #[serde(flatten)]
+    pub drape: DrapeReport,
+    /// At the end of the settling.
     pub settled_body_crossings: usize,
     pub settled_self_crossings: usize,
-    pub max_body_crossings: usize,
-    pub max_self_crossings: usize,
+    /// Worst over the walk's checked frames.
     pub max_seam_gap_mm: f32,
-    pub min_clearance_mm: f32,
-    pub max_speed: f32,
 }
 
 /// Writes `positions` (and triangles, and `lines` as OBJ line elements) as OBJ into `dir`.
@@ -1832,7 +1838,7 @@ pub fn drape_garment(
     let avatar = WalkingAvatar::load(avatar_dir)?;
     let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
     let mut sewn = garmentcode::load(pattern)?.sew(edge_cm, fit)?;
-    fit_sleeves(&mut sewn, &avatar.rest_arms()?);
+    fit_sleeves(&mut sewn, &crate::garment::sleeves::ArmAxis::of_avatar(&avatar)?);
     let body = avatar.rest_body();
     let rest = body.positions().to_vec();
     let body_tris = body.triangles().to_vec();
@@ -1843,10 +1849,13 @@ pub fn drape_garment(
     let mut drape = Drape::new(&sewn, &params, Some(body));
     let mut r = GarmentDrapeReport {
         edge_cm,
-        particles: drape.cloth.vertex_count(),
-        triangles: drape.cloth.triangle_count(),
-        body_triangles: body_tris.len(),
-        min_clearance_mm: f32::INFINITY,
+        drape: DrapeReport {
+            particles: drape.cloth.vertex_count(),
+            triangles: drape.cloth.triangle_count(),
+            body_triangles: body_tris.len(),
+            min_clearance_mm: f32::INFINITY,
+            ..Default::default()
+        },
         ..Default::default()
     };
     if let Some(dir) = obj_dir {
@@ -1857,18 +1866,9 @@ pub fn drape_garment(
     }
 
     let t0 = Instant::now();
-    r.settled_after_frames = settle_frames;
     let sewing = params.sewing_frames as usize;
-    for f in 0..settle_frames {
-        let before = drape.cloth.positions().to_vec();
-        drape.step(None);
-        let moving = before.iter().zip(drape.cloth.positions()).filter(|(a, b)| a.distance(**b) > 3e-4).count();
-        if f >= sewing && moving as f64 <= 0.015 * before.len() as f64 {
-            r.settled_after_frames = f + 1;
-            break;
-        }
-    }
-    r.settle_ms = t0.elapsed().as_secs_f64() * 1e3;
+    r.drape.settled_after_frames = settle(&mut drape, settle_frames, sewing, |d| d.step(None), |d| d.cloth.positions());
+    r.drape.settle_ms = t0.elapsed().as_secs_f64() * 1e3;
     r.settled_body_crossings = drape.cloth.body_crossings();
     r.settled_self_crossings = drape.cloth.self_crossings();
     if let Some(dir) = obj_dir {
@@ -1893,62 +1893,46 @@ pub fn drape_garment(
         let bytes: Vec<u8> = poses.iter().flatten().flat_map(|v| v.to_array()).flat_map(f32::to_le_bytes).collect();
         crate::io::atomic::write_atomic(&dir.join("body_frames.f32"), &bytes)?;
     }
-    let mut total = 0.0;
     for (f, pose) in poses.iter().enumerate() {
         let t0 = Instant::now();
         drape.step(Some(pose));
         if f < blend {
             continue;
         }
-        total += t0.elapsed().as_secs_f64() * 1e3;
-        let c = &drape.cloth;
-        let s = c.timings();
-        r.detection_ms += s.detection_ms;
-        r.constraints_ms += s.constraints_ms;
-        r.self_collision_ms += s.self_collision_ms;
-        r.body_collision_ms += s.body_collision_ms;
-        r.max_speed = r.max_speed.max(c.max_speed());
         let k = f - blend + 1;
-        if check_every > 0 && (k % check_every == 0 || k == walk_frames) {
-            r.max_body_crossings = r.max_body_crossings.max(c.body_crossings());
-            r.max_self_crossings = r.max_self_crossings.max(c.self_crossings());
+        let check = check_every > 0 && (k % check_every == 0 || k == walk_frames);
+        r.drape.record_frame(&drape.cloth, t0.elapsed().as_secs_f64() * 1e3, check);
+        if check {
             r.max_seam_gap_mm = r.max_seam_gap_mm.max(drape.max_seam_gap() * 1e3);
-            if let Some(d) = c.body_clearance(0.05) {
-                r.min_clearance_mm = r.min_clearance_mm.min(d * 1e3);
-            }
         }
     }
     if let Some(dir) = obj_dir {
         write_obj(dir, "garment_walked.obj", drape.cloth.positions(), sewn.mesh.triangles(), &[])?;
     }
-    let n = walk_frames.max(1) as f64;
-    r.frame_ms = total / n;
-    r.detection_ms /= n;
-    r.constraints_ms /= n;
-    r.self_collision_ms /= n;
-    r.body_collision_ms /= n;
+    r.drape.finish(walk_frames);
     Ok(r)
 }
 
 impl MarkdownRow for GarmentDrapeReport {
     const HEADER: &'static str = "| edge cm | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm |\n|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|";
     fn markdown(&self) -> String {
+        let d = &self.drape;
         format!(
             "| {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} |",
             self.edge_cm,
-            self.particles,
-            self.settled_after_frames,
-            self.settle_ms,
-            self.frame_ms,
-            self.detection_ms,
-            self.constraints_ms,
-            self.self_collision_ms,
-            self.body_collision_ms,
+            d.particles,
+            d.settled_after_frames,
+            d.settle_ms,
+            d.frame_ms,
+            d.detection_ms,
+            d.constraints_ms,
+            d.self_collision_ms,
+            d.body_collision_ms,
             self.settled_body_crossings,
-            self.max_body_crossings,
+            d.max_body_crossings,
             self.settled_self_crossings,
-            self.max_self_crossings,
-            self.min_clearance_mm,
+            d.max_self_crossings,
+            d.min_clearance_mm,
             self.max_seam_gap_mm
         )
     }

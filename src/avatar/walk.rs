@@ -11,7 +11,6 @@ use super::retarget::{JointMap, Retarget};
 use super::rig::{Pose, Skeleton, Skinning, Weights, skin};
 use super::{Body, collision_mesh};
 use crate::cloth::BodyMesh;
-use crate::garment::sleeves::ArmAxis;
 
 /// MakeHuman's base mesh rigged with its default skeleton and weights, walking by a BVH.
 pub struct WalkingAvatar {
@@ -69,10 +68,8 @@ impl WalkingAvatar {
         self.retarget.pose(&self.bvh, &self.skeleton, seconds / self.bvh.frame_time, true, 1.0)
     }
 
-    /// The arms' shoulder and elbow joints at rest (metres), for fitting sleeves.
-    pub fn rest_arms(&self) -> anyhow::Result<[ArmAxis; 2]> {
-        let heads: Vec<DVec3> =
-            self.skeleton.globals(&Pose::rest(&self.skeleton)).into_iter().map(|(_, h)| h).collect();
-        ArmAxis::makehuman_arms(&self.skeleton, &heads, |p| self.place(p))
+    /// The bones' heads at rest, in base-mesh units (see [`WalkingAvatar::place`]).
+    pub fn rest_heads(&self) -> Vec<DVec3> {
+        self.skeleton.globals(&Pose::rest(&self.skeleton)).into_iter().map(|(_, h)| h).collect()
     }
 }

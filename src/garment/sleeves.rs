@@ -40,6 +40,11 @@ impl ArmAxis {
         ])
     }
 
+    /// The arms of the bundled avatar at rest, in metres as it stands.
+    pub fn of_avatar(avatar: &crate::avatar::walk::WalkingAvatar) -> anyhow::Result<[ArmAxis; 2]> {
+        ArmAxis::makehuman_arms(&avatar.skeleton, &avatar.rest_heads(), |p| avatar.place(p))
+    }
+
     fn direction(&self) -> Vec3 {
         (self.elbow - self.shoulder).normalize_or_zero()
     }

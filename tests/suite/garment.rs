@@ -305,7 +305,7 @@ fn avatar() -> WalkingAvatar {
 /// MakeHuman's base body at rest (metres, feet on y = 0) and its arms.
 fn rest_avatar() -> (BodyMesh, [ArmAxis; 2]) {
     let a = avatar();
-    (a.rest_body(), a.rest_arms().unwrap())
+    (a.rest_body(), ArmAxis::of_avatar(&a).unwrap())
 }
 
 /// The shirt at 3 cm edges (the node's default is 1 cm), fitted to MakeHuman as the node's
@@ -417,7 +417,7 @@ fn a_short_drape_on_the_avatar_closes_the_seams() {
 fn the_shirt_stays_outside_the_body_through_the_walk() {
     let avatar = avatar();
     let pose_at = |seconds: f64| avatar.collision_vertices(&avatar.walk_pose(seconds));
-    let (rest_body, arms) = (avatar.rest_body(), avatar.rest_arms().unwrap());
+    let (rest_body, arms) = (avatar.rest_body(), ArmAxis::of_avatar(&avatar).unwrap());
     let rest = rest_body.positions().to_vec();
     let (sewn, _) = shirt_on(Some(&arms));
     let params =
