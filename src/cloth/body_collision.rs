@@ -165,10 +165,7 @@ pub fn segment_closest_params(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> (f32, f32, 
 
 /// Distance from `p` to the segment `ab`.
 fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
-    let ab = b - a;
-    let len2 = ab.length_squared();
-    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
-    p.distance(a + ab * t)
+    p.distance(super::collider::closest_point_on_segment(p, a, b))
 }
 
 /// Face normals (unit) and angle-weighted vertex normals of a mesh.
@@ -507,16 +504,8 @@ impl BodyMesh {
             };
             let depth = thickness - d;
             apply(n * depth, x);
-            // Friction as for vertices: the edge point's motion this substep relative to the
-            // body under it, its tangential part cut by up to `friction` times the push.
-            let tri = self.triangles[t as usize];
-            let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s) - self.corner(tri[k], s0)) * bary[k]).sum();
-            let rel = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f) - body_motion;
-            let tangential = rel - n * rel.dot(n);
-            let tl = tangential.length();
-            if tl > 0.0 {
-                apply(-tangential * (friction * depth / tl).min(1.0), x);
-            }
+            let moved = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f);
+            apply(-self.friction_cut(t, bary, s0, s, n, moved, depth, friction), x);
             self.stats.edge_contacts += 1;
         }
     }
@@ -624,17 +613,33 @@ impl BodyMesh {
             }
             self.stats.contacts += 1;
             let depth = thickness - dist;
-            let mut xi = p + n * depth;
-            let tri = self.triangles[t as usize];
-            let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s1) - self.corner(tri[k], s0)) * bary[k]).sum();
-            let rel = (xi - prev[i]) - body_motion;
-            let tangential = rel - n * rel.dot(n);
-            let tl = tangential.length();
-            if tl > 0.0 {
-                xi -= tangential * (friction * depth / tl).min(1.0);
-            }
-            x[i] = xi;
+            let xi = p + n * depth;
+            x[i] = xi - self.friction_cut(t, bary, s0, s1, n, xi - prev[i], depth, friction);
         }
+    }
+
+    /// PBD Coulomb friction of a contact pushed `depth` out along `n` at barycentrics `bary` of
+    /// triangle `t`: the part of `moved` (the contact point's motion this substep) tangential
+    /// to the body's motion under it from `s0` to `s1`, cut to at most `friction * depth`. The
+    /// caller subtracts it.
+    #[allow(clippy::too_many_arguments)]
+    fn friction_cut(
+        &self,
+        t: u32,
+        bary: [f32; 3],
+        s0: f32,
+        s1: f32,
+        n: Vec3,
+        moved: Vec3,
+        depth: f32,
+        friction: f32,
+    ) -> Vec3 {
+        let tri = self.triangles[t as usize];
+        let body_motion: Vec3 = (0..3).map(|k| (self.corner(tri[k], s1) - self.corner(tri[k], s0)) * bary[k]).sum();
+        let rel = moved - body_motion;
+        let tangential = rel - n * rel.dot(n);
+        let tl = tangential.length();
+        if tl > 0.0 { tangential * (friction * depth / tl).min(1.0) } else { Vec3::ZERO }
     }
 
     /// Smallest signed distance of any of `points` to the body (end pose), or

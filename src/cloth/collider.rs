@@ -63,13 +63,11 @@ impl Collider {
             }
             Collider::Capsule { a, b, radius } => {
                 let ab = *b - *a;
-                let denom = ab.length_squared();
-                let t = if denom > 0.0 { ((p - *a).dot(ab) / denom).clamp(0.0, 1.0) } else { 0.0 };
-                let d = p - (*a + ab * t);
+                let d = p - closest_point_on_segment(p, *a, *b);
                 let len = d.length();
                 let normal = if len > 0.0 {
                     d / len
-                } else if denom > 0.0 {
+                } else if ab.length_squared() > 0.0 {
                     any_perpendicular(ab.normalize())
                 } else {
                     Vec3::Y
@@ -263,6 +261,14 @@ fn for_cells(dims: [u32; 3], lo: [u32; 3], hi: [u32; 3], mut f: impl FnMut(usize
             }
         }
     }
+}
+
+/// Closest point on the segment `ab` to `p` (`a` when the segment is a point).
+pub(crate) fn closest_point_on_segment(p: Vec3, a: Vec3, b: Vec3) -> Vec3 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    a + ab * t
 }
 
 /// Closest point on triangle `abc` to `p` (Ericson, Real-Time Collision

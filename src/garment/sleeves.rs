@@ -51,9 +51,7 @@ impl ArmAxis {
 
     /// Distance from `p` to the segment shoulder-elbow.
     fn distance(&self, p: Vec3) -> f32 {
-        let d = self.elbow - self.shoulder;
-        let t = ((p - self.shoulder).dot(d) / d.length_squared().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
-        p.distance(self.shoulder + d * t)
+        p.distance(crate::cloth::collider::closest_point_on_segment(p, self.shoulder, self.elbow))
     }
 }
 
