@@ -6,7 +6,9 @@ use std::sync::Arc;
 use crate::btf::Btf;
 use crate::btf::directions::Sampling;
 use crate::btf::gpu::MAX_COMPONENTS;
+use crate::btf::gpu::upload;
 use crate::btf::pca::{Centring, compress};
+use crate::btf::pca_file::PcaFile;
 use crate::core::node::prelude::*;
 
 crate::choice!(
@@ -62,8 +64,8 @@ pub static BTF: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "path",
-            ParamKind::Path { default: "", extensions: &["btf"] },
-            "The BTF file for source = file (werkstatt btf bake / lambertian), relative to the graph's folder.",
+            ParamKind::Path { default: "", extensions: &["btf", "btfc"] },
+            "The BTF file for source = file, relative to the graph's folder: images (.btf: werkstatt btf bake / lambertian / import), compressed here, or already compressed (.btfc: werkstatt btf compress --out; 8-bit images, loads without the PCA's minutes).",
         ),
         ParamSpec::new(
             "components",
@@ -108,13 +110,15 @@ struct BtfNode;
 impl Node for BtfNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
-        let btf: Arc<Btf> = match cx.choice::<BtfSource>("source") {
+        let loaded = match cx.choice::<BtfSource>("source") {
             BtfSource::File => {
                 if cx.str("path").is_empty() {
-                    return Err(NodeError::msg("source = \"file\" but parameter \"path\" is empty: name a .btf file"));
+                    return Err(NodeError::msg(
+                        "source = \"file\" but parameter \"path\" is empty: name a .btf or .btfc file",
+                    ));
                 }
                 let path = cx.path("path");
-                cx.load(&path, crate::btf::container::load).map_err(|e| match e {
+                cx.load(&path, load_btf_file).map_err(|e| match e {
                     NodeError::Failed(m) => NodeError::msg(format!("parameter \"path\": {m}")),
                     other => other,
                 })?
@@ -125,7 +129,7 @@ impl Node for BtfNode {
                     BtfSampling::H2Tests => Sampling::h2_tests(),
                 };
                 let size = cx.int("resolution") as usize;
-                Arc::new(match source {
+                Arc::new(LoadedBtf::Images(Arc::new(match source {
                     BtfSource::Directions => directions_btf(sampling, size),
                     BtfSource::Bake => bake(cx, sampling, size)?,
                     _ => {
@@ -135,28 +139,68 @@ impl Node for BtfNode {
                             if striped { b.to_array() } else { a.to_array() }
                         })
                     }
-                })
+                })))
             }
         };
-        let btf = if cx.bool("frontal") {
-            Arc::new(btf.frontal().map_err(|e| NodeError::msg(format!("parameter \"frontal\": {e:#}")))?)
-        } else {
-            btf
-        };
+        let frontal = |e: anyhow::Error| NodeError::msg(format!("parameter \"frontal\": {e:#}"));
         let components = cx.int("components") as usize;
-        let lights = btf.sampling.len();
+        let lights = match &*loaded {
+            LoadedBtf::Images(btf) => btf.sampling.len(),
+            LoadedBtf::Compressed(file) => file.sampling.len(),
+        };
         if components > lights {
             return Err(NodeError::msg(format!(
                 "parameter \"components\" is {components}, but the BTF has {lights} light directions per view: a view's PCA has at most {lights} components"
             )));
         }
-        let pca = compress(&btf, components, Centring::Mean);
-        let gpu_btf = crate::btf::gpu::upload(gpu, &pca, &btf, components)
-            .map_err(|e| NodeError::msg(format!("uploading the BTF: {e:#}")))?;
+        let gpu_btf = match &*loaded {
+            LoadedBtf::Images(btf) => {
+                let btf = if cx.bool("frontal") { Arc::new(btf.frontal().map_err(frontal)?) } else { btf.clone() };
+                let pca = compress(&btf, components, Centring::Mean);
+                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components)
+            }
+            LoadedBtf::Compressed(file) if cx.bool("frontal") => {
+                // The frontal image, decoded, spread over every direction as for images.
+                let slot = file.compressed.slots.first().ok_or_else(|| NodeError::msg("the compressed BTF has no view slot"))?;
+                let btf = Btf::of_frontal_image(file.sampling.clone(), file.width, file.height, &slot.reconstruct(0));
+                let btf = Arc::new(btf.map_err(frontal)?);
+                let pca = compress(&btf, components, Centring::Mean);
+                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components)
+            }
+            LoadedBtf::Compressed(file) => {
+                if file.compressed.centring != Centring::Mean {
+                    return Err(NodeError::msg(
+                        "parameter \"path\": the compressed BTF is not centred on its mean (compressed with --no-centre); BtfShading draws centred ones: compress it again without --no-centre",
+                    ));
+                }
+                upload(gpu, &file.compressed, &file.sampling, (file.width, file.height), None, components)
+            }
+        }
+        .map_err(|e| NodeError::msg(format!("uploading the BTF: {e:#}")))?;
         cx.count("btf_bytes", gpu_btf.bytes as usize);
         cx.set("btf", Arc::new(gpu_btf));
         Ok(())
     }
+}
+
+/// A BTF file as read: its images, or their PCA (`.btfc`).
+enum LoadedBtf {
+    Images(Arc<Btf>),
+    Compressed(Arc<PcaFile>),
+}
+
+/// Reads either kind of BTF file, told apart by the format in its header.
+fn load_btf_file(path: &std::path::Path) -> anyhow::Result<LoadedBtf> {
+    let mut head = [0u8; 64];
+    let read = std::io::Read::read(
+        &mut std::fs::File::open(path).map_err(|e| anyhow::anyhow!("cannot open {}: {e}", path.display()))?,
+        &mut head,
+    )?;
+    Ok(if crate::btf::pca_file::is_compressed(&head[..read]) {
+        LoadedBtf::Compressed(Arc::new(crate::btf::pca_file::load(path)?))
+    } else {
+        LoadedBtf::Images(Arc::new(crate::btf::container::load(path)?))
+    })
 }
 
 /// Bakes the `weave` at `size` texels on `sampling` with all cores (the bytes do not depend

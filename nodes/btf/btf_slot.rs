@@ -112,7 +112,11 @@ impl Node for BtfSlotNode {
     fn eval(&mut self, cx: &mut EvalCx<'_>) -> Result<(), NodeError> {
         let gpu = cx.gpu()?;
         let gpu_btf: Arc<GpuBtf> = cx.input("btf")?;
-        let btf = &gpu_btf.source;
+        let Some(btf) = &gpu_btf.source else {
+            return Err(NodeError::msg(
+                "input \"btf\" was read compressed (.btfc): BtfSlot compares against the BTF's images, so its Btf must read the .btf file",
+            ));
+        };
         let find = |which: &str| {
             let d = Dir { theta: cx.f64(&format!("{which}_theta")), phi: cx.f64(&format!("{which}_phi")) };
             btf.direction_index(d).ok_or_else(|| {

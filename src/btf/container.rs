@@ -109,11 +109,26 @@ pub fn load(path: &Path) -> anyhow::Result<Btf> {
     parse(&bytes).with_context(|| format!("{} is not a usable BTF file", path.display()))
 }
 
-fn parse(bytes: &[u8]) -> anyhow::Result<Btf> {
+/// Splits a file into its header line (without the newline) and the data after it.
+pub(super) fn header_line(bytes: &[u8]) -> anyhow::Result<(&[u8], &[u8])> {
     let Some(end) = bytes.iter().take(MAX_HEADER).position(|&b| b == b'\n') else {
         bail!("no header line (a JSON object ending in a newline) in its first {MAX_HEADER} bytes");
     };
-    let header: Header = serde_json::from_slice(&bytes[..end]).context("the header is not valid")?;
+    Ok((&bytes[..end], &bytes[end + 1..]))
+}
+
+/// The sampling of a header's `[theta, count]` rings, checked.
+pub(super) fn sampling_from_rings(rings: &[(f64, usize)]) -> anyhow::Result<Sampling> {
+    let sampling =
+        Sampling { rings: rings.iter().map(|&(theta, count)| super::directions::Ring { theta, count }).collect() };
+    sampling.check().map_err(anyhow::Error::msg).context("the header's rings")?;
+    ensure!(sampling.len() <= 1024, "{} directions per ring set (at most 1024)", sampling.len());
+    Ok(sampling)
+}
+
+fn parse(bytes: &[u8]) -> anyhow::Result<Btf> {
+    let (line, raw) = header_line(bytes)?;
+    let header: Header = serde_json::from_slice(line).context("the header is not valid")?;
     ensure!(header.format == FORMAT, "the header's format is {:?}, not {FORMAT:?}", header.format);
     ensure!(header.version == VERSION, "version {} (this build reads version {VERSION})", header.version);
     ensure!(header.encoding == "f16-le", "encoding {:?} (only \"f16-le\" is read)", header.encoding);
@@ -124,18 +139,14 @@ fn parse(bytes: &[u8]) -> anyhow::Result<Btf> {
         header.width,
         header.height
     );
-    let sampling = Sampling {
-        rings: header.rings.iter().map(|&(theta, count)| super::directions::Ring { theta, count }).collect(),
-    };
-    sampling.check().map_err(anyhow::Error::msg).context("the header's rings")?;
-    ensure!(sampling.len() <= 1024, "{} directions per ring set (at most 1024)", sampling.len());
+    let sampling = sampling_from_rings(&header.rings)?;
     for (what, list) in [("views", &header.views), ("lights", &header.lights)] {
         check_directions(&sampling, list).with_context(|| format!("the header's {what}"))?;
     }
     let n = sampling.len();
     let (w, h) = (header.width as usize, header.height as usize);
     let values = n * n * w * h * 3;
-    let data_bytes = bytes.len() - end - 1;
+    let data_bytes = raw.len();
     ensure!(
         data_bytes >= values * 2,
         "truncated: {n}x{n} images of {w}x{h} RGB need {} bytes of f16 data, the file has {data_bytes}",
@@ -148,7 +159,6 @@ fn parse(bytes: &[u8]) -> anyhow::Result<Btf> {
     let view_of: Vec<usize> = dirs.iter().map(|&d| index(&header.views, d)).collect();
     let light_of: Vec<usize> = dirs.iter().map(|&d| index(&header.lights, d)).collect();
     let block = w * h * 3;
-    let raw = &bytes[end + 1..];
     let mut data = Vec::with_capacity(values);
     for (vj, &v) in view_of.iter().enumerate() {
         for (li, &l) in light_of.iter().enumerate() {

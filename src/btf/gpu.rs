@@ -37,8 +37,8 @@ pub struct GpuBtf {
     /// The coefficients on the CPU, for the per-vertex weight sets of environment light (HEM).
     pub table: super::hem::WeightTable,
     /// The uncompressed BTF it was made from (shared, not copied), for the figures that compare
-    /// against it (`BtfSlot`).
-    pub source: Arc<Btf>,
+    /// against it (`BtfSlot`); `None` when it was read compressed.
+    pub source: Option<Arc<Btf>>,
 }
 
 impl GpuBtf {
@@ -59,10 +59,17 @@ impl GpuBtf {
     }
 }
 
-/// Uploads `pca`, the per-view PCA (centred on the mean) of `btf`, with `components`
-/// eigentextures per slot. Fails, saying which limit, where the device cannot hold it.
-pub fn upload(gpu: &GpuContext, pca: &Compressed, btf: &Arc<Btf>, components: usize) -> anyhow::Result<GpuBtf> {
-    let (sampling, width, height) = (&btf.sampling, btf.width, btf.height);
+/// Uploads `pca`, the per-view PCA (centred on the mean) of a `width x height` BTF on
+/// `sampling` (`source`, where it is in memory), with `components` eigentextures per slot.
+/// Fails, saying which limit, where the device cannot hold it.
+pub fn upload(
+    gpu: &GpuContext,
+    pca: &Compressed,
+    sampling: &Sampling,
+    (width, height): (usize, usize),
+    source: Option<Arc<Btf>>,
+    components: usize,
+) -> anyhow::Result<GpuBtf> {
     let n = sampling.len();
     ensure!(pca.centring == Centring::Mean, "the GPU BTF expects a PCA centred on the mean");
     ensure!(pca.slots.len() == n, "{} PCA slots for {n} directions", pca.slots.len());
@@ -151,7 +158,7 @@ pub fn upload(gpu: &GpuContext, pca: &Compressed, btf: &Arc<Btf>, components: us
         height,
         bytes: image_bytes + coeff_bytes,
         table: super::hem::WeightTable::new(pca, sampling)?,
-        source: btf.clone(),
+        source,
     })
 }
 

@@ -11,6 +11,7 @@ pub mod gpu;
 pub mod hem;
 pub mod measured;
 pub mod pca;
+pub mod pca_file;
 
 use directions::{Dir, Sampling};
 
@@ -66,14 +67,23 @@ impl Btf {
     /// The mesostructure's parallax, self-shadowing and highlights are gone. Fails without a
     /// frontal direction (a first ring at theta 0).
     pub fn frontal(&self) -> anyhow::Result<Btf> {
+        // View 0 and light 0 are both the pole.
+        Btf::of_frontal_image(self.sampling.clone(), self.width, self.height, &self.data[..self.image_len()])
+    }
+
+    /// [`Btf::frontal`] of a BTF whose frontal image `N(0, 0)` is `image`.
+    pub fn of_frontal_image(sampling: Sampling, width: usize, height: usize, image: &[f32]) -> anyhow::Result<Btf> {
         anyhow::ensure!(
-            self.sampling.rings.first().is_some_and(|r| r.theta == 0.0),
+            sampling.rings.first().is_some_and(|r| r.theta == 0.0),
             "the BTF has no frontal direction (its first ring is not at theta 0)"
         );
-        // View 0 and light 0 are both the pole.
-        let image = &self.data[..self.image_len()];
-        let width = self.width;
-        Ok(Btf::lambertian(self.sampling.clone(), self.width, self.height, |x, y| {
+        anyhow::ensure!(
+            image.len() == width * height * 3,
+            "the frontal image has {} values, not {}",
+            image.len(),
+            width * height * 3
+        );
+        Ok(Btf::lambertian(sampling, width, height, |x, y| {
             let t = &image[(y * width + x) * 3..][..3];
             [t[0], t[1], t[2]].map(|v| v * std::f32::consts::PI)
         }))

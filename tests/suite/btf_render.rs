@@ -626,3 +626,53 @@ fn btf_slot_and_the_bake_name_their_bad_parameters() {
     let m = failure(&ev, "big");
     assert!(m.contains("\"resolution\" is 64") && m.contains("werkstatt btf bake"), "{m}");
 }
+
+/// A compressed file (`werkstatt btf compress --out`, 8-bit images) shades like the BTF it was
+/// compressed from, within the quantisation: a baked twill at the test tier, read both ways.
+#[test]
+fn a_compressed_btf_file_shades_like_its_images() {
+    use werkstatt::btf::bake::{BakeParams, Pattern, Tier};
+    use werkstatt::btf::pca::{Centring, compress};
+    let dir = std::env::temp_dir().join(format!("werkstatt-btfc-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let params = BakeParams { size: 16, supersample: 1, ..BakeParams::tier(Pattern::Twill, Tier::Test) };
+    let btf = werkstatt::btf::bake::bake(&params, 2).unwrap();
+    let (images, packed) = (dir.join("twill.btf"), dir.join("twill.btfc"));
+    werkstatt::btf::container::save(&btf, &images).unwrap();
+    let pca = compress(&btf, 8, Centring::Mean);
+    werkstatt::btf::pca_file::save(&pca, &btf.sampling, btf.width, btf.height, &packed).unwrap();
+    let shade = |path: &std::path::Path| {
+        let nodes = format!(
+            r#""btf": (kind: "Btf", params: {{ "source": "file", "path": {:?}, "components": 8 }}),
+            "shade": (kind: "BtfShading", params: {{ "tiling": 2.0 }}),"#,
+            path.to_str().unwrap()
+        );
+        let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"), ("shade.image", "out.image"),"#;
+        image(&run_graph(&sphere_graph(&nodes, links), 48, 48), "shade")
+    };
+    let (a, b) = (shade(&images), shade(&packed));
+    let peak = a.rgba.chunks_exact(4).flat_map(|p| &p[..3]).fold(0.0f32, |m, &x| m.max(x));
+    let (mut worst, mut sum) = (0.0f32, 0.0f32);
+    for (x, y) in a.rgba.iter().zip(&b.rgba) {
+        worst = worst.max((x - y).abs());
+        sum += (x - y).abs();
+    }
+    let mean = sum / a.rgba.len() as f32;
+    eprintln!("compressed file against images: worst {worst:.5}, mean {mean:.6}, peak {peak:.4}");
+    assert!(peak > 0.05, "nothing lit");
+    // 8-bit images: each eigentexture channel is off by at most half of 1/255 of its range.
+    assert!(worst < 0.03 * peak && mean < 0.003 * peak, "worst {worst}, mean {mean} of peak {peak}");
+    assert!(worst > 0.0, "the 8-bit file rendered bit for bit like f16 images: was it read at all?");
+
+    // BtfSlot compares against images, which a compressed file does not have.
+    let text = format!(
+        r#"(version: 2, nodes: {{
+            "btf": (kind: "Btf", params: {{ "source": "file", "path": {:?}, "components": 8 }}),
+            "slot": (kind: "BtfSlot", params: {{ "components": 8 }}),
+        }}, links: [("btf.btf", "slot.btf")])"#,
+        packed.to_str().unwrap()
+    );
+    let ev = evaluate_graph(&Graph::load_str(&text, "btfc-slot.ron".as_ref()).unwrap(), 8, 8);
+    let m = failure(&ev, "slot");
+    assert!(m.contains("read compressed (.btfc)") && m.contains("input \"btf\""), "{m}");
+}
