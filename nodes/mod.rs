@@ -64,6 +64,7 @@ pub static ALL: &[&NodeSpec] = &[
     &render::direct_light::DIRECT_LIGHT,
     &ibl::environment_map::ENVIRONMENT_MAP,
     &ibl::median_cut::MEDIAN_CUT,
+    &ibl::sun_light::SUN_LIGHT,
     &ibl::pems::PEMS,
     &ibl::shadow_atlas::SHADOW_ATLAS,
     &ibl::ibl_shading::IBL_SHADING,

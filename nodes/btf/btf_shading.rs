@@ -8,6 +8,7 @@ use crate::core::node::prelude::*;
 use crate::gpu::pass::Bindings;
 use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
 use crate::ibl::gpu::{EnvMap, Lights};
+use crate::ibl::shadow::ShadowAtlas;
 use crate::render::scene::{DrawItem, GBuffer};
 
 /// Texels of eq. 6's 1D texture (the paper's 1024).
@@ -29,6 +30,11 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
             "lights",
             PortType::Lights,
             "Directional lights of an environment (MedianCut), each through the BTF; no visibility.",
+        ),
+        PortSpec::optional(
+            "shadows",
+            PortType::ShadowAtlas,
+            "Variance shadow maps of the `lights` input's lights, in its order (a ShadowAtlas fed from the same MedianCut or SunLight): each light's term times its VIS, Chebyshev's bound as in IblShading (no jitter). The `sun_*` parameters' sun stays unshadowed.",
         ),
         PortSpec::optional(
             "scene",
@@ -86,8 +92,13 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "sun_boundary",
-            ParamKind::Choice { default: "smooth", options: SunBoundary::OPTIONS },
-            "smooth: eq. 6's boundary (alpha, shadow_blur) on the surface the interpolated normals describe; faces: the hard boundary a shadow volume gives, dark where the triangle itself faces away from the sun (the zigzag of the paper's Fig. 8, left).",
+            ParamKind::Choice { default: "smooth", options: Boundary::OPTIONS },
+            "smooth: eq. 6's boundary (alpha, shadow_blur) on the surface the interpolated normals describe; faces: the hard boundary a shadow volume gives, dark where the triangle itself faces away from the sun (the zigzag of the paper's Fig. 8, left); none: only the cosine carried to 0 at the horizon.",
+        ),
+        ParamSpec::new(
+            "lights_boundary",
+            ParamKind::Choice { default: "none", options: Boundary::OPTIONS },
+            "The boundary of the `lights` input's lights, as sun_boundary: none for an environment's lights, smooth (eq. 6) for a SunLight shadowed through `shadows`.",
         ),
         ParamSpec::new(
             "environment_intensity",
@@ -110,11 +121,23 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
 };
 
 crate::choice!(
-    enum SunBoundary {
+    enum Boundary {
         Smooth = "smooth",
         Faces = "faces",
+        None = "none",
     }
 );
+
+impl Boundary {
+    /// The shader's code in `Light::dir.w`: 0 none, 1 eq. 6, 2 the triangles' own facing.
+    fn code(self) -> f32 {
+        match self {
+            Boundary::None => 0.0,
+            Boundary::Smooth => 1.0,
+            Boundary::Faces => 2.0,
+        }
+    }
+}
 
 /// shaders/btf/btf_shading.wgsl `Params`.
 #[repr(C)]
@@ -135,6 +158,12 @@ struct Params {
 struct GpuLight {
     dir: [f32; 4],
     color: [f32; 4],
+    /// World to its shadow tile's atlas coordinates (zero: unshadowed).
+    to_atlas: [[f32; 4]; 4],
+    /// Its tile in atlas coordinates, inset by half a texel.
+    rect: [f32; 4],
+    /// x: 1 where shadowed, y: the lookup's normal offset (world units).
+    shadow: [f32; 4],
 }
 
 struct BtfShadingNode {
@@ -329,6 +358,17 @@ impl Node for BtfShadingNode {
                 b.width, b.height
             )));
         }
+        let shadows: Option<Arc<ShadowAtlas>> = cx.optional("shadows");
+        let env_count = env.as_ref().map_or(0, |e| e.lights.len());
+        if let Some(atlas) = &shadows
+            && atlas.lights.len() != env_count
+        {
+            return Err(NodeError::msg(format!(
+                "input \"shadows\" holds {} lights but input \"lights\" has {env_count}: feed both from the same MedianCut or SunLight",
+                atlas.lights.len()
+            )));
+        }
+        let unshadowed = |dir: [f32; 4], color: [f32; 4]| GpuLight { dir, color, ..bytemuck::Zeroable::zeroed() };
         let mut lights = Vec::new();
         let sun = cx.vec3("sun_color") * cx.f32("sun_intensity");
         if sun.max_element() > 0.0 {
@@ -336,23 +376,24 @@ impl Node for BtfShadingNode {
                 .vec3("sun_direction")
                 .try_normalize()
                 .ok_or_else(|| NodeError::msg("parameter \"sun_direction\" must not be zero"))?;
-            // The shader's boundary code: 1 eq. 6, 2 the triangles' own facing.
-            let boundary = match cx.choice::<SunBoundary>("sun_boundary") {
-                SunBoundary::Smooth => 1.0,
-                SunBoundary::Faces => 2.0,
-            };
-            lights.push(GpuLight { dir: towards.extend(boundary).to_array(), color: sun.extend(0.0).to_array() });
+            let boundary = cx.choice::<Boundary>("sun_boundary").code();
+            lights.push(unshadowed(towards.extend(boundary).to_array(), sun.extend(0.0).to_array()));
         }
         let scale = cx.f32("environment_intensity");
-        for l in env.iter().flat_map(|e| &e.lights) {
-            lights.push(GpuLight {
-                dir: l.direction.extend(0.0).to_array(),
-                color: (l.color * scale).extend(0.0).to_array(),
-            });
+        let boundary = cx.choice::<Boundary>("lights_boundary").code();
+        for (k, l) in env.iter().flat_map(|e| &e.lights).enumerate() {
+            let mut light =
+                unshadowed(l.direction.extend(boundary).to_array(), (l.color * scale).extend(0.0).to_array());
+            if let Some(atlas) = &shadows {
+                light.to_atlas = atlas.lights[k].to_atlas.to_cols_array_2d();
+                light.rect = atlas.lookup_rect(k);
+                light.shadow = [1.0, atlas.lights[k].normal_offset, 0.0, 0.0];
+            }
+            lights.push(light);
         }
         let count = lights.len();
         // A storage binding must not be empty.
-        lights.resize(count.max(1), GpuLight { dir: [0.0; 4], color: [0.0; 4] });
+        lights.resize(count.max(1), bytemuck::Zeroable::zeroed());
         let blur = cx.f32("shadow_blur");
         if self.ramp.as_ref().is_none_or(|(b, _)| *b != blur) {
             let bits: Vec<u16> =
@@ -398,7 +439,10 @@ impl Node for BtfShadingNode {
             inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
             eye: g.view.eye.extend(1.0).to_array(),
             size: [w as f32, h as f32, scale, material_id as f32],
-            btf: [0.0, 0.0, 0.0, cx.f32("exposure")],
+            btf: match &shadows {
+                Some(a) => [a.params.min_variance, a.params.bleed_reduction, a.params.depth_bias, cx.f32("exposure")],
+                None => [0.0, 0.0, 0.0, cx.f32("exposure")],
+            },
             tiling: [cx.f32("tiling"), rotation.cos(), rotation.sin(), cx.f32("alpha").to_radians()],
             background: background.extend(0.0).to_array(),
             rings: btf.rings_uniform(),
@@ -422,6 +466,8 @@ impl Node for BtfShadingNode {
             Bind::Texture(ids.as_ref().unwrap_or(&g.surface)),
             Bind::Storage(self.hem.as_ref().map_or(&light_buffer, |h| &h.vertices)),
             Bind::Storage(self.hem.as_ref().map_or(&light_buffer, |h| &h.sets)),
+            // Unbound: the normal stands in (never read).
+            Bind::Texture(shadows.as_ref().map_or(&g.normal, |a| &a.atlas)),
         ];
         let constants = [
             ("DIRECTIONS", btf.sampling.len() as u32),
@@ -430,6 +476,7 @@ impl Node for BtfShadingNode {
             ("LIGHTS", count as u32),
             ("BASE", u32::from(base.is_some())),
             ("HEM", u32::from(ids.is_some())),
+            ("SHADOWS", u32::from(shadows.is_some())),
         ];
         self.pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &constants)?;
         cx.count("lights", count);

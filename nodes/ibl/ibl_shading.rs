@@ -129,11 +129,10 @@ impl ShadowUniform {
         let mut u: ShadowUniform = bytemuck::Zeroable::zeroed();
         let Some(a) = atlas else { return u };
         let (w, h) = (a.atlas.width as f32, a.atlas.height as f32);
-        for (k, l) in a.lights.iter().skip(first).take(PEMS_PER_PASS).enumerate() {
-            u.to_atlas[k] = l.to_atlas.to_cols_array_2d();
-            let [x, y, tw, th] = l.rect.map(|v| v as f32);
-            u.rect[k] = [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h];
-            u.normal_offset[k] = l.normal_offset;
+        for (k, l) in a.lights.iter().enumerate().skip(first).take(PEMS_PER_PASS) {
+            u.to_atlas[k - first] = l.to_atlas.to_cols_array_2d();
+            u.rect[k - first] = a.lookup_rect(k);
+            u.normal_offset[k - first] = l.normal_offset;
         }
         let p = &a.params;
         (u.min_variance, u.bleed_reduction, u.jitter) = (p.min_variance, p.bleed_reduction, p.jitter);

@@ -5,3 +5,4 @@ pub mod ibl_shading;
 pub mod median_cut;
 pub mod pems;
 pub mod shadow_atlas;
+pub mod sun_light;

@@ -10,6 +10,7 @@
 
 // #include "fullscreen.wgsl"
 // #include "surface.wgsl"
+// #include "vsm_visibility.wgsl"
 
 // Mean + at most 32 eigentextures per slot (src/btf/gpu.rs MAX_COMPONENTS).
 const MAX_LAYERS: u32 = 33u;
@@ -28,13 +29,15 @@ override LIGHTS: u32 = 0u;
 override BASE: bool = false;
 // Whether the per-vertex weight sets (hem_ids, hem_corners, hem_sets) are bound.
 override HEM: bool = false;
+// Whether a shadow atlas of the `lights` input's lights is bound (shadow_atlas).
+override SHADOWS: bool = false;
 
 struct Params {
     inv_view_proj: mat4x4<f32>,
     eye: vec4<f32>,
     // width, height, environment intensity (HEM), material id
     size: vec4<f32>,
-    // unused (the constants above), exposure in w
+    // with SHADOWS the atlas's min variance, bleed reduction and depth bias; exposure in w
     btf: vec4<f32>,
     // tiles per UV unit, cos(rotation), sin(rotation), alpha of eq. 6 (radians)
     tiling: vec4<f32>,
@@ -45,11 +48,16 @@ struct Params {
 };
 
 // A directional light: dir.xyz towards the light, dir.w 1 where eq. 6's boundary applies, 2
-// where the triangles' facing cuts it (a shadow volume's hard boundary, Fig. 8 left);
-// color.rgb its irradiance on a surface facing it.
+// where the triangles' facing cuts it (a shadow volume's hard boundary, Fig. 8 left), 0 none;
+// color.rgb its irradiance on a surface facing it. Where shadow.x is 1, its visibility comes
+// from its tile of the shadow atlas: world to atlas coordinates, the tile inset by half a texel,
+// the lookup's offset along the normal in shadow.y.
 struct Light {
     dir: vec4<f32>,
     color: vec4<f32>,
+    to_atlas: mat4x4<f32>,
+    rect: vec4<f32>,
+    shadow: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -68,6 +76,8 @@ struct Light {
 @group(0) @binding(11) var hem_ids: texture_2d<u32>;
 @group(0) @binding(12) var<storage, read> hem_corners: array<u32>;
 @group(0) @binding(13) var<storage, read> hem_sets: array<f32>;
+// The moments of the lights' shadow maps (ShadowAtlas), read bilinearly through ramp_sampler.
+@group(0) @binding(14) var shadow_atlas: texture_2d<f32>;
 
 struct RingWeights {
     index: vec2<u32>,
@@ -153,6 +163,14 @@ fn smooth_shadow(cos_l: f32) -> f32 {
     let angle = acos(clamp(cos_l, -1.0, 1.0));
     let u = (1.0 + cos(min(params.tiling.w + angle, PI))) / 2.0;
     return textureSampleLevel(shadow_ramp, ramp_sampler, vec2<f32>(u, 0.5), 0.0).r;
+}
+
+// VIS of a shadowed light at world position p with normal n, as IblShading's `visibility`.
+fn light_visibility(light: Light, p: vec3<f32>, n: vec3<f32>) -> f32 {
+    let c = light.to_atlas * vec4<f32>(p + n * light.shadow.y, 1.0);
+    let uv = clamp(c.xy, light.rect.xy, light.rect.zw);
+    let m = textureSampleLevel(shadow_atlas, ramp_sampler, uv, 0.0).xy;
+    return chebyshev_visibility(m, c.z - params.btf.z, params.btf.x, params.btf.y);
 }
 
 // The world position of pixel q from its view depth (0: nothing there).
@@ -283,6 +301,10 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             break;
         }
     }
+    var p = vec3<f32>(0.0);
+    if SHADOWS {
+        p = world_at(px);
+    }
     // HEM: the pixel's triangle corners and barycentric weights.
     var hem_vertex = vec3<u32>(0u);
     var hem_weight = vec3<f32>(0.0);
@@ -324,6 +346,9 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             }
             if all(scale <= vec3<f32>(0.0)) {
                 continue;
+            }
+            if SHADOWS && light.shadow.x > 0.5 {
+                scale = scale * light_visibility(light, p, n);
             }
             let ld = to_direction(vec3<f32>(dot(l, fx), dot(l, fy), cos_l));
             let wl = direction_weights(ld.x, ld.y);

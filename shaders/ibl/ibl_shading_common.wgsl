@@ -77,6 +77,7 @@ struct Shadow {
 
 // #include "fullscreen.wgsl"
 // #include "cube.wgsl"
+// #include "vsm_visibility.wgsl"
 
 fn table(i: u32) -> f32 {
     return ibl.levels[i / 4u][i % 4u];
@@ -142,16 +143,7 @@ fn visibility(k: u32, p: vec3<f32>, n: vec3<f32>, px: vec2<i32>) -> f32 {
     let r = shadow.rect[k];
     uv = clamp(uv, r.xy, r.zw);
     let m = textureSampleLevel(atlas, samp, uv, 0.0).xy;
-    // The atlas holds moments of the centred depth (shaders/ibl/vsm.wgsl).
-    let t = c.z - shadow.bias.w - 0.5;
-    if t <= m.x {
-        return 1.0;
-    }
-    let variance = max(m.y - m.x * m.x, shadow.min_variance);
-    let d = t - m.x;
-    let p_max = variance / (variance + d * d);
-    let b = shadow.bleed_reduction;
-    return clamp((p_max - b) / (1.0 - b), 0.0, 1.0);
+    return chebyshev_visibility(m, c.z - shadow.bias.w, shadow.min_variance, shadow.bleed_reduction);
 }
 
 // Light k's term: its PEM's radiance times its visibility. The shadow lookup is skipped where

@@ -47,6 +47,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("occlusion/ssr.wgsl", include_str!("../../shaders/occlusion/ssr.wgsl")),
     ("occlusion/screen_space.wgsl", include_str!("../../shaders/occlusion/screen_space.wgsl")),
     ("ibl/vsm.wgsl", include_str!("../../shaders/ibl/vsm.wgsl")),
+    ("ibl/vsm_visibility.wgsl", include_str!("../../shaders/ibl/vsm_visibility.wgsl")),
     ("ibl/vsm_blur.wgsl", include_str!("../../shaders/ibl/vsm_blur.wgsl")),
     ("occlusion/hybrid_occlusion.wgsl", include_str!("../../shaders/occlusion/hybrid_occlusion.wgsl")),
     ("cuboid/cuboid.wgsl", include_str!("../../shaders/cuboid/cuboid.wgsl")),

@@ -55,6 +55,16 @@ pub struct ShadowAtlas {
     pub bytes: u64,
 }
 
+impl ShadowAtlas {
+    /// Light `k`'s tile in atlas coordinates, inset by half a texel (x0, y0, x1, y1): where a
+    /// bilinear lookup clamped to it reads only that tile.
+    pub fn lookup_rect(&self, k: usize) -> [f32; 4] {
+        let (w, h) = (self.atlas.width as f32, self.atlas.height as f32);
+        let [x, y, tw, th] = self.lights[k].rect.map(|v| v as f32);
+        [(x + 0.5) / w, (y + 0.5) / h, (x + tw - 0.5) / w, (y + th - 0.5) / h]
+    }
+}
+
 /// A light's view: looking along -`direction` at the sphere (c, r) from 2r away.
 pub fn light_view(direction: Vec3, center: Vec3, radius: f32) -> Mat4 {
     let l = direction.normalize_or(Vec3::Y);

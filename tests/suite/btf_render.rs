@@ -676,3 +676,76 @@ fn a_compressed_btf_file_shades_like_its_images() {
     let m = failure(&ev, "slot");
     assert!(m.contains("read compressed (.btfc)") && m.contains("input \"btf\""), "{m}");
 }
+
+/// A SunLight shadowed through a ShadowAtlas: a ball above a BTF-shaded floor, the sun at 45
+/// deg, seen from above. The ball's shadow is the disc's projection along the sun, an ellipse
+/// of semi-axes r and r sqrt(2) (area pi r^2 sqrt(2)) beside the ball; pixels outside it are
+/// exactly as without the atlas (VIS = 1 where the receiver is nearer than the moments' mean).
+#[test]
+fn a_sun_shadowed_through_the_atlas_casts_the_balls_shadow_on_the_btf_floor() {
+    let graph = |shadowed: bool| {
+        let (shadow_node, shadow_link) = if shadowed {
+            (
+                r#""atlas": (kind: "ShadowAtlas", params: { "tile_size": 256, "blur_scale": 0.0 }),"#,
+                r#"("scene.scene", "atlas.scene"), ("sun.lights", "atlas.lights"), ("atlas.shadows", "shade.shadows"),"#,
+            )
+        } else {
+            ("", "")
+        };
+        let text = format!(
+            r#"(version: 2, nodes: {{
+                "floor": (kind: "Primitive", params: {{ "shape": "plane", "size": 2.0 }}),
+                "fabric": (kind: "Material", params: {{ "base_color": [0.6, 0.5, 0.4], "btf_id": 1 }}),
+                "draw_floor": (kind: "Draw"),
+                "ball": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.25 }}),
+                "grey": (kind: "Material", params: {{ "base_color": [0.5, 0.5, 0.5] }}),
+                "draw_ball": (kind: "Draw", params: {{ "translate": [-0.3, 0.6, 0.0] }}),
+                "scene": (kind: "Merge"),
+                "camera": (kind: "OrbitCamera", params: {{ "distance": 3.0, "yaw": 0.0, "pitch": 89.0, "fov": 40.0 }}),
+                "gbuffer": (kind: "GBufferPass"),
+                "sun": (kind: "SunLight", params: {{ "direction": [1.0, -1.0, 0.0], "intensity": 3.0 }}),
+                "btf": (kind: "Btf", params: {{ "source": "lambert", "albedo": [0.6, 0.5, 0.4], "resolution": 2 }}),
+                "shade": (kind: "BtfShading", params: {{ "sun_intensity": 0.0, "lights_boundary": "smooth", "alpha": 0.0, "shadow_blur": 0.0 }}),
+                {shadow_node}
+                "out": (kind: "Preview"),
+            }}, links: [
+                ("floor.mesh", "draw_floor.mesh"), ("fabric.material", "draw_floor.material"),
+                ("ball.mesh", "draw_ball.mesh"), ("grey.material", "draw_ball.material"),
+                ("draw_floor.scene", "scene.a"), ("draw_ball.scene", "scene.b"),
+                ("scene.scene", "gbuffer.scene"), ("camera.camera", "gbuffer.camera"),
+                ("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"), ("sun.lights", "shade.lights"),
+                {shadow_link}
+                ("shade.image", "out.image"),
+            ])"#
+        );
+        Graph::load_str(&text, "btf-sun-shadow.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+    };
+    let size = 96usize;
+    let lit = image(&run_graph(&graph(false), size as u32, size as u32), "shade");
+    let shadowed = image(&run_graph(&graph(true), size as u32, size as u32), "shade");
+    let (mut floor, mut dark, mut same) = (0, 0, 0);
+    for i in 0..size * size {
+        let (a, b) = (lit.rgba[i * 4], shadowed.rgba[i * 4]);
+        // The floor's BTF pixels (the ball and the background are the background colour).
+        if a < 0.2 {
+            continue;
+        }
+        floor += 1;
+        if b < 0.3 * a {
+            dark += 1;
+        } else if (b - a).abs() <= 1e-6 {
+            same += 1;
+        }
+    }
+    // The view spans 2 x 3 tan(20 deg) = 2.18 m across 96 pixels.
+    let pixels_per_m2 = (size as f64 / (6.0 * 20f64.to_radians().tan())).powi(2);
+    let expected = std::f64::consts::PI * 0.25 * 0.25 * 2f64.sqrt() * pixels_per_m2;
+    eprintln!("sun shadow: {dark} dark pixels (ellipse {expected:.0}), {same} unchanged of {floor} floor pixels");
+    assert!(floor > 4000, "only {floor} floor pixels");
+    assert!(
+        (dark as f64 - expected).abs() < 0.25 * expected,
+        "{dark} shadowed pixels, the ellipse covers {expected:.0}"
+    );
+    let open = floor - dark;
+    assert!(same as f64 > 0.9 * open as f64, "{same} of {open} unshadowed floor pixels unchanged");
+}
