@@ -3,10 +3,11 @@
 use std::sync::Arc;
 
 use crate::btf::gpu::{GpuBtf, shadow_ramp};
-use crate::btf::hem::{Visibility, mesh_frames};
+use crate::btf::hem::{EigenWeightsets, Visibility, mesh_frames};
 use crate::core::node::prelude::*;
 use crate::gpu::pass::Bindings;
 use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
+use crate::ibl::cube::CubeImage;
 use crate::ibl::gpu::{EnvMap, Lights};
 use crate::ibl::shadow::ShadowAtlas;
 use crate::render::scene::{DrawItem, GBuffer};
@@ -17,7 +18,7 @@ const RAMP_SIZE: usize = 1024;
 pub static BTF_SHADING: NodeSpec = NodeSpec {
     kind: "BtfShading",
     category: Category::Lighting,
-    doc: "Deferred BTF shading (Sattler et al. 2003) of the pixels whose material's btf_id equals material_id: view and lights in the tangent frame of the item's UVs (the G-buffer's surface target), the 4 nearest view slots (eq. 5) and per light the 4 nearest light directions (eq. 3) with bilinear ring weights, coefficients blended before one pass over the mean and eigentextures (eqs. 3-4), times exposure (eq. 11). Lights: a directional sun with eq. 6's smooth shadow boundary (alpha and a blurred 1D texture), the directional lights of a MedianCut (environment light through its median-cut lights, without visibility), and an environment by the paper's per-vertex visibility and weight sets (HEM, eqs. 10-12) on the items of `scene`. The weave tiles `tiling` times per UV unit, turned by `rotation`. Other pixels show `base` (or the background colour).",
+    doc: "Deferred BTF shading (Sattler et al. 2003) of the pixels whose material's btf_id equals material_id: view and lights in the tangent frame of the item's UVs (the G-buffer's surface target), the 4 nearest view slots (eq. 5) and per light the 4 nearest light directions (eq. 3) with bilinear ring weights, coefficients blended before one pass over the mean and eigentextures (eqs. 3-4), times exposure (eq. 11). Lights: a directional sun with eq. 6's smooth shadow boundary (alpha and a blurred 1D texture), the directional lights of a MedianCut or SunLight (their visibility from a ShadowAtlas of them, `shadows`: cast shadows), and an environment by the paper's per-vertex visibility and weight sets (HEM, eqs. 10-12) on the items of `scene`, turned in real time by `environment_rotation`, directly or through eigen-weightsets (section 5.4). The weave tiles `tiling` times per UV unit, turned by `rotation`. Other pixels show `base` (or the background colour).",
     inputs: &[
         PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer to shade."),
         PortSpec::required("btf", PortType::Btf, "The compressed BTF (Btf)."),
@@ -104,6 +105,21 @@ pub static BTF_SHADING: NodeSpec = NodeSpec {
             "environment_intensity",
             ParamKind::Float { default: 1.0, min: 0.0, max: 1e5 },
             "Scales the lights of the `lights` input and the `environment`.",
+        ),
+        ParamSpec::new(
+            "environment_rotation",
+            ParamKind::Float { default: 0.0, min: -3600.0, max: 3600.0 },
+            "HEM: turns the environment about +Y by this many degrees (as EnvironmentMap's rotation), in real time: see rotation_steps.",
+        ),
+        ParamSpec::new(
+            "rotation_steps",
+            ParamKind::Int { default: 0, min: 0, max: 360 },
+            "HEM: 0 turns the probe itself (resampled, then light sums and eq. 12's product again, per new angle); A > 0 decomposes the weight sets of A rotations in 360/A degree steps once into eigen-weightsets (section 5.4, eq. 13), and each angle then sums eigen_sets of them, their weights o_ak interpolated between steps.",
+        ),
+        ParamSpec::new(
+            "eigen_sets",
+            ParamKind::Int { default: 5, min: 1, max: 360 },
+            "HEM with rotation_steps: the eigen-weightsets kept (e; the paper's 5), at most rotation_steps.",
         ),
         ParamSpec::new(
             "hemicube",
@@ -197,6 +213,8 @@ struct Hem {
     _held: (Vec<Arc<crate::mesh::Mesh>>, Arc<EnvMap>, Arc<GpuBtf>),
     visibility_key: u64,
     visibility: Vec<Visibility>,
+    /// Section 5.4's eigen-weightsets per item, and the key of the inputs they were made from.
+    eigen: Option<(u64, Vec<EigenWeightsets>)>,
     sets_key: u64,
     /// Per triangle corner: its world position (xyz, 1), and its vertex in `sets`.
     corners: wgpu::Buffer,
@@ -204,6 +222,19 @@ struct Hem {
     triangles: u32,
     /// U of every vertex: view slot, component, channel (f32).
     sets: wgpu::Buffer,
+}
+
+/// HEM's settings: the weave's rotation on the surface (radians), the hemicube's resolution,
+/// and how the environment turns about +Y: by `degrees`, directly (steps 0: the probe
+/// resampled, light sums and U again) or through the eigen-weightsets of `steps` rotations
+/// (section 5.4), keeping `eigen_sets` of them.
+#[derive(Clone, Copy)]
+struct HemSettings {
+    weave_rotation: f32,
+    hemicube: usize,
+    degrees: f32,
+    steps: usize,
+    eigen_sets: usize,
 }
 
 /// shaders/btf/btf_hem_ids.wgsl `Params`.
@@ -227,9 +258,9 @@ impl BtfShadingNode {
         items: &[&DrawItem],
         env: &Arc<EnvMap>,
         btf: &Arc<GpuBtf>,
-        rotation: f32,
-        hemicube: usize,
+        turn: HemSettings,
     ) -> Result<(), NodeError> {
+        let (rotation, hemicube) = (turn.weave_rotation, turn.hemicube);
         if !hemicube.is_multiple_of(2) {
             return Err(NodeError::msg(format!("parameter \"hemicube\" must be even, not {hemicube}")));
         }
@@ -243,13 +274,21 @@ impl BtfShadingNode {
             env.size() as u64,
             btf.sampling.len() as u64,
         ]));
-        let sets_key = hash_of([visibility_key, Arc::as_ptr(env) as u64, Arc::as_ptr(btf) as u64]);
+        let inputs_key = hash_of([visibility_key, Arc::as_ptr(env) as u64, Arc::as_ptr(btf) as u64]);
+        let eigen_key = hash_of([inputs_key, turn.steps as u64, turn.eigen_sets as u64]);
+        let sets_key = hash_of([eigen_key, u64::from(turn.degrees.to_bits())]);
         if self.hem.as_ref().is_some_and(|h| h.sets_key == sets_key) {
             return Ok(());
         }
         let failed = |e: anyhow::Error| NodeError::msg(format!("environment light (HEM): {e:#}"));
-        let visibility = match self.hem.take() {
-            Some(h) if h.visibility_key == visibility_key => h.visibility,
+        let (visibility, eigen) = match self.hem.take() {
+            Some(h) if h.visibility_key == visibility_key => {
+                (h.visibility, h.eigen.filter(|(key, _)| turn.steps > 0 && *key == eigen_key))
+            }
+            _ => (Vec::new(), None),
+        };
+        let visibility = match visibility {
+            v if !v.is_empty() => v,
             _ => items
                 .iter()
                 .map(|item| {
@@ -259,14 +298,45 @@ impl BtfShadingNode {
                 .collect::<anyhow::Result<_>>()
                 .map_err(failed)?,
         };
+        // Section 5.4: with steps, the weight sets of `steps` rotations decomposed once into
+        // eigen-weightsets per item, then each rotation is a sum of them (eq. 13).
+        let eigen = match eigen {
+            Some(e) => Some(e),
+            None if turn.steps > 0 => {
+                let step = 360.0 / turn.steps as f32;
+                let turned: Vec<Arc<CubeImage>> = (0..turn.steps)
+                    .map(|a| if a == 0 { env.texels.clone() } else { Arc::new(env.texels.rotated_y(a as f32 * step)) })
+                    .collect();
+                let sets = visibility
+                    .iter()
+                    .map(|vis| {
+                        let sums: Vec<Vec<f32>> =
+                            turned.iter().map(|cube| vis.light_sums(cube, 0)).collect::<anyhow::Result<_>>()?;
+                        EigenWeightsets::new(&btf.table, &sums, turn.eigen_sets.min(turn.steps), 0)
+                    })
+                    .collect::<anyhow::Result<Vec<_>>>()
+                    .map_err(failed)?;
+                Some((eigen_key, sets))
+            }
+            None => None,
+        };
+        let turned_env = match (&eigen, turn.degrees) {
+            (None, d) if d != 0.0 => Arc::new(env.texels.rotated_y(d)),
+            _ => env.texels.clone(),
+        };
         let (mut corners, mut vertices, mut sets) = (Vec::new(), Vec::new(), Vec::new());
         let set_len = btf.table.set_len();
-        for (item, vis) in items.iter().zip(&visibility) {
+        for (index, (item, vis)) in items.iter().zip(&visibility).enumerate() {
             let first = (sets.len() / set_len) as u32;
-            let g = vis.light_sums(&env.texels, 0).map_err(failed)?;
+            let u = match &eigen {
+                Some((_, per_item)) => {
+                    per_item[index].weight_set_at(f64::from(turn.degrees) * turn.steps as f64 / 360.0, 0)
+                }
+                None => btf.table.weight_sets(&vis.light_sums(&turned_env, 0).map_err(failed)?, 0),
+            };
             // Channels innermost: the values a pixel reads per corner and view slot lie together.
             let row = btf.table.views * btf.table.per_slot;
-            for set in btf.table.weight_sets(&g, 0).chunks_exact(set_len) {
+            for set in u.chunks_exact(set_len) {
                 sets.extend((0..row).flat_map(|jk| [set[jk], set[row + jk], set[2 * row + jk]]));
             }
             for &i in &item.mesh.indices {
@@ -292,6 +362,7 @@ impl BtfShadingNode {
             _held: (items.iter().map(|item| item.mesh.clone()).collect(), env.clone(), btf.clone()),
             visibility_key,
             visibility,
+            eigen,
             sets_key,
             corners: gpu.create_buffer_init("btf hem corners", bytemuck::cast_slice(&corners), storage),
             vertices: gpu.create_buffer_init("btf hem vertices", bytemuck::cast_slice(&vertices), storage),
@@ -420,7 +491,14 @@ impl Node for BtfShadingNode {
                         "no item of input \"scene\" has a material with btf_id {material_id} (parameter \"material_id\")"
                     )));
                 }
-                self.update_hem(gpu, &items, probe, &btf, rotation, cx.int("hemicube") as usize)?;
+                let turn = HemSettings {
+                    weave_rotation: rotation,
+                    hemicube: cx.int("hemicube") as usize,
+                    degrees: cx.f32("environment_rotation"),
+                    steps: cx.int("rotation_steps") as usize,
+                    eigen_sets: cx.int("eigen_sets") as usize,
+                };
+                self.update_hem(gpu, &items, probe, &btf, turn)?;
                 Some(self.draw_ids(gpu, &g)?)
             }
             (None, None) => {

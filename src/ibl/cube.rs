@@ -244,6 +244,26 @@ pub const SUPERSAMPLE: usize = 4;
 /// A probe resampled into a cube map (what `EnvironmentMap` uploads): each texel the mean of SUPERSAMPLE^2
 /// bilinear lookups spread evenly over it, times `intensity`.
 pub fn cube_from_equirect(eq: &EquirectImage, size: usize, rotation_deg: f32, intensity: f32) -> CubeImage {
+    resample_rotated(size, rotation_deg, intensity, |d| eq.sample(d))
+}
+
+impl CubeImage {
+    /// This map turned about +Y by `degrees` as `EnvironmentMap`'s rotation turns a probe (a
+    /// texel towards `d` shows this map along `rotate_y(d, -degrees)`), resampled like
+    /// [`cube_from_equirect`]: for environments rotated in real time (BtfShading's HEM).
+    pub fn rotated_y(&self, degrees: f32) -> CubeImage {
+        resample_rotated(self.size, degrees, 1.0, |d| self.sample(d).truncate())
+    }
+}
+
+/// A `size` cube map whose texel towards `d` is the mean of SUPERSAMPLE^2 lookups of `radiance`
+/// along `rotate_y(d', -rotation_deg)` over the texel, times `intensity`.
+fn resample_rotated(
+    size: usize,
+    rotation_deg: f32,
+    intensity: f32,
+    radiance: impl Fn(Vec3) -> Vec3 + Sync,
+) -> CubeImage {
     let n = SUPERSAMPLE;
     CubeImage::from_fn_parallel(size, |face, x, y| {
         let mut sum = Vec3::ZERO;
@@ -251,7 +271,7 @@ pub fn cube_from_equirect(eq: &EquirectImage, size: usize, rotation_deg: f32, in
             for i in 0..n {
                 let u = (2.0 * (x as f32 + (i as f32 + 0.5) / n as f32)) / size as f32 - 1.0;
                 let v = (2.0 * (y as f32 + (j as f32 + 0.5) / n as f32)) / size as f32 - 1.0;
-                sum += eq.sample(rotate_y(face_dir(face, u, v), -rotation_deg));
+                sum += radiance(rotate_y(face_dir(face, u, v), -rotation_deg));
             }
         }
         (sum * (intensity / (n * n) as f32)).extend(1.0)
