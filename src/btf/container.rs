@@ -117,6 +117,24 @@ pub(super) fn header_line(bytes: &[u8]) -> anyhow::Result<(&[u8], &[u8])> {
     Ok((&bytes[..end], &bytes[end + 1..]))
 }
 
+/// The checks every BTF header shares: its format and version are `(found, expected)`, RGB,
+/// and a size in 1..8192.
+pub(super) fn check_header(
+    (format, want_format): (&str, &str),
+    (version, want_version): (u32, u32),
+    channels: u32,
+    (width, height): (u32, u32),
+) -> anyhow::Result<()> {
+    ensure!(format == want_format, "the header's format is {format:?}, not {want_format:?}");
+    ensure!(version == want_version, "version {version} (this build reads version {want_version})");
+    ensure!(channels == 3, "{channels} channels (RGB, 3, expected)");
+    ensure!(
+        width > 0 && height > 0 && width <= 8192 && height <= 8192,
+        "image size {width}x{height} is out of range (1..8192)"
+    );
+    Ok(())
+}
+
 /// The sampling of a header's `[theta, count]` rings, checked.
 pub(super) fn sampling_from_rings(rings: &[(f64, usize)]) -> anyhow::Result<Sampling> {
     let sampling =
@@ -129,16 +147,8 @@ pub(super) fn sampling_from_rings(rings: &[(f64, usize)]) -> anyhow::Result<Samp
 fn parse(bytes: &[u8]) -> anyhow::Result<Btf> {
     let (line, raw) = header_line(bytes)?;
     let header: Header = serde_json::from_slice(line).context("the header is not valid")?;
-    ensure!(header.format == FORMAT, "the header's format is {:?}, not {FORMAT:?}", header.format);
-    ensure!(header.version == VERSION, "version {} (this build reads version {VERSION})", header.version);
+    check_header((&header.format, FORMAT), (header.version, VERSION), header.channels, (header.width, header.height))?;
     ensure!(header.encoding == "f16-le", "encoding {:?} (only \"f16-le\" is read)", header.encoding);
-    ensure!(header.channels == 3, "{} channels (RGB, 3, expected)", header.channels);
-    ensure!(
-        header.width > 0 && header.height > 0 && header.width <= 8192 && header.height <= 8192,
-        "image size {}x{} is out of range (1..8192)",
-        header.width,
-        header.height
-    );
     let sampling = sampling_from_rings(&header.rings)?;
     for (what, list) in [("views", &header.views), ("lights", &header.lights)] {
         check_directions(&sampling, list).with_context(|| format!("the header's {what}"))?;

@@ -19,7 +19,7 @@ use std::path::Path;
 use anyhow::{Context, bail, ensure};
 use serde::{Deserialize, Serialize};
 
-use super::container::{header_line, sampling_from_rings};
+use super::container::{check_header, header_line, sampling_from_rings};
 use super::directions::Sampling;
 use super::pca::{Centring, Compressed, SlotPca};
 
@@ -199,16 +199,8 @@ impl Reader<'_> {
 fn parse(bytes: &[u8]) -> anyhow::Result<PcaFile> {
     let (line, data) = header_line(bytes)?;
     let header: Header = serde_json::from_slice(line).context("the header is not valid")?;
-    ensure!(header.format == FORMAT, "the header's format is {:?}, not {FORMAT:?}", header.format);
-    ensure!(header.version == VERSION, "version {} (this build reads version {VERSION})", header.version);
+    check_header((&header.format, FORMAT), (header.version, VERSION), header.channels, (header.width, header.height))?;
     ensure!(header.images == "u8-affine", "images {:?} (only \"u8-affine\" is read)", header.images);
-    ensure!(header.channels == 3, "{} channels (RGB, 3, expected)", header.channels);
-    ensure!(
-        header.width > 0 && header.height > 0 && header.width <= 8192 && header.height <= 8192,
-        "image size {}x{} is out of range (1..8192)",
-        header.width,
-        header.height
-    );
     let centring = match header.centring.as_str() {
         "mean" => Centring::Mean,
         "none" => Centring::None,
