@@ -154,18 +154,22 @@ impl Node for BtfNode {
             )));
         }
         let gpu_btf = match &*loaded {
+            LoadedBtf::Images(btf) if cx.bool("frontal") => {
+                // Kept as BtfSlot's source; its PCA in closed form (rank one).
+                let frontal_btf = Arc::new(btf.frontal().map_err(frontal)?);
+                let pca = crate::btf::pca::lambertian(&btf.sampling, &btf.data[..btf.image_len()]);
+                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(frontal_btf), components)
+            }
             LoadedBtf::Images(btf) => {
-                let btf = if cx.bool("frontal") { Arc::new(btf.frontal().map_err(frontal)?) } else { btf.clone() };
-                let pca = compress(&btf, components, Centring::Mean);
+                let pca = compress(btf, components, Centring::Mean);
                 upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components)
             }
             LoadedBtf::Compressed(file) if cx.bool("frontal") => {
-                // The frontal image, decoded, spread over every direction as for images.
+                // The frontal image decoded, lit by cos(theta_i) alone: a rank-one PCA.
+                crate::btf::check_frontal(&file.sampling).map_err(frontal)?;
                 let slot = file.compressed.slots.first().ok_or_else(|| NodeError::msg("the compressed BTF has no view slot"))?;
-                let btf = Btf::of_frontal_image(file.sampling.clone(), file.width, file.height, &slot.reconstruct(0));
-                let btf = Arc::new(btf.map_err(frontal)?);
-                let pca = compress(&btf, components, Centring::Mean);
-                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components)
+                let pca = crate::btf::pca::lambertian(&file.sampling, &slot.reconstruct(0));
+                upload(gpu, &pca, &file.sampling, (file.width, file.height), None, components)
             }
             LoadedBtf::Compressed(file) => {
                 if file.compressed.centring != Centring::Mean {
