@@ -102,7 +102,7 @@ pub fn hem(small: bool, mut report: impl FnMut(&HemRow)) -> anyhow::Result<Vec<H
     // The U product is dense in (view, component) whatever the BTF holds, so the timing does not
     // depend on it; a Lambertian BTF is cheap to make.
     let btf = crate::btf::Btf::lambertian(sampling.clone(), 4, 4, |x, y| [0.2 + 0.1 * (x + y) as f32; 3]);
-    let table = WeightTable::new(&compress(&btf, 16, Centring::Mean), &sampling)?;
+    let table = WeightTable::new(&compress(&btf, 16, Centring::Mean), &sampling, 16)?;
     let probe = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/hdri/forest.hdr");
     let equirect = crate::ibl::cube::EquirectImage::load(&probe)?;
     let env = |degrees: f32| crate::ibl::cube::cube_from_equirect(&equirect, env_size, degrees, 1.0);

@@ -157,7 +157,7 @@ pub fn upload(
         width,
         height,
         bytes: image_bytes + coeff_bytes,
-        table: super::hem::WeightTable::new(pca, sampling)?,
+        table: super::hem::WeightTable::new(pca, sampling, components)?,
         source,
     })
 }

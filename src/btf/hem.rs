@@ -284,19 +284,20 @@ pub struct WeightTable {
 }
 
 impl WeightTable {
-    /// From a BTF of `sampling` compressed per view slot.
-    pub fn new(compressed: &Compressed, sampling: &Sampling) -> anyhow::Result<WeightTable> {
+    /// From a BTF of `sampling` compressed per view slot, with `components` eigentextures per
+    /// slot as drawn (the GPU's layers per slot less one; a slot keeping fewer has zeros).
+    pub fn new(compressed: &Compressed, sampling: &Sampling, components: usize) -> anyhow::Result<WeightTable> {
         let (views, lights) = (compressed.slots.len(), sampling.len());
         ensure!(views == lights, "{views} compressed view slots for a sampling of {lights} directions");
-        let per_slot = compressed.components + 1;
+        let per_slot = components + 1;
         let mut coeffs = vec![0.0f32; lights * views * per_slot];
         for (j, slot) in compressed.slots.iter().enumerate() {
-            let c = slot.components();
+            let (stored, c) = (slot.components(), slot.components().min(components));
             for i in 0..lights {
                 let row = &mut coeffs[(i * views + j) * per_slot..][..per_slot];
                 // The mean's weight is the sum of the light weights (eq. 4's k = 0).
                 row[0] = if slot.mean.is_empty() { 0.0 } else { 1.0 };
-                row[1..=c].copy_from_slice(&slot.coeffs[i * c..][..c]);
+                row[1..=c].copy_from_slice(&slot.coeffs[i * stored..][..c]);
             }
         }
         Ok(WeightTable { sampling: sampling.clone(), lights, views, per_slot, coeffs })
@@ -600,7 +601,7 @@ mod tests {
         let sampling = Sampling::h2_tests();
         let btf = noise_btf(sampling.clone());
         let compressed = compress(&btf, sampling.len(), Centring::Mean);
-        let table = WeightTable::new(&compressed, &sampling).unwrap();
+        let table = WeightTable::new(&compressed, &sampling, compressed.components).unwrap();
         let mut scene = ground(4);
         add_sphere(&mut scene, Vec3::new(0.1, -0.2, 0.45), 0.35);
         let (res, env_size) = (6, 8);
@@ -663,7 +664,7 @@ mod tests {
         let sampling = Sampling::h2_tests();
         let btf = Btf::lambertian(sampling.clone(), 2, 2, |_, _| [1.0; 3]);
         let compressed = compress(&btf, 2, Centring::Mean);
-        let table = WeightTable::new(&compressed, &sampling).unwrap();
+        let table = WeightTable::new(&compressed, &sampling, compressed.components).unwrap();
         let vis = Visibility::compute(&scene.positions, &scene.frames, &scene.indices, &sampling, 32, 4, 0).unwrap();
         let env = CubeImage::from_fn(4, |_, _, _| Vec4::ONE);
         let u = table.weight_sets(&vis.light_sums(&env, 0).unwrap(), 0);
@@ -701,7 +702,7 @@ mod tests {
     fn eigen_weightsets_are_exact_with_all_components_and_converge() {
         let sampling = Sampling::h2_tests();
         let compressed = compress(&noise_btf(sampling.clone()), 5, Centring::Mean);
-        let table = WeightTable::new(&compressed, &sampling).unwrap();
+        let table = WeightTable::new(&compressed, &sampling, compressed.components).unwrap();
         let mut scene = ground(3);
         add_sphere(&mut scene, Vec3::new(0.0, 0.0, 0.5), 0.4);
         let vis = Visibility::compute(&scene.positions, &scene.frames, &scene.indices, &sampling, 8, 8, 0).unwrap();
