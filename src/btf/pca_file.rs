@@ -115,10 +115,13 @@ impl Compressed {
 /// The exact size in bytes of the file [`save`] writes for `pca`, without its header line.
 pub fn data_bytes(pca: &Compressed) -> usize {
     let n = pca.slots.len();
-    pca.slots
-        .iter()
-        .map(|s| 8 * n + 4 * n * s.components() + stored_images(s).map(|i| 24 + i.len()).sum::<usize>())
-        .sum()
+    pca.slots.iter().map(|s| slot_bytes(n, s.components(), s.dim, !s.mean.is_empty())).sum()
+}
+
+/// The bytes of one view slot in the file: n eigenvalues, n x `kept` coefficients, and per
+/// stored image (the mean where `centred`, the kept eigentextures) its ranges and `dim` bytes.
+pub fn slot_bytes(n: usize, kept: usize, dim: usize, centred: bool) -> usize {
+    8 * n + 4 * n * kept + (kept + usize::from(centred)) * (24 + dim)
 }
 
 /// Writes `pca`, the per-view PCA of a `width x height` BTF on `sampling`, to `path`.
@@ -304,7 +307,7 @@ mod tests {
         }
         // An 8-bit BTF (the paper's 1230 MB) against its 8-bit PCA: the 256² tier of 81 x 81
         // directions at c = 16 fits the paper's 260 MB.
-        let slot = 8 * 81 + 4 * 81 * 16 + 17 * (24 + 256 * 256 * 3);
+        let slot = slot_bytes(81, 16, 256 * 256 * 3, true);
         assert!(((81 * slot) as f64 / (1 << 20) as f64) < 260.0);
         let images = dir().join("roundtrip.btf");
         crate::btf::container::save(&btf, &images).unwrap();
