@@ -9,7 +9,7 @@ use crate::gpu::pass::Bindings;
 use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
 use crate::ibl::cube::CubeImage;
 use crate::ibl::gpu::{EnvMap, Lights};
-use crate::ibl::shadow::ShadowAtlas;
+use crate::ibl::shadow::{GpuLight, ShadowAtlas, vsm_settings};
 use crate::render::scene::{DrawItem, GBuffer};
 
 /// Texels of eq. 6's 1D texture (the paper's 1024).
@@ -166,20 +166,6 @@ struct Params {
     tiling: [f32; 4],
     background: [f32; 4],
     rings: [[f32; 4]; crate::btf::gpu::MAX_RINGS],
-}
-
-/// shaders/btf/btf_shading.wgsl `Light`.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct GpuLight {
-    dir: [f32; 4],
-    color: [f32; 4],
-    /// World to its shadow tile's atlas coordinates (zero: unshadowed).
-    to_atlas: [[f32; 4]; 4],
-    /// Its tile in atlas coordinates, inset by half a texel.
-    rect: [f32; 4],
-    /// x: 1 where shadowed, y: the lookup's normal offset (world units).
-    shadow: [f32; 4],
 }
 
 struct BtfShadingNode {
@@ -439,7 +425,6 @@ impl Node for BtfShadingNode {
                 atlas.lights.len()
             )));
         }
-        let unshadowed = |dir: [f32; 4], color: [f32; 4]| GpuLight { dir, color, ..bytemuck::Zeroable::zeroed() };
         let mut lights = Vec::new();
         let sun = cx.vec3("sun_color") * cx.f32("sun_intensity");
         if sun.max_element() > 0.0 {
@@ -448,19 +433,17 @@ impl Node for BtfShadingNode {
                 .try_normalize()
                 .ok_or_else(|| NodeError::msg("parameter \"sun_direction\" must not be zero"))?;
             let boundary = cx.choice::<Boundary>("sun_boundary").code();
-            lights.push(unshadowed(towards.extend(boundary).to_array(), sun.extend(0.0).to_array()));
+            lights.push(GpuLight::unshadowed(towards.extend(boundary).to_array(), sun.extend(0.0).to_array()));
         }
         let scale = cx.f32("environment_intensity");
         let boundary = cx.choice::<Boundary>("lights_boundary").code();
         for (k, l) in env.iter().flat_map(|e| &e.lights).enumerate() {
-            let mut light =
-                unshadowed(l.direction.extend(boundary).to_array(), (l.color * scale).extend(0.0).to_array());
-            if let Some(atlas) = &shadows {
-                light.to_atlas = atlas.lights[k].to_atlas.to_cols_array_2d();
-                light.rect = atlas.lookup_rect(k);
-                light.shadow = [1.0, atlas.lights[k].normal_offset, 0.0, 0.0];
-            }
-            lights.push(light);
+            let light =
+                GpuLight::unshadowed(l.direction.extend(boundary).to_array(), (l.color * scale).extend(0.0).to_array());
+            lights.push(match &shadows {
+                Some(atlas) => light.shadowed_by(atlas, k),
+                None => light,
+            });
         }
         let count = lights.len();
         // A storage binding must not be empty.
@@ -517,9 +500,9 @@ impl Node for BtfShadingNode {
             inv_view_proj: g.view.inv_view_proj.to_cols_array_2d(),
             eye: g.view.eye.extend(1.0).to_array(),
             size: [w as f32, h as f32, scale, material_id as f32],
-            btf: match &shadows {
-                Some(a) => [a.params.min_variance, a.params.bleed_reduction, a.params.depth_bias, cx.f32("exposure")],
-                None => [0.0, 0.0, 0.0, cx.f32("exposure")],
+            btf: {
+                let [min_variance, bleed, bias] = vsm_settings(shadows.as_deref());
+                [min_variance, bleed, bias, cx.f32("exposure")]
             },
             tiling: [cx.f32("tiling"), rotation.cos(), rotation.sin(), cx.f32("alpha").to_radians()],
             background: background.extend(0.0).to_array(),

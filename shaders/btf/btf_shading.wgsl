@@ -10,7 +10,7 @@
 
 // #include "fullscreen.wgsl"
 // #include "surface.wgsl"
-// #include "vsm_visibility.wgsl"
+// #include "shadowed_light.wgsl"
 
 // Mean + at most 32 eigentextures per slot (src/btf/gpu.rs MAX_COMPONENTS).
 const MAX_LAYERS: u32 = 33u;
@@ -47,18 +47,8 @@ struct Params {
     rings: array<vec4<f32>, MAX_RINGS>,
 };
 
-// A directional light: dir.xyz towards the light, dir.w 1 where eq. 6's boundary applies, 2
-// where the triangles' facing cuts it (a shadow volume's hard boundary, Fig. 8 left), 0 none;
-// color.rgb its irradiance on a surface facing it. Where shadow.x is 1, its visibility comes
-// from its tile of the shadow atlas: world to atlas coordinates, the tile inset by half a texel,
-// the lookup's offset along the normal in shadow.y.
-struct Light {
-    dir: vec4<f32>,
-    color: vec4<f32>,
-    to_atlas: mat4x4<f32>,
-    rect: vec4<f32>,
-    shadow: vec4<f32>,
-};
+// The lights (shadowed_light.wgsl): dir.w 1 where eq. 6's boundary applies, 2 where the
+// triangles' facing cuts it (a shadow volume's hard boundary, Fig. 8 left), 0 none.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var g_normal: texture_2d<f32>;
@@ -163,14 +153,6 @@ fn smooth_shadow(cos_l: f32) -> f32 {
     let angle = acos(clamp(cos_l, -1.0, 1.0));
     let u = (1.0 + cos(min(params.tiling.w + angle, PI))) / 2.0;
     return textureSampleLevel(shadow_ramp, ramp_sampler, vec2<f32>(u, 0.5), 0.0).r;
-}
-
-// VIS of a shadowed light at world position p with normal n, as IblShading's `visibility`.
-fn light_visibility(light: Light, p: vec3<f32>, n: vec3<f32>) -> f32 {
-    let c = light.to_atlas * vec4<f32>(p + n * light.shadow.y, 1.0);
-    let uv = clamp(c.xy, light.rect.xy, light.rect.zw);
-    let m = textureSampleLevel(shadow_atlas, ramp_sampler, uv, 0.0).xy;
-    return chebyshev_visibility(m, c.z - params.btf.z, params.btf.x, params.btf.y);
 }
 
 // The world position of pixel q from its view depth (0: nothing there).
@@ -347,8 +329,8 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             if all(scale <= vec3<f32>(0.0)) {
                 continue;
             }
-            if SHADOWS && light.shadow.x > 0.5 {
-                scale = scale * light_visibility(light, p, n);
+            if SHADOWS {
+                scale = scale * light_visibility(light, shadow_atlas, ramp_sampler, p, n, params.btf.xyz);
             }
             let ld = to_direction(vec3<f32>(dot(l, fx), dot(l, fy), cos_l));
             let wl = direction_weights(ld.x, ld.y);

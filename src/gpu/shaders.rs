@@ -48,6 +48,7 @@ const EMBEDDED: &[(&str, &str)] = &[
     ("occlusion/screen_space.wgsl", include_str!("../../shaders/occlusion/screen_space.wgsl")),
     ("ibl/vsm.wgsl", include_str!("../../shaders/ibl/vsm.wgsl")),
     ("ibl/vsm_visibility.wgsl", include_str!("../../shaders/ibl/vsm_visibility.wgsl")),
+    ("ibl/shadowed_light.wgsl", include_str!("../../shaders/ibl/shadowed_light.wgsl")),
     ("ibl/vsm_blur.wgsl", include_str!("../../shaders/ibl/vsm_blur.wgsl")),
     ("occlusion/hybrid_occlusion.wgsl", include_str!("../../shaders/occlusion/hybrid_occlusion.wgsl")),
     ("cuboid/cuboid.wgsl", include_str!("../../shaders/cuboid/cuboid.wgsl")),

@@ -65,6 +65,45 @@ impl ShadowAtlas {
     }
 }
 
+/// A directional light as the shaders that read its tile themselves take it
+/// (shaders/ibl/shadowed_light.wgsl `Light`: BtfShading, ScreenSpaceReflections).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuLight {
+    /// xyz towards the light; w a code of the shader that reads it.
+    pub dir: [f32; 4],
+    /// rgb: irradiance on a surface facing it.
+    pub color: [f32; 4],
+    /// World to its tile's atlas coordinates (zero: unshadowed).
+    pub to_atlas: [[f32; 4]; 4],
+    /// Its tile in atlas coordinates, inset by half a texel.
+    pub rect: [f32; 4],
+    /// x: 1 where shadowed, y: the lookup's normal offset (world units).
+    pub shadow: [f32; 4],
+}
+
+impl GpuLight {
+    pub fn unshadowed(dir: [f32; 4], color: [f32; 4]) -> GpuLight {
+        GpuLight { dir, color, ..bytemuck::Zeroable::zeroed() }
+    }
+
+    /// This light with the visibility of `atlas`'s light `k`.
+    pub fn shadowed_by(self, atlas: &ShadowAtlas, k: usize) -> GpuLight {
+        GpuLight {
+            to_atlas: atlas.lights[k].to_atlas.to_cols_array_2d(),
+            rect: atlas.lookup_rect(k),
+            shadow: [1.0, atlas.lights[k].normal_offset, 0.0, 0.0],
+            ..self
+        }
+    }
+}
+
+/// `vsm` of shaders/ibl/shadowed_light.wgsl: the atlas's minimum variance, bleed reduction and
+/// depth bias (zero without an atlas).
+pub fn vsm_settings(atlas: Option<&ShadowAtlas>) -> [f32; 3] {
+    atlas.map_or([0.0; 3], |a| [a.params.min_variance, a.params.bleed_reduction, a.params.depth_bias])
+}
+
 /// A light's view: looking along -`direction` at the sphere (c, r) from 2r away.
 pub fn light_view(direction: Vec3, center: Vec3, radius: f32) -> Mat4 {
     let l = direction.normalize_or(Vec3::Y);
