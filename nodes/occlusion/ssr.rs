@@ -8,8 +8,9 @@ use std::sync::Arc;
 
 use super::GatherResolve;
 use crate::core::node::prelude::*;
-use crate::gpu::{Bind, GpuImage};
-use crate::ibl::gpu::EnvMap;
+use crate::gpu::{Bind, BufferRing, GpuImage, SamplerKind};
+use crate::ibl::gpu::{EnvMap, Lights};
+use crate::ibl::shadow::{GpuLight, ShadowAtlas, vsm_settings};
 use crate::render::scene::GBuffer;
 
 pub static SCREEN_SPACE_REFLECTIONS: NodeSpec = NodeSpec {
@@ -40,6 +41,16 @@ unchanged). Surfaces hidden from the camera are not reflected (a ray passing beh
             PortType::Environment,
             "The environment map IblShading's PEMs come from: weighs the escaped directions.",
         ),
+        PortSpec::optional(
+            "lights",
+            PortType::Lights,
+            "With `ground`: the directional lights (MedianCut) that light the hidden ground.",
+        ),
+        PortSpec::optional(
+            "shadows",
+            PortType::ShadowAtlas,
+            "With `ground`: a ShadowAtlas of `lights` (in their order), their visibility on the hidden ground.",
+        ),
     ],
     outputs: &[PortSpec::output("image", PortType::Texture, "The image with screen-space reflections.")],
     params: &[
@@ -62,6 +73,21 @@ unchanged). Surfaces hidden from the camera are not reflected (a ray passing beh
             "thickness",
             ParamKind::Float { default: 0.3, min: 0.0, max: 1e4 },
             "How far behind the visible surface a ray may cross it and still hit it, world units (plus the step's depth).",
+        ),
+        ParamSpec::new(
+            "ground",
+            ParamKind::Bool { default: false },
+            "Rays that find nothing on screen and go down meet the plane y = ground_height, lit by `lights` through `shadows`: radiance ground_albedo / pi x sum VIS_i E_i max(0, l_i . y), the floor a glossy object reflects where the camera cannot see it (under the object itself).",
+        ),
+        ParamSpec::new(
+            "ground_height",
+            ParamKind::Float { default: 0.0, min: -1e4, max: 1e4 },
+            "The ground plane's height (world y).",
+        ),
+        ParamSpec::new(
+            "ground_albedo",
+            ParamKind::Color { default: [0.5, 0.5, 0.5] },
+            "The ground's albedo (linear RGB), as its material's base colour.",
         ),
         ParamSpec::new(
             "extend",
@@ -90,11 +116,21 @@ struct SsrUniform {
     _pad: [f32; 2],
     /// March steps, bisections, resolve taps.
     loops: [u32; 4],
+    /// The ground: rgb its albedo, w its height.
+    ground: [f32; 4],
+    /// The atlas's min variance, bleed reduction, depth bias (ibl::shadow::vsm_settings).
+    vsm: [f32; 4],
 }
 
-#[derive(Default)]
 struct SsrNode {
     passes: Option<GatherResolve>,
+    lights: BufferRing,
+}
+
+impl Default for SsrNode {
+    fn default() -> Self {
+        SsrNode { passes: None, lights: BufferRing::new("ssr lights", wgpu::BufferUsages::STORAGE) }
+    }
 }
 
 impl Node for SsrNode {
@@ -103,6 +139,9 @@ impl Node for SsrNode {
         let g: Arc<GBuffer> = cx.input("gbuffer")?;
         let image: Arc<GpuImage> = cx.input("image")?;
         let env: Arc<EnvMap> = cx.input("environment")?;
+        let sky: Option<Arc<Lights>> = cx.optional("lights");
+        let shadows: Option<Arc<ShadowAtlas>> = cx.optional("shadows");
+        let ground = cx.bool("ground");
         super::check_image_size(&image, &g)?;
         let max_distance = cx.f32("max_distance");
         let u = SsrUniform {
@@ -119,9 +158,47 @@ impl Node for SsrNode {
             extend: cx.f32("extend") * g.height() as f32,
             _pad: [0.0; 2],
             loops: [16, 4, 16, 0],
+            ground: cx.vec3("ground_albedo").extend(cx.f32("ground_height")).to_array(),
+            vsm: {
+                let [a, b, c] = vsm_settings(shadows.as_deref());
+                [a, b, c, 0.0]
+            },
         };
+        let mut lights: Vec<GpuLight> = Vec::new();
+        if ground {
+            let Some(sky) = &sky else {
+                return Err(NodeError::msg(
+                    "parameter \"ground\" is on but input \"lights\" is not connected: the ground is lit by them",
+                ));
+            };
+            if let Some(atlas) = &shadows
+                && atlas.lights.len() != sky.lights.len()
+            {
+                return Err(NodeError::msg(format!(
+                    "input \"shadows\" holds {} lights but input \"lights\" has {}: feed both from the same MedianCut",
+                    atlas.lights.len(),
+                    sky.lights.len()
+                )));
+            }
+            for (k, l) in sky.lights.iter().enumerate() {
+                let light = GpuLight::unshadowed(l.direction.extend(0.0).to_array(), l.color.extend(0.0).to_array());
+                lights.push(shadows.as_ref().map_or(light, |a| light.shadowed_by(a, k)));
+            }
+        }
+        let count = lights.len();
+        // A storage binding must not be empty.
+        lights.resize(count.max(1), bytemuck::Zeroable::zeroed());
+        let light_buffer = self.lights.write(gpu, bytemuck::cast_slice(&lights)).clone();
+        let binds = [
+            Bind::Texture(&env.cube),
+            Bind::Storage(&light_buffer),
+            // Unbound: the environment stands in (never read).
+            Bind::Texture(shadows.as_ref().map_or(&g.normal, |a| &a.atlas)),
+            Bind::Sampler(SamplerKind::LinearClamp),
+        ];
+        let constants = [("LIGHTS", count as u32)];
         let passes = self.passes.get_or_insert_with(|| GatherResolve::new("ssr.wgsl"));
-        let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &[Bind::Texture(&env.cube)], &[])?;
+        let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &binds, &constants)?;
         cx.set("image", Arc::new(out));
         Ok(())
     }

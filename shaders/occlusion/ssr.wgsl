@@ -34,7 +34,14 @@ struct Ssr {
     // because llvmpipe runs every iteration of an unrolled constant-count loop even for pixels
     // that returned early (the node's cost with no glossy pixel fell from 25 to 18 ms).
     loops: vec4<u32>,
+    // The hidden ground: rgb its albedo, w its height (world y).
+    ground: vec4<f32>,
+    // The shadow atlas's min variance, bleed reduction and depth bias.
+    vsm: vec4<f32>,
 };
+
+// Lights of the hidden ground (0: no ground).
+override LIGHTS: u32 = 0u;
 
 @group(0) @binding(0) var<uniform> u: Ssr;
 @group(0) @binding(1) var g_depth: texture_2d<f32>;
@@ -46,12 +53,18 @@ struct Ssr {
 @group(0) @binding(5) var gathered: texture_2d<f32>;
 // The environment cube (six-layer array, 2x2-box mip chain: shaders/ibl/cube.wgsl).
 @group(0) @binding(6) var env: texture_2d_array<f32>;
+// The ground's lights (shadowed_light.wgsl), their shadow atlas and its bilinear sampler.
+@group(0) @binding(7) var<storage, read> lights: array<Light>;
+@group(0) @binding(8) var atlas: texture_2d<f32>;
+@group(0) @binding(9) var atlas_sampler: sampler;
 
 // #include "fullscreen.wgsl"
 
 // #include "screen_space.wgsl"
 
 // #include "cube.wgsl"
+
+// #include "shadowed_light.wgsl"
 
 // Glossiness over which the reflections fade in above the threshold.
 const GLOSS_FADE: f32 = 0.1;
@@ -109,6 +122,38 @@ fn beyond(o: vec3<f32>, d: vec3<f32>, sp: vec2<i32>) -> Hit {
     let at = clamp(vec2<i32>(floor(pix)), vec2<i32>(0), vec2<i32>(gsize()) - vec2<i32>(1));
     var hit: Hit;
     hit.radiance = w * textureLoad(image, at, 0).rgb;
+    hit.weight = w;
+    return hit;
+}
+
+// The hidden ground (the node's `ground`): where the view-space ray (o, d) goes down to the
+// plane y = u.ground.w within the march's reach, the plane's radiance there, lit by the lights
+// through their shadow tiles, albedo / pi sum_i VIS_i E_i max(0, l_i . y); it fades like hits.
+fn ground_hit(o: vec3<f32>, d: vec3<f32>) -> Hit {
+    var none: Hit;
+    none.radiance = vec3<f32>(0.0);
+    none.weight = 0.0;
+    let to_world = transpose(mat3x3<f32>(u.view[0].xyz, u.view[1].xyz, u.view[2].xyz));
+    let wo = to_world * (o - u.view[3].xyz);
+    let wd = to_world * d;
+    if wd.y >= -1e-4 {
+        return none;
+    }
+    let t = (u.ground.w - wo.y) / wd.y;
+    if t <= 0.0 || t >= u.max_distance {
+        return none;
+    }
+    let x = wo + wd * t;
+    var e = vec3<f32>(0.0);
+    for (var i = 0u; i < LIGHTS; i++) {
+        let light = lights[i];
+        if light.dir.y > 0.0 {
+            e += light.color.rgb * light.dir.y * light_visibility(light, atlas, atlas_sampler, x, vec3<f32>(0.0, 1.0, 0.0), u.vsm.xyz);
+        }
+    }
+    var hit: Hit;
+    let w = end_weight(t);
+    hit.radiance = w * u.ground.rgb / PI * e;
     hit.weight = w;
     return hit;
 }
@@ -229,7 +274,13 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         let level = clamp(0.5 * log2(1.0 / (f32(count) * pdf * texel)) + 1.0, 0.0, u.size.w);
         let e = luminance(env_texel(to_world * dir, level));
         let jitter = fract((f32(k) + 0.5) * INV_PHI + (f32(b) + 0.5) / 16.0);
-        let hit = march(o, dir, q, jitter);
+        var hit = march(o, dir, q, jitter);
+        if LIGHTS > 0u && hit.weight < 1.0 {
+            // What the screen did not show of a ray going down: the ground.
+            let ground = ground_hit(o, dir);
+            hit.radiance += (1.0 - hit.weight) * ground.radiance;
+            hit.weight += (1.0 - hit.weight) * ground.weight;
+        }
         hits += hit.radiance;
         env_all += e;
         env_missed += (1.0 - hit.weight) * e;

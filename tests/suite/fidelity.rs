@@ -132,8 +132,16 @@ fn a_glossy_ball_is_no_farther_from_cycles_than_today() {
 fn screen_space_reflections_bring_the_glossy_ball_closer_to_cycles() {
     let m = measure_graph("default_glossy_ball", Some("graphs/ssr.ron"));
     let ball = item(&m, "ball");
-    // 16.6% with sqrt_cosine.
-    assert!(ball.rel_mae < 0.14, "glossy ball with SSR: relative MAE {:.1}% (today 13.0%)", 100.0 * ball.rel_mae);
+    eprintln!(
+        "figure: SSR glossy ball {:.2}%, overall {:.2}%, fifths {:?}, mean {:.4} / {:.4}",
+        100.0 * ball.rel_mae,
+        100.0 * m.rel_mae,
+        ball.fifths,
+        ball.mean_werkstatt,
+        ball.mean_cycles
+    );
+    // 16.6% with sqrt_cosine, 13.0% before the hidden ground.
+    assert!(ball.rel_mae < 0.125, "glossy ball with SSR: relative MAE {:.1}% (today 12.0%)", 100.0 * ball.rel_mae);
     let (with, without) = (measure_graph("default_lambert", Some("graphs/ssr.ron")), measure_case("default_lambert"));
     assert_eq!(with.rel_mae, without.rel_mae, "SSR changed the Lambertian scene");
 }

@@ -17,11 +17,27 @@ const RADIUS: f32 = 0.3;
 const SPHERE_ALBEDO: f32 = 0.8;
 
 fn graph(probe: &std::path::Path, floor: bool, glossiness: f32) -> Graph {
-    graph_lit_by(probe, floor, glossiness, "light.image")
+    graph_lit_by(probe, floor, glossiness, "light.image", false)
 }
 
-/// `graph` with `image` (a texture output) as the node's lit image.
-fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &str) -> Graph {
+/// `graph` with `image` (a texture output) as the node's lit image, and with `ground` the
+/// node's hidden ground at y = 0 (albedo 0.5) lit by 16 median-cut lights.
+fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &str, ground: bool) -> Graph {
+    let text = graph_text(probe, floor, glossiness, image, ground);
+    Graph::load_str(&text, "ssr-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+/// The text of `graph_lit_by`'s graph.
+fn graph_text(probe: &std::path::Path, floor: bool, glossiness: f32, image: &str, ground: bool) -> String {
+    let (ssr_params, count, ground_link) = if ground {
+        (
+            r#"params: { "ground": true, "ground_height": 0.0, "ground_albedo": [0.5, 0.5, 0.5] }"#,
+            16,
+            r#"("cut.lights", "ssr.lights"),"#,
+        )
+    } else {
+        ("", 1, "")
+    };
     let floor_nodes = if floor {
         r#""plane": (kind: "Primitive", params: { "shape": "plane", "size": 8.0, "segments_u": 1, "segments_v": 1 }),
         "white": (kind: "Material", params: { "base_color": [0.5, 0.5, 0.5], "glossiness": 0.0 }),
@@ -34,7 +50,7 @@ fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &s
     } else {
         ""
     };
-    let text = format!(
+    format!(
         r#"(version: 2, nodes: {{
         "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": {RADIUS:?} }}),
         "glossy": (kind: "Material", params: {{ "base_color": [{SPHERE_ALBEDO:?}, {SPHERE_ALBEDO:?}, {SPHERE_ALBEDO:?}], "glossiness": {glossiness:?} }}),
@@ -44,10 +60,10 @@ fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &s
         "camera": (kind: "OrbitCamera", params: {{ "distance": 3.0, "pitch": 10.0, "yaw": 0.0, "target": [0.0, 0.4, 0.0] }}),
         "gbuffer": (kind: "GBufferPass"),
         "environment": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": 32 }}),
-        "cut": (kind: "MedianCut", params: {{ "count": 1 }}),
+        "cut": (kind: "MedianCut", params: {{ "count": {count} }}),
         "pems": (kind: "Pems"),
         "light": (kind: "IblShading", params: {{ "mode": "full" }}),
-        "ssr": (kind: "ScreenSpaceReflections"),
+        "ssr": (kind: "ScreenSpaceReflections", {ssr_params}),
         "out": (kind: "Preview"),
     }}, links: [
         ("sphere.mesh", "ball.mesh"), ("glossy.material", "ball.material"), ("ball.scene", "all.a"),
@@ -56,11 +72,10 @@ fn graph_lit_by(probe: &std::path::Path, floor: bool, glossiness: f32, image: &s
         ("environment.environment", "cut.environment"), ("environment.environment", "pems.environment"),
         ("cut.lights", "pems.lights"), ("pems.pems", "light.pems"), ("gbuffer.gbuffer", "light.gbuffer"),
         ("gbuffer.gbuffer", "ssr.gbuffer"), ("{image}", "ssr.image"), ("environment.environment", "ssr.environment"),
-        ("ssr.image", "out.image"),
+        ("ssr.image", "out.image"), {ground_link}
     ])"#,
         CENTRE.x, CENTRE.y, CENTRE.z
-    );
-    Graph::load_str(&text, "ssr-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+    )
 }
 
 /// Sky 1 above the horizon, ground 0.05 below.
@@ -116,6 +131,41 @@ fn a_glossy_sphere_reflects_the_lit_floor_below_it() {
     assert!(out.iter().all(|c| c.is_finite()), "non-finite output");
 }
 
+/// The hidden ground: no floor is drawn, but the node's ground plane at y = 0 (albedo 0.5, lit
+/// by 16 median-cut lights of a sky of radiance 1, so about 0.5 * pi / pi = 0.5) is what the
+/// sphere's lower part reflects instead of the probe's dark ground (0.05).
+#[test]
+fn the_hidden_ground_is_reflected_where_the_screen_shows_no_floor() {
+    let ev = run_graph(&graph_lit_by(&probe("ssr_floor"), false, 0.95, "light.image", true), SIZE.0, SIZE.1);
+    let (eye, pos) = (eye(&ev), world_positions(&ev, 5));
+    let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
+    let down = |p: Vec3| {
+        let n = (p - CENTRE).normalize();
+        let v = (p - eye).normalize();
+        (p - CENTRE).length() < RADIUS * 1.05 && (v - 2.0 * v.dot(n) * n).y < -0.5 && -v.dot(n) > 0.4
+    };
+    let sphere: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(down)).collect();
+    let (before, after) = (mean(sphere.iter().map(|&i| lit[i])), mean(sphere.iter().map(|&i| out[i])));
+    let expected = SPHERE_ALBEDO * 0.5;
+    eprintln!("hidden ground: lower sphere without {before}, with {after}, albedo x 0.5 = {expected}");
+    assert!(sphere.len() > 30, "{} sphere pixels", sphere.len());
+    assert!(before.x < 0.3 * expected, "without the ground the sphere should show the dark ground: {before}");
+    assert!(
+        after.x > 0.85 * expected && after.x < 1.15 * expected,
+        "the sphere's lower part should reflect the ground: {after} against {expected}"
+    );
+    // A ground without its lights is an error naming both.
+    let text = graph_text(&probe("ssr_floor"), false, 0.95, "light.image", true)
+        .replace(r#"("cut.lights", "ssr.lights"),"#, "");
+    let ev = evaluate_graph(&Graph::load_str(&text, "ssr-no-lights.ron".as_ref()).unwrap(), SIZE.0, SIZE.1);
+    match &ev.report("ssr").unwrap().status {
+        werkstatt::core::eval::NodeStatus::Failed(m) => {
+            assert!(m.contains("\"ground\"") && m.contains("\"lights\""), "{m}")
+        }
+        other => panic!("a ground without lights was accepted: {other:?}"),
+    }
+}
+
 #[test]
 fn escaped_rays_and_low_glossiness_keep_the_image() {
     let probe = probe("ssr_open");
@@ -137,7 +187,7 @@ fn escaped_rays_and_low_glossiness_keep_the_image() {
 fn an_image_of_another_size_than_the_gbuffer_is_refused() {
     use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
     // The probe's preview (64x32) as the lit image of a 160x120 G-buffer.
-    let graph = graph_lit_by(&probe("ssr_size"), true, 0.95, "environment.preview");
+    let graph = graph_lit_by(&probe("ssr_size"), true, 0.95, "environment.preview", false);
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let res = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { width: SIZE.0, height: SIZE.1, base_dir: root(), frames: None };
