@@ -28,7 +28,7 @@ E_k along it (a texel of its box mip chain at the level of the ray's share of th
 sum lum(E_k), the share of the lobe's environment light that still arrives. So IblShading's result, shadows and occlusion included, is kept \
 for the escaped directions and returned exactly where every ray escapes. The lobe is rotated per pixel with a 4x4 interleaved pattern and the \
 result averaged over each 4x4 tile, edge-aware; it fades in over glossiness threshold..threshold + 0.1 (pixels at or below the threshold are \
-unchanged). Surfaces hidden from the camera are not reflected (a ray passing behind one goes on). Deterministic: no time-based noise.",
+unchanged). Surfaces hidden from the camera are not reflected (a ray passing behind one goes on); with `ground`, such a ray going down meets a ground plane lit by `lights` through `shadows` (the floor under a glossy object). Deterministic: no time-based noise.",
     inputs: &[
         PortSpec::required("gbuffer", PortType::GBuffer, "The G-buffer (depth, normals, albedo, glossiness in alpha)."),
         PortSpec::required(
