@@ -102,19 +102,23 @@ fn mean(v: impl Iterator<Item = Vec3>) -> Vec3 {
     sum / n.max(1) as f32
 }
 
-#[test]
-fn a_glossy_sphere_reflects_the_lit_floor_below_it() {
-    let ev = run_graph(&graph(&probe("ssr_floor"), true, 0.95), SIZE.0, SIZE.1);
-    let (eye, pos) = (eye(&ev), world_positions(&ev, 5));
-    let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
-    // The sphere's points whose mirror direction points well down (at the floor), away from
-    // the silhouette (whose 4x4 tile mixes in the floor).
+/// The sphere's pixels whose mirror direction points well down (at the floor), away from the
+/// silhouette (whose 4x4 tile mixes in the floor).
+fn lower_sphere(eye: Vec3, pos: &[Option<Vec3>]) -> Vec<usize> {
     let down = |p: Vec3| {
         let n = (p - CENTRE).normalize();
         let v = (p - eye).normalize();
         (p - CENTRE).length() < RADIUS * 1.05 && (v - 2.0 * v.dot(n) * n).y < -0.5 && -v.dot(n) > 0.4
     };
-    let sphere: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(down)).collect();
+    (0..pos.len()).filter(|&i| pos[i].is_some_and(down)).collect()
+}
+
+#[test]
+fn a_glossy_sphere_reflects_the_lit_floor_below_it() {
+    let ev = run_graph(&graph(&probe("ssr_floor"), true, 0.95), SIZE.0, SIZE.1);
+    let (eye, pos) = (eye(&ev), world_positions(&ev, 5));
+    let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
+    let sphere = lower_sphere(eye, &pos);
     let floor: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(|p| p.y.abs() < 1e-3)).collect();
     assert!(sphere.len() > 30 && floor.len() > 1000, "{} sphere, {} floor pixels", sphere.len(), floor.len());
     let floor_radiance = mean(floor.iter().map(|&i| lit[i]));
@@ -139,12 +143,7 @@ fn the_hidden_ground_is_reflected_where_the_screen_shows_no_floor() {
     let ev = run_graph(&graph_lit_by(&probe("ssr_floor"), false, 0.95, "light.image", true), SIZE.0, SIZE.1);
     let (eye, pos) = (eye(&ev), world_positions(&ev, 5));
     let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
-    let down = |p: Vec3| {
-        let n = (p - CENTRE).normalize();
-        let v = (p - eye).normalize();
-        (p - CENTRE).length() < RADIUS * 1.05 && (v - 2.0 * v.dot(n) * n).y < -0.5 && -v.dot(n) > 0.4
-    };
-    let sphere: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(down)).collect();
+    let sphere = lower_sphere(eye, &pos);
     let (before, after) = (mean(sphere.iter().map(|&i| lit[i])), mean(sphere.iter().map(|&i| out[i])));
     let expected = SPHERE_ALBEDO * 0.5;
     eprintln!("hidden ground: lower sphere without {before}, with {after}, albedo x 0.5 = {expected}");
