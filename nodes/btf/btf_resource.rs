@@ -6,7 +6,7 @@ use std::sync::Arc;
 use crate::btf::Btf;
 use crate::btf::directions::Sampling;
 use crate::btf::gpu::MAX_COMPONENTS;
-use crate::btf::gpu::upload;
+use crate::btf::gpu::{Storage, upload};
 use crate::btf::pca::{Centring, compress};
 use crate::btf::pca_file::PcaFile;
 use crate::core::node::prelude::*;
@@ -66,6 +66,11 @@ pub static BTF: NodeSpec = NodeSpec {
             "path",
             ParamKind::Path { default: "", extensions: &["btf", "btfc"] },
             "The BTF file for source = file, relative to the graph's folder: images (.btf: werkstatt btf bake / lambertian / import), compressed here, or already compressed (.btfc: werkstatt btf compress --out; 8-bit images, loads without the PCA's minutes).",
+        ),
+        ParamSpec::new(
+            "storage",
+            ParamKind::Choice { default: "f16", options: BtfStorage::OPTIONS },
+            "How the mean and eigentextures sit in GPU memory: f16 (RGBA half floats), or 8bit (RGBA8 with each layer's range per channel, as the .btfc file stores them: half the memory, e.g. 482 instead of 963 MiB for the 256² tier with c = 16).",
         ),
         ParamSpec::new(
             "components",
@@ -153,23 +158,27 @@ impl Node for BtfNode {
                 "parameter \"components\" is {components}, but the BTF has {lights} light directions per view: a view's PCA has at most {lights} components"
             )));
         }
+        let storage = match cx.choice::<BtfStorage>("storage") {
+            BtfStorage::Half => Storage::Half,
+            BtfStorage::Unorm8 => Storage::Unorm8,
+        };
         let gpu_btf = match &*loaded {
             LoadedBtf::Images(btf) if cx.bool("frontal") => {
                 // Kept as BtfSlot's source; its PCA in closed form (rank one).
                 let frontal_btf = Arc::new(btf.frontal().map_err(frontal)?);
                 let pca = crate::btf::pca::lambertian(&btf.sampling, &btf.data[..btf.image_len()]);
-                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(frontal_btf), components)
+                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(frontal_btf), components, storage)
             }
             LoadedBtf::Images(btf) => {
                 let pca = compress(btf, components, Centring::Mean);
-                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components)
+                upload(gpu, &pca, &btf.sampling, (btf.width, btf.height), Some(btf.clone()), components, storage)
             }
             LoadedBtf::Compressed(file) if cx.bool("frontal") => {
                 // The frontal image decoded, lit by cos(theta_i) alone: a rank-one PCA.
                 crate::btf::check_frontal(&file.sampling).map_err(frontal)?;
                 let slot = file.compressed.slots.first().ok_or_else(|| NodeError::msg("the compressed BTF has no view slot"))?;
                 let pca = crate::btf::pca::lambertian(&file.sampling, &slot.reconstruct(0));
-                upload(gpu, &pca, &file.sampling, (file.width, file.height), None, components)
+                upload(gpu, &pca, &file.sampling, (file.width, file.height), None, components, storage)
             }
             LoadedBtf::Compressed(file) => {
                 if file.compressed.centring != Centring::Mean {
@@ -177,7 +186,7 @@ impl Node for BtfNode {
                         "parameter \"path\": the compressed BTF is not centred on its mean (compressed with --no-centre); BtfShading draws centred ones: compress it again without --no-centre",
                     ));
                 }
-                upload(gpu, &file.compressed, &file.sampling, (file.width, file.height), None, components)
+                upload(gpu, &file.compressed, &file.sampling, (file.width, file.height), None, components, storage)
             }
         }
         .map_err(|e| NodeError::msg(format!("uploading the BTF: {e:#}")))?;
@@ -186,6 +195,13 @@ impl Node for BtfNode {
         Ok(())
     }
 }
+
+crate::choice!(
+    enum BtfStorage {
+        Half = "f16",
+        Unorm8 = "8bit",
+    }
+);
 
 /// A BTF file as read: its images, or their PCA (`.btfc`).
 enum LoadedBtf {

@@ -529,6 +529,7 @@ impl Node for BtfShadingNode {
             Bind::Storage(self.hem.as_ref().map_or(&light_buffer, |h| &h.sets)),
             // Unbound: the normal stands in (never read).
             Bind::Texture(shadows.as_ref().map_or(&g.normal, |a| &a.atlas)),
+            Bind::Storage(&btf.affine),
         ];
         let constants = [
             ("DIRECTIONS", btf.sampling.len() as u32),

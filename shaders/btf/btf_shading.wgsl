@@ -68,6 +68,9 @@ struct Params {
 @group(0) @binding(13) var<storage, read> hem_sets: array<f32>;
 // The moments of the lights' shadow maps (ShadowAtlas), read bilinearly through ramp_sampler.
 @group(0) @binding(14) var shadow_atlas: texture_2d<f32>;
+// Per layer of btf_images its offset and scale (rgb): value = offset + scale * texel (src/btf/gpu.rs;
+// identity for f16 layers, the layer's range for 8-bit ones).
+@group(0) @binding(15) var<storage, read> layer_affine: array<vec4<f32>>;
 
 struct RingWeights {
     index: vec2<u32>,
@@ -346,8 +349,9 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             }
         }
         for (var k = 0u; k < PER_SLOT; k++) {
-            let layer = i32(j * PER_SLOT + k);
-            radiance += wm * gamma[k] * textureSampleLevel(btf_images, btf_sampler, tex, layer, lod).rgb;
+            let layer = j * PER_SLOT + k;
+            let texel = textureSampleLevel(btf_images, btf_sampler, tex, i32(layer), lod).rgb;
+            radiance += wm * gamma[k] * (layer_affine[2u * layer].rgb + layer_affine[2u * layer + 1u].rgb * texel);
         }
     }
     return vec4<f32>(radiance * params.btf.w, 1.0);

@@ -1,9 +1,12 @@
 //! A per-view PCA of a BTF on the GPU, as `BtfShading` reads it (shaders/btf/btf_shading.wgsl;
 //! docs/btf.md, "Rendering").
 //!
-//! - **Images**: one `Rgba16Float` 2D array (rgb used, filterable, repeating), `c + 1` layers per
-//!   view slot: the slot's mean image, then its eigentextures B_0..B_{c-1} (zero where a
-//!   low-rank slot kept fewer). 81 views x 17 layers = 1377 layers, within lavapipe's 2048.
+//! - **Images**: one 2D array (rgb used, filterable, repeating), `c + 1` layers per view slot: the
+//!   slot's mean image, then its eigentextures B_0..B_{c-1} (zero where a low-rank slot kept
+//!   fewer). 81 views x 17 layers = 1377 layers, within lavapipe's 2048. `Rgba16Float`, or
+//!   `Rgba8Unorm` ([`Storage::Unorm8`], half the memory) with per layer and channel an offset and
+//!   a scale (value = offset + scale x texel; `affine`, identity for f16): filtering commutes
+//!   with that map, so trilinear lookups stay exact.
 //! - **Coefficients**: one storage buffer of f32, `c + 1` per (view, light) pair: 1 (the mean's
 //!   weight, so eq. 4's k = 0 term is blended like the others), then p_0..p_{c-1}.
 //! - **Rings**: the sampling's rings (theta, count, first direction) for the shader's copy of
@@ -23,9 +26,19 @@ pub const MAX_RINGS: usize = 16;
 /// The most components per slot the shader blends (`MAX_LAYERS` - 1 in btf_shading.wgsl).
 pub const MAX_COMPONENTS: usize = 32;
 
+/// How the images are stored on the GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Storage {
+    Half,
+    /// 8 bits per channel over each layer's own range per channel, as the `.btfc` file stores them.
+    Unorm8,
+}
+
 /// A compressed BTF uploaded for rendering.
 pub struct GpuBtf {
     pub images: GpuImage,
+    /// Per layer two vec4s: the offset and the scale (rgb) that map a texel to its value.
+    pub affine: wgpu::Buffer,
     pub coeffs: wgpu::Buffer,
     pub sampling: Sampling,
     /// c: the eigentextures per slot (layers per slot are c + 1).
@@ -69,6 +82,7 @@ pub fn upload(
     (width, height): (usize, usize),
     source: Option<Arc<Btf>>,
     components: usize,
+    storage: Storage,
 ) -> anyhow::Result<GpuBtf> {
     let n = sampling.len();
     ensure!(pca.centring == Centring::Mean, "the GPU BTF expects a PCA centred on the mean");
@@ -117,20 +131,55 @@ pub fn upload(
         coeff_bytes <= limits.max_storage_buffer_binding_size,
         "{coeff_bytes} bytes of coefficients exceed the device's storage binding limit"
     );
+    // Per layer and channel the value range (level 0 holds every level's extremes: mips average).
+    let mut affine = vec![[0.0f32, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0]; layers];
+    if storage == Storage::Unorm8 {
+        let level0 = &levels[0].2;
+        for (l, a) in affine.iter_mut().enumerate() {
+            for c in 0..3 {
+                let (lo, hi) = level0[l * texels * 4..][..texels * 4]
+                    .iter()
+                    .skip(c)
+                    .step_by(4)
+                    .fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+                (a[c], a[4 + c]) = (lo, (hi - lo).max(0.0));
+            }
+        }
+    }
+    let format = match storage {
+        Storage::Half => wgpu::TextureFormat::Rgba16Float,
+        Storage::Unorm8 => wgpu::TextureFormat::Rgba8Unorm,
+    };
     let desc = TextureDesc::array(
         width as u32,
         height as u32,
         layers as u32,
-        wgpu::TextureFormat::Rgba16Float,
+        format,
         wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
     )
     .with_mips(levels.len() as u32);
     let images = GpuImage::create(gpu, "btf images", desc);
     let mut image_bytes = 0;
     for (m, (w, h, level)) in levels.iter().enumerate() {
-        // f16 bits (the half crate is built without bytemuck).
-        let bits: Vec<u16> = level.iter().map(|&x| half::f16::from_f32(x).to_bits()).collect();
-        image_bytes += bits.len() as u64 * 2;
+        let bytes: Vec<u8> = match storage {
+            // f16 bits (the half crate is built without bytemuck).
+            Storage::Half => level.iter().flat_map(|&x| half::f16::from_f32(x).to_le_bytes()).collect(),
+            Storage::Unorm8 => level
+                .chunks_exact(w * h * 4)
+                .zip(&affine)
+                .flat_map(|(layer, a)| {
+                    layer.iter().enumerate().map(move |(t, &x)| {
+                        let c = t % 4;
+                        if c == 3 || a[4 + c] <= 0.0 {
+                            0
+                        } else {
+                            ((x - a[c]) / a[4 + c] * 255.0).round().clamp(0.0, 255.0) as u8
+                        }
+                    })
+                })
+                .collect(),
+        };
+        image_bytes += bytes.len() as u64;
         gpu.queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &images.texture,
@@ -138,25 +187,28 @@ pub fn upload(
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::All,
             },
-            bytemuck::cast_slice(&bits),
+            &bytes,
             wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(8 * *w as u32),
+                bytes_per_row: Some((bytes.len() / (h * layers)) as u32),
                 rows_per_image: Some(*h as u32),
             },
             wgpu::Extent3d { width: *w as u32, height: *h as u32, depth_or_array_layers: layers as u32 },
         );
     }
+    let affine_buffer =
+        gpu.create_buffer_init("btf layer ranges", bytemuck::cast_slice(&affine), wgpu::BufferUsages::STORAGE);
     let coeffs_buffer =
         gpu.create_buffer_init("btf coefficients", bytemuck::cast_slice(&coeffs), wgpu::BufferUsages::STORAGE);
     Ok(GpuBtf {
         images,
+        affine: affine_buffer,
         coeffs: coeffs_buffer,
         sampling: sampling.clone(),
         components,
         width,
         height,
-        bytes: image_bytes + coeff_bytes,
+        bytes: image_bytes + coeff_bytes + (layers * 32) as u64,
         table: super::hem::WeightTable::new(pca, sampling, components)?,
         source,
     })

@@ -789,3 +789,34 @@ fn hem_turns_the_environment_through_eigen_weightsets() {
         "5 eigen-weightsets between steps are off by {between} (the turn itself: {turned})"
     );
 }
+
+/// `storage: "8bit"`: the mean and eigentextures as RGBA8 with each layer's range (half the GPU
+/// memory of f16) shade like f16 layers within the 8-bit steps.
+#[test]
+fn eight_bit_layers_shade_like_half_floats_in_half_the_memory() {
+    let render = |storage: &str| {
+        let nodes = format!(
+            r#""btf": (kind: "Btf", params: {{ "source": "bake", "weave": "twill", "resolution": 16, "supersample": 1, "sampling": "h2_tests", "components": 8, "storage": "{storage}" }}),
+            "shade": (kind: "BtfShading", params: {{ "tiling": 2.0 }}),"#
+        );
+        let links = r#"("gbuffer.gbuffer", "shade.gbuffer"), ("btf.btf", "shade.btf"), ("shade.image", "out.image"),"#;
+        let ev = run_graph(&sphere_graph(&nodes, links), 48, 48);
+        let Some(Value::Btf(btf)) = ev.output("btf", "btf") else { panic!("no BTF") };
+        (image(&ev, "shade"), btf.images.desc.format, btf.bytes)
+    };
+    let ((half, half_format, half_bytes), (byte, byte_format, byte_bytes)) = (render("f16"), render("8bit"));
+    assert_eq!((half_format, byte_format), (wgpu::TextureFormat::Rgba16Float, wgpu::TextureFormat::Rgba8Unorm));
+    let peak = half.rgba.chunks_exact(4).flat_map(|p| &p[..3]).fold(0.0f32, |m, &x| m.max(x));
+    let (mut worst, mut sum) = (0.0f32, 0.0f32);
+    for (x, y) in half.rgba.iter().zip(&byte.rgba) {
+        worst = worst.max((x - y).abs());
+        sum += (x - y).abs();
+    }
+    let mean = sum / half.rgba.len() as f32;
+    eprintln!(
+        "8-bit layers against f16: worst {worst:.5}, mean {mean:.6}, peak {peak:.4}; {byte_bytes} against {half_bytes} bytes"
+    );
+    assert!(peak > 0.05, "nothing lit");
+    assert!(worst > 0.0 && worst < 0.03 * peak && mean < 0.003 * peak, "worst {worst}, mean {mean} of peak {peak}");
+    assert!((byte_bytes as f64) < 0.55 * half_bytes as f64, "{byte_bytes} bytes against {half_bytes}");
+}
