@@ -15,6 +15,8 @@
 // Mean + at most 32 eigentextures per slot (src/btf/gpu.rs MAX_COMPONENTS).
 const MAX_LAYERS: u32 = 33u;
 const MAX_RINGS: u32 = 16u;
+// Lights whose shadow visibility is kept per pixel (fs_main).
+const CACHED: u32 = 32u;
 const DEG: f32 = 57.29577951308232;
 const PI: f32 = 3.14159265358979;
 
@@ -286,9 +288,15 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             break;
         }
     }
+    // The shadowed lights' visibility, looked up once per pixel rather than per view slot (the
+    // first CACHED lights; any beyond look theirs up in the slot loop).
     var p = vec3<f32>(0.0);
+    var vis: array<f32, CACHED>;
     if SHADOWS {
         p = world_at(px);
+        for (var li = 0u; li < min(LIGHTS, CACHED); li++) {
+            vis[li] = light_visibility(lights[li], shadow_atlas, ramp_sampler, p, n, params.btf.xyz);
+        }
     }
     // HEM: the pixel's triangle corners and barycentric weights.
     var hem_vertex = vec3<u32>(0u);
@@ -333,7 +341,11 @@ fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
                 continue;
             }
             if SHADOWS {
-                scale = scale * light_visibility(light, shadow_atlas, ramp_sampler, p, n, params.btf.xyz);
+                if li < CACHED {
+                    scale = scale * vis[li];
+                } else {
+                    scale = scale * light_visibility(light, shadow_atlas, ramp_sampler, p, n, params.btf.xyz);
+                }
             }
             let ld = to_direction(vec3<f32>(dot(l, fx), dot(l, fy), cos_l));
             let wl = direction_weights(ld.x, ld.y);
