@@ -53,7 +53,7 @@ crate::choice!(
 pub static BTF: NodeSpec = NodeSpec {
     kind: "Btf",
     category: Category::Scene,
-    doc: "A bidirectional texture function (Sattler et al. 2003): for every view and light direction an image of the fabric. Read from a BTF file (on a worker thread; a compressed .btfc skips the PCA) or made analytically (a Lambertian rho/pi cos theta_i, optionally striped; or a diagnostic BTF of flat colours), compressed per view slot by PCA centred on the mean (eq. 1, `components` eigentextures) and uploaded: a 2D texture array of (c + 1) layers per view (mean, eigentextures; f16) and a buffer of coefficients. For BtfShading.",
+    doc: "A bidirectional texture function (Sattler et al. 2003): for every view and light direction an image of the fabric. Read from a BTF file (on a worker thread; a compressed .btfc skips the PCA) or made analytically (a Lambertian rho/pi cos theta_i, optionally striped; or a diagnostic BTF of flat colours), compressed per view slot by PCA centred on the mean (eq. 1, `components` eigentextures) and uploaded: a 2D texture array of (c + 1) layers per view (mean, eigentextures; f16, or 8-bit with each layer's range: `storage`) and a buffer of coefficients. For BtfShading.",
     inputs: &[],
     outputs: &[PortSpec::output("btf", PortType::Btf, "The compressed BTF on the GPU.")],
     params: &[
