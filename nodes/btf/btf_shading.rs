@@ -9,7 +9,7 @@ use crate::gpu::pass::Bindings;
 use crate::gpu::{Bind, BufferRing, FullscreenPass, GpuContext, GpuImage, RenderPipelineDesc, SamplerKind};
 use crate::ibl::cube::CubeImage;
 use crate::ibl::gpu::{EnvMap, Lights};
-use crate::ibl::shadow::{GpuLight, ShadowAtlas, vsm_settings};
+use crate::ibl::shadow::{GpuLight, ShadowAtlas, gpu_lights, vsm_settings};
 use crate::render::scene::{DrawItem, GBuffer};
 
 /// Texels of eq. 6's 1D texture (the paper's 1024).
@@ -200,7 +200,7 @@ struct Hem {
     visibility_key: u64,
     visibility: Vec<Visibility>,
     /// Section 5.4's eigen-weightsets per item, and the key of the inputs they were made from.
-    eigen: Option<(u64, Vec<EigenWeightsets>)>,
+    eigen: Option<(u64, Arc<Vec<EigenWeightsets>>)>,
     sets_key: u64,
     /// Per triangle corner: its world position (xyz, 1), and its vertex in `sets`.
     corners: wgpu::Buffer,
@@ -267,28 +267,25 @@ impl BtfShadingNode {
             return Ok(());
         }
         let failed = |e: anyhow::Error| NodeError::msg(format!("environment light (HEM): {e:#}"));
-        let (visibility, eigen) = match self.hem.take() {
-            Some(h) if h.visibility_key == visibility_key => {
-                (h.visibility, h.eigen.filter(|(key, _)| turn.steps > 0 && *key == eigen_key))
-            }
-            _ => (Vec::new(), None),
-        };
-        let visibility = match visibility {
-            v if !v.is_empty() => v,
-            _ => items
+        // The same geometry keeps its visibility and corner buffers; the same inputs and steps
+        // keep the eigen-weightsets, so a new angle only sums them and rewrites `sets`.
+        let mut kept = self.hem.take().filter(|h| h.visibility_key == visibility_key);
+        let visibility = match &mut kept {
+            Some(h) => std::mem::take(&mut h.visibility),
+            None => items
                 .iter()
                 .map(|item| {
                     let (positions, frames) = mesh_frames(&item.mesh, item.model, f64::from(rotation));
                     Visibility::compute(&positions, &frames, &item.mesh.indices, &btf.sampling, hemicube, env.size(), 0)
                 })
-                .collect::<anyhow::Result<_>>()
+                .collect::<anyhow::Result<Vec<_>>>()
                 .map_err(failed)?,
         };
         // Section 5.4: with steps, the weight sets of `steps` rotations decomposed once into
         // eigen-weightsets per item, then each rotation is a sum of them (eq. 13).
-        let eigen = match eigen {
-            Some(e) => Some(e),
-            None if turn.steps > 0 => {
+        let eigen = match kept.as_ref().and_then(|h| h.eigen.clone()).filter(|(key, _)| *key == eigen_key) {
+            Some(e) if turn.steps > 0 => Some(e),
+            _ if turn.steps > 0 => {
                 let step = 360.0 / turn.steps as f32;
                 let turned: Vec<Arc<CubeImage>> = (0..turn.steps)
                     .map(|a| if a == 0 { env.texels.clone() } else { Arc::new(env.texels.rotated_y(a as f32 * step)) })
@@ -302,18 +299,18 @@ impl BtfShadingNode {
                     })
                     .collect::<anyhow::Result<Vec<_>>>()
                     .map_err(failed)?;
-                Some((eigen_key, sets))
+                Some((eigen_key, Arc::new(sets)))
             }
-            None => None,
+            _ => None,
         };
         let turned_env = match (&eigen, turn.degrees) {
             (None, d) if d != 0.0 => Arc::new(env.texels.rotated_y(d)),
             _ => env.texels.clone(),
         };
-        let (mut corners, mut vertices, mut sets) = (Vec::new(), Vec::new(), Vec::new());
         let set_len = btf.table.set_len();
-        for (index, (item, vis)) in items.iter().zip(&visibility).enumerate() {
-            let first = (sets.len() / set_len) as u32;
+        let row = btf.table.views * btf.table.per_slot;
+        let mut sets = Vec::new();
+        for (index, vis) in visibility.iter().enumerate() {
             let u = match &eigen {
                 Some((_, per_item)) => {
                     per_item[index].weight_set_at(f64::from(turn.degrees) * turn.steps as f64 / 360.0, 0)
@@ -321,13 +318,8 @@ impl BtfShadingNode {
                 None => btf.table.weight_sets(&vis.light_sums(&turned_env, 0).map_err(failed)?, 0),
             };
             // Channels innermost: the values a pixel reads per corner and view slot lie together.
-            let row = btf.table.views * btf.table.per_slot;
             for set in u.chunks_exact(set_len) {
                 sets.extend((0..row).flat_map(|jk| [set[jk], set[row + jk], set[2 * row + jk]]));
-            }
-            for &i in &item.mesh.indices {
-                corners.push(item.model.transform_point3(item.mesh.positions[i as usize]).extend(1.0));
-                vertices.push(first + i);
             }
         }
         let bytes = (sets.len() * 4) as u64;
@@ -338,22 +330,49 @@ impl BtfShadingNode {
                 sets.len() / set_len
             )));
         }
-        let triangles = (vertices.len() / 3) as u32;
         // A storage binding must not be empty.
-        corners.resize(corners.len().max(1), glam::Vec4::ZERO);
-        vertices.resize(vertices.len().max(1), 0);
         sets.resize(sets.len().max(1), 0.0);
         let storage = wgpu::BufferUsages::STORAGE;
+        let (corners, vertices, triangles, sets) = match kept {
+            Some(h) if h.sets.size() == (sets.len() * 4) as u64 => {
+                gpu.queue.write_buffer(&h.sets, 0, bytemuck::cast_slice(&sets));
+                (h.corners, h.vertices, h.triangles, h.sets)
+            }
+            _ => {
+                let (mut corners, mut vertices) = (Vec::new(), Vec::new());
+                let mut first = 0u32;
+                for item in items {
+                    for &i in &item.mesh.indices {
+                        corners.push(item.model.transform_point3(item.mesh.positions[i as usize]).extend(1.0));
+                        vertices.push(first + i);
+                    }
+                    first += item.mesh.positions.len() as u32;
+                }
+                let triangles = (vertices.len() / 3) as u32;
+                corners.resize(corners.len().max(1), glam::Vec4::ZERO);
+                vertices.resize(vertices.len().max(1), 0);
+                (
+                    gpu.create_buffer_init("btf hem corners", bytemuck::cast_slice(&corners), storage),
+                    gpu.create_buffer_init("btf hem vertices", bytemuck::cast_slice(&vertices), storage),
+                    triangles,
+                    gpu.create_buffer_init(
+                        "btf hem sets",
+                        bytemuck::cast_slice(&sets),
+                        storage | wgpu::BufferUsages::COPY_DST,
+                    ),
+                )
+            }
+        };
         self.hem = Some(Hem {
             _held: (items.iter().map(|item| item.mesh.clone()).collect(), env.clone(), btf.clone()),
             visibility_key,
             visibility,
             eigen,
             sets_key,
-            corners: gpu.create_buffer_init("btf hem corners", bytemuck::cast_slice(&corners), storage),
-            vertices: gpu.create_buffer_init("btf hem vertices", bytemuck::cast_slice(&vertices), storage),
+            corners,
+            vertices,
             triangles,
-            sets: gpu.create_buffer_init("btf hem sets", bytemuck::cast_slice(&sets), storage),
+            sets,
         });
         Ok(())
     }
@@ -416,15 +435,6 @@ impl Node for BtfShadingNode {
             )));
         }
         let shadows: Option<Arc<ShadowAtlas>> = cx.optional("shadows");
-        let env_count = env.as_ref().map_or(0, |e| e.lights.len());
-        if let Some(atlas) = &shadows
-            && atlas.lights.len() != env_count
-        {
-            return Err(NodeError::msg(format!(
-                "input \"shadows\" holds {} lights but input \"lights\" has {env_count}: feed both from the same MedianCut or SunLight",
-                atlas.lights.len()
-            )));
-        }
         let mut lights = Vec::new();
         let sun = cx.vec3("sun_color") * cx.f32("sun_intensity");
         if sun.max_element() > 0.0 {
@@ -437,14 +447,8 @@ impl Node for BtfShadingNode {
         }
         let scale = cx.f32("environment_intensity");
         let boundary = cx.choice::<Boundary>("lights_boundary").code();
-        for (k, l) in env.iter().flat_map(|e| &e.lights).enumerate() {
-            let light =
-                GpuLight::unshadowed(l.direction.extend(boundary).to_array(), (l.color * scale).extend(0.0).to_array());
-            lights.push(match &shadows {
-                Some(atlas) => light.shadowed_by(atlas, k),
-                None => light,
-            });
-        }
+        let env_lights = env.as_ref().map_or(&[][..], |e| &e.lights[..]);
+        lights.extend(gpu_lights(env_lights, shadows.as_deref(), boundary, scale).map_err(NodeError::msg)?);
         let count = lights.len();
         // A storage binding must not be empty.
         lights.resize(count.max(1), bytemuck::Zeroable::zeroed());

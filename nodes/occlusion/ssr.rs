@@ -10,7 +10,7 @@ use super::GatherResolve;
 use crate::core::node::prelude::*;
 use crate::gpu::{Bind, BufferRing, GpuImage, SamplerKind};
 use crate::ibl::gpu::{EnvMap, Lights};
-use crate::ibl::shadow::{GpuLight, ShadowAtlas, vsm_settings};
+use crate::ibl::shadow::{ShadowAtlas, gpu_lights, vsm_settings};
 use crate::render::scene::GBuffer;
 
 pub static SCREEN_SPACE_REFLECTIONS: NodeSpec = NodeSpec {
@@ -164,27 +164,15 @@ impl Node for SsrNode {
                 [a, b, c, 0.0]
             },
         };
-        let mut lights: Vec<GpuLight> = Vec::new();
-        if ground {
-            let Some(sky) = &sky else {
+        let mut lights = match (&sky, ground) {
+            (_, false) => Vec::new(),
+            (None, true) => {
                 return Err(NodeError::msg(
                     "parameter \"ground\" is on but input \"lights\" is not connected: the ground is lit by them",
                 ));
-            };
-            if let Some(atlas) = &shadows
-                && atlas.lights.len() != sky.lights.len()
-            {
-                return Err(NodeError::msg(format!(
-                    "input \"shadows\" holds {} lights but input \"lights\" has {}: feed both from the same MedianCut",
-                    atlas.lights.len(),
-                    sky.lights.len()
-                )));
             }
-            for (k, l) in sky.lights.iter().enumerate() {
-                let light = GpuLight::unshadowed(l.direction.extend(0.0).to_array(), l.color.extend(0.0).to_array());
-                lights.push(shadows.as_ref().map_or(light, |a| light.shadowed_by(a, k)));
-            }
-        }
+            (Some(sky), true) => gpu_lights(&sky.lights, shadows.as_deref(), 0.0, 1.0).map_err(NodeError::msg)?,
+        };
         let count = lights.len();
         // A storage binding must not be empty.
         lights.resize(count.max(1), bytemuck::Zeroable::zeroed());

@@ -126,16 +126,13 @@ fn beyond(o: vec3<f32>, d: vec3<f32>, sp: vec2<i32>) -> Hit {
     return hit;
 }
 
-// The hidden ground (the node's `ground`): where the view-space ray (o, d) goes down to the
+// The hidden ground (the node's `ground`): where the world-space ray (wo, wd) goes down to the
 // plane y = u.ground.w within the march's reach, the plane's radiance there, lit by the lights
 // through their shadow tiles, albedo / pi sum_i VIS_i E_i max(0, l_i . y); it fades like hits.
-fn ground_hit(o: vec3<f32>, d: vec3<f32>) -> Hit {
+fn ground_hit(wo: vec3<f32>, wd: vec3<f32>) -> Hit {
     var none: Hit;
     none.radiance = vec3<f32>(0.0);
     none.weight = 0.0;
-    let to_world = transpose(mat3x3<f32>(u.view[0].xyz, u.view[1].xyz, u.view[2].xyz));
-    let wo = to_world * (o - u.view[3].xyz);
-    let wd = to_world * d;
     if wd.y >= -1e-4 {
         return none;
     }
@@ -254,6 +251,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     // environment at the level whose texels cover its share of the lobe's solid angle.
     let texel = 4.0 * PI / (6.0 * u.size.z * u.size.z);
     let o = p + n * (2.0 * pixel_size(d));
+    let world_origin = to_world * (o - u.view[3].xyz);
     var hits = vec3<f32>(0.0);
     var env_all = 0.0;
     var env_missed = 0.0;
@@ -277,7 +275,7 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         var hit = march(o, dir, q, jitter);
         if LIGHTS > 0u && hit.weight < 1.0 {
             // What the screen did not show of a ray going down: the ground.
-            let ground = ground_hit(o, dir);
+            let ground = ground_hit(world_origin, to_world * dir);
             hit.radiance += (1.0 - hit.weight) * ground.radiance;
             hit.weight += (1.0 - hit.weight) * ground.weight;
         }

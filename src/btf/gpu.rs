@@ -19,6 +19,7 @@ use anyhow::ensure;
 use super::Btf;
 use super::directions::Sampling;
 use super::pca::{Centring, Compressed};
+use super::pca_file::{channel_range, to_byte};
 use crate::gpu::{GpuContext, GpuImage, TextureDesc};
 
 /// The most rings a sampling may have on the GPU (`rings` in shaders/btf/btf_shading.wgsl).
@@ -137,12 +138,7 @@ pub fn upload(
         let level0 = &levels[0].2;
         for (l, a) in affine.iter_mut().enumerate() {
             for c in 0..3 {
-                let (lo, hi) = level0[l * texels * 4..][..texels * 4]
-                    .iter()
-                    .skip(c)
-                    .step_by(4)
-                    .fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
-                (a[c], a[4 + c]) = (lo, (hi - lo).max(0.0));
+                (a[c], a[4 + c]) = channel_range(&level0[l * texels * 4..][..texels * 4], 4, c);
             }
         }
     }
@@ -168,13 +164,9 @@ pub fn upload(
                 .chunks_exact(w * h * 4)
                 .zip(&affine)
                 .flat_map(|(layer, a)| {
-                    layer.iter().enumerate().map(move |(t, &x)| {
-                        let c = t % 4;
-                        if c == 3 || a[4 + c] <= 0.0 {
-                            0
-                        } else {
-                            ((x - a[c]) / a[4 + c] * 255.0).round().clamp(0.0, 255.0) as u8
-                        }
+                    layer.iter().enumerate().map(move |(t, &x)| match t % 4 {
+                        3 => 0,
+                        c => to_byte(x, (a[c], a[4 + c])),
                     })
                 })
                 .collect(),

@@ -62,22 +62,24 @@ struct Quantised {
     bytes: Vec<u8>,
 }
 
+/// The range of channel `c` of `values` interleaved in `channels`: (its minimum, max - min);
+/// (0, 0) when empty. With [`to_byte`] the 8-bit quantisation of the file and of the GPU's
+/// 8-bit layers (src/btf/gpu.rs).
+pub(crate) fn channel_range(values: &[f32], channels: usize, c: usize) -> (f32, f32) {
+    let (lo, hi) =
+        values.iter().skip(c).step_by(channels).fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+    if lo <= hi { (lo, hi - lo) } else { (0.0, 0.0) }
+}
+
+/// `x` as the byte nearest to it over the range (offset, span) in 255 steps.
+pub(crate) fn to_byte(x: f32, (offset, span): (f32, f32)) -> u8 {
+    if span > 0.0 { ((x - offset) / span * 255.0).round().clamp(0.0, 255.0) as u8 } else { 0 }
+}
+
 fn quantise(image: &[f32]) -> Quantised {
-    let mut ranges = [(0.0f32, 0.0f32); 3];
-    for (c, range) in ranges.iter_mut().enumerate() {
-        let (lo, hi) =
-            image.iter().skip(c).step_by(3).fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
-        *range = if lo <= hi { (lo, (hi - lo) / 255.0) } else { (0.0, 0.0) };
-    }
-    let bytes = image
-        .iter()
-        .enumerate()
-        .map(|(t, &x)| {
-            let (offset, step) = ranges[t % 3];
-            if step > 0.0 { ((x - offset) / step).round().clamp(0.0, 255.0) as u8 } else { 0 }
-        })
-        .collect();
-    Quantised { ranges, bytes }
+    let spans = [0, 1, 2].map(|c| channel_range(image, 3, c));
+    let bytes = image.iter().enumerate().map(|(t, &x)| to_byte(x, spans[t % 3])).collect();
+    Quantised { ranges: spans.map(|(offset, span)| (offset, span / 255.0)), bytes }
 }
 
 fn dequantise(ranges: &[(f32, f32); 3], bytes: &[u8]) -> Vec<f32> {

@@ -98,6 +98,35 @@ impl GpuLight {
     }
 }
 
+/// `lights` (a MedianCut's or SunLight's, RegionLight colours scaled by `scale`, `code` in
+/// dir.w) for the shaders, each with its tile of `atlas` where one is given; an atlas of another
+/// number of lights is an error naming the two inputs, `shadows` and `lights`.
+pub fn gpu_lights(
+    lights: &[crate::ibl::median_cut::RegionLight],
+    atlas: Option<&ShadowAtlas>,
+    code: f32,
+    scale: f32,
+) -> Result<Vec<GpuLight>, String> {
+    if let Some(a) = atlas
+        && a.lights.len() != lights.len()
+    {
+        return Err(format!(
+            "input \"shadows\" holds {} lights but input \"lights\" has {}: feed both from the same MedianCut or SunLight",
+            a.lights.len(),
+            lights.len()
+        ));
+    }
+    Ok(lights
+        .iter()
+        .enumerate()
+        .map(|(k, l)| {
+            let light =
+                GpuLight::unshadowed(l.direction.extend(code).to_array(), (l.color * scale).extend(0.0).to_array());
+            atlas.map_or(light, |a| light.shadowed_by(a, k))
+        })
+        .collect())
+}
+
 /// `vsm` of shaders/ibl/shadowed_light.wgsl: the atlas's minimum variance, bleed reduction and
 /// depth bias (zero without an atlas).
 pub fn vsm_settings(atlas: Option<&ShadowAtlas>) -> [f32; 3] {

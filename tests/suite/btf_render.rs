@@ -788,6 +788,31 @@ fn hem_turns_the_environment_through_eigen_weightsets() {
         between < 0.1 * turned,
         "5 eigen-weightsets between steps are off by {between} (the turn itself: {turned})"
     );
+
+    // A new angle on the same node (the eigen-weightsets and corner buffers kept, the weight
+    // sets rewritten in place) gives what a fresh node gives at that angle.
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+    let turned_graph = |degrees: f64| {
+        hem_graph(
+            &probe,
+            btf,
+            &format!(r#""environment_rotation": {degrees:?}, "rotation_steps": 15, "eigen_sets": 5"#),
+        )
+    };
+    let mut ev = Evaluator::new(&turned_graph(24.0), &[]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { width: 32, height: 32, base_dir: root(), frames: None };
+    for degrees in [24.0, 36.0] {
+        ev.update(&turned_graph(degrees), &[]).unwrap();
+        while ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, Some(gpu()), &res, &settings).pending > 0 {
+            wait_idle(&res);
+        }
+    }
+    let depth = read_back(gpu(), &gbuffer_of(&ev).depth).unwrap();
+    let img = image(&ev, "shade");
+    let again: Vec<f32> =
+        (0..32 * 32).filter(|&i| depth.rgba[i * 4] > 0.0).flat_map(|i| img.rgba[i * 4..][..3].to_vec()).collect();
+    assert_eq!(again, few, "turning a running node differs from a fresh one at the same angle");
 }
 
 /// `storage: "8bit"`: the mean and eigentextures as RGBA8 with each layer's range (half the GPU
