@@ -78,7 +78,17 @@ pub static AVATAR: NodeSpec = NodeSpec {
         ParamSpec::new(
             "start",
             ParamKind::Float { default: 0.0, min: -1e6, max: 1e6 },
-            "Motion time (seconds) at frame 0.",
+            "Motion time (seconds) at frame 0 (once the rest and blend times are over).",
+        ),
+        ParamSpec::new(
+            "rest",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 600.0 },
+            "Seconds the body holds its rest pose before the motion (a garment is sewn and settles on it); 0: the motion from frame 0.",
+        ),
+        ParamSpec::new(
+            "blend",
+            ParamKind::Float { default: 0.5, min: 0.0, max: 60.0 },
+            "After a rest time: seconds over which the body moves from the rest pose to the motion's first pose (vertex by vertex), before the motion plays.",
         ),
         ParamSpec::new(
             "units",
@@ -161,6 +171,8 @@ impl Node for AvatarNode {
 
         // The pose.
         let mut frame = 0.0;
+        // 1: the motion's pose; below 1, blended with the rest pose by this weight.
+        let mut towards_motion = 1.0;
         let pose = if cx.str("motion").is_empty() {
             Pose::rest(skeleton)
         } else {
@@ -189,7 +201,9 @@ impl Node for AvatarNode {
                 self.retarget = Some((retarget_key, Arc::new(r)));
             }
             let retarget = self.retarget.as_ref().expect("set above").1.clone();
-            let seconds = cx.f64("start") + cx.time().seconds() * cx.f64("speed");
+            let (motion_time, weight) = rest_then_motion(cx.time().seconds(), cx.f64("rest"), cx.f64("blend"));
+            towards_motion = weight;
+            let seconds = cx.f64("start") + motion_time * cx.f64("speed");
             frame = seconds / bvh.frame_time;
             retarget.pose(&bvh, skeleton, frame, cx.bool("loop"), 1.0)
         };
@@ -197,7 +211,13 @@ impl Node for AvatarNode {
             SkinningKind::Lbs => Skinning::Linear,
             SkinningKind::Dqs => Skinning::DualQuaternion,
         };
-        let posed = skin(&body.obj.positions, weights, &skeleton.skinning(&pose), method);
+        let mut posed = skin(&body.obj.positions, weights, &skeleton.skinning(&pose), method);
+        if towards_motion < 1.0 {
+            // The rest pose is the base mesh itself (the rest pose reproduces it exactly).
+            for (p, r) in posed.iter_mut().zip(&body.obj.positions) {
+                *p = r.lerp(*p, towards_motion as f32);
+            }
+        }
         let (floor, units) = (body.floor(), cx.f32("units"));
         let place = move |p: Vec3| (p - Vec3::Y * floor) * units;
 
@@ -247,5 +267,31 @@ impl Node for AvatarNode {
         cx.set("collision", Arc::new(collision));
         cx.set("frame", frame);
         Ok(())
+    }
+}
+
+/// The motion's time (seconds from its start) and the weight of its pose against the rest pose
+/// at graph time `t`: the rest pose for `rest` seconds, then a blend over `blend` seconds into
+/// the motion's first pose, then the motion. Without a rest time the motion plays from 0.
+fn rest_then_motion(t: f64, rest: f64, blend: f64) -> (f64, f64) {
+    if rest <= 0.0 {
+        return (t, 1.0);
+    }
+    let blended = if blend > 0.0 { ((t - rest) / blend).clamp(0.0, 1.0) } else { f64::from(t >= rest) };
+    ((t - rest - blend.max(0.0)).max(0.0), blended)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rest_then_motion;
+
+    #[test]
+    fn the_body_rests_blends_then_moves() {
+        assert_eq!(rest_then_motion(0.7, 0.0, 0.5), (0.7, 1.0));
+        assert_eq!(rest_then_motion(0.5, 1.0, 0.5), (0.0, 0.0));
+        assert_eq!(rest_then_motion(1.25, 1.0, 0.5), (0.0, 0.5));
+        assert_eq!(rest_then_motion(2.0, 1.0, 0.5), (0.5, 1.0));
+        assert_eq!(rest_then_motion(0.9, 1.0, 0.0), (0.0, 0.0));
+        assert_eq!(rest_then_motion(1.0, 1.0, 0.0), (0.0, 1.0));
     }
 }

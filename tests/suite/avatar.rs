@@ -409,6 +409,26 @@ fn speed_and_loop() {
     assert!(worst < 1e-5, "one loop later the body is {worst} m away");
 }
 
+#[test]
+fn a_rest_time_holds_the_rest_pose_then_blends_into_the_motion() {
+    let walk = r#""motion": "walk1.bvh", "joint_map": "makehuman-old-rig.ron""#;
+    let rested = |frame: i64| node_outputs(&format!(r#"{walk}, "rest": 1.0, "blend": 0.5"#), frame).collision;
+    let rest = node_outputs("", 0).collision;
+    let first = node_outputs(walk, 0).collision;
+    assert_ne!(rest.positions, first.positions);
+    // At 0.5 s (frame 15 at 30 fps) the body rests; at 1.3 s it is 60% of the way to the
+    // motion's first pose; at 2 s it has walked 0.5 s.
+    assert_eq!(rested(15).positions, rest.positions);
+    let worst = rested(39)
+        .positions
+        .iter()
+        .zip(rest.positions.iter().zip(&first.positions))
+        .map(|(p, (a, b))| p.distance(a.lerp(*b, 0.6)))
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-5, "the blend is {worst} m off");
+    assert_eq!(rested(60).positions, node_outputs(walk, 15).collision.positions);
+}
+
 /// Frame settings with paths resolved in assets/avatar.
 fn settings() -> FrameSettings {
     FrameSettings { base_dir: root().join("assets/avatar"), ..FrameSettings::default() }
