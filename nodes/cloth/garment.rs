@@ -6,9 +6,11 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
+use crate::avatar::Joints;
 use crate::cloth::BodyMesh;
 use crate::core::node::prelude::*;
 use crate::garment::drape::{Drape, DrapeParams};
+use crate::garment::sleeves::{ArmAxis, fit_sleeves};
 use crate::garment::{Fit, Pattern, Sewn, freesewing, garmentcode};
 use crate::mesh::Mesh;
 use crate::warp::Placement;
@@ -17,11 +19,18 @@ pub static GARMENT: NodeSpec = NodeSpec {
     kind: "Garment",
     category: Category::Simulation,
     doc: "A garment sewn from a sewing pattern: GarmentCode v2 JSON, or a FreeSewing SVG through a RON sidecar that names its seams and places its parts (docs/garments.md). Panels are triangulated at the target edge length with equal vertex counts on stitched edges, placed in 3D, sewn by seam constraints that close over the first frames with gravity off, then draped (XPBD, 60 steps per second) against the body input, which moves every frame. UVs are the packed panel coordinates; piece ids follow the file's panel order; stitches are the Surface's seams.",
-    inputs: &[PortSpec::optional(
-        "body",
-        PortType::Mesh,
-        "The body to collide with (Avatar's collision output): the same vertices and triangles every frame.",
-    )],
+    inputs: &[
+        PortSpec::optional(
+            "body",
+            PortType::Mesh,
+            "The body to collide with (Avatar's collision output): the same vertices and triangles every frame.",
+        ),
+        PortSpec::optional(
+            "joints",
+            PortType::Joints,
+            "The body's joints at rest (Avatar's joints output): sleeve panels are slid along their arms (shoulder to elbow) to sit around them; without it they stay where the pattern places them.",
+        ),
+    ],
     outputs: &[
         PortSpec::output("surface", PortType::Surface, "The garment at the current time."),
         PortSpec::output("seam_gap", PortType::Scalar, "The largest distance between two sewn vertices (metres)."),
@@ -79,7 +88,8 @@ fn load_pattern(path: &Path) -> anyhow::Result<Pattern> {
 struct GarmentNode {
     /// The drape, what it was built from, and its step count.
     state: Option<(Drape, String, u64)>,
-    sewn: Option<(String, Arc<Sewn>)>,
+    /// The sewn pattern, what it was sewn from, and how many sleeves were fitted.
+    sewn: Option<(String, Arc<Sewn>, usize)>,
 }
 
 impl Node for GarmentNode {
@@ -91,12 +101,20 @@ impl Node for GarmentNode {
         let o = cx.vec3("offset");
         let fit = Fit { scale: DVec3::splat(cx.f64("scale")), offset: DVec3::new(o.x as f64, o.y as f64, o.z as f64) };
         let edge = cx.f64("edge_length");
-        let sew_key = format!("{:p} {edge} {fit:?}", Arc::as_ptr(&pattern));
-        if self.sewn.as_ref().is_none_or(|(k, _)| *k != sew_key) {
-            let sewn = pattern.sew(edge, fit).map_err(|e| NodeError::msg(e.to_string()))?;
-            self.sewn = Some((sew_key.clone(), Arc::new(sewn)));
+        let joints: Option<Arc<Joints>> = cx.optional("joints");
+        let arms = match &joints {
+            Some(j) => ArmAxis::of_joints(j).map_err(|e| NodeError::msg(format!("input \"joints\": {e:#}")))?.to_vec(),
+            None => Vec::new(),
+        };
+        let sew_key = format!("{:p} {edge} {fit:?} {arms:?}", Arc::as_ptr(&pattern));
+        if self.sewn.as_ref().is_none_or(|(k, ..)| *k != sew_key) {
+            let mut sewn = pattern.sew(edge, fit).map_err(|e| NodeError::msg(e.to_string()))?;
+            let fitted = fit_sleeves(&mut sewn, &arms).len();
+            self.sewn = Some((sew_key.clone(), Arc::new(sewn), fitted));
         }
-        let sewn = self.sewn.as_ref().expect("set above").1.clone();
+        let (_, sewn, fitted) = self.sewn.as_ref().expect("set above");
+        let sewn = sewn.clone();
+        cx.count("sleeves_fitted", *fitted);
         for w in &sewn.warnings {
             cx.warn(w.clone());
         }

@@ -37,6 +37,11 @@ pub static AVATAR: NodeSpec = NodeSpec {
             "The .mhclo garment fitted to the posed body (the body itself when no clothes are set).",
         ),
         PortSpec::output("frame", PortType::Scalar, "The motion's frame position this frame (fractional; 0 at rest)."),
+        PortSpec::output(
+            "joints",
+            PortType::Joints,
+            "The skeleton's joints at rest, placed like the body (for the Garment node's sleeve fit).",
+        ),
     ],
     params: &[
         ParamSpec::new(
@@ -266,6 +271,11 @@ impl Node for AvatarNode {
         cx.set("surface", surface);
         cx.set("collision", Arc::new(collision));
         cx.set("frame", frame);
+        let joints = avatar::Joints {
+            names: skeleton.bones.iter().map(|b| b.name.clone()).collect(),
+            rest: skeleton.bones.iter().map(|b| place(b.head.as_vec3())).collect(),
+        };
+        cx.set("joints", Arc::new(joints));
         Ok(())
     }
 }

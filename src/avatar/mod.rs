@@ -18,6 +18,21 @@ use glam::{Vec2, Vec3};
 use crate::mesh::{Mesh, vertex_normals};
 use obj::{Obj, SplitMesh, is_helper_group};
 
+/// A skeleton's joints (its bones' heads) where the body stands at rest, in metres, by bone name:
+/// what a garment fits its sleeves to (`Avatar`'s `joints` output).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joints {
+    pub names: Vec<String>,
+    pub rest: Vec<Vec3>,
+}
+
+impl Joints {
+    /// The rest position of the head of bone `name`.
+    pub fn rest_head(&self, name: &str) -> Option<Vec3> {
+        self.names.iter().position(|n| n == name).map(|i| self.rest[i])
+    }
+}
+
 /// The base mesh: every vertex (helpers included: joints and proxies refer to them), the
 /// visible faces split by UV, and the visible faces as a welded triangle mesh for collisions.
 #[derive(Clone, Debug)]

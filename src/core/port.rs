@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use crate::avatar::Joints;
 use crate::btf::gpu::GpuBtf;
 use crate::cuboid::Transform as CuboidTransform;
 use crate::gpu::GpuImage;
@@ -110,6 +111,8 @@ port_types! {
     CuboidTransform(Arc<CuboidTransform>) { color: [200, 120, 255], view: None };
     /// A bidirectional texture function compressed per view (PCA) on the GPU.
     Btf(Arc<GpuBtf>) { color: [170, 110, 60], view: None };
+    /// A skeleton's joints at rest, by bone name (the avatar's, for fitting sleeves).
+    Joints(Arc<Joints>) { color: [235, 225, 200], view: None };
 }
 
 impl PortType {
@@ -164,6 +167,7 @@ impl Value {
                 b.components,
                 b.bytes as f64 / (1u64 << 20) as f64
             ),
+            Value::Joints(j) => format!("{} joints", j.names.len()),
             Value::CuboidTransform(t) => match &**t {
                 CuboidTransform::Affine(_) => "affine cuboid (linear fast path)".into(),
                 CuboidTransform::Grid(g) => format!("{g:?}"),
@@ -227,6 +231,7 @@ typed!(Arc<GBuffer>: GBuffer);
 typed!(Arc<Vec<Placement>>: Instances);
 typed!(Arc<MatrixTexture>: MatrixTexture);
 typed!(Arc<Curves>: Curves);
+typed!(Arc<Joints>: Joints);
 typed!(Arc<EnvMap>: Environment);
 typed!(Arc<Lights>: Lights);
 typed!(Arc<PemSet>: Pems);

@@ -11,7 +11,6 @@
 use glam::Vec3;
 
 use super::Sewn;
-use crate::avatar::rig::Skeleton;
 
 /// One arm of the body a garment is fitted to: the shoulder joint (the upper arm's head) and the
 /// elbow joint (the forearm's head), in the garment's world frame (metres).
@@ -23,26 +22,24 @@ pub struct ArmAxis {
 
 impl ArmAxis {
     /// Both arms of a MakeHuman default skeleton (`upperarm01` and `lowerarm01`, left then
-    /// right) from its bones' global head positions `heads` (`Skeleton::globals`, mesh units),
-    /// each placed into the world by `place`.
-    pub fn makehuman_arms(
-        skeleton: &Skeleton,
-        heads: &[glam::DVec3],
-        place: impl Fn(Vec3) -> Vec3,
-    ) -> anyhow::Result<[ArmAxis; 2]> {
-        let head = |name: &str| -> anyhow::Result<Vec3> {
-            let i = skeleton.index(name).ok_or_else(|| anyhow::anyhow!("the skeleton has no bone \"{name}\""))?;
-            Ok(place(heads[i].as_vec3()))
-        };
+    /// right) from `head`, a bone's head position in the world by name.
+    pub fn makehuman_arms(head: impl Fn(&str) -> Option<Vec3>) -> anyhow::Result<[ArmAxis; 2]> {
+        let at = |name: &str| head(name).ok_or_else(|| anyhow::anyhow!("the skeleton has no bone \"{name}\""));
         Ok([
-            ArmAxis { shoulder: head("upperarm01.L")?, elbow: head("lowerarm01.L")? },
-            ArmAxis { shoulder: head("upperarm01.R")?, elbow: head("lowerarm01.R")? },
+            ArmAxis { shoulder: at("upperarm01.L")?, elbow: at("lowerarm01.L")? },
+            ArmAxis { shoulder: at("upperarm01.R")?, elbow: at("lowerarm01.R")? },
         ])
     }
 
     /// The arms of the bundled avatar at rest, in metres as it stands.
     pub fn of_avatar(avatar: &crate::avatar::walk::WalkingAvatar) -> anyhow::Result<[ArmAxis; 2]> {
-        ArmAxis::makehuman_arms(&avatar.skeleton, &avatar.rest_heads(), |p| avatar.place(p))
+        let heads = avatar.rest_heads();
+        ArmAxis::makehuman_arms(|name| avatar.skeleton.index(name).map(|i| avatar.place(heads[i].as_vec3())))
+    }
+
+    /// The arms of an `Avatar` node's joints.
+    pub fn of_joints(joints: &crate::avatar::Joints) -> anyhow::Result<[ArmAxis; 2]> {
+        ArmAxis::makehuman_arms(|name| joints.rest_head(name))
     }
 
     fn direction(&self) -> Vec3 {

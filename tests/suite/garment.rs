@@ -448,3 +448,50 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
         assert!(clearance.is_none_or(|d| d >= 0.9 * th), "frame {f}: a vertex {clearance:?} m from the body");
     }
 }
+
+/// The Garment node's surface at frame 0 (nothing simulated yet) for the shirt at 3 cm edges on
+/// the resting Avatar node, with or without the avatar's joints linked.
+fn garment_node_at_rest(joints: bool) -> Vec<Vec3> {
+    use werkstatt::core::eval::Evaluator;
+    let link = if joints { r#", ("avatar.joints", "garment.joints")"# } else { "" };
+    let text = format!(
+        r#"(version: 2, nodes: {{
+            "avatar": (kind: "Avatar", params: {{}}),
+            "garment": (kind: "Garment", params: {{"pattern": "../assets/patterns/garmentcode/shirt_mean_specification.json", "edge_length": 3.0}}),
+        }}, links: [("avatar.collision", "garment.body"){link}])"#
+    );
+    let graph = werkstatt::core::graph::Graph::load_str(&text, &root().join("graphs/test.ron")).unwrap();
+    let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = werkstatt::core::eval::FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
+    for _ in 0..50 {
+        if ev.evaluate(werkstatt::core::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
+            break;
+        }
+        crate::common::wait_idle(&res);
+    }
+    let status = format!("{:?}", ev.report("garment").unwrap().status);
+    match ev.output("garment", "surface") {
+        Some(werkstatt::core::port::Value::Surface(m)) => m.positions.clone(),
+        _ => panic!("no garment surface: {status}"),
+    }
+}
+
+/// Positions as a sorted list, to compare meshes whose vertex order may differ.
+fn sorted(mut p: Vec<Vec3>) -> Vec<Vec3> {
+    p.sort_by(|a, b| a.to_array().partial_cmp(&b.to_array()).unwrap());
+    p
+}
+
+#[test]
+fn the_garment_node_fits_its_sleeves_to_the_avatars_joints() {
+    let (_, arms) = rest_avatar();
+    let (fitted, fits) = shirt_on(Some(&arms));
+    assert_eq!(fits.len(), 2);
+    let (unfitted, _) = shirt_on(None);
+    let (with, without) = (sorted(garment_node_at_rest(true)), sorted(garment_node_at_rest(false)));
+    let close = |a: &[Vec3], b: &[Vec3]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.distance(*y) < 1e-5);
+    assert!(close(&with, &sorted(fitted.positions.clone())), "the node's sleeves are not fit_sleeves'");
+    assert!(close(&without, &sorted(unfitted.positions.clone())));
+    assert!(!close(&with, &without));
+}

@@ -37,6 +37,7 @@ fn producer(ty: PortType) -> Option<(&'static str, &'static str, Params)> {
         PortType::ShadowAtlas => ("ShadowAtlas", "shadows", vec![("tile_size", ParamValue::Int(32))]),
         PortType::CuboidTransform => ("Cuboid", "transform", vec![]),
         PortType::Btf => ("Btf", "btf", vec![]),
+        PortType::Joints => ("Avatar", "joints", vec![]),
         PortType::Vector | PortType::Color => return None,
     })
 }
