@@ -495,3 +495,40 @@ fn the_garment_node_fits_its_sleeves_to_the_avatars_joints() {
     assert!(close(&without, &sorted(unfitted.positions.clone())));
     assert!(!close(&with, &without));
 }
+
+#[test]
+fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+    use werkstatt::core::port::Value;
+    // graphs/garment_shirt.ron's avatar and garment, at 4 cm edges, rest shortened to 1 s.
+    let text = r#"(version: 2, nodes: {
+        "avatar": (kind: "Avatar", params: {"joint_map": "../assets/avatar/makehuman-old-rig.ron", "motion": "../assets/avatar/walk1.bvh", "rest": 1.0}),
+        "garment": (kind: "Garment", params: {"pattern": "../assets/patterns/garmentcode/shirt_mean_specification.json", "edge_length": 4.0, "self_collision": true}),
+    }, links: [("avatar.collision", "garment.body"), ("avatar.joints", "garment.joints")])"#;
+    let graph = werkstatt::core::graph::Graph::load_str(text, &root().join("graphs/test.ron")).unwrap();
+    let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
+    // Frame by frame at 60 fps (one simulator step each, the body moving between them) to 2.5 s:
+    // 1 s at rest, 0.5 s of blend, 1 s of walk.
+    for frame in 0..=150 {
+        for _ in 0..50 {
+            if ev.evaluate(FrameTime { frame, fps: 60.0 }, None, &res, &settings).pending == 0 {
+                break;
+            }
+            crate::common::wait_idle(&res);
+        }
+    }
+    let status = format!("{:?}", ev.report("garment").unwrap().status);
+    let (Some(Value::Surface(shirt)), Some(Value::Scalar(gap))) =
+        (ev.output("garment", "surface"), ev.output("garment", "seam_gap"))
+    else {
+        panic!("no garment: {status}");
+    };
+    let (lo, hi) = shirt.bounds();
+    let mean_y = shirt.positions.iter().map(|p| p.y).sum::<f32>() / shirt.positions.len() as f32;
+    eprintln!("shirt bounds {lo} {hi}, mean y {mean_y}, seam gap {gap}");
+    assert!(shirt.positions.iter().all(|p| p.is_finite()));
+    assert!(*gap < 1e-3, "the seams opened to {gap} m");
+    assert!(lo.y > 0.8 && hi.y < 1.6 && mean_y > 1.1, "the shirt is not on the torso: {lo} {hi}, mean y {mean_y}");
+}
