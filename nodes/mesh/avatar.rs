@@ -144,6 +144,8 @@ fn key<T>(arcs: &[&Arc<T>]) -> Key {
 struct AvatarNode {
     rig: Option<(Key, Arc<(Skeleton, Weights)>)>,
     retarget: Option<(Key, Arc<Retarget>)>,
+    /// The rest joints, placed, and the rig and metres per unit they were placed for.
+    joints: Option<((Key, u32), Arc<avatar::Joints>)>,
 }
 
 impl Node for AvatarNode {
@@ -271,11 +273,16 @@ impl Node for AvatarNode {
         cx.set("surface", surface);
         cx.set("collision", Arc::new(collision));
         cx.set("frame", frame);
-        let joints = avatar::Joints {
-            names: skeleton.bones.iter().map(|b| b.name.clone()).collect(),
-            rest: skeleton.bones.iter().map(|b| place(b.head.as_vec3())).collect(),
-        };
-        cx.set("joints", Arc::new(joints));
+        // The rest joints change with the rig and units only, not per frame.
+        let joints_key = (rig_key, units.to_bits());
+        if self.joints.as_ref().is_none_or(|(k, _)| *k != joints_key) {
+            let joints = avatar::Joints {
+                names: skeleton.bones.iter().map(|b| b.name.clone()).collect(),
+                rest: skeleton.bones.iter().map(|b| place(b.head.as_vec3())).collect(),
+            };
+            self.joints = Some((joints_key, Arc::new(joints)));
+        }
+        cx.set("joints", self.joints.as_ref().expect("set above").1.clone());
         Ok(())
     }
 }

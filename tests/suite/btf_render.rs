@@ -49,6 +49,18 @@ fn gbuffer_of(ev: &Evaluator) -> Arc<GBuffer> {
     }
 }
 
+/// `a`'s brightest colour channel, and the largest and mean absolute difference of `b` from `a`
+/// over every channel.
+fn differences(a: &Pixels, b: &Pixels) -> (f32, f32, f32) {
+    let peak = a.rgba.chunks_exact(4).flat_map(|p| &p[..3]).fold(0.0f32, |m, &x| m.max(x));
+    let (mut worst, mut sum) = (0.0f32, 0.0f32);
+    for (x, y) in a.rgba.iter().zip(&b.rgba) {
+        worst = worst.max((x - y).abs());
+        sum += (x - y).abs();
+    }
+    (peak, worst, sum / a.rgba.len() as f32)
+}
+
 fn image(ev: &Evaluator, node: &str) -> Pixels {
     read_back(gpu(), ev.output(node, "image").and_then(Value::as_texture).expect("an image")).unwrap()
 }
@@ -650,13 +662,7 @@ fn a_compressed_btf_file_shades_like_its_images() {
         image(&run_graph(&hem_graph(&probe, &btf, r#""tiling": 2.0"#), 48, 48), "shade")
     };
     let (a, b) = (shade(&images), shade(&packed));
-    let peak = a.rgba.chunks_exact(4).flat_map(|p| &p[..3]).fold(0.0f32, |m, &x| m.max(x));
-    let (mut worst, mut sum) = (0.0f32, 0.0f32);
-    for (x, y) in a.rgba.iter().zip(&b.rgba) {
-        worst = worst.max((x - y).abs());
-        sum += (x - y).abs();
-    }
-    let mean = sum / a.rgba.len() as f32;
+    let (peak, worst, mean) = differences(&a, &b);
     eprintln!("compressed file against images: worst {worst:.5}, mean {mean:.6}, peak {peak:.4}");
     assert!(peak > 0.05, "nothing lit");
     // 8-bit images: each eigentexture channel is off by at most half of 1/255 of its range.
@@ -831,13 +837,7 @@ fn eight_bit_layers_shade_like_half_floats_in_half_the_memory() {
     };
     let ((half, half_format, half_bytes), (byte, byte_format, byte_bytes)) = (render("f16"), render("8bit"));
     assert_eq!((half_format, byte_format), (wgpu::TextureFormat::Rgba16Float, wgpu::TextureFormat::Rgba8Unorm));
-    let peak = half.rgba.chunks_exact(4).flat_map(|p| &p[..3]).fold(0.0f32, |m, &x| m.max(x));
-    let (mut worst, mut sum) = (0.0f32, 0.0f32);
-    for (x, y) in half.rgba.iter().zip(&byte.rgba) {
-        worst = worst.max((x - y).abs());
-        sum += (x - y).abs();
-    }
-    let mean = sum / half.rgba.len() as f32;
+    let (peak, worst, mean) = differences(&half, &byte);
     eprintln!(
         "8-bit layers against f16: worst {worst:.5}, mean {mean:.6}, peak {peak:.4}; {byte_bytes} against {half_bytes} bytes"
     );
