@@ -18,15 +18,18 @@ pub static SCREEN_SPACE_REFLECTIONS: NodeSpec = NodeSpec {
     category: Category::Lighting,
     doc: "Glossy reflections of the scene in screen space, with the environment where a ray finds nothing (issue 34). IblShading \
 reflects only the probe (albedo x sum VIS_i PEM_i along r' = n(1-g) + r g), so a glossy ball above a lit floor shows the probe's dark ground. \
-Per pixel of glossiness g above `threshold`, `samples` directions of IblShading's Phong lobe cos^s about r' (s = 1/(1-g)) are marched against \
+Per pixel of glossiness g above `threshold`, `samples` rays of the GGX lobe as wide as IblShading's Phong lobe cos^s about r' (s = 1/(1-g), \
+alpha^2 = 2/(4s + 2), drawn by their visible normals with weights w_k = G2/G1) are marched against \
 the G-buffer's depth in 16 steps up to `max_distance` (world units, spaced quadratically) with 4 bisections; a ray that crosses a visible \
 surface facing it (by less than `thickness` plus the step's depth) takes that surface's radiance L_k from the lit image. A ray that leaves the \
 screen meets the tangent plane of the edge pixel it left through (a floor cut by the screen's edge goes on as a floor) and takes that pixel's \
 radiance, with a weight that falls linearly to 0 at `extend` screen heights beyond the screen; hits also fade out over the last fifth of \
 `max_distance`. Each ray's weight h_k (1 for on-screen hits) says how much of it hit; the rest escapes, weighed by the environment's radiance \
-E_k along it (a texel of its box mip chain at the level of the ray's share of the lobe): out = image x m + albedo x (1/K) sum h_k L_k, m = sum (1 - h_k) lum(E_k) / \
-sum lum(E_k), the share of the lobe's environment light that still arrives. So IblShading's result, shadows and occlusion included, is kept \
-for the escaped directions and returned exactly where every ray escapes. The lobe is rotated per pixel with a 4x4 interleaved pattern and the \
+E_k along it (a texel of its box mip chain at the level of the ray's share of the lobe): out = image x m + albedo x sum w_k h_k L_k / sum w_k, \
+m = [sum w_k (1 - h_k) lum(E_k) / sum w_k lum(E_k)] x [GGX lobe's / Phong lobe's environment light], the share of the lobe's environment light \
+that still arrives times what the GGX lobe reads of the probe over what IblShading's Phong lobe read (horizon included; 4K environment-only \
+directions each). So IblShading's result, shadows and occlusion included, is kept \
+for the escaped directions, reshaped to the GGX lobe (unchanged under a uniform probe). The lobe is rotated per pixel with a 4x4 interleaved pattern and the \
 result averaged over each 4x4 tile, edge-aware; it fades in over glossiness threshold..threshold + 0.1 (pixels at or below the threshold are \
 unchanged). Surfaces hidden from the camera are not reflected (a ray passing behind one goes on); with `ground`, such a ray going down meets a ground plane lit by `lights` through `shadows` (the floor under a glossy object). Deterministic: no time-based noise.",
     inputs: &[

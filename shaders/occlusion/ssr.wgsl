@@ -1,17 +1,24 @@
 // Screen-space reflections with the environment as fallback (nodes/occlusion/ssr.rs, issue
-// 34). IblShading reflects only the probe: c = albedo * sum_i VIS_i PEM_i(r', level(g)). Where
-// the lobe about r' sees the scene instead (a ball above a lit floor), this pass swaps the
-// probe for what the screen shows there. Per glossy pixel, K directions d_k of the Phong lobe
-// cos^s about r' (s = 1/(1-g), IblShading's lobe) are marched against the G-buffer's depth;
-// a ray that crosses a visible surface facing it takes the lit image's radiance L_k there,
-// with weight h_k (1, fading over the end of the march); one that leaves the screen meets the
-// edge pixel's tangent plane (`beyond`, h_k fading with the distance off screen). What is
-// not hit escapes to the environment, whose radiance E_k along d_k weighs it. Then
-//   out = image * m + albedo * (1/K) sum_k h_k L_k,   m = sum_k (1 - h_k) lum(E_k) / sum_k lum(E_k),
-// so m is the share of the lobe's environment light that still arrives: IblShading's result
-// (with its shadows and occlusion) is kept for that share, exactly where every ray escapes.
-// fs_gather writes (1/K sum h L, m) with one of 16 lobe rotations per pixel of a 4x4 tile;
-// fs_resolve averages over the tile, edge-aware, and fades in with glossiness above the
+// 34). IblShading reflects only the probe: c = albedo * sum_i VIS_i PEM_i(r', level(g)), a
+// Phong lobe cos^s about r' = n (1 - g) + r g, s = 1/(1-g). Where the lobe sees the scene
+// instead (a ball above a lit floor), this pass swaps the probe for what the screen shows
+// there. Per glossy pixel, K rays follow the GGX lobe of the same width (alpha^2 = 2/(4s + 2),
+// the exporter's material for Cycles), drawn by its visible normals (Heitz 2018) with weights
+// w_k = G2/G1; they are marched against the G-buffer's depth; a ray that crosses a visible
+// surface facing it takes the lit image's radiance L_k there, with weight h_k (1, fading over
+// the end of the march); one that leaves the screen meets the edge pixel's tangent plane
+// (`beyond`, h_k fading with the distance off screen). What is not hit escapes to the
+// environment, whose radiance E_k along the ray weighs it. Then
+//   out = image * m + albedo * sum_k w_k h_k L_k / sum_k w_k,
+//   m = [sum_k w_k (1 - h_k) E_k / sum_k w_k E_k] * [GGX(E) / PHONG(E)],
+// the first factor the share of the lobe's environment light that still arrives, the second
+// what the GGX lobe reads of the environment over what IblShading's Phong lobe read (under the
+// surface's horizon included), each by ENV_RAYS x K environment-only directions. So
+// IblShading's result (its shadows and occlusion) is kept for the escaped share, reshaped to
+// the GGX lobe: unchanged under a uniform probe. The weights are normalised, as if multiple
+// scattering returned the energy single scattering loses (Cycles' multiscatter GGX, in white).
+// fs_gather writes (sum w h L / sum w, m) with one of 16 lobe rotations per pixel of a 4x4
+// tile; fs_resolve averages over the tile, edge-aware, and fades in with glossiness above the
 // threshold.
 
 struct Ssr {
@@ -65,6 +72,9 @@ override LIGHTS: u32 = 0u;
 // #include "cube.wgsl"
 
 // #include "shadowed_light.wgsl"
+
+// Environment-only directions per marched ray.
+const ENV_RAYS: u32 = 4u;
 
 // Glossiness over which the reflections fade in above the threshold.
 const GLOSS_FADE: f32 = 0.1;
@@ -227,6 +237,56 @@ fn env_texel(d: vec3<f32>, level: f32) -> vec3<f32> {
     return textureLoad(env, t, i32(f.face), i32(l)).rgb;
 }
 
+// The environment level for a direction drawn with density pdf among count.
+fn env_level(pdf: f32, count: u32, texel: f32) -> f32 {
+    return clamp(0.5 * log2(1.0 / (f32(count) * max(pdf, 1e-6) * texel)) + 1.0, 0.0, u.size.w);
+}
+
+// Smith's Lambda for GGX at cos theta c.
+fn smith_lambda(c: f32, alpha: f32) -> f32 {
+    let t2 = max(1.0 - c * c, 0.0) / max(c * c, 1e-8);
+    return 0.5 * (-1.0 + sqrt(1.0 + alpha * alpha * t2));
+}
+
+// The GGX normal distribution D(h) at cos theta_h c.
+fn ggx_ndf(c: f32, alpha: f32) -> f32 {
+    let a2 = alpha * alpha;
+    let k = c * c * (a2 - 1.0) + 1.0;
+    return a2 / (PI * k * k);
+}
+
+// A GGX visible normal for the view ve (tangent space, z the normal), Heitz 2018.
+fn sample_vndf(ve: vec3<f32>, alpha: f32, u1: f32, u2: f32) -> vec3<f32> {
+    let vh = normalize(vec3<f32>(alpha * ve.x, alpha * ve.y, max(ve.z, 1e-4)));
+    let len2 = vh.x * vh.x + vh.y * vh.y;
+    let t1_axis = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(-vh.y, vh.x, 0.0) / sqrt(len2), len2 > 1e-12);
+    let t2_axis = cross(vh, t1_axis);
+    let rad = sqrt(u1);
+    let phi = 2.0 * PI * u2;
+    let t1 = rad * cos(phi);
+    let sv = 0.5 * (1.0 + vh.z);
+    let t2 = (1.0 - sv) * sqrt(max(1.0 - t1 * t1, 0.0)) + sv * rad * sin(phi);
+    let nh = t1 * t1_axis + t2 * t2_axis + sqrt(max(1.0 - t1 * t1 - t2 * t2, 0.0)) * vh;
+    return normalize(vec3<f32>(alpha * nh.x, alpha * nh.y, max(nh.z, 1e-6)));
+}
+
+// A GGX ray for the view ve (tangent space): its direction and weight G2 / G1 (0 where the
+// reflection falls under the surface).
+fn ggx_ray(ve: vec3<f32>, alpha: f32, lambda_v: f32, u1: f32, u2: f32) -> vec4<f32> {
+    let h = sample_vndf(ve, alpha, u1, u2);
+    let l = reflect(-ve, h);
+    if l.z <= 0.0 {
+        return vec4<f32>(l, 0.0);
+    }
+    return vec4<f32>(l, (1.0 + lambda_v) / (1.0 + lambda_v + smith_lambda(l.z, alpha)));
+}
+
+// The density of ggx_ray's direction l: D_v(h) / (4 v.h) = G1(v) D(h) / (4 v.n).
+fn ggx_pdf(ve: vec3<f32>, l: vec3<f32>, alpha: f32, lambda_v: f32) -> f32 {
+    let h = normalize(ve + l);
+    return ggx_ndf(h.z, alpha) / (4.0 * max(ve.z, 1e-4) * (1.0 + lambda_v));
+}
+
 @fragment
 fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let q = vec2<i32>(frag.xy);
@@ -239,10 +299,15 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let p = view_pos(vec2<f32>(q) + 0.5, d);
     let n = view_normal(q);
     let r = reflect(normalize(p), n);
-    // IblShading's lobe: cos^s about r' = n (1 - g) + r g.
+    // IblShading's lobe: cos^s about r'.
     let axis = normalize(n * (1.0 - g) + r * g);
     let s = select(1.0 / (1.0 - g), 1e6, g >= 1.0);
-    let frame = basis(axis);
+    let phong_frame = basis(axis);
+    // The GGX lobe of the same width (alpha^2 = 2 / (4 s + 2), as Blinn-Phong 4 s; Walter et al.
+    // 2007): the rays follow it, sampled by its visible normals (Heitz 2018).
+    let alpha = max(sqrt(2.0 / (4.0 * s + 2.0)), 1e-3);
+    let frame = basis(n);
+    let ve = transpose(frame) * -normalize(p);
     let to_world = transpose(mat3x3<f32>(u.view[0].xyz, u.view[1].xyz, u.view[2].xyz));
     let count = u32(u.samples);
     let b = pattern(q);
@@ -253,24 +318,20 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let o = p + n * (2.0 * pixel_size(d));
     let world_origin = to_world * (o - u.view[3].xyz);
     var hits = vec3<f32>(0.0);
-    var env_all = 0.0;
+    var weights = 0.0;
+    var env_seen = 0.0;
     var env_missed = 0.0;
+    let lambda_v = smith_lambda(max(ve.z, 1e-4), alpha);
     for (var k = 0u; k < count; k++) {
-        // Direction 16k + b of a Fibonacci set distributed as cos^s about the axis.
+        // Direction 16k + b of a Fibonacci set: a visible normal of the GGX lobe, the view
+        // reflected about it, weighed by G2 / G1 (BRDF x cos over the VNDF's pdf, colour aside).
         let i = f32(k * 16u + b);
-        let u1 = (i + 0.5) / total;
-        let cos_t = pow(u1, 1.0 / (s + 1.0));
-        let sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
-        let phi = i * GOLDEN_ANGLE;
-        var dir = frame * vec3<f32>(sin_t * cos(phi), sin_t * sin(phi), cos_t);
-        // Directions under the surface (a wide lobe near the horizon) are mirrored above it.
-        let below = dot(dir, n);
-        if below < 0.0 {
-            dir -= 2.0 * below * n;
+        let ray = ggx_ray(ve, alpha, lambda_v, (i + 0.5) / total, fract(i * (1.0 - INV_PHI)));
+        if ray.w <= 0.0 {
+            continue;
         }
-        let pdf = (s + 1.0) / (2.0 * PI) * pow(cos_t, s);
-        let level = clamp(0.5 * log2(1.0 / (f32(count) * pdf * texel)) + 1.0, 0.0, u.size.w);
-        let e = luminance(env_texel(to_world * dir, level));
+        let dir = frame * ray.xyz;
+        let e = luminance(env_texel(to_world * dir, env_level(ggx_pdf(ve, ray.xyz, alpha, lambda_v), count, texel)));
         let jitter = fract((f32(k) + 0.5) * INV_PHI + (f32(b) + 0.5) / 16.0);
         var hit = march(o, dir, q, jitter);
         if LIGHTS > 0u && hit.weight < 1.0 {
@@ -279,12 +340,44 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             hit.radiance += (1.0 - hit.weight) * ground.radiance;
             hit.weight += (1.0 - hit.weight) * ground.weight;
         }
-        hits += hit.radiance;
-        env_all += e;
-        env_missed += (1.0 - hit.weight) * e;
+        hits += ray.w * hit.radiance;
+        weights += ray.w;
+        env_seen += ray.w * e;
+        env_missed += ray.w * (1.0 - hit.weight) * e;
     }
-    let missed = select(env_missed / env_all, 1.0, env_all <= 0.0);
-    return vec4<f32>(hits / f32(count), missed);
+    // What the two lobes read of the environment alone, by ENV_RAYS times as many directions
+    // (no march: cheap): IblShading's Phong lobe cos^s about r' (under the surface's horizon
+    // included, as its PEM lookup) and the GGX lobe.
+    let env_count = count * ENV_RAYS;
+    let env_total = f32(env_count * 16u);
+    var phong_env = 0.0;
+    var ggx_env = 0.0;
+    var ggx_weights = 0.0;
+    for (var k = 0u; k < env_count; k++) {
+        let i = f32(k * 16u + b);
+        let u1 = (i + 0.5) / env_total;
+        let u2 = fract(i * (1.0 - INV_PHI));
+        let cos_t = pow(u1, 1.0 / (s + 1.0));
+        let sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+        let phi = 2.0 * PI * u2;
+        let dp = phong_frame * vec3<f32>(sin_t * cos(phi), sin_t * sin(phi), cos_t);
+        let pdf_p = (s + 1.0) / (2.0 * PI) * pow(cos_t, s);
+        phong_env += luminance(env_texel(to_world * dp, env_level(pdf_p, env_count, texel)));
+        let ray = ggx_ray(ve, alpha, lambda_v, u1, u2);
+        if ray.w > 0.0 {
+            let pdf = ggx_pdf(ve, ray.xyz, alpha, lambda_v);
+            ggx_env += ray.w * luminance(env_texel(to_world * (frame * ray.xyz), env_level(pdf, env_count, texel)));
+            ggx_weights += ray.w;
+        }
+    }
+    // Normalised to the rays' total weight: the energy multiple scattering returns (Cycles'
+    // multiscatter GGX) is taken as white. m, the share of IblShading's result that stays (its
+    // shadows and occlusion kept): the marched rays' missed share of their environment light,
+    // times the GGX lobe's environment light over what the Phong lobe read.
+    let norm = max(weights, 1e-6);
+    let missed_share = select(env_missed / env_seen, 1.0, env_seen <= 0.0);
+    let reshape = select((ggx_env / ggx_weights) / (phong_env / f32(env_count)), 1.0, phong_env <= 0.0 || ggx_weights <= 0.0);
+    return vec4<f32>(select(hits / norm, vec3<f32>(0.0), weights <= 0.0), missed_share * reshape);
 }
 
 @fragment

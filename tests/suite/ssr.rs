@@ -2,8 +2,9 @@
 //! probe whose sky is bright and whose ground is dark. IblShading alone makes the sphere's
 //! lower part reflect the probe's dark ground; with the node it reflects the floor, about
 //! albedo x the floor's radiance. Where every ray leaves the screen (the sphere alone) the
-//! environment fallback returns IblShading's image; at or below the glossiness threshold the
-//! image is unchanged.
+//! environment fallback returns IblShading's image, rescaled only by what the GGX lobe reads of
+//! the probe against IblShading's Phong lobe; at or below the glossiness threshold the image is
+//! unchanged.
 
 use glam::Vec3;
 use werkstatt::core::graph::Graph;
@@ -166,17 +167,40 @@ fn the_hidden_ground_is_reflected_where_the_screen_shows_no_floor() {
 }
 
 #[test]
-fn escaped_rays_and_low_glossiness_keep_the_image() {
-    let probe = probe("ssr_open");
+fn escaped_rays_keep_the_image_up_to_the_lobes_shape_and_low_glossiness_keeps_it() {
     // The sphere alone: every ray leaves for the background, the environment answers them all.
-    let ev = run_graph(&graph(&probe, false, 0.95), SIZE.0, SIZE.1);
+    // Under a uniform probe the GGX lobe reads what IblShading's Phong lobe read: no change.
+    let uniform = out_dir("ssr_uniform").join("probe.hdr");
+    write_probe(&uniform, 32, 16, |_, _| Vec3::splat(0.5));
+    let ev = run_graph(&graph(&uniform, false, 0.95), SIZE.0, SIZE.1);
     let (lit, out) = (rgb(&ev, "light"), rgb(&ev, "ssr"));
-    let worst = lit
-        .iter()
-        .zip(&out)
-        .map(|(a, b)| ((*b - *a).abs() / a.max(Vec3::splat(1e-3))).max_element())
-        .fold(0.0, f32::max);
-    assert!(worst < 0.01, "an open scene changed by {:.3}%", 100.0 * worst);
+    let change = |a: &Vec3, b: &Vec3| ((*b - *a) / a.max(Vec3::splat(1e-3))).abs().max_element();
+    let worst = lit.iter().zip(&out).map(|(a, b)| change(a, b)).fold(0.0, f32::max);
+    assert!(worst < 0.01, "an open scene under a uniform probe changed by {:.3}%", 100.0 * worst);
+    // Under the bright sky and dark ground: where the mirror direction points well up (away
+    // from the silhouette) both lobes see sky but for the GGX lobe's longer tails (a few
+    // percent); towards the silhouette the Phong lobe dips under the horizon into the dark
+    // ground, which the GGX lobe does not reflect, so the sphere brightens there (by 6%
+    // on average where n.v < 0.3).
+    let probe = probe("ssr_open");
+    let ev = run_graph(&graph(&probe, false, 0.95), SIZE.0, SIZE.1);
+    let (lit, out, pos, eye) = (rgb(&ev, "light"), rgb(&ev, "ssr"), world_positions(&ev, 5), eye(&ev));
+    let up = |p: Vec3| {
+        let (n, v) = ((p - CENTRE).normalize(), (p - eye).normalize());
+        (v - 2.0 * v.dot(n) * n).y > 0.7 && -v.dot(n) > 0.5
+    };
+    let top: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(up)).collect();
+    assert!(top.len() > 20, "{} top pixels", top.len());
+    let worst_top = top.iter().map(|&i| change(&lit[i], &out[i])).fold(0.0, f32::max);
+    assert!(worst_top < 0.05, "the sphere's top changed by {:.3}%", 100.0 * worst_top);
+    let rim = |p: Vec3| -(p - eye).normalize().dot((p - CENTRE).normalize()) < 0.3;
+    let silhouette: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].is_some_and(rim)).collect();
+    let (before, after) = (mean(silhouette.iter().map(|&i| lit[i])), mean(silhouette.iter().map(|&i| out[i])));
+    assert!(
+        silhouette.len() > 20 && after.x > 1.04 * before.x,
+        "{} silhouette pixels: {before} -> {after}",
+        silhouette.len()
+    );
     // Glossiness at the threshold (0.3): nothing changes, floor or sphere.
     let ev = run_graph(&graph(&probe, true, 0.3), SIZE.0, SIZE.1);
     assert_eq!(rgb(&ev, "light"), rgb(&ev, "ssr"), "glossiness 0.3 changed the image");
