@@ -9,7 +9,7 @@ use glam::DVec3;
 use crate::avatar::Joints;
 use crate::cloth::BodyMesh;
 use crate::core::node::prelude::*;
-use crate::garment::drape::{Drape, DrapeParams};
+use crate::garment::drape::{Drape, DrapeParams, DrapeState};
 use crate::garment::sleeves::{ArmAxis, fit_sleeves};
 use crate::garment::{Fit, Pattern, Sewn, freesewing, garmentcode};
 use crate::mesh::Mesh;
@@ -73,6 +73,21 @@ pub static GARMENT: NodeSpec = NodeSpec {
             "Seconds simulated before frame 0, against the body as it is at the first evaluated frame.",
         ),
         ParamSpec::new("self_collision", ParamKind::Bool { default: false }, "Cloth-cloth contacts (slower)."),
+        ParamSpec::new(
+            "start_state",
+            ParamKind::Path { default: "", extensions: &["drape"] },
+            "A drape saved by `save_state` (relative to the graph's folder): the simulation starts from it at frame 0, seams closed, instead of from the flat panels. It must have been saved for the same garment (pattern, edge length, placement, sleeves), simulation settings and body vertex count; otherwise a warning says so and the garment is sewn from the start. Where the body stands at frame 0 is up to the graph: start the motion where the saving graph's was.",
+        ),
+        ParamSpec::new(
+            "save_state",
+            ParamKind::Text { default: "" },
+            "Where to write the drape (relative to the graph's folder) when the simulation reaches `save_at`: a warm start for `start_state` (for example `werkstatt render GRAPH --frames N..N --set garment.save_state=FILE --set garment.save_at=T`, N / fps = T). Empty: nothing is written.",
+        ),
+        ParamSpec::new(
+            "save_at",
+            ParamKind::Float { default: 0.0, min: 0.0, max: 3600.0 },
+            "Graph time (s) at which `save_state` is written, rounded to the simulation's 1/60 s frames.",
+        ),
     ],
     capabilities: Capabilities::NONE,
     create: || Box::new(GarmentNode::default()),
@@ -88,6 +103,8 @@ fn load_pattern(path: &Path) -> anyhow::Result<Pattern> {
 struct GarmentNode {
     /// The drape, what it was built from, and its step count.
     state: Option<(Drape, String, u64)>,
+    /// Why `start_state` was not used for the drape being simulated (warned every frame).
+    start_refused: Option<String>,
     /// The sewn pattern, what it was sewn from, and how many sleeves were fitted.
     sewn: Option<(String, Arc<Sewn>, usize)>,
 }
@@ -125,7 +142,12 @@ impl Node for GarmentNode {
             sim: crate::cloth::SimParams { self_collision: cx.bool("self_collision"), ..DrapeParams::default().sim },
             sewing_frames: cx.int("sewing_frames") as u64,
         };
-        let key = format!("{sew_key} {body_n:?} {params:?}");
+        let state_key = Drape::key(&sewn, &params, body_n);
+        let start: Option<Arc<DrapeState>> = match cx.str("start_state").trim() {
+            "" => None,
+            _ => Some(cx.load(&cx.path("start_state"), DrapeState::read)?),
+        };
+        let key = format!("{sew_key} {body_n:?} {params:?} {:?}", start.as_ref().map(Arc::as_ptr));
         let time = cx.time();
         let target = ((cx.f64("warmup") + time.seconds()) * 60.0).round().max(0.0) as u64;
         let rebuild = self.state.as_ref().is_none_or(|(_, k, step)| *k != key || *step > target);
@@ -134,12 +156,46 @@ impl Node for GarmentNode {
                 let tris = b.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
                 BodyMesh::new(b.positions.clone(), tris)
             });
-            self.state = Some((Drape::new(&sewn, &params, body_mesh), key, 0));
+            let mut drape = Drape::new(&sewn, &params, body_mesh);
+            self.start_refused = None;
+            if let Some(start) = &start {
+                if start.key == state_key {
+                    drape.restore(start).map_err(|e| NodeError::msg(format!("parameter \"start_state\": {e:#}")))?;
+                } else {
+                    self.start_refused = Some(format!(
+                        "start_state {}: saved for another garment, body or simulation settings ({} vertices, key {:016x}; \
+                         this garment has {} vertices, key {state_key:016x}): sewing from the flat panels instead",
+                        cx.str("start_state"),
+                        start.positions.len(),
+                        start.key,
+                        sewn.positions.len()
+                    ));
+                }
+            }
+            self.state = Some((drape, key, 0));
         }
+        if let Some(why) = &self.start_refused {
+            cx.warn(why.clone());
+        }
+        let save = (!cx.str("save_state").trim().is_empty()).then(|| cx.path("save_state"));
+        let save_step = (cx.f64("save_at") * 60.0).round().max(0.0) as u64;
         let (drape, _, step) = self.state.as_mut().expect("built above");
+        let write = |drape: &Drape, step: u64| -> Result<(), NodeError> {
+            match &save {
+                Some(path) if step == save_step => drape
+                    .state(state_key)
+                    .write(path)
+                    .map_err(|e| NodeError::msg(format!("parameter \"save_state\": {e:#}"))),
+                _ => Ok(()),
+            }
+        };
+        if rebuild {
+            write(drape, *step)?;
+        }
         while *step < target {
             drape.step(body.as_ref().map(|b| b.positions.as_slice()));
             *step += 1;
+            write(drape, *step)?;
         }
         let cloth = &drape.cloth;
         if cloth.positions().iter().any(|p| !p.is_finite()) {

@@ -240,6 +240,17 @@ impl BodyMesh {
         &self.triangles
     }
     /// The pose at the end of the last (or coming) frame.
+    /// The last frame's `(body vertex, cloth triangle, side)` pairs: the sides the next frame
+    /// keeps.
+    pub(crate) fn sides(&self) -> &[(u32, u32, f32)] {
+        &self.vt_pairs
+    }
+
+    /// Puts back the sides a saved cloth's last frame recorded.
+    pub(crate) fn set_sides(&mut self, sides: &[(u32, u32, f32)]) {
+        self.vt_pairs = sides.to_vec();
+    }
+
     pub fn positions(&self) -> &[Vec3] {
         &self.end
     }

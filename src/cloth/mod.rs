@@ -35,7 +35,7 @@ pub use body_collision::BodyMesh;
 pub use collider::{Collider, Contact, TriMeshCollider};
 pub use pattern::{EdgeRef, PatternError, PatternMesh, Piece, PieceMesh, Seam};
 pub use presets::{FlagParams, Preset, SkirtParams, TableclothParams};
-pub use sim::{CM, Cloth, SimParams, StepTimings, Wind};
+pub use sim::{CM, Cloth, ClothState, SimParams, StepTimings, Wind};
 
 /// Frame length used by [`simulate_to_frame`] (60 frames per second).
 pub const FRAME_DT: f32 = 1.0 / 60.0;

@@ -48,6 +48,16 @@ impl SelfCollision {
         }
     }
 
+    /// The last frame's pairs `(vertex, triangle, side)`: the sides the next frame keeps.
+    pub(crate) fn sides(&self) -> &[(u32, u32, f32)] {
+        &self.pairs
+    }
+
+    /// `new` for a cloth saved mid-run, with the sides its last frame recorded.
+    pub(crate) fn with_sides(x: &[Vec3], triangles: &[[u32; 3]], sides: &[(u32, u32, f32)]) -> Self {
+        SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles) }
+    }
+
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn begin_frame(
         &mut self,

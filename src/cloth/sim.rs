@@ -169,6 +169,18 @@ impl Default for SimParams {
     }
 }
 
+/// What [`Cloth::restore`] puts back: a cloth's state between two frames.
+pub struct ClothState<'a> {
+    pub positions: &'a [Vec3],
+    pub velocities: &'a [Vec3],
+    pub time: f64,
+    pub frame: u64,
+    /// `(vertex, triangle, side)` of the self-contacts the last frame recorded.
+    pub sides: &'a [(u32, u32, f32)],
+    /// `(body vertex, cloth triangle, side)` of the body's contacts the last frame recorded.
+    pub body_sides: &'a [(u32, u32, f32)],
+}
+
 /// A simulated garment: pattern, solver state, constraints and colliders.
 #[derive(Clone, Debug)]
 pub struct Cloth {
@@ -782,6 +794,53 @@ impl Cloth {
         &self.edge_rest
     }
     /// Simulated time (s).
+    /// Puts the cloth at a saved state: positions, velocities, simulated time, frame count and
+    /// the sides of its self-contacts (what [`Cloth::step_frame`] carries from one frame to the
+    /// next; the rest is rebuilt from the positions, as at the start).
+    pub fn restore(&mut self, state: ClothState<'_>) -> Result<(), String> {
+        let ClothState { positions, velocities, time, frame, sides, body_sides } = state;
+        let n = self.x.len();
+        if positions.len() != n || velocities.len() != n {
+            return Err(format!(
+                "{} positions and {} velocities for a cloth of {n} vertices",
+                positions.len(),
+                velocities.len()
+            ));
+        }
+        let tris = self.mesh.triangles().len() as u32;
+        if let Some(bad) = sides.iter().find(|s| s.0 as usize >= n || s.1 >= tris) {
+            return Err(format!("a self-contact of vertex {} and triangle {} outside the cloth", bad.0, bad.1));
+        }
+        let body_n = self.body.as_ref().map_or(0, |b| b.positions().len());
+        if let Some(bad) = body_sides.iter().find(|s| s.0 as usize >= body_n || s.1 >= tris) {
+            return Err(format!(
+                "a body contact of body vertex {} and triangle {} outside the body or cloth",
+                bad.0, bad.1
+            ));
+        }
+        self.x.copy_from_slice(positions);
+        self.prev.copy_from_slice(positions);
+        self.v.copy_from_slice(velocities);
+        self.time = time;
+        self.frame = frame;
+        self.self_collision =
+            self.params.self_collision.then(|| SelfCollision::with_sides(&self.x, self.mesh.triangles(), sides));
+        if let Some(body) = &mut self.body {
+            body.set_sides(body_sides);
+        }
+        Ok(())
+    }
+
+    /// The sides of the self-contacts the last frame recorded (none without self-collision).
+    pub fn self_contact_sides(&self) -> &[(u32, u32, f32)] {
+        self.self_collision.as_ref().map_or(&[], |sc| sc.sides())
+    }
+
+    /// The sides of the body's contacts the last frame recorded (none without a body).
+    pub fn body_contact_sides(&self) -> &[(u32, u32, f32)] {
+        self.body.as_ref().map_or(&[], |b| b.sides())
+    }
+
     pub fn time(&self) -> f64 {
         self.time
     }

@@ -532,3 +532,120 @@ fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
     assert!(*gap < 1e-3, "the seams opened to {gap} m");
     assert!(lo.y > 0.8 && hi.y < 1.6 && mean_y > 1.1, "the shirt is not on the torso: {lo} {hi}, mean y {mean_y}");
 }
+
+/// A drape saved mid-run and restored into a fresh drape goes on exactly as the run it was saved
+/// from: positions, velocities, time, frame and the self-contacts' sides are what one frame
+/// hands the next (the shirt at 3 cm on the rest-pose avatar, self-collision on, walking body
+/// frames after the save).
+#[test]
+fn a_saved_drape_goes_on_as_the_run_it_was_saved_from() {
+    use werkstatt::garment::drape::DrapeState;
+    let params =
+        DrapeParams { sim: SimParams { self_collision: true, ..DrapeParams::default().sim }, ..Default::default() };
+    let (body, arms) = rest_avatar();
+    let (sewn, _) = shirt_on(Some(&arms));
+    let new_drape = || Drape::new(&sewn, &params, Some(body.clone()));
+    let key = Drape::key(&sewn, &params, Some(body.positions().len()));
+    let mut run = new_drape();
+    for _ in 0..40 {
+        run.step(None);
+    }
+    let saved = DrapeState::from_bytes(&run.state(key).to_bytes()).unwrap();
+    assert_eq!(saved, run.state(key), "the file round trip changed the state");
+    assert!(!saved.sides.is_empty(), "no self-contacts recorded after 40 frames");
+    let mut restored = new_drape();
+    restored.restore(&saved).unwrap();
+    for _ in 0..20 {
+        run.step(None);
+        restored.step(None);
+    }
+    let worst =
+        run.cloth.positions().iter().zip(restored.cloth.positions()).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
+    assert_eq!(worst, 0.0, "the restored drape drifted {worst} m from the run it was saved from");
+    // A fresh drape sewn from the flat panels is elsewhere: the comparison can fail.
+    let mut fresh = new_drape();
+    for _ in 0..20 {
+        fresh.step(None);
+    }
+    let apart =
+        run.cloth.positions().iter().zip(fresh.cloth.positions()).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
+    assert!(apart > 0.01, "a fresh drape is only {apart} m from the saved run");
+    // Another garment's key differs (the same pattern at another edge length).
+    let other = garmentcode::load(&pattern_path("shirt_mean")).unwrap().sew(4.0, Fit::default()).unwrap();
+    assert_ne!(key, Drape::key(&other, &params, Some(body.positions().len())));
+}
+
+#[test]
+fn broken_drape_states_get_clear_errors() {
+    use werkstatt::garment::drape::DrapeState;
+    let state = DrapeState {
+        key: 7,
+        frame: 3,
+        time: 0.05,
+        positions: vec![Vec3::X, Vec3::Y],
+        velocities: vec![Vec3::ZERO; 2],
+        sides: vec![(0, 0, 1.0)],
+        body_sides: Vec::new(),
+    };
+    let bytes = state.to_bytes();
+    assert_eq!(DrapeState::from_bytes(&bytes).unwrap(), state);
+    let err = |b: &[u8]| format!("{:#}", DrapeState::from_bytes(b).unwrap_err());
+    assert!(err(&bytes[..bytes.len() - 4]).contains("cut short"), "{}", err(&bytes[..bytes.len() - 4]));
+    assert!(err(&bytes[..10]).contains("too short"), "{}", err(&bytes[..10]));
+    let mut wrong = bytes.clone();
+    wrong[0] = b'X';
+    assert!(err(&wrong).contains("not a werkstatt drape state"), "{}", err(&wrong));
+    let mut nan = bytes.clone();
+    let at = bytes.len() - 12 * 2 - 12;
+    nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    assert!(err(&nan).contains("non-finite"), "{}", err(&nan));
+    // A state for another cloth is refused by name.
+    let (sewn, _) = shirt_on(None);
+    let mut drape = Drape::new(&sewn, &DrapeParams::default(), None);
+    let msg = format!("{:#}", drape.restore(&state).unwrap_err());
+    assert!(msg.contains("does not fit") && msg.contains("2 positions"), "{msg}");
+}
+
+/// graphs/garment_walk.ron starts its shirt from the drape saved by graphs/garment_shirt.ron at
+/// the end of its rest and blend (assets/drapes/garment_shirt_walk.drape): on the torso at frame
+/// 0, where without the state the panels would be flat and apart. With another edge length the
+/// state does not fit: a warning says so and the shirt is sewn from the panels.
+#[test]
+fn the_walk_graph_starts_from_its_saved_drape() {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+    use werkstatt::core::port::Value;
+    let run = |edge: Option<f64>| {
+        let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/garment_walk.ron")).unwrap();
+        if let Some(edge) = edge {
+            graph
+                .nodes
+                .get_mut("garment")
+                .unwrap()
+                .params
+                .insert("edge_length".into(), werkstatt::core::param::ParamValue::Float(edge));
+        }
+        let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
+        let res = werkstatt::core::resources::Resources::new(false);
+        let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
+        for _ in 0..50 {
+            if ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
+                break;
+            }
+            crate::common::wait_idle(&res);
+        }
+        let report = ev.report("garment").unwrap();
+        let warnings = report.warnings.join("\n");
+        let Some(Value::Surface(shirt)) = ev.output("garment", "surface") else {
+            panic!("no garment: {:?}", report.status);
+        };
+        let Some(Value::Scalar(gap)) = ev.output("garment", "seam_gap") else { panic!("no seam gap") };
+        (shirt.bounds(), *gap, warnings)
+    };
+    let ((lo, hi), gap, warnings) = run(None);
+    assert!(warnings.is_empty(), "{warnings}");
+    assert!(gap < 1e-3, "the saved shirt's seams are {gap} m open");
+    assert!(lo.y > 0.8 && hi.y < 1.6, "the shirt is not on the torso at frame 0: {lo} {hi}");
+    let (_, gap, warnings) = run(Some(4.0));
+    assert!(warnings.contains("start_state") && warnings.contains("sewing from the flat panels"), "{warnings}");
+    assert!(gap > 0.05, "the panels should start apart without the state: {gap} m");
+}
