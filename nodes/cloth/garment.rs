@@ -178,6 +178,12 @@ impl Node for GarmentNode {
             cx.warn(why.clone());
         }
         let save = (!cx.str("save_state").trim().is_empty()).then(|| cx.path("save_state"));
+        if save.is_some() && start.is_some() && save == Some(cx.path("start_state")) {
+            // The write would reload the start and sew again, over and over.
+            return Err(NodeError::msg(
+                "parameters \"save_state\" and \"start_state\" name the same file: save to another one",
+            ));
+        }
         let save_step = (cx.f64("save_at") * 60.0).round().max(0.0) as u64;
         let (drape, _, step) = self.state.as_mut().expect("built above");
         let write = |drape: &Drape, step: u64| -> Result<(), NodeError> {

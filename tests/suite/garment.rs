@@ -649,3 +649,26 @@ fn the_walk_graph_starts_from_its_saved_drape() {
     assert!(warnings.contains("start_state") && warnings.contains("sewing from the flat panels"), "{warnings}");
     assert!(gap > 0.05, "the panels should start apart without the state: {gap} m");
 }
+
+#[test]
+fn saving_over_the_start_state_is_refused() {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::core::param::ParamValue;
+    let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/garment_walk.ron")).unwrap();
+    let same = graph.nodes["garment"].params["start_state"].clone();
+    graph.nodes.get_mut("garment").unwrap().params.insert("save_state".into(), same);
+    graph.nodes.get_mut("garment").unwrap().params.insert("save_at".into(), ParamValue::Float(1.0));
+    let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
+    for _ in 0..50 {
+        if ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
+            break;
+        }
+        crate::common::wait_idle(&res);
+    }
+    match &ev.report("garment").unwrap().status {
+        NodeStatus::Failed(m) => assert!(m.contains("same file"), "{m}"),
+        other => panic!("saving over the start state was accepted: {other:?}"),
+    }
+}
