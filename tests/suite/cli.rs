@@ -101,10 +101,10 @@ fn every_node_kind_is_documented_and_used_by_a_graph() {
 
 #[test]
 fn check_passes_good_graphs_and_fails_bad_ones() {
-    let (code, out, _) = werkstatt(&["check", "graphs/default.ron"]);
+    let (code, out, _) = werkstatt(&["check", "graphs/still_life.ron"]);
     assert_eq!(code, 0);
-    assert!(out.contains("ok: graphs/default.ron"));
-    let (code, _, err) = werkstatt(&["check", "graphs/default.ron", "tests/data/bad/unknown_kind.ron"]);
+    assert!(out.contains("ok: graphs/still_life.ron"));
+    let (code, _, err) = werkstatt(&["check", "graphs/still_life.ron", "tests/data/bad/unknown_kind.ron"]);
     assert_eq!(code, 1);
     assert!(
         err.contains("tests/data/bad/unknown_kind.ron:5:9: error in node \"cam\": unknown node kind \"OrbitCamra\""),
@@ -124,22 +124,22 @@ fn fmt_check_reports_non_canonical_files() {
     assert_eq!((code, out.contains("not canonical")), (1, true));
     assert_eq!(werkstatt(&["fmt", p]).0, 0);
     assert_eq!(werkstatt(&["fmt", "--check", p]).0, 0);
-    assert_eq!(werkstatt(&["fmt", "--check", "graphs/default.ron"]).0, 0);
+    assert_eq!(werkstatt(&["fmt", "--check", "graphs/still_life.ron"]).0, 0);
     std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]
 fn render_rejects_bad_arguments_before_rendering() {
     for (args, needle) in [
-        (vec!["render", "graphs/default.ron", "--frames", "5..2"], "--frames"),
-        (vec!["render", "graphs/default.ron", "--size", "big"], "--size"),
-        (vec!["render", "graphs/default.ron", "--set", "camera.fov=500"], "out of range"),
+        (vec!["render", "graphs/still_life.ron", "--frames", "5..2"], "--frames"),
+        (vec!["render", "graphs/still_life.ron", "--size", "big"], "--size"),
+        (vec!["render", "graphs/still_life.ron", "--set", "camera.fov=500"], "out of range"),
         (vec!["render", "tests/data/bad/cycle.ron"], "cycle"),
-        (vec!["render", "graphs/default.ron", "--size", "0x48"], "each 1..=8192"),
-        (vec!["render", "graphs/default.ron", "--size", "8193x10"], "each 1..=8192"),
-        (vec!["render", "graphs/default.ron", "--fps", "0"], "--fps must be a positive number"),
-        (vec!["render", "graphs/default.ron", "--fps=-30"], "--fps must be a positive number"),
-        (vec!["render", "graphs/default.ron", "--frames", "0..10000000"], "--frames"),
+        (vec!["render", "graphs/still_life.ron", "--size", "0x48"], "each 1..=8192"),
+        (vec!["render", "graphs/still_life.ron", "--size", "8193x10"], "each 1..=8192"),
+        (vec!["render", "graphs/still_life.ron", "--fps", "0"], "--fps must be a positive number"),
+        (vec!["render", "graphs/still_life.ron", "--fps=-30"], "--fps must be a positive number"),
+        (vec!["render", "graphs/still_life.ron", "--frames", "0..10000000"], "--frames"),
     ] {
         let (code, _, err) = werkstatt(&args);
         assert_eq!(code, 1, "{args:?}");
@@ -153,7 +153,7 @@ fn render_writes_frames_and_stats() {
     let _ = std::fs::remove_dir_all(&out);
     let (code, _, err) = werkstatt(&[
         "render",
-        "graphs/default.ron",
+        "graphs/still_life.ron",
         "--frames",
         "0..2",
         "--size",
@@ -186,7 +186,7 @@ fn render_writes_frames_and_stats() {
     assert_eq!(files, images);
     let graph = werkstatt::core::graph::Graph::load(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/graphs/default.ron"
+        "/graphs/still_life.ron"
     )))
     .unwrap();
     let hash = format!("{:016x}", werkstatt::core::hash::fnv1a(graph.to_ron().as_bytes()));
@@ -300,7 +300,7 @@ fn stats_describe_the_run() {
     let out = dir.join("out");
     let args = [
         "render",
-        "graphs/default.ron",
+        "graphs/still_life.ron",
         "--frames",
         "1..2",
         "--fps",
@@ -401,7 +401,7 @@ fn two_processes_render_the_same_bytes() {
     let render = |name: &str| {
         let out = dir.join(name);
         let args =
-            ["render", "graphs/default.ron", "--frames", "0..1", "--size", "64x48", "--out", out.to_str().unwrap()];
+            ["render", "graphs/still_life.ron", "--frames", "0..1", "--size", "64x48", "--out", out.to_str().unwrap()];
         let (code, _, err) = werkstatt(&args);
         assert_eq!(code, 0, "{err}");
         out
@@ -574,7 +574,7 @@ fn set_typos_get_did_you_mean() {
         ("camra.fov=40", "there is no node \"camra\"; did you mean \"camera\"?"),
         ("camera.fow=40", "has no parameter \"fow\"; did you mean \"fov\"?"),
     ] {
-        let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--set", set]);
+        let (code, _, err) = werkstatt(&["render", "graphs/still_life.ron", "--set", set]);
         assert_eq!(code, 1, "{set}");
         assert!(err.contains(needle), "{set}: {err}");
     }
@@ -585,7 +585,7 @@ fn dump_format_chooses_png_tone_mapped_or_exr() {
     let dir = temp("dump-format");
     let render = |extra: &[&str]| {
         let out = dir.join(extra.join("-"));
-        let mut args = vec!["render", "graphs/default.ron", "--size", "32x24", "--dump", "gbuffer.depth"];
+        let mut args = vec!["render", "graphs/still_life.ron", "--size", "32x24", "--dump", "gbuffer.depth"];
         args.extend_from_slice(extra);
         args.extend_from_slice(&["--out", out.to_str().unwrap()]);
         let (code, _, err) = werkstatt(&args);
@@ -608,7 +608,8 @@ fn ssaa_writes_the_asked_size_with_smoothed_edges() {
     let dir = temp("ssaa");
     let total_variation = |ssaa: &str| {
         let out = dir.join(ssaa);
-        let args = ["render", "graphs/default.ron", "--size", "40x30", "--ssaa", ssaa, "--out", out.to_str().unwrap()];
+        let args =
+            ["render", "graphs/still_life.ron", "--size", "40x30", "--ssaa", ssaa, "--out", out.to_str().unwrap()];
         let (code, _, err) = werkstatt(&args);
         assert_eq!(code, 0, "{err}");
         let png = image::open(out.join("image_0000.png")).unwrap().to_rgba8();
@@ -626,7 +627,7 @@ fn ssaa_writes_the_asked_size_with_smoothed_edges() {
     };
     let (plain, smooth) = (total_variation("1"), total_variation("3"));
     assert!(smooth * 10 < plain * 9, "total variation {plain} without SSAA, {smooth} with");
-    let (code, _, err) = werkstatt(&["render", "graphs/default.ron", "--size", "4000x100", "--ssaa", "3"]);
+    let (code, _, err) = werkstatt(&["render", "graphs/still_life.ron", "--size", "4000x100", "--ssaa", "3"]);
     assert_eq!(code, 1);
     assert!(err.contains("over the limit of 8192"), "{err}");
     std::fs::remove_dir_all(dir).unwrap();

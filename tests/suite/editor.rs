@@ -39,7 +39,7 @@ fn wgpu_setup() -> egui_wgpu::WgpuSetup {
     egui_wgpu::WgpuSetup::CreateNew(setup)
 }
 
-/// The editor on `graph`, in a 2000x1100 window with a wgpu renderer: the default graph fits
+/// The editor on `graph`, in a 2000x1100 window with a wgpu renderer: the still life (graphs/still_life.ron) fits
 /// at the smallest framing zoom (titles readable), so every node is on screen.
 fn editor(graph: &Path) -> Harness<'static, EditorApp> {
     editor_with(graph, Vec2::new(2000.0, 1100.0), 1.0, options())
@@ -60,7 +60,7 @@ fn editor_with(graph: &Path, size: Vec2, pixels_per_point: f32, options: Options
 
 /// Runs frames until the canvas has laid out and the evaluation has settled.
 /// Steps the UI at least six frames and until the evaluation worker is idle with nothing left
-/// to evaluate and no file loading (the default graph's light probe loads on a thread), with a
+/// to evaluate and no file loading (the still life's light probe loads on a thread), with a
 /// 120 s deadline.
 fn settle(h: &mut Harness<'_, EditorApp>) {
     for _ in 0..6 {
@@ -120,19 +120,19 @@ fn click_at(h: &mut Harness<'_, EditorApp>, pos: Pos2) {
     h.step();
 }
 
-/// graphs/default.ron copied into `dir`, its light probe path made absolute (it is relative
+/// graphs/still_life.ron copied into `dir`, its light probe path made absolute (it is relative
 /// to graphs/), with 8 median-cut lights instead of 22 and the cheaper sqrt_cosine PEM kernel
 /// instead of phong: the editor's tests evaluate it often, and building its PEMs is most of its
 /// first frame on lavapipe.
 fn copy_default(dir: &Path) -> PathBuf {
-    let path = dir.join("default.ron");
-    let text = std::fs::read_to_string(root().join("graphs/default.ron")).unwrap();
+    let path = dir.join("still_life.ron");
+    let text = std::fs::read_to_string(root().join("graphs/still_life.ron")).unwrap();
     let assets = root().join("assets").display().to_string();
-    assert!(text.contains("\"../assets/"), "default.ron no longer names ../assets/");
+    assert!(text.contains("\"../assets/"), "still_life.ron no longer names ../assets/");
     let lights = "\"count\": 22,";
-    assert!(text.contains(lights), "default.ron no longer has 22 median-cut lights");
+    assert!(text.contains(lights), "still_life.ron no longer has 22 median-cut lights");
     let pems = "kind: \"Pems\",\n            pos: (720.0, 560.0),\n            params: {},";
-    assert!(text.contains(pems), "default.ron's Pems node moved or has parameters");
+    assert!(text.contains(pems), "still_life.ron's Pems node moved or has parameters");
     // In canonical form: a test saves the graph and compares the text.
     let cheap = pems.replace("params: {},", "params: {\n                \"kernel\": \"sqrt_cosine\",\n            },");
     let text =
@@ -371,7 +371,7 @@ fn the_viewport_shows_the_rendered_graph_and_orbits() {
     settle(&mut h);
     let cam = h.state().live.camera.clone().expect("the drag overrides the camera");
     assert_eq!(cam.node, "camera");
-    // From yaw 35, pitch 25 (graphs/default.ron), 0.4 degrees per point: 80 points right
+    // From yaw 35, pitch 25 (graphs/still_life.ron), 0.4 degrees per point: 80 points right
     // turn the yaw to 35 - 32 = 3, 20 points up the pitch to 25 - 8 = 17; no zoom.
     let close = |a: f64, b: f64| (a - b).abs() < 1e-3;
     assert!(
@@ -419,7 +419,7 @@ fn hovering_a_port_shows_its_value() {
     assert!(h.query_by_label_contains("value: camera at").is_some(), "the camera output's summary is shown");
 }
 
-/// Renders the editor on the default graph as in docs/editor.png; with
+/// Renders the editor on the still life as in docs/editor.png; with
 /// `WERKSTATT_EDITOR_SCREENSHOT=path` the picture is written there.
 #[test]
 fn screenshot() {
@@ -662,7 +662,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     // A session that ended without saving left an autosave with one more node.
     let mut crashed = Graph::load(&path).unwrap();
     werkstatt::app::editor::document::add_node(&mut crashed, "Number", [0.0, 960.0]).unwrap();
-    std::fs::write(dir.join("default.autosave.ron"), crashed.to_ron()).unwrap();
+    std::fs::write(dir.join("still_life.autosave.ron"), crashed.to_ron()).unwrap();
 
     let opts = Options { watch_files: true, ..options() };
     let mut h = editor_with(&path, Vec2::new(2000.0, 1100.0), 1.0, opts);
@@ -671,7 +671,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     settle(&mut h);
     assert_eq!(h.state().state.graph, crashed);
     assert!(h.state().state.is_dirty(), "recovered changes are unsaved");
-    assert!(h.state().state.title().starts_with("* default.ron"));
+    assert!(h.state().state.title().starts_with("* still_life.ron"));
 
     // Closing the window with unsaved changes asks first.
     h.input_mut().viewports.entry(egui::ViewportId::ROOT).or_default().events.push(egui::ViewportEvent::Close);
@@ -694,7 +694,7 @@ fn autosave_recovery_unsaved_close_and_reload_from_disk() {
     other.save(&path).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1100));
     settle(&mut h);
-    assert!(h.query_by_label("default.ron changed on disk.").is_some());
+    assert!(h.query_by_label("still_life.ron changed on disk.").is_some());
     h.get_by_role_and_label(Role::Button, "Reload").click();
     settle(&mut h);
     assert_eq!(h.state().state.graph, other);
@@ -785,7 +785,7 @@ fn a_graph_is_opened_through_the_file_dialog() {
     settle(&mut h);
     let label =
         |h: &Harness<'_, EditorApp>, name: &str| h.query_by(|n| n.label().is_some_and(|l| l.ends_with(name))).is_some();
-    assert!(label(&h, "other.ron") && label(&h, "default.ron"), "the dialog lists the graph's folder");
+    assert!(label(&h, "other.ron") && label(&h, "still_life.ron"), "the dialog lists the graph's folder");
     assert!(!label(&h, "notes.txt"), "the dialog shows graphs only");
     h.get_by(|n| n.label().is_some_and(|l| l.ends_with("other.ron"))).click();
     settle(&mut h);
@@ -821,12 +821,12 @@ fn stats(v: &[f64]) -> (f64, f64, f64) {
     (at(0.5), at(0.95), v[v.len() - 1])
 }
 
-/// The default graph (8 lights) with a `Delay` node between the tone mapper and the output.
+/// The still life (8 lights) with a `Delay` node between the tone mapper and the output.
 fn copy_default_with_delay(dir: &Path) -> PathBuf {
     let path = copy_default(dir);
     let text = std::fs::read_to_string(&path).unwrap();
     let link = "(\"tonemap.image\", \"image.image\")";
-    assert!(text.contains(link), "default.ron no longer links tonemap to image");
+    assert!(text.contains(link), "still_life.ron no longer links tonemap to image");
     let text = text.replace(link, "(\"tonemap.image\", \"delay.image\"), (\"delay.image\", \"image.image\")").replacen(
         "nodes: {",
         "nodes: {\n        \"delay\": (kind: \"Delay\", pos: (1440.0, 420.0), params: {}),",
@@ -1143,7 +1143,7 @@ fn playback_keeps_the_ui_frames_short() {
     let (wm, wp, wx) = stats(&frames.iter().map(|f| f.0).collect::<Vec<_>>());
     let (cm, cp, _) = stats(&frames.iter().map(|f| f.1).collect::<Vec<_>>());
     eprintln!(
-        "figure: playback of default.ron (8 lights), {} UI frames and {shown} rendered frames in {secs:.1} s: UI wall median {wm:.1} ms, \
+        "figure: playback of still_life.ron (8 lights), {} UI frames and {shown} rendered frames in {secs:.1} s: UI wall median {wm:.1} ms, \
          p95 {wp:.1} ms, max {wx:.1} ms; UI thread CPU median {cm:.1} ms, p95 {cp:.1} ms",
         frames.len()
     );

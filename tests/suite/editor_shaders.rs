@@ -67,7 +67,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
         std::fs::copy(root().join("shaders").join(path), dir.join(path)).unwrap();
     }
     let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
-    let mut graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let mut graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
     let mut live = Live::new(root().join("graphs"), false);
     live.set_size(64, 48);
     live.sync(&graph, 1, None);

@@ -606,7 +606,7 @@ fn broken_drape_states_get_clear_errors() {
     assert!(msg.contains("does not fit") && msg.contains("2 positions"), "{msg}");
 }
 
-/// graphs/garment_walk.ron starts its shirt from the drape saved by graphs/garment_shirt.ron at
+/// graphs/default.ron starts its shirt from the drape saved by graphs/garment_shirt.ron at
 /// the end of its rest and blend (assets/drapes/garment_shirt_walk.drape): on the torso at frame
 /// 0, where without the state the panels would be flat and apart. With another edge length the
 /// state does not fit: a warning says so and the shirt is sewn from the panels.
@@ -615,7 +615,7 @@ fn the_walk_graph_starts_from_its_saved_drape() {
     use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
     use werkstatt::core::port::Value;
     let run = |edge: Option<f64>| {
-        let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/garment_walk.ron")).unwrap();
+        let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/default.ron")).unwrap();
         if let Some(edge) = edge {
             graph
                 .nodes
@@ -654,7 +654,7 @@ fn the_walk_graph_starts_from_its_saved_drape() {
 fn saving_over_the_start_state_is_refused() {
     use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
     use werkstatt::core::param::ParamValue;
-    let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/garment_walk.ron")).unwrap();
+    let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/default.ron")).unwrap();
     let same = graph.nodes["garment"].params["start_state"].clone();
     graph.nodes.get_mut("garment").unwrap().params.insert("save_state".into(), same);
     graph.nodes.get_mut("garment").unwrap().params.insert("save_at".into(), ParamValue::Float(1.0));

@@ -1,6 +1,6 @@
 //! The second software backend: every graph in graphs/ renders on OpenGL ES through EGL
 //! (Mesa's llvmpipe), with the formats the context picks for what that driver can render
-//! (llvmpipe's GLES renders no 32-bit float targets), and the default graph stays close to
+//! (llvmpipe's GLES renders no 32-bit float targets), and the still life (graphs/still_life.ron) stays close to
 //! its golden image there.
 //!
 //! Skipped, with a message, only where no EGL driver is installed at all
@@ -231,6 +231,6 @@ fn a_direct_light_graph_matches_vulkan_on_gl() {
 /// Image-based lighting (cube faces kept as 2D arrays, which wgpu's GL backend would turn into
 /// cube maps at 6 layers) and the VSM shadow atlas (depth read as float) on GL.
 #[test]
-fn the_default_graph_with_image_based_lighting_matches_vulkan_on_gl() {
-    matches_vulkan_on_gl("default.ron", "image");
+fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl() {
+    matches_vulkan_on_gl("still_life.ron", "image");
 }

@@ -73,7 +73,7 @@ fn a_steady_orbit_creates_no_gpu_textures_or_buffers_after_the_first_frame() {
     let gpu = fresh_gpu();
     let out = out_dir("gpu-created");
     let opts = RenderOptions {
-        graph_path: root().join("graphs/default.ron"),
+        graph_path: root().join("graphs/still_life.ron"),
         frames: (0, 23),
         fps: 30.0,
         width: 96,
@@ -200,7 +200,7 @@ fn a_shader_edit_reruns_only_the_nodes_that_use_it_and_keeps_the_cloth_state() {
 fn a_broken_shader_keeps_the_last_good_pipeline_and_reports_a_typed_error() {
     let gpu = fresh_gpu();
     let dir = shader_copy(&gpu, "gpu-shader-broken");
-    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let res = Resources::new(false);
     let s = settings(64, 48);
@@ -242,7 +242,7 @@ fn a_broken_shader_keeps_the_last_good_pipeline_and_reports_a_typed_error() {
 #[test]
 fn a_validation_error_lands_on_the_node_that_caused_it() {
     let gpu = fresh_gpu();
-    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
     let mut ev = Evaluator::new(&graph, &[]).unwrap();
     let res = Resources::new(false);
     // A zero-sized frame: the G-buffer pass is the first to make textures of the frame size.

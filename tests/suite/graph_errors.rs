@@ -188,7 +188,8 @@ fn missing_file_is_an_error_naming_it() {
 
 #[test]
 fn cli_set_errors_name_node_and_param() {
-    let mut g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
+    let mut g =
+        Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/still_life.ron"))).unwrap();
     let err = g.set_from_cli("camera.distanse=3").unwrap_err();
     assert!(matches!(&err, GraphError::SetUnknownParam { node, param, .. } if node == "camera" && param == "distanse"));
     let e = err.to_string();

@@ -97,22 +97,22 @@ fn a_changed_parameter_fails_with_a_diff_image_and_a_junit_failure_and_bless_acc
     assert!(!r.regressed(), "after --bless the changed outputs are the references: {}", failures(&r));
 }
 
-/// Deleting the default graph's shadow link loses every shadow: the project's own regression
-/// case for default.ron fails on it, at the manifest's tolerances and at the defaults (by the
+/// Deleting the still life's shadow link loses every shadow: the project's own regression
+/// case for still_life.ron fails on it, at the manifest's tolerances and at the defaults (by the
 /// pixel budget: soft shadows cost little PSNR and almost no SSIM, 42.6 dB and 0.9988 here).
 /// The report names the overrides and that the graph changed since the bless.
 #[test]
-fn losing_every_shadow_of_the_default_graph_fails_its_regression_case() {
+fn losing_every_shadow_of_the_still_life_fails_its_regression_case() {
     let dir = out_dir("regression-shadows");
     let manifest = regress::Manifest::load(&root().join("tests/references/manifest.ron")).unwrap();
-    let case = &manifest.cases["default"];
-    let graph = dir.join("default.ron");
+    let case = &manifest.cases["still_life"];
+    let graph = dir.join("still_life.ron");
     // A copy outside graphs/: its relative asset paths made absolute.
-    let original = std::fs::read_to_string(root().join("graphs/default.ron"))
+    let original = std::fs::read_to_string(root().join("graphs/still_life.ron"))
         .unwrap()
         .replace("\"../assets/", &format!("\"{}/", root().join("assets").display()));
     let link = "(\"shadow_atlas.shadows\", \"light.shadows\"),";
-    assert!(original.contains(link), "graphs/default.ron feeds the light its shadows");
+    assert!(original.contains(link), "graphs/still_life.ron feeds the light its shadows");
     std::fs::write(&graph, &original).unwrap();
     let mut opts = TestOptions::new(vec![graph.clone()], dir.join("out"));
     opts.references = dir.join("references");

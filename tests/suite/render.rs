@@ -4,7 +4,7 @@
 use crate::common::*;
 
 fn default_graph() -> std::path::PathBuf {
-    root().join("graphs/default.ron")
+    root().join("graphs/still_life.ron")
 }
 
 #[test]

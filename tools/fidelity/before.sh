@@ -17,7 +17,7 @@ ws=${WERKSTATT:-}
 if [ -z "$ws" ]; then
     if [ -x target/release/werkstatt ]; then ws=target/release/werkstatt; else ws=target/debug/werkstatt; fi
 fi
-graph=graphs/default.ron
+graph=graphs/still_life.ron
 lambert="--set ball_material.glossiness=0 --set cloth.glossiness=0 --set floor_material.glossiness=0"
 glossy="--set ball_material.glossiness=0.8 --set cloth.glossiness=0 --set floor_material.glossiness=0"
 

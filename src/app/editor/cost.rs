@@ -164,7 +164,7 @@ mod tests {
     use crate::core::param::ParamValue;
 
     fn default_graph() -> Graph {
-        Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap()
+        Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/still_life.ron"))).unwrap()
     }
 
     fn limits() -> Limits {
@@ -179,9 +179,9 @@ mod tests {
         let cube = 6 * (128 * 128 + 64 * 64 + 32 * 32 + 16 * 16 + 8 * 8 + 4 * 4 + 2 * 2 + 1) * 8;
         assert_eq!(e["pems"].bytes, 23 * cube + 128 * 768 * 4);
         assert!(e["pems"].detail.contains("22 PEMs (median_cut.count)"), "{}", e["pems"].detail);
-        // 22 tiles of 64 (default.ron) on a 5 x 5 grid: 320², 12 bytes per texel.
+        // 22 tiles of 64 (still_life.ron) on a 5 x 5 grid: 320², 12 bytes per texel.
         assert_eq!(e["shadow_atlas"].bytes, 320 * 320 * 12);
-        assert!(refusals(&e, &limits()).is_empty(), "the default graph fits");
+        assert!(refusals(&e, &limits()).is_empty(), "the still life fits");
 
         g.nodes.get_mut("median_cut").unwrap().params.insert("count".into(), ParamValue::Int(2200));
         let e = estimate(&g, &limits());

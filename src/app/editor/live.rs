@@ -1121,7 +1121,8 @@ mod tests {
 
     #[test]
     fn the_viewport_prefers_preview_then_outputs() {
-        let g = Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/default.ron"))).unwrap();
+        let g =
+            Graph::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/still_life.ron"))).unwrap();
         assert_eq!(viewed_port(&g, None), Some(p("image.image")));
         assert_eq!(viewed_port(&crate::app::chain_graph(3), None), Some(p("watch.value")), "else a Watch value");
         assert_eq!(viewed_port(&Graph::new(), None), None);
