@@ -81,7 +81,7 @@ pub static GARMENT: NodeSpec = NodeSpec {
         ParamSpec::new(
             "save_state",
             ParamKind::Text { default: "" },
-            "Where to write the drape (relative to the graph's folder) when the simulation reaches `save_at`: a warm start for `start_state` (for example `werkstatt render GRAPH --frames N..N --set garment.save_state=FILE --set garment.save_at=T`, N / fps = T). Empty: nothing is written.",
+            "Where to write the drape (relative to the graph's folder) when the simulation reaches `save_at`: a warm start for `start_state`. Render every frame up to it at 60 fps, so that the body moves between the simulator's frames (`werkstatt render GRAPH --frames 0..N --fps 60 --set garment.save_state=FILE --set garment.save_at=T`, N = 60 T). Empty: nothing is written.",
         ),
         ParamSpec::new(
             "save_at",
