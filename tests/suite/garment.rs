@@ -608,7 +608,7 @@ fn broken_drape_states_get_clear_errors() {
 
 /// graphs/default.ron starts its shirt from the drape saved by graphs/garment_shirt.ron at
 /// the end of its rest and blend (assets/drapes/garment_shirt_walk.drape): on the torso at frame
-/// 0, where without the state the panels would be flat and apart. With another edge length the
+/// 0, where without the state the panels would be flat and apart; four buttons down its front. With another edge length the
 /// state does not fit: a warning says so and the shirt is sewn from the panels.
 #[test]
 fn the_walk_graph_starts_from_its_saved_drape() {
@@ -624,7 +624,7 @@ fn the_walk_graph_starts_from_its_saved_drape() {
                 .params
                 .insert("edge_length".into(), werkstatt::core::param::ParamValue::Float(edge));
         }
-        let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
+        let mut ev = Evaluator::new(&graph, &["garment".to_string(), "button_row".to_string()]).unwrap();
         let res = werkstatt::core::resources::Resources::new(false);
         let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
         for _ in 0..50 {
@@ -632,6 +632,12 @@ fn the_walk_graph_starts_from_its_saved_drape() {
                 break;
             }
             crate::common::wait_idle(&res);
+        }
+        // Four buttons down the right front panel (piece 3 in GarmentCode's panel order).
+        if let Some(Value::Instances(buttons)) = ev.output("button_row", "placements") {
+            assert!(buttons.len() == 4 && buttons.iter().all(|b| b.piece == 3), "buttons {buttons:?}");
+        } else {
+            panic!("no buttons: {:?}", ev.report("button_row").unwrap().status);
         }
         let report = ev.report("garment").unwrap();
         let warnings = report.warnings.join("\n");
