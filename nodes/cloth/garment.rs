@@ -101,12 +101,22 @@ fn load_pattern(path: &Path) -> anyhow::Result<Pattern> {
 
 #[derive(Default)]
 struct GarmentNode {
-    /// The drape, what it was built from, and its step count.
-    state: Option<(Drape, String, u64)>,
-    /// Why `start_state` was not used for the drape being simulated (warned every frame).
-    start_refused: Option<String>,
+    sim: Option<Simulation>,
     /// The sewn pattern, what it was sewn from, and how many sleeves were fitted.
     sewn: Option<(String, Arc<Sewn>, usize)>,
+}
+
+/// The drape being simulated.
+struct Simulation {
+    drape: Drape,
+    /// What it was built from (rebuilt when that changes).
+    built_from: String,
+    /// Simulator frames since graph time 0.
+    step: u64,
+    /// Its [`Drape::key`], under which it saves and against which a start state is checked.
+    state_key: u64,
+    /// Why `start_state` was not used (warned every frame).
+    start_refused: Option<String>,
 }
 
 impl Node for GarmentNode {
@@ -142,41 +152,10 @@ impl Node for GarmentNode {
             sim: crate::cloth::SimParams { self_collision: cx.bool("self_collision"), ..DrapeParams::default().sim },
             sewing_frames: cx.int("sewing_frames") as u64,
         };
-        let state_key = Drape::key(&sewn, &params, body_n);
         let start: Option<Arc<DrapeState>> = match cx.str("start_state").trim() {
             "" => None,
             _ => Some(cx.load(&cx.path("start_state"), DrapeState::read)?),
         };
-        let key = format!("{sew_key} {body_n:?} {params:?} {:?}", start.as_ref().map(Arc::as_ptr));
-        let time = cx.time();
-        let target = ((cx.f64("warmup") + time.seconds()) * 60.0).round().max(0.0) as u64;
-        let rebuild = self.state.as_ref().is_none_or(|(_, k, step)| *k != key || *step > target);
-        if rebuild {
-            let body_mesh = body.as_ref().map(|b| {
-                let tris = b.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-                BodyMesh::new(b.positions.clone(), tris)
-            });
-            let mut drape = Drape::new(&sewn, &params, body_mesh);
-            self.start_refused = None;
-            if let Some(start) = &start {
-                if start.key == state_key {
-                    drape.restore(start).map_err(|e| NodeError::msg(format!("parameter \"start_state\": {e:#}")))?;
-                } else {
-                    self.start_refused = Some(format!(
-                        "start_state {}: saved for another garment, body or simulation settings ({} vertices, key {:016x}; \
-                         this garment has {} vertices, key {state_key:016x}): sewing from the flat panels instead",
-                        cx.str("start_state"),
-                        start.positions.len(),
-                        start.key,
-                        sewn.positions.len()
-                    ));
-                }
-            }
-            self.state = Some((drape, key, 0));
-        }
-        if let Some(why) = &self.start_refused {
-            cx.warn(why.clone());
-        }
         let save = (!cx.str("save_state").trim().is_empty()).then(|| cx.path("save_state"));
         if save.is_some() && start.is_some() && save == Some(cx.path("start_state")) {
             // The write would reload the start and sew again, over and over.
@@ -184,25 +163,58 @@ impl Node for GarmentNode {
                 "parameters \"save_state\" and \"start_state\" name the same file: save to another one",
             ));
         }
+        let key = format!("{sew_key} {body_n:?} {params:?} {:?}", start.as_ref().map(Arc::as_ptr));
+        let time = cx.time();
+        let target = ((cx.f64("warmup") + time.seconds()) * 60.0).round().max(0.0) as u64;
+        let rebuild = self.sim.as_ref().is_none_or(|s| s.built_from != key || s.step > target);
+        if rebuild {
+            let body_mesh = body.as_ref().map(|b| {
+                let tris = b.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+                BodyMesh::new(b.positions.clone(), tris)
+            });
+            let mut drape = Drape::new(&sewn, &params, body_mesh);
+            let state_key = Drape::key(&sewn, &params, body_n);
+            let mut start_refused = None;
+            if let Some(start) = &start {
+                if start.key == state_key {
+                    drape.restore(start).map_err(|e| NodeError::msg(format!("parameter \"start_state\": {e:#}")))?;
+                } else {
+                    start_refused = Some(format!(
+                        "start_state {}: saved for another garment, body or simulation settings ({} vertices, key {:016x}; \
+                         this garment has {} vertices, key {state_key:016x}): sewing from the flat panels instead",
+                        cx.str("start_state"),
+                        start.cloth.positions.len(),
+                        start.key,
+                        sewn.positions.len()
+                    ));
+                }
+            }
+            self.sim = Some(Simulation { drape, built_from: key, step: 0, state_key, start_refused });
+        }
+        let sim = self.sim.as_mut().expect("built above");
+        if let Some(why) = &sim.start_refused {
+            cx.warn(why.clone());
+        }
         let save_step = (cx.f64("save_at") * 60.0).round().max(0.0) as u64;
-        let (drape, _, step) = self.state.as_mut().expect("built above");
-        let write = |drape: &Drape, step: u64| -> Result<(), NodeError> {
+        let write = |sim: &Simulation| -> Result<(), NodeError> {
             match &save {
-                Some(path) if step == save_step => drape
-                    .state(state_key)
+                Some(path) if sim.step == save_step => sim
+                    .drape
+                    .state(sim.state_key)
                     .write(path)
                     .map_err(|e| NodeError::msg(format!("parameter \"save_state\": {e:#}"))),
                 _ => Ok(()),
             }
         };
         if rebuild {
-            write(drape, *step)?;
+            write(sim)?;
         }
-        while *step < target {
-            drape.step(body.as_ref().map(|b| b.positions.as_slice()));
-            *step += 1;
-            write(drape, *step)?;
+        while sim.step < target {
+            sim.drape.step(body.as_ref().map(|b| b.positions.as_slice()));
+            sim.step += 1;
+            write(sim)?;
         }
+        let (drape, step) = (&sim.drape, sim.step);
         let cloth = &drape.cloth;
         if cloth.positions().iter().any(|p| !p.is_finite()) {
             return Err(NodeError::msg(format!("the simulation diverged (non-finite positions) at step {step}")));

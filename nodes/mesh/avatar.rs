@@ -218,13 +218,19 @@ impl Node for AvatarNode {
             SkinningKind::Lbs => Skinning::Linear,
             SkinningKind::Dqs => Skinning::DualQuaternion,
         };
-        let mut posed = skin(&body.obj.positions, weights, &skeleton.skinning(&pose), method);
-        if towards_motion < 1.0 {
-            // The rest pose is the base mesh itself (the rest pose reproduces it exactly).
-            for (p, r) in posed.iter_mut().zip(&body.obj.positions) {
-                *p = r.lerp(*p, towards_motion as f32);
+        // The rest pose is the base mesh itself (the rest pose reproduces it exactly): while the
+        // body rests there is nothing to skin.
+        let posed = if towards_motion > 0.0 {
+            let mut posed = skin(&body.obj.positions, weights, &skeleton.skinning(&pose), method);
+            if towards_motion < 1.0 {
+                for (p, r) in posed.iter_mut().zip(&body.obj.positions) {
+                    *p = r.lerp(*p, towards_motion as f32);
+                }
             }
-        }
+            posed
+        } else {
+            body.obj.positions.clone()
+        };
         let (floor, units) = (body.floor(), cx.f32("units"));
         let place = move |p: Vec3| (p - Vec3::Y * floor) * units;
 

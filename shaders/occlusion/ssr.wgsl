@@ -270,21 +270,21 @@ fn sample_vndf(ve: vec3<f32>, alpha: f32, u1: f32, u2: f32) -> vec3<f32> {
     return normalize(vec3<f32>(alpha * nh.x, alpha * nh.y, max(nh.z, 1e-6)));
 }
 
-// A GGX ray for the view ve (tangent space): its direction and weight G2 / G1 (0 where the
-// reflection falls under the surface).
-fn ggx_ray(ve: vec3<f32>, alpha: f32, lambda_v: f32, u1: f32, u2: f32) -> vec4<f32> {
-    let h = sample_vndf(ve, alpha, u1, u2);
-    let l = reflect(-ve, h);
-    if l.z <= 0.0 {
-        return vec4<f32>(l, 0.0);
-    }
-    return vec4<f32>(l, (1.0 + lambda_v) / (1.0 + lambda_v + smith_lambda(l.z, alpha)));
-}
+// A GGX ray for the view ve (tangent space): its direction, its weight G2 / G1 (0 where the
+// reflection falls under the surface) and its density D_v(h) / (4 v.h) = G1(v) D(h) / (4 v.n).
+struct GgxRay {
+    dir: vec3<f32>,
+    weight: f32,
+    pdf: f32,
+};
 
-// The density of ggx_ray's direction l: D_v(h) / (4 v.h) = G1(v) D(h) / (4 v.n).
-fn ggx_pdf(ve: vec3<f32>, l: vec3<f32>, alpha: f32, lambda_v: f32) -> f32 {
-    let h = normalize(ve + l);
-    return ggx_ndf(h.z, alpha) / (4.0 * max(ve.z, 1e-4) * (1.0 + lambda_v));
+fn ggx_ray(ve: vec3<f32>, alpha: f32, lambda_v: f32, u1: f32, u2: f32) -> GgxRay {
+    let h = sample_vndf(ve, alpha, u1, u2);
+    var ray: GgxRay;
+    ray.dir = reflect(-ve, h);
+    ray.weight = select(0.0, (1.0 + lambda_v) / (1.0 + lambda_v + smith_lambda(ray.dir.z, alpha)), ray.dir.z > 0.0);
+    ray.pdf = ggx_ndf(h.z, alpha) / (4.0 * max(ve.z, 1e-4) * (1.0 + lambda_v));
+    return ray;
 }
 
 @fragment
@@ -327,11 +327,11 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         // reflected about it, weighed by G2 / G1 (BRDF x cos over the VNDF's pdf, colour aside).
         let i = f32(k * 16u + b);
         let ray = ggx_ray(ve, alpha, lambda_v, (i + 0.5) / total, fract(i * (1.0 - INV_PHI)));
-        if ray.w <= 0.0 {
+        if ray.weight <= 0.0 {
             continue;
         }
-        let dir = frame * ray.xyz;
-        let e = luminance(env_texel(to_world * dir, env_level(ggx_pdf(ve, ray.xyz, alpha, lambda_v), count, texel)));
+        let dir = frame * ray.dir;
+        let e = luminance(env_texel(to_world * dir, env_level(ray.pdf, count, texel)));
         let jitter = fract((f32(k) + 0.5) * INV_PHI + (f32(b) + 0.5) / 16.0);
         var hit = march(o, dir, q, jitter);
         if LIGHTS > 0u && hit.weight < 1.0 {
@@ -340,10 +340,10 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
             hit.radiance += (1.0 - hit.weight) * ground.radiance;
             hit.weight += (1.0 - hit.weight) * ground.weight;
         }
-        hits += ray.w * hit.radiance;
-        weights += ray.w;
-        env_seen += ray.w * e;
-        env_missed += ray.w * (1.0 - hit.weight) * e;
+        hits += ray.weight * hit.radiance;
+        weights += ray.weight;
+        env_seen += ray.weight * e;
+        env_missed += ray.weight * (1.0 - hit.weight) * e;
     }
     // What the two lobes read of the environment alone, by ENV_RAYS times as many directions
     // (no march: cheap): IblShading's Phong lobe cos^s about r' (under the surface's horizon
@@ -364,10 +364,9 @@ fn fs_gather(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
         let pdf_p = (s + 1.0) / (2.0 * PI) * pow(cos_t, s);
         phong_env += luminance(env_texel(to_world * dp, env_level(pdf_p, env_count, texel)));
         let ray = ggx_ray(ve, alpha, lambda_v, u1, u2);
-        if ray.w > 0.0 {
-            let pdf = ggx_pdf(ve, ray.xyz, alpha, lambda_v);
-            ggx_env += ray.w * luminance(env_texel(to_world * (frame * ray.xyz), env_level(pdf, env_count, texel)));
-            ggx_weights += ray.w;
+        if ray.weight > 0.0 {
+            ggx_env += ray.weight * luminance(env_texel(to_world * (frame * ray.dir), env_level(ray.pdf, env_count, texel)));
+            ggx_weights += ray.weight;
         }
     }
     // Normalised to the rays' total weight: the energy multiple scattering returns (Cycles'

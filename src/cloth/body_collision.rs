@@ -239,7 +239,6 @@ impl BodyMesh {
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
     }
-    /// The pose at the end of the last (or coming) frame.
     /// The last frame's `(body vertex, cloth triangle, side)` pairs: the sides the next frame
     /// keeps.
     pub(crate) fn sides(&self) -> &[(u32, u32, f32)] {
@@ -251,6 +250,7 @@ impl BodyMesh {
         self.vt_pairs = sides.to_vec();
     }
 
+    /// The pose at the end of the last (or coming) frame.
     pub fn positions(&self) -> &[Vec3] {
         &self.end
     }

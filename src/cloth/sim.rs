@@ -169,16 +169,19 @@ impl Default for SimParams {
     }
 }
 
-/// What [`Cloth::restore`] puts back: a cloth's state between two frames.
-pub struct ClothState<'a> {
-    pub positions: &'a [Vec3],
-    pub velocities: &'a [Vec3],
+/// A cloth's state between two frames, what [`Cloth::step_frame`] carries from one frame to
+/// the next ([`Cloth::state`], [`Cloth::restore`]); the rest is rebuilt from the positions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClothState {
+    pub positions: Vec<Vec3>,
+    pub velocities: Vec<Vec3>,
+    /// Simulated time (s) and frames: gravity and the seams' closing go on from there.
     pub time: f64,
     pub frame: u64,
     /// `(vertex, triangle, side)` of the self-contacts the last frame recorded.
-    pub sides: &'a [(u32, u32, f32)],
+    pub sides: Vec<(u32, u32, f32)>,
     /// `(body vertex, cloth triangle, side)` of the body's contacts the last frame recorded.
-    pub body_sides: &'a [(u32, u32, f32)],
+    pub body_sides: Vec<(u32, u32, f32)>,
 }
 
 /// A simulated garment: pattern, solver state, constraints and colliders.
@@ -793,11 +796,20 @@ impl Cloth {
     pub fn rest_edge_lengths(&self) -> &[f32] {
         &self.edge_rest
     }
-    /// Simulated time (s).
-    /// Puts the cloth at a saved state: positions, velocities, simulated time, frame count and
-    /// the sides of its self-contacts (what [`Cloth::step_frame`] carries from one frame to the
-    /// next; the rest is rebuilt from the positions, as at the start).
-    pub fn restore(&mut self, state: ClothState<'_>) -> Result<(), String> {
+    /// This cloth's state between frames.
+    pub fn state(&self) -> ClothState {
+        ClothState {
+            positions: self.x.clone(),
+            velocities: self.v.clone(),
+            time: self.time,
+            frame: self.frame,
+            sides: self.self_collision.as_ref().map_or(Vec::new(), |sc| sc.sides().to_vec()),
+            body_sides: self.body.as_ref().map_or(Vec::new(), |b| b.sides().to_vec()),
+        }
+    }
+
+    /// Puts the cloth at a saved state (of a cloth of the same pattern and body).
+    pub fn restore(&mut self, state: &ClothState) -> Result<(), String> {
         let ClothState { positions, velocities, time, frame, sides, body_sides } = state;
         let n = self.x.len();
         if positions.len() != n || velocities.len() != n {
@@ -821,8 +833,8 @@ impl Cloth {
         self.x.copy_from_slice(positions);
         self.prev.copy_from_slice(positions);
         self.v.copy_from_slice(velocities);
-        self.time = time;
-        self.frame = frame;
+        self.time = *time;
+        self.frame = *frame;
         self.self_collision =
             self.params.self_collision.then(|| SelfCollision::with_sides(&self.x, self.mesh.triangles(), sides));
         if let Some(body) = &mut self.body {
@@ -831,16 +843,7 @@ impl Cloth {
         Ok(())
     }
 
-    /// The sides of the self-contacts the last frame recorded (none without self-collision).
-    pub fn self_contact_sides(&self) -> &[(u32, u32, f32)] {
-        self.self_collision.as_ref().map_or(&[], |sc| sc.sides())
-    }
-
-    /// The sides of the body's contacts the last frame recorded (none without a body).
-    pub fn body_contact_sides(&self) -> &[(u32, u32, f32)] {
-        self.body.as_ref().map_or(&[], |b| b.sides())
-    }
-
+    /// Simulated time (s).
     pub fn time(&self) -> f64 {
         self.time
     }

@@ -74,16 +74,7 @@ impl Drape {
 #[derive(Clone, Debug, PartialEq)]
 pub struct DrapeState {
     pub key: u64,
-    /// Frames the cloth had simulated, and its time (s): gravity and the seams' closing go on
-    /// from there.
-    pub frame: u64,
-    pub time: f64,
-    pub positions: Vec<Vec3>,
-    pub velocities: Vec<Vec3>,
-    /// `(vertex, triangle, side)` of the self-contacts of the last frame.
-    pub sides: Vec<(u32, u32, f32)>,
-    /// `(body vertex, cloth triangle, side)` of the body's contacts of the last frame.
-    pub body_sides: Vec<(u32, u32, f32)>,
+    pub cloth: ClothState,
 }
 
 /// The file's first bytes and version.
@@ -107,23 +98,24 @@ struct StateHeader {
 
 impl DrapeState {
     pub fn to_bytes(&self) -> Vec<u8> {
+        let c = &self.cloth;
         let header = StateHeader {
             magic: *STATE_MAGIC,
             version: STATE_VERSION,
-            vertices: self.positions.len() as u32,
+            vertices: c.positions.len() as u32,
             key: self.key,
-            frame: self.frame,
-            time: self.time,
-            sides: self.sides.len() as u32,
-            body_sides: self.body_sides.len() as u32,
+            frame: c.frame,
+            time: c.time,
+            sides: c.sides.len() as u32,
+            body_sides: c.body_sides.len() as u32,
         };
         let mut out = bytemuck::bytes_of(&header).to_vec();
-        for v in self.positions.iter().chain(&self.velocities) {
-            for c in v.to_array() {
-                out.extend_from_slice(&c.to_le_bytes());
+        for v in c.positions.iter().chain(&c.velocities) {
+            for x in v.to_array() {
+                out.extend_from_slice(&x.to_le_bytes());
             }
         }
-        for &(vertex, triangle, side) in self.sides.iter().chain(&self.body_sides) {
+        for &(vertex, triangle, side) in c.sides.iter().chain(&c.body_sides) {
             out.extend_from_slice(&vertex.to_le_bytes());
             out.extend_from_slice(&triangle.to_le_bytes());
             out.extend_from_slice(&side.to_le_bytes());
@@ -143,42 +135,36 @@ impl DrapeState {
         if header.version != STATE_VERSION {
             bail!("drape state version {}, this werkstatt reads version {STATE_VERSION}", header.version);
         }
-        let (n, sides, body_sides) = (header.vertices as usize, header.sides as usize, header.body_sides as usize);
-        let want = head + n * 2 * 12 + (sides + body_sides) * 12;
+        let (n, sides) = (header.vertices as usize, header.sides as usize);
+        let contacts = sides + header.body_sides as usize;
+        let want = head + n * 24 + contacts * 12;
         if bytes.len() != want {
             bail!(
-                "{} bytes where {n} vertices and {} contacts take {want}: the file is cut short or has more in it",
-                bytes.len(),
-                sides + body_sides
+                "{} bytes where {n} vertices and {contacts} contacts take {want}: the file is cut short or has more in it",
+                bytes.len()
             );
         }
         let word = |at: usize| [bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]];
-        let vectors = head + n * 24;
-        let floats: Vec<f32> = (head..vectors).step_by(4).map(|at| f32::from_le_bytes(word(at))).collect();
-        let vecs: Vec<Vec3> = floats.chunks_exact(3).map(Vec3::from_slice).collect();
-        let mut contacts: Vec<(u32, u32, f32)> = (vectors..want)
-            .step_by(12)
-            .map(|at| {
-                (u32::from_le_bytes(word(at)), u32::from_le_bytes(word(at + 4)), f32::from_le_bytes(word(at + 8)))
-            })
-            .collect();
-        let body_sides = contacts.split_off(sides);
-        if vecs.iter().any(|v| !v.is_finite())
-            || !header.time.is_finite()
-            || contacts.iter().chain(&body_sides).any(|s| !s.2.is_finite())
+        let float = |at: usize| f32::from_le_bytes(word(at));
+        let vector = |at: usize| Vec3::new(float(at), float(at + 4), float(at + 8));
+        let contact = |at: usize| (u32::from_le_bytes(word(at)), u32::from_le_bytes(word(at + 4)), float(at + 8));
+        let velocities_at = head + n * 12;
+        let contacts_at = velocities_at + n * 12;
+        let cloth = ClothState {
+            positions: (head..velocities_at).step_by(12).map(vector).collect(),
+            velocities: (velocities_at..contacts_at).step_by(12).map(vector).collect(),
+            time: header.time,
+            frame: header.frame,
+            sides: (contacts_at..contacts_at + sides * 12).step_by(12).map(contact).collect(),
+            body_sides: (contacts_at + sides * 12..want).step_by(12).map(contact).collect(),
+        };
+        if cloth.positions.iter().chain(&cloth.velocities).any(|v| !v.is_finite())
+            || !cloth.time.is_finite()
+            || cloth.sides.iter().chain(&cloth.body_sides).any(|s| !s.2.is_finite())
         {
             bail!("the state holds non-finite numbers");
         }
-        let (positions, velocities) = vecs.split_at(n);
-        Ok(DrapeState {
-            key: header.key,
-            frame: header.frame,
-            time: header.time,
-            positions: positions.to_vec(),
-            velocities: velocities.to_vec(),
-            sides: contacts,
-            body_sides,
-        })
+        Ok(DrapeState { key: header.key, cloth })
     }
 
     pub fn read(path: &Path) -> anyhow::Result<DrapeState> {
@@ -209,32 +195,11 @@ impl Drape {
 
     /// This drape's state now, under `key`.
     pub fn state(&self, key: u64) -> DrapeState {
-        DrapeState {
-            key,
-            frame: self.cloth.frame(),
-            time: self.cloth.time(),
-            positions: self.cloth.positions().to_vec(),
-            velocities: self.cloth.velocities().to_vec(),
-            sides: self.cloth.self_contact_sides().to_vec(),
-            body_sides: self.cloth.body_contact_sides().to_vec(),
-        }
+        DrapeState { key, cloth: self.cloth.state() }
     }
 
-    /// Continues from `state` (of the same key): its positions and velocities, gravity on once
-    /// its frame is past the sewing frames.
+    /// Continues from `state` (of the same key); [`Drape::step`] turns gravity on from its frame.
     pub fn restore(&mut self, state: &DrapeState) -> anyhow::Result<()> {
-        let saved = ClothState {
-            positions: &state.positions,
-            velocities: &state.velocities,
-            time: state.time,
-            frame: state.frame,
-            sides: &state.sides,
-            body_sides: &state.body_sides,
-        };
-        self.cloth.restore(saved).map_err(|e| anyhow::anyhow!("the drape state does not fit this garment: {e}"))?;
-        if state.frame >= self.sewing_frames {
-            self.cloth.set_gravity(self.gravity);
-        }
-        Ok(())
+        self.cloth.restore(&state.cloth).map_err(|e| anyhow::anyhow!("the drape state does not fit this garment: {e}"))
     }
 }

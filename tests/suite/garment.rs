@@ -449,10 +449,26 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
     }
 }
 
+/// `graph` (its paths relative to graphs/) evaluated at frame 0 for `targets`, loads waited for,
+/// without a GPU; nodes may fail (see their reports).
+fn frame_0(graph: &werkstatt::core::graph::Graph, targets: &[&str]) -> werkstatt::core::eval::Evaluator {
+    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
+    let targets: Vec<String> = targets.iter().map(|t| t.to_string()).collect();
+    let mut ev = Evaluator::new(graph, &targets).unwrap();
+    let res = werkstatt::core::resources::Resources::new(false);
+    let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
+    for _ in 0..50 {
+        if ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
+            break;
+        }
+        crate::common::wait_idle(&res);
+    }
+    ev
+}
+
 /// The Garment node's surface at frame 0 (nothing simulated yet) for the shirt at 3 cm edges on
 /// the resting Avatar node, with or without the avatar's joints linked.
 fn garment_node_at_rest(joints: bool) -> Vec<Vec3> {
-    use werkstatt::core::eval::Evaluator;
     let link = if joints { r#", ("avatar.joints", "garment.joints")"# } else { "" };
     let text = format!(
         r#"(version: 2, nodes: {{
@@ -461,15 +477,7 @@ fn garment_node_at_rest(joints: bool) -> Vec<Vec3> {
         }}, links: [("avatar.collision", "garment.body"){link}])"#
     );
     let graph = werkstatt::core::graph::Graph::load_str(&text, &root().join("graphs/test.ron")).unwrap();
-    let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
-    let res = werkstatt::core::resources::Resources::new(false);
-    let settings = werkstatt::core::eval::FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
-    for _ in 0..50 {
-        if ev.evaluate(werkstatt::core::eval::FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
-            break;
-        }
-        crate::common::wait_idle(&res);
-    }
+    let ev = frame_0(&graph, &["garment"]);
     let status = format!("{:?}", ev.report("garment").unwrap().status);
     match ev.output("garment", "surface") {
         Some(werkstatt::core::port::Value::Surface(m)) => m.positions.clone(),
@@ -552,7 +560,7 @@ fn a_saved_drape_goes_on_as_the_run_it_was_saved_from() {
     }
     let saved = DrapeState::from_bytes(&run.state(key).to_bytes()).unwrap();
     assert_eq!(saved, run.state(key), "the file round trip changed the state");
-    assert!(!saved.sides.is_empty(), "no self-contacts recorded after 40 frames");
+    assert!(!saved.cloth.sides.is_empty(), "no self-contacts recorded after 40 frames");
     let mut restored = new_drape();
     restored.restore(&saved).unwrap();
     for _ in 0..20 {
@@ -577,16 +585,17 @@ fn a_saved_drape_goes_on_as_the_run_it_was_saved_from() {
 
 #[test]
 fn broken_drape_states_get_clear_errors() {
+    use werkstatt::cloth::ClothState;
     use werkstatt::garment::drape::DrapeState;
-    let state = DrapeState {
-        key: 7,
-        frame: 3,
-        time: 0.05,
+    let cloth = ClothState {
         positions: vec![Vec3::X, Vec3::Y],
         velocities: vec![Vec3::ZERO; 2],
+        time: 0.05,
+        frame: 3,
         sides: vec![(0, 0, 1.0)],
         body_sides: Vec::new(),
     };
+    let state = DrapeState { key: 7, cloth };
     let bytes = state.to_bytes();
     assert_eq!(DrapeState::from_bytes(&bytes).unwrap(), state);
     let err = |b: &[u8]| format!("{:#}", DrapeState::from_bytes(b).unwrap_err());
@@ -608,11 +617,11 @@ fn broken_drape_states_get_clear_errors() {
 
 /// graphs/default.ron starts its shirt from the drape saved by graphs/garment_shirt.ron at
 /// the end of its rest and blend (assets/drapes/garment_shirt_walk.drape): on the torso at frame
-/// 0, where without the state the panels would be flat and apart; four buttons down its front. With another edge length the
-/// state does not fit: a warning says so and the shirt is sewn from the panels.
+/// 0, where without the state the panels would be flat and apart; four buttons down its front.
+/// With another edge length the state does not fit: a warning says so and the shirt is sewn from
+/// the panels.
 #[test]
 fn the_walk_graph_starts_from_its_saved_drape() {
-    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
     use werkstatt::core::port::Value;
     let run = |edge: Option<f64>| {
         let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/default.ron")).unwrap();
@@ -624,15 +633,7 @@ fn the_walk_graph_starts_from_its_saved_drape() {
                 .params
                 .insert("edge_length".into(), werkstatt::core::param::ParamValue::Float(edge));
         }
-        let mut ev = Evaluator::new(&graph, &["garment".to_string(), "button_row".to_string()]).unwrap();
-        let res = werkstatt::core::resources::Resources::new(false);
-        let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
-        for _ in 0..50 {
-            if ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
-                break;
-            }
-            crate::common::wait_idle(&res);
-        }
+        let ev = frame_0(&graph, &["garment", "button_row"]);
         // Four buttons down the right front panel (piece 3 in GarmentCode's panel order).
         if let Some(Value::Instances(buttons)) = ev.output("button_row", "placements") {
             assert!(buttons.len() == 4 && buttons.iter().all(|b| b.piece == 3), "buttons {buttons:?}");
@@ -658,21 +659,13 @@ fn the_walk_graph_starts_from_its_saved_drape() {
 
 #[test]
 fn saving_over_the_start_state_is_refused() {
-    use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
+    use werkstatt::core::eval::NodeStatus;
     use werkstatt::core::param::ParamValue;
     let mut graph = werkstatt::core::graph::Graph::load(&root().join("graphs/default.ron")).unwrap();
     let same = graph.nodes["garment"].params["start_state"].clone();
     graph.nodes.get_mut("garment").unwrap().params.insert("save_state".into(), same);
     graph.nodes.get_mut("garment").unwrap().params.insert("save_at".into(), ParamValue::Float(1.0));
-    let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
-    let res = werkstatt::core::resources::Resources::new(false);
-    let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
-    for _ in 0..50 {
-        if ev.evaluate(FrameTime { frame: 0, fps: 30.0 }, None, &res, &settings).pending == 0 {
-            break;
-        }
-        crate::common::wait_idle(&res);
-    }
+    let ev = frame_0(&graph, &["garment"]);
     match &ev.report("garment").unwrap().status {
         NodeStatus::Failed(m) => assert!(m.contains("same file"), "{m}"),
         other => panic!("saving over the start state was accepted: {other:?}"),
