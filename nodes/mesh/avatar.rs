@@ -81,6 +81,11 @@ pub static AVATAR: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("loop", ParamKind::Bool { default: true }, "Loop the motion (else hold its last frame)."),
         ParamSpec::new(
+            "arm_spread",
+            ParamKind::Float { default: 0.0, min: -45.0, max: 90.0 },
+            "Degrees each upper arm turns away from the body on top of the motion (about the chest's forward axis). Walks recorded on slimmer bodies swing MakeHuman's arms through its torso at the armpits, which pinches a garment's underarm into the body; about 30 keeps arm and torso apart through the bundled walk (docs/garments.md).",
+        ),
+        ParamSpec::new(
             "start",
             ParamKind::Float { default: 0.0, min: -1e6, max: 1e6 },
             "Motion time (seconds) at frame 0 (once the rest and blend times are over).",
@@ -212,7 +217,9 @@ impl Node for AvatarNode {
             towards_motion = weight;
             let seconds = cx.f64("start") + motion_time * cx.f64("speed");
             frame = seconds / bvh.frame_time;
-            retarget.pose(&bvh, skeleton, frame, cx.bool("loop"), 1.0)
+            let mut pose = retarget.pose(&bvh, skeleton, frame, cx.bool("loop"), 1.0);
+            pose.spread_arms(skeleton, cx.f64("arm_spread").to_radians());
+            pose
         };
         let method = match cx.choice::<SkinningKind>("skinning") {
             SkinningKind::Lbs => Skinning::Linear,

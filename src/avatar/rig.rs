@@ -38,6 +38,20 @@ impl Pose {
     pub fn rest(skeleton: &Skeleton) -> Pose {
         Pose { rotations: vec![DQuat::IDENTITY; skeleton.bones.len()], root_offset: DVec3::ZERO }
     }
+
+    /// Turns each upper arm (`upperarm01.L`/`.R`, with everything below it) `radians` away from
+    /// the body about the chest's forward axis, after the motion's own rotation: walks recorded
+    /// on slimmer bodies swing MakeHuman's arms through its torso at the armpits, and a few
+    /// degrees outward keep arm and torso apart. Bones missing from the skeleton are skipped.
+    pub fn spread_arms(&mut self, skeleton: &Skeleton, radians: f64) {
+        for name in ["upperarm01.L", "upperarm01.R"] {
+            let Some(b) = skeleton.index(name) else { continue };
+            // Local rotations are deltas from the rest pose in mesh axes (facing +Z, left arm
+            // at +X): a turn about +Z in the parent's frame, applied after the motion's.
+            let side = skeleton.bones[b].head.x.signum();
+            self.rotations[b] = (DQuat::from_rotation_z(side * radians) * self.rotations[b]).normalize();
+        }
+    }
 }
 
 /// A rigid transform x -> q x + t.

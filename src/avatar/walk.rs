@@ -20,6 +20,8 @@ pub struct WalkingAvatar {
     bvh: Bvh,
     retarget: Retarget,
     pub skinning: Skinning,
+    /// Radians each upper arm turns away from the body on top of the walk ([`Pose::spread_arms`]).
+    pub arm_spread: f64,
 }
 
 impl WalkingAvatar {
@@ -40,7 +42,7 @@ impl WalkingAvatar {
         let bvh = Bvh::load(&dir.join("walk1.bvh"))?;
         let (map, text) = JointMap::load(&dir.join("makehuman-old-rig.ron"))?;
         let retarget = Retarget::new(&map, "makehuman-old-rig.ron", &text, &bvh, "walk1.bvh", &skeleton)?;
-        Ok(WalkingAvatar { body, skeleton, weights, bvh, retarget, skinning: Skinning::Linear })
+        Ok(WalkingAvatar { body, skeleton, weights, bvh, retarget, skinning: Skinning::Linear, arm_spread: 0.0 })
     }
 
     /// Base-mesh units (decimetres, feet at the mesh's floor) to metres with the feet on y = 0,
@@ -65,7 +67,9 @@ impl WalkingAvatar {
 
     /// The walk's pose `seconds` in (looping).
     pub fn walk_pose(&self, seconds: f64) -> Pose {
-        self.retarget.pose(&self.bvh, &self.skeleton, seconds / self.bvh.frame_time, true, 1.0)
+        let mut pose = self.retarget.pose(&self.bvh, &self.skeleton, seconds / self.bvh.frame_time, true, 1.0);
+        pose.spread_arms(&self.skeleton, self.arm_spread);
+        pose
     }
 
     /// The bones' heads at rest, in base-mesh units (see [`WalkingAvatar::place`]).

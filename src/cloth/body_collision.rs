@@ -501,7 +501,12 @@ impl BodyMesh {
             }
             let Some((f, _)) = best else { continue };
             let p = a.lerp(b, f);
-            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied()) else {
+            // The nearest of the triangles around this edge, however deep: the candidates all
+            // come within a sweep of the segment (not only of its box), and a body ridge
+            // through the edge is pushed back by the surfaces around it, not by another part
+            // of the body that happens to be nearer a deep point (an arm through the torso).
+            let local = f32::INFINITY;
+            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied(), local) else {
                 continue;
             };
             let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
@@ -550,10 +555,35 @@ impl BodyMesh {
         }
     }
 
-    /// Closest body point to `p` among `tris` at time `s` (0 = frame start,
-    /// 1 = frame end): `(signed distance, outward unit normal, triangle,
-    /// barycentrics)`.
-    fn closest(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<(f32, Vec3, u32, [f32; 3])> {
+    /// The body's closest point to `p` at time `s` (0 = frame start, 1 = frame end): `(signed
+    /// distance, outward unit normal, triangle, barycentrics)`. `tris` must hold every triangle
+    /// within `covered` of `p`. The pseudo-normal's sign holds for the body's nearest point
+    /// only: when the nearest of `tris` is farther than `covered`, a nearer triangle may be
+    /// missing (a far one seen from its back would read as deep inside), so the tree is asked
+    /// again out to that distance.
+    fn closest(
+        &self,
+        p: Vec3,
+        s: f32,
+        tris: impl Iterator<Item = u32>,
+        covered: f32,
+    ) -> Option<(f32, Vec3, u32, [f32; 3])> {
+        let hit = self.closest_among(p, s, tris)?;
+        if hit.0.abs() <= covered {
+            return Some(hit);
+        }
+        let q = Aabb::around(p, hit.0.abs());
+        let mut near = Vec::new();
+        self.tree.query(&q, |t| {
+            if self.boxes[t as usize].overlaps(&q) {
+                near.push(t)
+            }
+        });
+        self.closest_among(p, s, near.into_iter())
+    }
+
+    /// Closest body point to `p` among `tris` at time `s`, as [`BodyMesh::closest`].
+    fn closest_among(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<(f32, Vec3, u32, [f32; 3])> {
         let mut best: Option<(f32, u32, Vec3, [f32; 3], Feature)> = None;
         for t in tris {
             let [a, b, c] = self.triangles[t as usize].map(|i| self.corner(i, s));
@@ -593,17 +623,13 @@ impl BodyMesh {
                 continue;
             }
             let p = x[i];
-            let inside_box = {
-                let q = &self.query[i];
-                let r = Aabb::around(p, thickness);
-                q.min.cmple(r.min).all() && r.max.cmple(q.max).all()
-            };
-            let hit = if inside_box {
+            let covered = self.query[i].margin(p);
+            let hit = if covered >= thickness {
                 let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
                 if a == b {
                     continue;
                 }
-                self.closest(p, s1, self.cand[a..b].iter().copied())
+                self.closest(p, s1, self.cand[a..b].iter().copied(), covered)
             } else {
                 self.stats.fallbacks += 1;
                 let mut near = Vec::new();
@@ -613,7 +639,7 @@ impl BodyMesh {
                         near.push(t)
                     }
                 });
-                self.closest(p, s1, near.into_iter())
+                self.closest(p, s1, near.into_iter(), 2.0 * thickness)
             };
             let Some((dist, n, t, bary)) = hit else {
                 continue;
@@ -662,7 +688,7 @@ impl BodyMesh {
             near.clear();
             let q = Aabb::around(p, max_distance);
             self.tree.query(&q, |t| near.push(t));
-            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied())
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied(), max_distance)
                 && d <= max_distance
             {
                 best = Some(best.map_or(d, |b: f32| b.min(d)));
@@ -671,11 +697,11 @@ impl BodyMesh {
         best
     }
 
-    /// Number of segments `[a, b]` (cloth edges) that cross a body triangle
-    /// (end pose).
-    pub fn count_crossings(&self, x: &[Vec3], edges: &[[u32; 2]]) -> usize {
-        let mut n = 0;
-        for e in edges {
+    /// Indices of the segments `[a, b]` (cloth edges) that cross a body
+    /// triangle (end pose).
+    pub fn crossings(&self, x: &[Vec3], edges: &[[u32; 2]]) -> Vec<usize> {
+        let mut out = Vec::new();
+        for (i, e) in edges.iter().enumerate() {
             let (a, b) = (x[e[0] as usize], x[e[1] as usize]);
             let q = Aabb::from_points(&[a, b]);
             let mut hit = false;
@@ -685,9 +711,11 @@ impl BodyMesh {
                     hit = super::intersections::segment_hits_triangle(a, b, p0, p1, p2);
                 }
             });
-            n += hit as usize;
+            if hit {
+                out.push(i);
+            }
         }
-        n
+        out
     }
 }
 

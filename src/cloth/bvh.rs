@@ -40,6 +40,12 @@ impl Aabb {
         Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
     #[inline]
+    /// Distance from `p` to the nearest face of the box (negative outside it): every point
+    /// within this distance of `p` lies in the box.
+    pub fn margin(&self, p: Vec3) -> f32 {
+        (p - self.min).min(self.max - p).min_element()
+    }
+    #[inline]
     pub fn inflate(self, r: f32) -> Aabb {
         Aabb { min: self.min - Vec3::splat(r), max: self.max + Vec3::splat(r) }
     }

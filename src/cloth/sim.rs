@@ -854,7 +854,11 @@ impl Cloth {
     /// Largest relative edge elongation `len / rest - 1` over all edges.
     /// Cloth edges crossing the body surface (0 without a body).
     pub fn body_crossings(&self) -> usize {
-        self.body.as_ref().map_or(0, |b| b.count_crossings(&self.x, &self.edges))
+        self.body_crossing_edges().len()
+    }
+    /// The cloth edges (indices into [`Cloth::edges`]) crossing the body.
+    pub fn body_crossing_edges(&self) -> Vec<usize> {
+        self.body.as_ref().map_or(Vec::new(), |b| b.crossings(&self.x, &self.edges))
     }
     /// Cloth edges crossing cloth triangles that do not share a vertex with them.
     pub fn self_crossings(&self) -> usize {

@@ -700,3 +700,57 @@ fn the_avatar_graphs_render_a_moving_body() {
         assert!(changed > 50, "{graph}: only {changed} pixels change while the avatar walks");
     }
 }
+
+/// Edges of `x` (the collision body) within 15 cm of either shoulder joint that cross the
+/// body's own triangles.
+fn armpit_self_crossings(avatar: &werkstatt::avatar::walk::WalkingAvatar, pose: &Pose) -> usize {
+    let x = avatar.collision_vertices(pose);
+    let tris = avatar.rest_body().triangles().to_vec();
+    let globals = avatar.skeleton.globals(pose);
+    let shoulders: Vec<Vec3> = ["upperarm01.L", "upperarm01.R"]
+        .iter()
+        .map(|b| avatar.place(globals[avatar.skeleton.index(b).unwrap()].1.as_vec3()))
+        .collect();
+    let mut edges: Vec<[u32; 2]> = tris
+        .iter()
+        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+        .map(|[a, b]| [a.min(b), a.max(b)])
+        .filter(|e| {
+            let m = (x[e[0] as usize] + x[e[1] as usize]) * 0.5;
+            shoulders.iter().any(|s| m.distance(*s) < 0.15)
+        })
+        .collect();
+    edges.sort();
+    edges.dedup();
+    let rep: Vec<u32> = (0..x.len() as u32).collect();
+    werkstatt::cloth::intersections::count_self_crossings(&x, &rep, &edges, &tris)
+}
+
+#[test]
+fn spreading_the_arms_keeps_them_out_of_the_torso_through_the_walk() {
+    // The bundled walk swings MakeHuman's arms through its torso at the armpits; 30 degrees
+    // outward keeps them apart in every pose of its first two seconds.
+    let mut avatar = werkstatt::avatar::walk::WalkingAvatar::load(&root().join("assets/avatar")).unwrap();
+    let elbow = avatar.skeleton.index("lowerarm01.L").unwrap();
+    let mut worst = [0; 2];
+    for (k, degrees) in [0.0f64, 30.0].into_iter().enumerate() {
+        avatar.arm_spread = degrees.to_radians();
+        for f in 0..10 {
+            let pose = avatar.walk_pose(f as f64 * 0.2);
+            worst[k] = worst[k].max(armpit_self_crossings(&avatar, &pose));
+            if k == 1 {
+                // The elbow swings out by the spread about the shoulder, in the chest's plane.
+                let mut plain = pose.clone();
+                plain.spread_arms(&avatar.skeleton, -avatar.arm_spread);
+                let (spread, plain) = (avatar.skeleton.globals(&pose), avatar.skeleton.globals(&plain));
+                assert!(
+                    spread[elbow].1.x > plain[elbow].1.x + 0.5,
+                    "the left elbow moved out {} dm",
+                    spread[elbow].1.x - plain[elbow].1.x
+                );
+            }
+        }
+    }
+    assert!(worst[0] >= 20, "without a spread the arms cross the torso ({} edges)", worst[0]);
+    assert_eq!(worst[1], 0, "edges at the armpits crossing the body with the arms spread 30 degrees");
+}
