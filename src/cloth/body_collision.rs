@@ -829,11 +829,11 @@ mod tests {
         assert!(body.adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
         // Signs from pseudo-normals: inside a thin limb and beside its caps.
         let all = 0..body.triangles.len() as u32;
-        assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone()).unwrap().0 < 0.0);
-        let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone()).unwrap();
+        assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone(), f32::INFINITY).unwrap().0 < 0.0);
+        let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone(), f32::INFINITY).unwrap();
         assert!((d - 0.1).abs() < 2e-3 && n.z > 0.99, "{d} {n}");
         // 0.086 from the cap's centre: inside its 0.1 radius.
-        let (d, ..) = body.closest(Vec3::new(0.0, 0.07, 1.05), 1.0, all).unwrap();
+        let (d, ..) = body.closest(Vec3::new(0.0, 0.07, 1.05), 1.0, all, f32::INFINITY).unwrap();
         assert!(d < 0.0, "{d}");
     }
 }
