@@ -186,6 +186,11 @@ fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec
     }
 }
 
+/// How deep inside the body (m) a cloth vertex beyond its candidates' reach is still pushed
+/// back out by the body's nearest surface. Deeper (a limb moved through the cloth, a drape
+/// started on another pose) the nearest surface is as likely the wrong one.
+const DEEPEST_CONTACT: f32 = 0.02;
+
 impl BodyMesh {
     /// A body at rest in `positions` (metres; triangles CCW seen from outside).
     pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
@@ -506,7 +511,7 @@ impl BodyMesh {
             // through the edge is pushed back by the surfaces around it, not by another part
             // of the body that happens to be nearer a deep point (an arm through the torso).
             let local = f32::INFINITY;
-            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied(), local) else {
+            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied(), local, local) else {
                 continue;
             };
             let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
@@ -556,30 +561,37 @@ impl BodyMesh {
     }
 
     /// The body's closest point to `p` at time `s` (0 = frame start, 1 = frame end): `(signed
-    /// distance, outward unit normal, triangle, barycentrics)`. `tris` must hold every triangle
-    /// within `covered` of `p`. The pseudo-normal's sign holds for the body's nearest point
-    /// only: when the nearest of `tris` is farther than `covered`, a nearer triangle may be
-    /// missing (a far one seen from its back would read as deep inside), so the tree is asked
-    /// again out to that distance.
+    /// distance, outward unit normal, triangle, barycentrics)`, where `tris` holds every
+    /// triangle within `covered` of `p`. Only the body's nearest point has a trustworthy side
+    /// (its pseudo-normal's): the nearest of `tris` beyond `covered` may be a far triangle seen
+    /// from behind while a nearer one is missing, which read points 10 cm out as 24 cm inside
+    /// and pushed them through the body. Beyond `covered`, an outside point is out of contact
+    /// (`None`), and an inside one is checked against the body's triangles out to `reach`:
+    /// deeper than that it is left alone (`None`).
     fn closest(
         &self,
         p: Vec3,
         s: f32,
         tris: impl Iterator<Item = u32>,
         covered: f32,
+        reach: f32,
     ) -> Option<(f32, Vec3, u32, [f32; 3])> {
         let hit = self.closest_among(p, s, tris)?;
         if hit.0.abs() <= covered {
             return Some(hit);
         }
-        let q = Aabb::around(p, hit.0.abs());
+        if hit.0 > 0.0 || reach <= covered {
+            return None;
+        }
+        let r = (-hit.0).min(reach);
+        let q = Aabb::around(p, r);
         let mut near = Vec::new();
         self.tree.query(&q, |t| {
             if self.boxes[t as usize].overlaps(&q) {
                 near.push(t)
             }
         });
-        self.closest_among(p, s, near.into_iter())
+        self.closest_among(p, s, near.into_iter()).filter(|h| h.0.abs() <= r)
     }
 
     /// Closest body point to `p` among `tris` at time `s`, as [`BodyMesh::closest`].
@@ -629,7 +641,7 @@ impl BodyMesh {
                 if a == b {
                     continue;
                 }
-                self.closest(p, s1, self.cand[a..b].iter().copied(), covered)
+                self.closest(p, s1, self.cand[a..b].iter().copied(), covered, DEEPEST_CONTACT)
             } else {
                 self.stats.fallbacks += 1;
                 let mut near = Vec::new();
@@ -639,7 +651,7 @@ impl BodyMesh {
                         near.push(t)
                     }
                 });
-                self.closest(p, s1, near.into_iter(), 2.0 * thickness)
+                self.closest(p, s1, near.into_iter(), 2.0 * thickness, DEEPEST_CONTACT)
             };
             let Some((dist, n, t, bary)) = hit else {
                 continue;
@@ -688,7 +700,7 @@ impl BodyMesh {
             near.clear();
             let q = Aabb::around(p, max_distance);
             self.tree.query(&q, |t| near.push(t));
-            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied(), max_distance)
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied(), max_distance, max_distance)
                 && d <= max_distance
             {
                 best = Some(best.map_or(d, |b: f32| b.min(d)));
@@ -829,11 +841,14 @@ mod tests {
         assert!(body.adjacent.iter().flatten().all(|&a| a != u32::MAX), "closed");
         // Signs from pseudo-normals: inside a thin limb and beside its caps.
         let all = 0..body.triangles.len() as u32;
-        assert!(body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone(), f32::INFINITY).unwrap().0 < 0.0);
-        let (d, n, ..) = body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone(), f32::INFINITY).unwrap();
+        assert!(
+            body.closest(Vec3::new(0.05, 0.0, 0.5), 1.0, all.clone(), f32::INFINITY, f32::INFINITY).unwrap().0 < 0.0
+        );
+        let (d, n, ..) =
+            body.closest(Vec3::new(0.0, 0.0, 1.2), 1.0, all.clone(), f32::INFINITY, f32::INFINITY).unwrap();
         assert!((d - 0.1).abs() < 2e-3 && n.z > 0.99, "{d} {n}");
         // 0.086 from the cap's centre: inside its 0.1 radius.
-        let (d, ..) = body.closest(Vec3::new(0.0, 0.07, 1.05), 1.0, all, f32::INFINITY).unwrap();
+        let (d, ..) = body.closest(Vec3::new(0.0, 0.07, 1.05), 1.0, all, f32::INFINITY, f32::INFINITY).unwrap();
         assert!(d < 0.0, "{d}");
     }
 }
