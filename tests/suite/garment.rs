@@ -506,21 +506,23 @@ fn the_garment_node_fits_its_sleeves_to_the_avatars_joints() {
     assert!(!close(&with, &without));
 }
 
-#[test]
-fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
+/// `pattern` (under assets/patterns/garmentcode) on graphs/garment_shirt.ron's avatar (arms
+/// spread 30 degrees) at 4 cm edges with self-collision, rest shortened to 1 s, evaluated frame
+/// by frame at 60 fps (one simulator step each, the body moving between them) to 2.5 s: 1 s at
+/// rest, 0.5 s of blend, 1 s of walk. Returns the garment's bounds, mean height and seam gap.
+fn worn_through_rest_blend_and_walk(pattern: &str) -> (Vec3, Vec3, f32, f32) {
     use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
     use werkstatt::core::port::Value;
-    // graphs/garment_shirt.ron's avatar and garment, at 4 cm edges, rest shortened to 1 s.
-    let text = r#"(version: 2, nodes: {
-        "avatar": (kind: "Avatar", params: {"joint_map": "../assets/avatar/makehuman-old-rig.ron", "motion": "../assets/avatar/walk1.bvh", "rest": 1.0}),
-        "garment": (kind: "Garment", params: {"pattern": "../assets/patterns/garmentcode/shirt_mean_specification.json", "edge_length": 4.0, "self_collision": true}),
-    }, links: [("avatar.collision", "garment.body"), ("avatar.joints", "garment.joints")])"#;
-    let graph = werkstatt::core::graph::Graph::load_str(text, &root().join("graphs/test.ron")).unwrap();
+    let text = format!(
+        r#"(version: 2, nodes: {{
+        "avatar": (kind: "Avatar", params: {{"joint_map": "../assets/avatar/makehuman-old-rig.ron", "motion": "../assets/avatar/walk1.bvh", "rest": 1.0, "arm_spread": 30.0}}),
+        "garment": (kind: "Garment", params: {{"pattern": "../assets/patterns/garmentcode/{pattern}", "edge_length": 4.0, "self_collision": true}}),
+    }}, links: [("avatar.collision", "garment.body"), ("avatar.joints", "garment.joints")])"#
+    );
+    let graph = werkstatt::core::graph::Graph::load_str(&text, &root().join("graphs/test.ron")).unwrap();
     let mut ev = Evaluator::new(&graph, &["garment".to_string()]).unwrap();
     let res = werkstatt::core::resources::Resources::new(false);
     let settings = FrameSettings { base_dir: root().join("graphs"), ..Default::default() };
-    // Frame by frame at 60 fps (one simulator step each, the body moving between them) to 2.5 s:
-    // 1 s at rest, 0.5 s of blend, 1 s of walk.
     for frame in 0..=150 {
         for _ in 0..50 {
             if ev.evaluate(FrameTime { frame, fps: 60.0 }, None, &res, &settings).pending == 0 {
@@ -530,17 +532,34 @@ fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
         }
     }
     let status = format!("{:?}", ev.report("garment").unwrap().status);
-    let (Some(Value::Surface(shirt)), Some(Value::Scalar(gap))) =
+    let (Some(Value::Surface(garment)), Some(Value::Scalar(gap))) =
         (ev.output("garment", "surface"), ev.output("garment", "seam_gap"))
     else {
-        panic!("no garment: {status}");
+        panic!("no garment from {pattern}: {status}");
     };
-    let (lo, hi) = shirt.bounds();
-    let mean_y = shirt.positions.iter().map(|p| p.y).sum::<f32>() / shirt.positions.len() as f32;
-    eprintln!("shirt bounds {lo} {hi}, mean y {mean_y}, seam gap {gap}");
-    assert!(shirt.positions.iter().all(|p| p.is_finite()));
-    assert!(*gap < 1e-3, "the seams opened to {gap} m");
+    let (lo, hi) = garment.bounds();
+    let mean_y = garment.positions.iter().map(|p| p.y).sum::<f32>() / garment.positions.len() as f32;
+    eprintln!("{pattern}: bounds {lo} {hi}, mean y {mean_y}, seam gap {gap}");
+    assert!(garment.positions.iter().all(|p| p.is_finite()), "{pattern}: NaN");
+    (lo, hi, mean_y, *gap as f32)
+}
+
+#[test]
+fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
+    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("shirt_mean_specification.json");
+    assert!(gap < 1e-3, "the seams opened to {gap} m");
     assert!(lo.y > 0.8 && hi.y < 1.6 && mean_y > 1.1, "the shirt is not on the torso: {lo} {hi}, mean y {mean_y}");
+}
+
+#[test]
+fn the_hoodie_stays_on_through_rest_blend_and_walk() {
+    // Torso below the hips' top, hood over the head (MakeHuman's crown at 1.67 m).
+    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("hoody_mean_specification.json");
+    assert!(gap < 1e-3, "the seams opened to {gap} m");
+    assert!(
+        lo.y > 0.8 && (1.6..1.9).contains(&hi.y) && mean_y > 1.2,
+        "the hoodie is not on: {lo} {hi}, mean y {mean_y}"
+    );
 }
 
 /// A drape saved mid-run and restored into a fresh drape goes on exactly as the run it was saved
