@@ -700,9 +700,8 @@ impl BodyMesh {
             near.clear();
             let q = Aabb::around(p, max_distance);
             self.tree.query(&q, |t| near.push(t));
-            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied(), max_distance, max_distance)
-                && d <= max_distance
-            {
+            // `closest` keeps only a nearest point within `max_distance`.
+            if let Some((d, ..)) = self.closest(p, 1.0, near.iter().copied(), max_distance, max_distance) {
                 best = Some(best.map_or(d, |b: f32| b.min(d)));
             }
         }

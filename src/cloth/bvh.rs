@@ -39,9 +39,9 @@ impl Aabb {
     pub fn union(self, o: Aabb) -> Aabb {
         Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
-    #[inline]
     /// Distance from `p` to the nearest face of the box (negative outside it): every point
     /// within this distance of `p` lies in the box.
+    #[inline]
     pub fn margin(&self, p: Vec3) -> f32 {
         (p - self.min).min(self.max - p).min_element()
     }
