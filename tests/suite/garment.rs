@@ -517,14 +517,15 @@ fn the_garment_node_fits_its_sleeves_to_the_avatars_joints() {
 /// `pattern` (under assets/patterns/garmentcode) on graphs/garment_shirt.ron's avatar (arms
 /// spread 30 degrees) at 4 cm edges with self-collision, rest shortened to 1 s, evaluated frame
 /// by frame at 60 fps (one simulator step each, the body moving between them) to 2.5 s: 1 s at
-/// rest, 0.5 s of blend, 1 s of walk. Returns the garment's bounds, mean height and seam gap.
-fn worn_through_rest_blend_and_walk(pattern: &str) -> (Vec3, Vec3, f32, f32) {
+/// rest, 0.5 s of blend, 1 s of walk. `offset` is the Garment node's (cm). Returns the garment's
+/// bounds, mean height and seam gap.
+fn worn_through_rest_blend_and_walk(pattern: &str, offset: [f32; 3]) -> (Vec3, Vec3, f32, f32) {
     use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime};
     use werkstatt::core::port::Value;
     let text = format!(
         r#"(version: 2, nodes: {{
         "avatar": (kind: "Avatar", params: {{"joint_map": "../assets/avatar/makehuman-old-rig.ron", "motion": "../assets/avatar/walk1.bvh", "rest": 1.0, "arm_spread": 30.0}}),
-        "garment": (kind: "Garment", params: {{"pattern": "../assets/patterns/garmentcode/{pattern}", "edge_length": 4.0, "self_collision": true}}),
+        "garment": (kind: "Garment", params: {{"pattern": "../assets/patterns/garmentcode/{pattern}", "edge_length": 4.0, "self_collision": true, "offset": {offset:?}}}),
     }}, links: [("avatar.collision", "garment.body"), ("avatar.joints", "garment.joints")])"#
     );
     let graph = werkstatt::core::graph::Graph::load_str(&text, &root().join("graphs/test.ron")).unwrap();
@@ -554,7 +555,7 @@ fn worn_through_rest_blend_and_walk(pattern: &str) -> (Vec3, Vec3, f32, f32) {
 
 #[test]
 fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
-    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("shirt_mean_specification.json");
+    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("shirt_mean_specification.json", [0.0, 0.0, 3.0]);
     assert!(gap < 1e-3, "the seams opened to {gap} m");
     assert!(lo.y > 0.8 && hi.y < 1.6 && mean_y > 1.1, "the shirt is not on the torso: {lo} {hi}, mean y {mean_y}");
 }
@@ -562,11 +563,23 @@ fn the_shirt_graph_keeps_the_shirt_on_through_rest_blend_and_walk() {
 #[test]
 fn the_hoodie_stays_on_through_rest_blend_and_walk() {
     // Torso below the hips' top, hood over the head (MakeHuman's crown at 1.67 m).
-    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("hoody_mean_specification.json");
+    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("hoody_mean_specification.json", [0.0, 0.0, 3.0]);
     assert!(gap < 1e-3, "the seams opened to {gap} m");
     assert!(
         lo.y > 0.8 && (1.6..1.9).contains(&hi.y) && mean_y > 1.2,
         "the hoodie is not on: {lo} {hi}, mean y {mean_y}"
+    );
+}
+
+#[test]
+fn the_pencil_dress_hangs_from_its_shoulder_straps_through_rest_blend_and_walk() {
+    // graphs/garment_dress.ron's placement, 4 cm above the shirt's: the straps' seams close over
+    // the shoulders (MakeHuman's are at about 1.40 m) rather than through them.
+    let (lo, hi, mean_y, gap) = worn_through_rest_blend_and_walk("dress_pencil_specification.json", [0.0, 4.0, 3.0]);
+    assert!(gap < 1e-3, "the seams opened to {gap} m");
+    assert!(
+        (1.35..1.55).contains(&hi.y) && lo.y > 0.05 && mean_y > 0.7,
+        "the dress is not hanging from the shoulders: {lo} {hi}, mean y {mean_y}"
     );
 }
 
