@@ -10,6 +10,7 @@
 pub mod cloth {
     pub mod garment;
     pub mod node;
+    pub mod settle_surface;
 }
 pub mod btf;
 pub mod compare;
@@ -38,6 +39,7 @@ pub static ALL: &[&NodeSpec] = &[
     &woven::woven_cloth::WOVEN_CLOTH,
     &cloth::node::CLOTH_SIM,
     &cloth::garment::GARMENT,
+    &cloth::settle_surface::SETTLE_SURFACE,
     &mesh::mesh_sequence::MESH_SEQUENCE,
     &mesh::live_link::LIVE_LINK,
     &render::scene::MATERIAL,

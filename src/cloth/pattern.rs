@@ -208,13 +208,35 @@ impl PatternMesh {
         Ok(mesh)
     }
 
+    /// The topology of a garment that exists only in 3D (a fitted proxy, an OBJ from another
+    /// tool), for [`super::Cloth::new_shaped`], whose rest shape is its start positions: no
+    /// pieces, seams or flat rest coordinates (`rest_positions` is empty), one UV and piece id
+    /// per vertex. `edge_length` (cm) is the mesh's typical edge.
+    pub fn shaped(triangles: Vec<[u32; 3]>, uvs: Vec<Vec2>, piece_ids: Vec<u32>, edge_length: f32) -> Self {
+        assert_eq!(uvs.len(), piece_ids.len(), "one UV and piece id per vertex");
+        assert!(triangles.iter().flatten().all(|&i| (i as usize) < uvs.len()), "triangle index out of range");
+        PatternMesh {
+            pieces: Vec::new(),
+            seams: Vec::new(),
+            rest: Vec::new(),
+            uvs,
+            piece_ids,
+            triangles,
+            piece_meshes: Vec::new(),
+            seam_pairs: Vec::new(),
+            edge_length,
+            uv_per_cm: 0.0,
+        }
+    }
+
     pub fn pieces(&self) -> &[Piece] {
         &self.pieces
     }
     pub fn seams(&self) -> &[Seam] {
         &self.seams
     }
-    /// Per-vertex pattern coordinates (cm, in the piece's own frame).
+    /// Per-vertex pattern coordinates (cm, in the piece's own frame); empty for a
+    /// [`PatternMesh::shaped`] mesh.
     pub fn rest_positions(&self) -> &[Vec2] {
         &self.rest
     }
@@ -245,7 +267,7 @@ impl PatternMesh {
         self.uv_per_cm
     }
     pub fn vertex_count(&self) -> usize {
-        self.rest.len()
+        self.uvs.len()
     }
 
     /// Shelf packing of the piece bounding boxes. The shelf width is chosen

@@ -65,6 +65,7 @@ impl SelfCollision {
         v: &[Vec3],
         inv_mass: &[f32],
         rep: &[u32],
+        excluded: &[(u32, u32)],
         triangles: &[[u32; 3]],
         dt: f32,
         thickness: f32,
@@ -93,6 +94,9 @@ impl SelfCollision {
                     return;
                 }
                 if inv_mass[i] == 0.0 && tri.iter().all(|&j| inv_mass[j as usize] == 0.0) {
+                    return;
+                }
+                if !excluded.is_empty() && excluded.binary_search(&(i as u32, t)).is_ok() {
                     return;
                 }
                 // Near enough at the frame start for what the two can close

@@ -19,9 +19,13 @@ use std::time::Instant;
 
 use super::SurfaceFrame;
 use super::body_collision::BodyMesh;
+use super::bvh::{Aabb, AabbTree};
 use super::collider::Collider;
 use super::pattern::PatternMesh;
 use super::self_collision::SelfCollision;
+
+/// Self-collision ignores a vertex and a triangle closer at rest than this many self-thicknesses.
+const SELF_EXCLUSION: f32 = 1.5;
 
 /// Pattern coordinates are centimetres; the simulation runs in metres.
 pub const CM: f32 = 0.01;
@@ -184,6 +188,104 @@ pub struct ClothState {
     pub body_sides: Vec<(u32, u32, f32)>,
 }
 
+/// A cloth's undeformed shape (metres), from which its constraints take their rest values.
+enum Rest<'a> {
+    /// The flat pattern, one point per vertex: x and y are the warp and weft.
+    Flat(Vec<Vec2>),
+    /// A shaped surface ([`Cloth::new_shaped`]), its UVs giving the grain.
+    Shaped { positions: &'a [Vec3], uvs: &'a [Vec2] },
+}
+
+impl Rest<'_> {
+    fn distance(&self, a: u32, b: u32) -> f32 {
+        match self {
+            Rest::Flat(p) => p[a as usize].distance(p[b as usize]),
+            Rest::Shaped { positions: p, .. } => p[a as usize].distance(p[b as usize]),
+        }
+    }
+
+    /// The triangle in 2D, counter-clockwise where the pattern's (or, shaped, its 3D winding's)
+    /// is: shaped, in its own plane with x along the direction its u grows.
+    fn triangle(&self, t: [u32; 3]) -> [Vec2; 3] {
+        let (positions, uvs) = match self {
+            Rest::Flat(p) => return t.map(|i| p[i as usize]),
+            Rest::Shaped { positions, uvs } => (positions, uvs),
+        };
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        let [ua, ub, uc] = t.map(|i| uvs[i as usize]);
+        let (e1, e2) = (b - a, c - a);
+        let normal = e1.cross(e2).normalize_or_zero();
+        let (d1, d2) = (ub - ua, uc - ua);
+        // The 3D direction along which u grows: e1 dv2 - e2 dv1 up to the sign of the UV
+        // triangle's area, which mirrored UVs flip.
+        let grain = (e1 * d2.y - e2 * d1.y) * d1.perp_dot(d2).signum();
+        let grain = grain - normal * grain.dot(normal);
+        let x = if grain.length_squared() > 1e-12 * e1.length_squared() {
+            grain.normalize()
+        } else {
+            e1.normalize_or_zero()
+        };
+        let y = normal.cross(x);
+        [Vec2::ZERO, Vec2::new(e1.dot(x), e1.dot(y)), Vec2::new(e2.dot(x), e2.dot(y))]
+    }
+
+    /// Every `(vertex, triangle)`, sorted, not incident, of one piece (or of a shaped surface),
+    /// whose rest distance is under `reach`: a mesh finer than the self-thickness (a proxy's
+    /// 0.3 mm edges) would otherwise push its own neighbours apart.
+    fn near_pairs(&self, triangles: &[[u32; 3]], piece_ids: &[u32], reach: f32) -> Vec<(u32, u32)> {
+        let point = |i: u32| match self {
+            Rest::Flat(p) => p[i as usize].extend(0.0),
+            Rest::Shaped { positions, .. } => positions[i as usize],
+        };
+        let same_layer =
+            |i: u32, j: u32| matches!(self, Rest::Shaped { .. }) || piece_ids[i as usize] == piece_ids[j as usize];
+        let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(point)).inflate(reach)).collect();
+        let tree = AabbTree::build(&boxes);
+        let mut pairs = Vec::new();
+        for i in 0..piece_ids.len() as u32 {
+            let p = point(i);
+            let start = pairs.len();
+            tree.query(&Aabb::around(p, 0.0), |t| {
+                let tri = triangles[t as usize];
+                if tri.contains(&i) || !same_layer(i, tri[0]) {
+                    return;
+                }
+                let [a, b, c] = tri.map(point);
+                if p.distance(super::collider::closest_point_on_triangle(p, a, b, c)) < reach {
+                    pairs.push((i, t));
+                }
+            });
+            pairs[start..].sort_unstable();
+        }
+        pairs
+    }
+
+    /// `|Σ K_i x_i|` of a bending stencil at rest: zero where the rest is flat; on a shaped
+    /// rest the curvature the bending constraint keeps, so the shape is not pulled flat.
+    fn curvature(&self, s: [u32; 4], k: [f32; 4]) -> f32 {
+        match self {
+            Rest::Flat(_) => 0.0,
+            Rest::Shaped { positions: p, .. } => (0..4).map(|j| p[s[j] as usize] * k[j]).sum::<Vec3>().length(),
+        }
+    }
+
+    /// A bending stencil `[edge a, edge b, opposite c, opposite d]` in 2D: shaped, the two
+    /// triangles unfolded about their edge into one plane.
+    fn hinge(&self, s: [u32; 4]) -> [Vec2; 4] {
+        let positions = match self {
+            Rest::Flat(p) => return s.map(|i| p[i as usize]),
+            Rest::Shaped { positions, .. } => positions,
+        };
+        let [a, b, c, d] = s.map(|i| positions[i as usize]);
+        let along = (b - a).normalize_or_zero();
+        let unfold = |p: Vec3, side: f32| {
+            let x = (p - a).dot(along);
+            Vec2::new(x, side * (p - a - along * x).length())
+        };
+        [Vec2::ZERO, Vec2::new((b - a).length(), 0.0), unfold(c, 1.0), unfold(d, -1.0)]
+    }
+}
+
 /// A simulated garment: pattern, solver state, constraints and colliders.
 #[derive(Clone, Debug)]
 pub struct Cloth {
@@ -203,8 +305,9 @@ pub struct Cloth {
     edge_rest: Vec<f32>,
     /// `[edge a, edge b, opposite c, opposite d]` per interior edge.
     bends: Vec<[u32; 4]>,
-    /// Cotangent weights `K` and the compliance scale `(A0 + A1) / 3`.
-    bend_k: Vec<([f32; 4], f32)>,
+    /// Cotangent weights `K`, the compliance scale `(A0 + A1) / 3` and the rest value of
+    /// `|Σ K_i x_i|` (zero for a flat pattern).
+    bend_k: Vec<([f32; 4], f32, f32)>,
     shears: Vec<[u32; 3]>,
     /// Inverse of the rest edge matrix `[u1 - u0, u2 - u0]`, column-major.
     shear_inv: Vec<[f32; 4]>,
@@ -215,6 +318,9 @@ pub struct Cloth {
     seam_groups: Vec<Vec<u32>>,
     /// Per vertex, the first vertex of its seam group (itself when not sewn).
     seam_rep: Vec<u32>,
+    /// `(vertex, triangle)` pairs, sorted, that self-collision leaves alone: closer at rest
+    /// than [`SELF_EXCLUSION`] self-thicknesses, so neighbours on the surface, not layers.
+    self_excluded: Vec<(u32, u32)>,
     /// `(vertex, anchor pin, max distance)`, rebuilt when pins change.
     tethers: Vec<(u32, u32, f32)>,
     loops: Vec<LengthLoop>,
@@ -246,17 +352,32 @@ impl Cloth {
     /// Rest shapes come from the flat pattern, not from `positions`, so a
     /// piece may start curved around a body.
     pub fn new(mesh: PatternMesh, positions: Vec<Vec3>, params: SimParams) -> Self {
+        let rest = Rest::Flat(mesh.rest_positions().iter().map(|p| *p * CM).collect());
+        Self::with_rest(mesh, positions, params, &rest)
+    }
+
+    /// A cloth whose rest shape is `positions` (metres) rather than a flat pattern: a garment
+    /// made in 3D (a fitted `.mhclo` proxy) on a [`PatternMesh::shaped`] mesh. Lengths and
+    /// triangle shapes are measured on the surface, each triangle unfolded into its plane with
+    /// x along the direction its UV u grows (the grain, for the warp/weft shear), each hinge
+    /// unfolded flat for the bending weights, whose constraint keeps the magnitude of the
+    /// surface's curvature there (not its sign: a fold may flip).
+    pub fn new_shaped(mesh: PatternMesh, positions: Vec<Vec3>, params: SimParams) -> Self {
+        let (shape, uvs) = (positions.clone(), mesh.uvs().to_vec());
+        Self::with_rest(mesh, positions, params, &Rest::Shaped { positions: &shape, uvs: &uvs })
+    }
+
+    fn with_rest(mesh: PatternMesh, positions: Vec<Vec3>, params: SimParams, rest: &Rest<'_>) -> Self {
         assert_eq!(positions.len(), mesh.vertex_count(), "one position per pattern vertex");
         assert!(params.substeps > 0 && params.iterations > 0);
         let n = positions.len();
-        let rest: Vec<Vec2> = mesh.rest_positions().iter().map(|p| *p * CM).collect();
 
         let mut mass = vec![0.0f32; n];
         let mut shears = Vec::with_capacity(mesh.triangles().len());
         let mut shear_inv = Vec::with_capacity(mesh.triangles().len());
         let mut shear_area = Vec::with_capacity(mesh.triangles().len());
         for &t in mesh.triangles() {
-            let [a, b, c] = t.map(|i| rest[i as usize]);
+            let [a, b, c] = rest.triangle(t);
             let (e1, e2) = (b - a, c - a);
             let det = e1.perp_dot(e2);
             let area = 0.5 * det;
@@ -301,9 +422,14 @@ impl Cloth {
         let shears: Vec<[u32; 3]> = order.iter().map(|&k| shears[k]).collect();
         let shear_inv: Vec<[f32; 4]> = order.iter().map(|&k| shear_inv[k]).collect();
         let shear_area: Vec<f32> = order.iter().map(|&k| shear_area[k]).collect();
-        let dist = |e: &[u32; 2]| rest[e[0] as usize].distance(rest[e[1] as usize]);
-        let edge_rest = edges.iter().map(dist).collect();
-        let bend_k = bends.iter().map(|b| isometric_bending_weights(b.map(|i| rest[i as usize]))).collect();
+        let edge_rest = edges.iter().map(|&[a, b]| rest.distance(a, b)).collect();
+        let bend_k = bends
+            .iter()
+            .map(|&b| {
+                let (k, area) = isometric_bending_weights(rest.hinge(b));
+                (k, area, rest.curvature(b, k))
+            })
+            .collect();
 
         let seams = mesh.seam_pairs().to_vec();
         let seam_gap = seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
@@ -315,6 +441,7 @@ impl Cloth {
                 seam_rep[v as usize] = g[0];
             }
         }
+        let self_excluded = rest.near_pairs(mesh.triangles(), mesh.piece_ids(), SELF_EXCLUSION * params.self_thickness);
         let n_constraints = edges.len() + bends.len() + shears.len() + seams.len();
         Cloth {
             mesh,
@@ -338,6 +465,7 @@ impl Cloth {
             seam_gap,
             seam_groups,
             seam_rep,
+            self_excluded,
             tethers: Vec::new(),
             loops: Vec::new(),
             lambda: vec![0.0; n_constraints],
@@ -534,7 +662,8 @@ impl Cloth {
             let tris = self.mesh.triangles();
             let sc = self.self_collision.get_or_insert_with(|| SelfCollision::new(&self.x, tris));
             let (th, rep) = (self.params.self_thickness, &self.seam_rep);
-            sc.begin_frame(&self.x, &self.v, &self.inv_mass, rep, tris, dt, th, slack);
+            let excluded = &self.self_excluded;
+            sc.begin_frame(&self.x, &self.v, &self.inv_mass, rep, excluded, tris, dt, th, slack);
         }
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
@@ -871,6 +1000,12 @@ impl Cloth {
         self.body.as_ref()?.min_clearance(&free, max_distance)
     }
     /// Largest vertex speed (m/s).
+    /// Stops every vertex (velocities to zero): between the steps of a quasi-static settle,
+    /// so contacts that push a start state out of a body do not fling it.
+    pub fn halt(&mut self) {
+        self.v.fill(Vec3::ZERO);
+    }
+
     pub fn max_speed(&self) -> f32 {
         super::intersections::max_speed(&self.v)
     }
@@ -1051,7 +1186,8 @@ fn isometric_bending_weights(p: [Vec2; 4]) -> ([f32; 4], f32) {
     ([c03 + c04, c01 + c02, -c01 - c03, -c02 - c04], (a0 + a1) / 3.0)
 }
 
-/// XPBD isometric bending: `C = |Σ K_i x_i|` per interior edge. The
+/// XPBD isometric bending: `C = |Σ K_i x_i| - r` per interior edge, `r` its rest value (zero
+/// for a flat pattern; a shaped rest keeps the magnitude of its curvature, not its sign). The
 /// constraint is linear inside the norm, so it is cheap, has full stiffness
 /// at the flat state (unlike a distance across the edge, which only resists
 /// to second order and also fights stretching) and is independent of mesh
@@ -1060,7 +1196,7 @@ fn solve_bending(
     x: &mut [Vec3],
     w: &[f32],
     stencils: &[[u32; 4]],
-    weights: &[([f32; 4], f32)],
+    weights: &[([f32; 4], f32, f32)],
     lambda: &mut [f32],
     compliance: f32,
     h: f32,
@@ -1068,7 +1204,7 @@ fn solve_bending(
     let alpha_base = compliance / (h * h);
     for (k, s) in stencils.iter().enumerate() {
         let v = s.map(|i| i as usize);
-        let (kw, area) = weights[k];
+        let (kw, area, rest) = weights[k];
         let hv = x[v[0]] * kw[0] + x[v[1]] * kw[1] + x[v[2]] * kw[2] + x[v[3]] * kw[3];
         let c = hv.length();
         if c < 1e-9 {
@@ -1077,7 +1213,7 @@ fn solve_bending(
         let n = hv / c;
         let alpha = alpha_base * area;
         let denom = (0..4).map(|j| w[v[j]] * kw[j] * kw[j]).sum::<f32>() + alpha;
-        let dl = (-c - alpha * lambda[k]) / denom;
+        let dl = (rest - c - alpha * lambda[k]) / denom;
         lambda[k] += dl;
         for j in 0..4 {
             if w[v[j]] > 0.0 {

@@ -531,3 +531,63 @@ fn a_new_seed_rebuilds_the_simulation() {
     assert_ne!(table.len(), 0);
     assert!(table != seed_2);
 }
+
+/// A flat pattern given to [`Cloth::new_shaped`] as its placed 3D shape (turned and moved, UVs
+/// the atlas's) is the same cloth as the pattern: the same rest lengths and, pinned at a corner
+/// under gravity, the same motion up to rounding. Fails if a shaped triangle's grain is not
+/// along its u, or lengths are measured off the surface.
+#[test]
+fn a_flat_pattern_given_as_a_shape_is_the_same_cloth() {
+    let mesh = PatternMesh::build(vec![Piece::new("r", rectangle_outline(40.0, 30.0))], vec![], 3.0).unwrap();
+    let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+    let placed: Vec<Vec3> = mesh
+        .rest_positions()
+        .iter()
+        .map(|p| turn * Vec3::new(p.x, p.y, 0.0) * CM + Vec3::new(0.1, 1.0, -0.2))
+        .collect();
+    let shaped_mesh =
+        PatternMesh::shaped(mesh.triangles().to_vec(), mesh.uvs().to_vec(), mesh.piece_ids().to_vec(), 3.0);
+    let corner = mesh.piece_meshes()[0].edge_chains[3][0];
+    let params = SimParams { stretch_compliance: 1e-3, shear_compliance: 1e-2, ..SimParams::default() };
+    let mut flat = Cloth::new(mesh, placed.clone(), params.clone());
+    let mut shaped = Cloth::new_shaped(shaped_mesh, placed, params);
+    let worst_rest =
+        flat.rest_edge_lengths().iter().zip(shaped.rest_edge_lengths()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+    assert!(worst_rest < 1e-6, "rest lengths differ by {worst_rest} m");
+    flat.pin(&[corner]);
+    shaped.pin(&[corner]);
+    for _ in 0..60 {
+        flat.step_frame(FRAME_DT);
+        shaped.step_frame(FRAME_DT);
+    }
+    let apart = flat.positions().iter().zip(shaped.positions()).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
+    let fallen = flat.positions().iter().map(|p| 1.0 - p.y).fold(0.0, f32::max);
+    assert!(fallen > 0.1, "the cloth did not swing down ({fallen} m)");
+    assert!(apart < 1e-3, "the shaped cloth moved {apart} m away from the flat one");
+}
+
+/// A shaped cloth at rest, no gravity, stays as it is: its curved shape is its rest (the
+/// bending constraint keeps the rest curvature; with a flat rest it would unroll).
+#[test]
+fn a_shaped_cylinder_stays_at_rest() {
+    let mesh = PatternMesh::build(vec![Piece::new("r", rectangle_outline(40.0, 30.0))], vec![], 3.0).unwrap();
+    // Wrapped half way round a 10 cm cylinder, pattern x around it.
+    let radius = 0.1;
+    let wrapped: Vec<Vec3> = mesh
+        .rest_positions()
+        .iter()
+        .map(|p| {
+            let a = p.x * CM / radius;
+            Vec3::new(radius * a.sin(), p.y * CM, radius * a.cos())
+        })
+        .collect();
+    let shaped_mesh =
+        PatternMesh::shaped(mesh.triangles().to_vec(), mesh.uvs().to_vec(), mesh.piece_ids().to_vec(), 3.0);
+    let params = SimParams { gravity: Vec3::ZERO, bend_compliance: 1e-2, ..SimParams::default() };
+    let mut cloth = Cloth::new_shaped(shaped_mesh, wrapped.clone(), params);
+    for _ in 0..60 {
+        cloth.step_frame(FRAME_DT);
+    }
+    let moved = cloth.positions().iter().zip(&wrapped).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
+    assert!(moved < 1e-3, "the cylinder moved {moved} m from its rest shape");
+}
