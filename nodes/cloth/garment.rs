@@ -222,6 +222,11 @@ impl Node for GarmentNode {
         let mesh = super::node::surface_mesh(cloth)
             .map_err(|e| NodeError::msg(format!("the garment at step {step}: {e:#}")))?;
         cx.count("triangles", mesh.triangle_count());
+        if let (_, Some(self_stats)) = cloth.collision_stats() {
+            // Vertices that met more triangles than the cap this frame (a heap, a burst of speed).
+            cx.count("self_pairs", self_stats.pairs);
+            cx.count("self_pairs_capped_vertices", self_stats.capped);
+        }
         cx.count("panels", sewn.piece_names.len());
         cx.count("stitches", pattern.stitches.len());
         cx.set("seam_gap", drape.max_seam_gap() as f64);

@@ -18,6 +18,11 @@ use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
 
+/// The most triangles one vertex is paired with in a frame (the nearest kept). Regular cloth
+/// meets a handful; where a crumpled heap or a burst of speed makes every vertex meet every
+/// triangle, pairs would otherwise grow with the square of the mesh (gigabytes at 1 cm edges).
+pub const MAX_PAIRS_PER_VERTEX: usize = 64;
+
 #[derive(Clone, Debug)]
 pub struct SelfCollision {
     tree: AabbTree,
@@ -34,6 +39,8 @@ pub struct SelfStats {
     pub pairs: usize,
     /// Pair projections that moved vertices (summed over substeps).
     pub contacts: usize,
+    /// Vertices that met more than [`MAX_PAIRS_PER_VERTEX`] triangles and kept the nearest.
+    pub capped: usize,
 }
 
 impl SelfCollision {
@@ -104,10 +111,18 @@ impl SelfCollision {
                 let [a, b, c] = tri.map(|j| j as usize);
                 let closing = (v[i] - (v[a] + v[b] + v[c]) / 3.0).length() * (1.25 * dt);
                 let q_near = super::collider::closest_point_on_triangle(x[i], x[a], x[b], x[c]);
-                if x[i].distance(q_near) <= thickness + slack + closing {
-                    pairs.push((i as u32, t, 0.0));
+                let d = x[i].distance(q_near);
+                if d <= thickness + slack + closing {
+                    // The distance rides in the side's place until the side is set below.
+                    pairs.push((i as u32, t, d));
                 }
             });
+            if self.pairs.len() - start > MAX_PAIRS_PER_VERTEX {
+                let nearest = |a: &(u32, u32, f32), b: &(u32, u32, f32)| a.2.total_cmp(&b.2).then(a.1.cmp(&b.1));
+                self.pairs[start..].select_nth_unstable_by(MAX_PAIRS_PER_VERTEX - 1, nearest);
+                self.pairs.truncate(start + MAX_PAIRS_PER_VERTEX);
+                self.stats.capped += 1;
+            }
             self.pairs[start..].sort_unstable_by_key(|p| p.1);
             for pair in &mut self.pairs[start..] {
                 let [a, b, c] = triangles[pair.1 as usize].map(|j| x[j as usize]);
