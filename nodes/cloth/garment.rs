@@ -223,7 +223,8 @@ impl Node for GarmentNode {
             .map_err(|e| NodeError::msg(format!("the garment at step {step}: {e:#}")))?;
         cx.count("triangles", mesh.triangle_count());
         if let (_, Some(self_stats)) = cloth.collision_stats() {
-            // Vertices that met more triangles than the cap this frame (a heap, a burst of speed).
+            // Self-contact pairs this frame, and the vertices that met more triangles than the
+            // cap (a heap, a burst of speed) and kept the nearest.
             cx.count("self_pairs", self_stats.pairs);
             cx.count("self_pairs_capped_vertices", self_stats.capped);
         }

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::cloth::{BodyMesh, Cloth, FRAME_DT, PatternMesh, SimParams};
 use crate::core::node::prelude::*;
@@ -41,6 +41,8 @@ pub static SETTLE_SURFACE: NodeSpec = NodeSpec {
 pub struct Welded {
     pub mesh: PatternMesh,
     pub positions: Vec<Vec3>,
+    /// Per cloth triangle, the surface's UVs at its corners (for [`Cloth::new_shaped`]).
+    pub corner_uvs: Vec<[Vec2; 3]>,
     pub cloth_vertex: Vec<u32>,
 }
 
@@ -62,18 +64,18 @@ pub fn weld(surface: &Mesh) -> Welded {
             })
         })
         .collect();
-    let triangles: Vec<[u32; 3]> = surface
+    let (triangles, corner_uvs): (Vec<[u32; 3]>, Vec<[Vec2; 3]>) = surface
         .indices
         .chunks_exact(3)
-        .map(|t| [0, 1, 2].map(|k| cloth_vertex[t[k] as usize]))
-        .filter(|[a, b, c]| a != b && b != c && a != c)
-        .collect();
+        .map(|t| ([0, 1, 2].map(|k| cloth_vertex[t[k] as usize]), [0, 1, 2].map(|k| surface.uvs[t[k] as usize])))
+        .filter(|([a, b, c], _)| a != b && b != c && a != c)
+        .unzip();
     let edges = triangles.iter().flat_map(|t| (0..3).map(move |k| [t[k], t[(k + 1) % 3]]));
     let (sum, count) = edges.fold((0.0f64, 0usize), |(s, n), [a, b]| {
         (s + positions[a as usize].distance(positions[b as usize]) as f64, n + 1)
     });
     let mean_edge_cm = (100.0 * sum / count.max(1) as f64) as f32;
-    Welded { mesh: PatternMesh::shaped(triangles, uvs, pieces, mean_edge_cm), positions, cloth_vertex }
+    Welded { mesh: PatternMesh::shaped(triangles, uvs, pieces, mean_edge_cm), positions, corner_uvs, cloth_vertex }
 }
 
 struct SettleSurfaceNode;
@@ -88,7 +90,7 @@ impl Node for SettleSurfaceNode {
         }
         let params =
             SimParams { self_collision: cx.bool("self_collision"), gravity: Vec3::ZERO, ..DrapeParams::default().sim };
-        let mut cloth = Cloth::new_shaped(welded.mesh, welded.positions, params);
+        let mut cloth = Cloth::new_shaped(welded.mesh, welded.positions, &welded.corner_uvs, params);
         let tris = body.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
         cloth.set_body(Some(BodyMesh::new(body.positions.clone(), tris)));
         let before = cloth.body_crossings();
@@ -102,7 +104,10 @@ impl Node for SettleSurfaceNode {
         let frame = cloth.surface();
         let at = |i: u32| Vec3::from_array(frame.positions[i as usize]);
         let positions = welded.cloth_vertex.iter().map(|&i| at(i)).collect();
-        let normals = welded.cloth_vertex.iter().map(|&i| Vec3::from_array(frame.normals[i as usize])).collect();
+        // A vertex in no triangle with area has no cloth normal: the surface's own stays.
+        let normals = (welded.cloth_vertex.iter().zip(&surface.normals))
+            .map(|(&i, &own)| Vec3::from_array(frame.normals[i as usize]).try_normalize().unwrap_or(own))
+            .collect();
         let mut mesh = Mesh::from_parts(
             positions,
             Some(normals),

@@ -3,7 +3,9 @@
 //! Once per frame an [`AabbTree`] over the cloth triangles is refitted to the
 //! boxes the triangles are predicted to sweep (`x` to `x + v dt`, widened by
 //! the thickness and a slack), and every vertex gathers the triangles (not
-//! its own) whose sweep meets its own. Each pair records on which side of the
+//! its own, nor those the cloth excludes as its neighbours on the surface at
+//! rest) whose sweep meets its own, keeping at most [`MAX_PAIRS_PER_VERTEX`],
+//! those it can reach first. Each pair records on which side of the
 //! triangle the vertex is: the side it had at the start of the frame, or, for
 //! a pair already in contact (closer than the thickness to the plane) that
 //! was a pair last frame, the side recorded then. Each substep a pair whose
@@ -12,13 +14,15 @@
 //! the recorded side (a PBD contact between the vertex and the three
 //! triangle corners, weighted by inverse mass and barycentrics). The side
 //! never flips while the pair lives, so a vertex cannot pass through a
-//! triangle it was gathered against.
+//! triangle it was gathered against; a pair the cap left out for a frame
+//! comes back with the side it then has.
 
 use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
 
-/// The most triangles one vertex is paired with in a frame (the nearest kept). Regular cloth
+/// The most triangles one vertex is paired with in a frame (those it can reach soonest kept:
+/// distance less what the two can close this frame). Regular cloth
 /// meets a handful; where a crumpled heap or a burst of speed makes every vertex meet every
 /// triangle, pairs would otherwise grow with the square of the mesh (gigabytes at 1 cm edges).
 pub const MAX_PAIRS_PER_VERTEX: usize = 64;
@@ -39,7 +43,7 @@ pub struct SelfStats {
     pub pairs: usize,
     /// Pair projections that moved vertices (summed over substeps).
     pub contacts: usize,
-    /// Vertices that met more than [`MAX_PAIRS_PER_VERTEX`] triangles and kept the nearest.
+    /// Vertices that met more than [`MAX_PAIRS_PER_VERTEX`] triangles and kept the soonest.
     pub capped: usize,
 }
 
@@ -113,8 +117,9 @@ impl SelfCollision {
                 let q_near = super::collider::closest_point_on_triangle(x[i], x[a], x[b], x[c]);
                 let d = x[i].distance(q_near);
                 if d <= thickness + slack + closing {
-                    // The distance rides in the side's place until the side is set below.
-                    pairs.push((i as u32, t, d));
+                    // How soon the two can meet (distance less closing) rides in the side's
+                    // place until the side is set below: the cap keeps the soonest.
+                    pairs.push((i as u32, t, d - closing));
                 }
             });
             if self.pairs.len() - start > MAX_PAIRS_PER_VERTEX {

@@ -192,8 +192,8 @@ pub struct ClothState {
 enum Rest<'a> {
     /// The flat pattern, one point per vertex: x and y are the warp and weft.
     Flat(Vec<Vec2>),
-    /// A shaped surface ([`Cloth::new_shaped`]), its UVs giving the grain.
-    Shaped { positions: &'a [Vec3], uvs: &'a [Vec2] },
+    /// A shaped surface ([`Cloth::new_shaped`]), its triangles' corner UVs giving the grain.
+    Shaped { positions: &'a [Vec3], corner_uvs: &'a [[Vec2; 3]] },
 }
 
 impl Rest<'_> {
@@ -205,14 +205,14 @@ impl Rest<'_> {
     }
 
     /// The triangle in 2D, counter-clockwise where the pattern's (or, shaped, its 3D winding's)
-    /// is: shaped, in its own plane with x along the direction its u grows.
-    fn triangle(&self, t: [u32; 3]) -> [Vec2; 3] {
-        let (positions, uvs) = match self {
+    /// is: shaped, in its own plane with x along the direction its u grows. `k` is its index.
+    fn triangle(&self, k: usize, t: [u32; 3]) -> [Vec2; 3] {
+        let (positions, corner_uvs) = match self {
             Rest::Flat(p) => return t.map(|i| p[i as usize]),
-            Rest::Shaped { positions, uvs } => (positions, uvs),
+            Rest::Shaped { positions, corner_uvs } => (positions, corner_uvs),
         };
         let [a, b, c] = t.map(|i| positions[i as usize]);
-        let [ua, ub, uc] = t.map(|i| uvs[i as usize]);
+        let [ua, ub, uc] = corner_uvs[k];
         let (e1, e2) = (b - a, c - a);
         let normal = e1.cross(e2).normalize_or_zero();
         let (d1, d2) = (ub - ua, uc - ua);
@@ -229,29 +229,32 @@ impl Rest<'_> {
         [Vec2::ZERO, Vec2::new(e1.dot(x), e1.dot(y)), Vec2::new(e2.dot(x), e2.dot(y))]
     }
 
-    /// Every `(vertex, triangle)`, sorted, not incident, of one piece (or of a shaped surface),
-    /// whose rest distance is under `reach`: a mesh finer than the self-thickness (a proxy's
-    /// 0.3 mm edges) would otherwise push its own neighbours apart.
+    /// Every `(vertex, triangle)`, sorted, not incident, whose rest distance is under `reach`
+    /// (flat: on one piece). A mesh finer than the self-thickness (a proxy's 0.3 mm edges)
+    /// would otherwise push its own neighbours apart; layers the garment was made with that
+    /// close (a proxy's overlapping parts) are left alone too, as close as they start, rather
+    /// than pushed apart (which tried, stretched the worksuit 14 % at the 99th percentile).
     fn near_pairs(&self, triangles: &[[u32; 3]], piece_ids: &[u32], reach: f32) -> Vec<(u32, u32)> {
         let point = |i: u32| match self {
             Rest::Flat(p) => p[i as usize].extend(0.0),
             Rest::Shaped { positions, .. } => positions[i as usize],
         };
-        let same_layer =
-            |i: u32, j: u32| matches!(self, Rest::Shaped { .. }) || piece_ids[i as usize] == piece_ids[j as usize];
+        let n = piece_ids.len();
         let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(point)).inflate(reach)).collect();
         let tree = AabbTree::build(&boxes);
         let mut pairs = Vec::new();
-        for i in 0..piece_ids.len() as u32 {
+        for i in 0..n as u32 {
             let p = point(i);
             let start = pairs.len();
             tree.query(&Aabb::around(p, 0.0), |t| {
                 let tri = triangles[t as usize];
-                if tri.contains(&i) || !same_layer(i, tri[0]) {
-                    return;
-                }
                 let [a, b, c] = tri.map(point);
-                if p.distance(super::collider::closest_point_on_triangle(p, a, b, c)) < reach {
+                let same_piece =
+                    matches!(self, Rest::Shaped { .. }) || piece_ids[i as usize] == piece_ids[tri[0] as usize];
+                if !tri.contains(&i)
+                    && same_piece
+                    && p.distance(super::collider::closest_point_on_triangle(p, a, b, c)) < reach
+                {
                     pairs.push((i, t));
                 }
             });
@@ -319,7 +322,7 @@ pub struct Cloth {
     /// Per vertex, the first vertex of its seam group (itself when not sewn).
     seam_rep: Vec<u32>,
     /// `(vertex, triangle)` pairs, sorted, that self-collision leaves alone: closer at rest
-    /// than [`SELF_EXCLUSION`] self-thicknesses, so neighbours on the surface, not layers.
+    /// than [`SELF_EXCLUSION`] self-thicknesses (neighbours on a fine mesh, layers made close).
     self_excluded: Vec<(u32, u32)>,
     /// `(vertex, anchor pin, max distance)`, rebuilt when pins change.
     tethers: Vec<(u32, u32, f32)>,
@@ -361,10 +364,12 @@ impl Cloth {
     /// triangle shapes are measured on the surface, each triangle unfolded into its plane with
     /// x along the direction its UV u grows (the grain, for the warp/weft shear), each hinge
     /// unfolded flat for the bending weights, whose constraint keeps the magnitude of the
-    /// surface's curvature there (not its sign: a fold may flip).
-    pub fn new_shaped(mesh: PatternMesh, positions: Vec<Vec3>, params: SimParams) -> Self {
-        let (shape, uvs) = (positions.clone(), mesh.uvs().to_vec());
-        Self::with_rest(mesh, positions, params, &Rest::Shaped { positions: &shape, uvs: &uvs })
+    /// surface's curvature there (not its sign: a fold may flip). `corner_uvs` are the UVs at
+    /// each triangle's corners, which differ from a welded vertex's one UV across a UV seam.
+    pub fn new_shaped(mesh: PatternMesh, positions: Vec<Vec3>, corner_uvs: &[[Vec2; 3]], params: SimParams) -> Self {
+        assert_eq!(corner_uvs.len(), mesh.triangles().len(), "corner UVs for every triangle");
+        let shape = positions.clone();
+        Self::with_rest(mesh, positions, params, &Rest::Shaped { positions: &shape, corner_uvs })
     }
 
     fn with_rest(mesh: PatternMesh, positions: Vec<Vec3>, params: SimParams, rest: &Rest<'_>) -> Self {
@@ -376,8 +381,8 @@ impl Cloth {
         let mut shears = Vec::with_capacity(mesh.triangles().len());
         let mut shear_inv = Vec::with_capacity(mesh.triangles().len());
         let mut shear_area = Vec::with_capacity(mesh.triangles().len());
-        for &t in mesh.triangles() {
-            let [a, b, c] = rest.triangle(t);
+        for (k, &t) in mesh.triangles().iter().enumerate() {
+            let [a, b, c] = rest.triangle(k, t);
             let (e1, e2) = (b - a, c - a);
             let det = e1.perp_dot(e2);
             let area = 0.5 * det;
@@ -572,6 +577,7 @@ impl Cloth {
         }
         assert!(nodes.len() >= 3, "a loop needs at least three nodes");
         let rest = self.mesh.rest_positions();
+        assert!(!rest.is_empty(), "length loops need a flat pattern (a shaped cloth has none)");
         let m = nodes.len();
         let rest_length = (0..m)
             .map(|k| {
@@ -999,13 +1005,13 @@ impl Cloth {
         let free: Vec<Vec3> = self.x.iter().zip(&self.inv_mass).filter(|(_, w)| **w > 0.0).map(|(p, _)| *p).collect();
         self.body.as_ref()?.min_clearance(&free, max_distance)
     }
-    /// Largest vertex speed (m/s).
     /// Stops every vertex (velocities to zero): between the steps of a quasi-static settle,
     /// so contacts that push a start state out of a body do not fling it.
     pub fn halt(&mut self) {
         self.v.fill(Vec3::ZERO);
     }
 
+    /// Largest vertex speed (m/s).
     pub fn max_speed(&self) -> f32 {
         super::intersections::max_speed(&self.v)
     }

@@ -550,7 +550,9 @@ fn a_flat_pattern_given_as_a_shape_is_the_same_cloth() {
     let corner = mesh.piece_meshes()[0].edge_chains[3][0];
     let params = SimParams { stretch_compliance: 1e-3, shear_compliance: 1e-2, ..SimParams::default() };
     let mut flat = Cloth::new(mesh, placed.clone(), params.clone());
-    let mut shaped = Cloth::new_shaped(shaped_mesh, placed, params);
+    let corners: Vec<[Vec2; 3]> =
+        shaped_mesh.triangles().iter().map(|t| t.map(|i| shaped_mesh.uvs()[i as usize])).collect();
+    let mut shaped = Cloth::new_shaped(shaped_mesh, placed, &corners, params);
     let worst_rest =
         flat.rest_edge_lengths().iter().zip(shaped.rest_edge_lengths()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
     assert!(worst_rest < 1e-6, "rest lengths differ by {worst_rest} m");
@@ -584,7 +586,9 @@ fn a_shaped_cylinder_stays_at_rest() {
     let shaped_mesh =
         PatternMesh::shaped(mesh.triangles().to_vec(), mesh.uvs().to_vec(), mesh.piece_ids().to_vec(), 3.0);
     let params = SimParams { gravity: Vec3::ZERO, bend_compliance: 1e-2, ..SimParams::default() };
-    let mut cloth = Cloth::new_shaped(shaped_mesh, wrapped.clone(), params);
+    let corners: Vec<[Vec2; 3]> =
+        shaped_mesh.triangles().iter().map(|t| t.map(|i| shaped_mesh.uvs()[i as usize])).collect();
+    let mut cloth = Cloth::new_shaped(shaped_mesh, wrapped.clone(), &corners, params);
     for _ in 0..60 {
         cloth.step_frame(FRAME_DT);
     }
