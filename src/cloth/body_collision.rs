@@ -25,7 +25,7 @@
 use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
-use super::self_collision::track_side;
+use super::self_collision::{MAX_PAIRS_PER_VERTEX, track_side};
 
 /// A body mesh moving from pose to pose, one pose per frame.
 #[derive(Clone, Debug)]
@@ -71,6 +71,9 @@ pub struct BodyStats {
     pub contacts: usize,
     /// Body-vertex / cloth-triangle pairs gathered.
     pub vertex_pairs: usize,
+    /// Body vertices that met more than [`MAX_PAIRS_PER_VERTEX`] cloth triangles and kept
+    /// the nearest.
+    pub vertex_pairs_capped: usize,
     /// Cloth-edge / body-triangle candidates gathered.
     pub edge_candidates: usize,
     /// Cloth edges pushed off a body edge (summed over substeps).
@@ -383,8 +386,20 @@ impl BodyMesh {
                     pairs.push((b as u32, t, 0.0));
                 }
             });
-            self.vt_pairs[first..].sort_unstable_by_key(|p| p.1);
             let p = self.start[b];
+            // A cloth that sped up (a heap, a caught hem) sweeps boxes over the whole body:
+            // keep the nearest triangles, as self-collision does, so pairs stay bounded.
+            if self.vt_pairs.len() - first > MAX_PAIRS_PER_VERTEX {
+                for pair in &mut self.vt_pairs[first..] {
+                    let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
+                    pair.2 = p.distance(super::collider::closest_point_on_triangle(p, a, bb, c));
+                }
+                let nearest = |a: &(u32, u32, f32), b: &(u32, u32, f32)| a.2.total_cmp(&b.2).then(a.1.cmp(&b.1));
+                self.vt_pairs[first..].select_nth_unstable_by(MAX_PAIRS_PER_VERTEX - 1, nearest);
+                self.vt_pairs.truncate(first + MAX_PAIRS_PER_VERTEX);
+                self.stats.vertex_pairs_capped += 1;
+            }
+            self.vt_pairs[first..].sort_unstable_by_key(|p| p.1);
             for pair in &mut self.vt_pairs[first..] {
                 let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                 let n = (bb - a).cross(c - a).normalize_or_zero();
