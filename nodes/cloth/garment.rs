@@ -168,10 +168,7 @@ impl Node for GarmentNode {
         let target = ((cx.f64("warmup") + time.seconds()) * 60.0).round().max(0.0) as u64;
         let rebuild = self.sim.as_ref().is_none_or(|s| s.built_from != key || s.step > target);
         if rebuild {
-            let body_mesh = body.as_ref().map(|b| {
-                let tris = b.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-                BodyMesh::new(b.positions.clone(), tris)
-            });
+            let body_mesh = body.as_deref().map(BodyMesh::from_mesh);
             let mut drape = Drape::new(&sewn, &params, body_mesh);
             let state_key = Drape::key(&sewn, &params, body_n);
             let mut start_refused = None;

@@ -91,8 +91,7 @@ impl Node for SettleSurfaceNode {
         let params =
             SimParams { self_collision: cx.bool("self_collision"), gravity: Vec3::ZERO, ..DrapeParams::default().sim };
         let mut cloth = Cloth::new_shaped(welded.mesh, welded.positions, &welded.corner_uvs, params);
-        let tris = body.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-        cloth.set_body(Some(BodyMesh::new(body.positions.clone(), tris)));
+        cloth.set_body(Some(BodyMesh::from_mesh(&body)));
         let before = cloth.body_crossings();
         for _ in 0..cx.int("steps") {
             cloth.step_frame(FRAME_DT);

@@ -25,7 +25,7 @@
 use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
-use super::self_collision::{MAX_PAIRS_PER_VERTEX, track_side};
+use super::self_collision::{MAX_PAIRS_PER_VERTEX, cap_and_sort, track_side};
 
 /// A body mesh moving from pose to pose, one pose per frame.
 #[derive(Clone, Debug)]
@@ -244,6 +244,12 @@ impl BodyMesh {
         body
     }
 
+    /// The body as a [`crate::mesh::Mesh`] gives it (a node's collision input).
+    pub fn from_mesh(mesh: &crate::mesh::Mesh) -> Self {
+        let tris = mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        BodyMesh::new(mesh.positions.clone(), tris)
+    }
+
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
     }
@@ -394,12 +400,10 @@ impl BodyMesh {
                     let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                     pair.2 = p.distance(super::collider::closest_point_on_triangle(p, a, bb, c));
                 }
-                let nearest = |a: &(u32, u32, f32), b: &(u32, u32, f32)| a.2.total_cmp(&b.2).then(a.1.cmp(&b.1));
-                self.vt_pairs[first..].select_nth_unstable_by(MAX_PAIRS_PER_VERTEX - 1, nearest);
-                self.vt_pairs.truncate(first + MAX_PAIRS_PER_VERTEX);
+            }
+            if cap_and_sort(&mut self.vt_pairs, first) {
                 self.stats.vertex_pairs_capped += 1;
             }
-            self.vt_pairs[first..].sort_unstable_by_key(|p| p.1);
             for pair in &mut self.vt_pairs[first..] {
                 let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                 let n = (bb - a).cross(c - a).normalize_or_zero();

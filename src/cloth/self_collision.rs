@@ -27,6 +27,20 @@ use super::bvh::{Aabb, AabbTree};
 /// triangle, pairs would otherwise grow with the square of the mesh (gigabytes at 1 cm edges).
 pub const MAX_PAIRS_PER_VERTEX: usize = 64;
 
+/// One vertex's pairs `pairs[first..]` `(vertex, triangle, key)`: keeps the
+/// [`MAX_PAIRS_PER_VERTEX`] of smallest key (ties by triangle) and sorts them by triangle.
+/// Returns whether any were dropped.
+pub(crate) fn cap_and_sort(pairs: &mut Vec<(u32, u32, f32)>, first: usize) -> bool {
+    let capped = pairs.len() - first > MAX_PAIRS_PER_VERTEX;
+    if capped {
+        let smallest = |a: &(u32, u32, f32), b: &(u32, u32, f32)| a.2.total_cmp(&b.2).then(a.1.cmp(&b.1));
+        pairs[first..].select_nth_unstable_by(MAX_PAIRS_PER_VERTEX - 1, smallest);
+        pairs.truncate(first + MAX_PAIRS_PER_VERTEX);
+    }
+    pairs[first..].sort_unstable_by_key(|p| p.1);
+    capped
+}
+
 #[derive(Clone, Debug)]
 pub struct SelfCollision {
     tree: AabbTree,
@@ -122,13 +136,9 @@ impl SelfCollision {
                     pairs.push((i as u32, t, d - closing));
                 }
             });
-            if self.pairs.len() - start > MAX_PAIRS_PER_VERTEX {
-                let nearest = |a: &(u32, u32, f32), b: &(u32, u32, f32)| a.2.total_cmp(&b.2).then(a.1.cmp(&b.1));
-                self.pairs[start..].select_nth_unstable_by(MAX_PAIRS_PER_VERTEX - 1, nearest);
-                self.pairs.truncate(start + MAX_PAIRS_PER_VERTEX);
+            if cap_and_sort(&mut self.pairs, start) {
                 self.stats.capped += 1;
             }
-            self.pairs[start..].sort_unstable_by_key(|p| p.1);
             for pair in &mut self.pairs[start..] {
                 let [a, b, c] = triangles[pair.1 as usize].map(|j| x[j as usize]);
                 let n = (b - a).cross(c - a).normalize_or_zero();

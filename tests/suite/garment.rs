@@ -797,8 +797,7 @@ fn settled_worksuit(extra: &str, frame: i64) -> (Arc<Mesh>, Arc<Mesh>, Arc<Mesh>
 /// Body crossings (cloth edges through the body's triangles), the smallest clearance (m) and
 /// each edge's length, of a garment surface on a body.
 fn on_body(garment: &Mesh, body: &Mesh) -> (usize, f32, Vec<f32>) {
-    let tris = body.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let b = BodyMesh::new(body.positions.clone(), tris);
+    let b = BodyMesh::from_mesh(body);
     let mut edges: Vec<[u32; 2]> = garment
         .indices
         .chunks_exact(3)
