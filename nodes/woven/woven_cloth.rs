@@ -8,7 +8,7 @@ use glam::{Mat4, Vec2, Vec3};
 
 use crate::core::node::prelude::*;
 use crate::mesh::Mesh;
-use crate::render::draw::kinds::woven::{WovenGpu, WovenLayer};
+use crate::render::draw::kinds::woven::{LAYER_NAMES, WovenGpu, WovenLayer};
 use crate::render::scene::{Camera, DrawItem, Material, View};
 use crate::woven::gpu::{GpuWoven, culled_patches, patch_levels};
 use crate::woven::lod::{MAX_LEVEL, Morph};
@@ -215,7 +215,7 @@ impl Node for WovenClothNode {
         let gloss = cx.f32("glossiness");
         let materials = [weft * cover + warp * (1.0 - cover), weft, warp]
             .map(|color| Arc::new(Material { base_color: color, glossiness: gloss, ..Default::default() }));
-        let names = ["panel", "weft", "warp"];
+        let names = LAYER_NAMES;
         let mut planned = 0;
         let mut layers: [Layer; 3] = Default::default();
         let mut scales = [0; 3];

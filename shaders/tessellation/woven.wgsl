@@ -2,7 +2,8 @@
 // src/woven/tess.rs, lod.rs, panel.rs and yarn.rs: each function here has the name and the
 // arithmetic of its Rust original (f32 here, f64 there). The CPU plans the frame (src/woven/gpu.rs:
 // each drawn patch's level, its four edge levels, its first vertex and index); four entry points
-// fill one layer's buffers, one workgroup row per patch:
+// fill one layer's buffers, one workgroup column per patch, as many rows (y of the dispatch) as
+// the pass's largest patch needs; invocations stride by 64 x the rows:
 //   panel_vertices  the patch's geomorphed, crack-snapped vertices, one invocation each;
 //   tube_vertices   the same, one invocation per ring: the ring's panel point, frames and morph
 //                   rings are evaluated once and shared by its vertices (they differ in θ only);
@@ -23,8 +24,7 @@ struct Params {
     weave_w: u32,
     weave_h: u32,
     flip: u32,
-    // Workgroup rows per patch (y of the dispatch): invocations stride by 64 x slices.
-    slices: u32,
+    _pad: u32,
     spacing: f32,
     crimp: f32,
     radius: f32,
@@ -615,22 +615,30 @@ fn tube_ring_at(plan: Plan, pi: u32, pj: u32, r: u32) {
 }
 
 @compute @workgroup_size(64)
-fn panel_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn panel_vertices(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
     let plan = plans[wg.x];
     let pi = plan.ids.x % params.patches_u;
     let pj = plan.ids.x / params.patches_u;
-    for (var v = wg.y * 64u + lid; v < plan.ids.w; v += 64u * params.slices) {
+    for (var v = wg.y * 64u + lid; v < plan.ids.w; v += 64u * groups.y) {
         panel_vertex_at(plan, pi, pj, v);
     }
 }
 
 @compute @workgroup_size(64)
-fn tube_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn tube_vertices(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
     let plan = plans[wg.x];
     let pi = plan.ids.x % params.patches_u;
     let pj = plan.ids.x / params.patches_u;
     let rings = plan.ids.w / tube_res(lod_at(plan.level.x).grid).y;
-    for (var r = wg.y * 64u + lid; r < rings; r += 64u * params.slices) {
+    for (var r = wg.y * 64u + lid; r < rings; r += 64u * groups.y) {
         tube_ring_at(plan, pi, pj, r);
     }
 }
@@ -643,12 +651,16 @@ const QUAD_CORNERS = array<u32, 6>(0u, 1u, 3u, 0u, 3u, 2u);
 const QUAD_CORNERS_REVERSED = array<u32, 6>(0u, 3u, 1u, 0u, 2u, 3u);
 
 @compute @workgroup_size(64)
-fn panel_indices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn panel_indices(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
     let plan = plans[wg.x];
     let count = bitcast<u32>(plan.level.y);
     let g = panel_res(lod_at(plan.level.x).grid);
     let row = g + 1u;
-    for (var i = wg.y * 64u + lid; i < count; i += 64u * params.slices) {
+    for (var i = wg.y * 64u + lid; i < count; i += 64u * groups.y) {
         let q = i / 6u;
         var corners = QUAD_CORNERS;
         if params.flip != 0u {
@@ -661,13 +673,17 @@ fn panel_indices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
 }
 
 @compute @workgroup_size(64)
-fn tube_indices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn tube_indices(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
     let plan = plans[wg.x];
     let count = bitcast<u32>(plan.level.y);
     let res = tube_res(lod_at(plan.level.x).grid);
     let rings = along_count(res.x);
     let quads = (rings - 1u) * res.y;
-    for (var i = wg.y * 64u + lid; i < count; i += 64u * params.slices) {
+    for (var i = wg.y * 64u + lid; i < count; i += 64u * groups.y) {
         let q = i / 6u;
         var corners = QUAD_CORNERS;
         if params.dir == 0u || params.flip == 0u {

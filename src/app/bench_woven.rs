@@ -11,7 +11,7 @@ use glam::{DVec3, Vec3};
 
 use crate::app::bench::MarkdownRow;
 use crate::gpu::GpuContext;
-use crate::render::draw::kinds::woven::{WovenGpu, WovenLayer};
+use crate::render::draw::kinds::woven::{LAYER_NAMES, WovenGpu, WovenLayer};
 use crate::render::scene::{Camera, DrawItem, Material, View};
 use crate::woven::gpu::{GpuWoven, culled_patches, patch_counts, patch_levels};
 use crate::woven::lod::Morph;
@@ -152,7 +152,7 @@ pub fn woven(
                             glam::Mat4::IDENTITY,
                         )
                         .with_kind(WovenLayer {
-                            layer: "bench",
+                            layer: LAYER_NAMES[k],
                             scales: out.scales,
                             culled: 0,
                             gpu: Some(Arc::new(gpu)),

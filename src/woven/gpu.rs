@@ -87,7 +87,7 @@ struct Params {
     weave_w: u32,
     weave_h: u32,
     flip: u32,
-    slices: u32,
+    _pad: u32,
     spacing: f32,
     crimp: f32,
     radius: f32,
@@ -160,7 +160,9 @@ impl Default for GpuWoven {
     }
 }
 
-/// Vertices (or indices) one invocation row handles per patch before another row is added.
+/// Items (vertices, tube rings or indices) one workgroup row handles per patch before another
+/// row is added: 64 invocations, 16 each. Each pass has its own rows (its item is what it
+/// loops over), so a ring pass is not dispatched as wide as its index pass.
 const PER_ROW: usize = 64 * 16;
 
 impl GpuWoven {
@@ -182,7 +184,9 @@ impl GpuWoven {
         // Plans of the panel layer and of the tube layers (weft and warp share theirs).
         let mut plans: [Vec<Plan>; 2] = Default::default();
         let mut totals = [[0usize; 2]; 2];
-        let mut largest = [0usize; 2];
+        // The largest patch of each layer in the items of its vertex pass (vertices of the
+        // panel, rings of the tubes) and of its index pass.
+        let mut largest = [[0usize; 2]; 2];
         let mut out = GpuWovenFrame::default();
         anyhow::ensure!(pu * pv <= 65535, "{pu}x{pv} patches are more than one dispatch holds (65535)");
         for pj in 0..pv {
@@ -207,7 +211,11 @@ impl GpuWoven {
                 });
                 totals[layer][0] += nv;
                 totals[layer][1] += ni;
-                largest[layer] = largest[layer].max(nv.max(ni));
+                let items = match scale {
+                    Scale::Panel => nv,
+                    _ => nv / LodState::tube_res(LodState::at(l, Morph::Continuous).grid).1,
+                };
+                largest[layer] = [largest[layer][0].max(items), largest[layer][1].max(ni)];
             }
         }
         let limits = gpu.device.limits();
@@ -240,7 +248,6 @@ impl GpuWoven {
             if plans[p].is_empty() {
                 continue;
             }
-            let slices = largest[p].div_ceil(PER_ROW).clamp(1, 65535);
             let params = Params {
                 patches_u: pu as u32,
                 patches_v: pv as u32,
@@ -249,7 +256,7 @@ impl GpuWoven {
                 weave_w: ww as u32,
                 weave_h: wh as u32,
                 flip: u32::from(w.panel.flip),
-                slices: slices as u32,
+                _pad: 0,
                 spacing: y.spacing as f32,
                 crimp: y.crimp as f32,
                 radius: y.radius as f32,
@@ -287,9 +294,9 @@ impl GpuWoven {
                 Bind::StorageRw(&vertices),
                 Bind::StorageRw(&indices),
             ];
-            let groups = [plans[p].len() as u32, slices as u32, 1];
-            for pass in &mut self.passes[p] {
-                pass.dispatch(gpu, &[&binds], groups)?;
+            for (pass, items) in self.passes[p].iter_mut().zip(largest[p]) {
+                let rows = items.div_ceil(PER_ROW).clamp(1, 65535) as u32;
+                pass.dispatch(gpu, &[&binds], [plans[p].len() as u32, rows, 1])?;
             }
             out.layers[layer] =
                 Some(GpuLayer { vertices, indices, indirect, vertex_count: nv as u64, index_count: ni as u64 });

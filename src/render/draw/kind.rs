@@ -143,6 +143,8 @@ pub struct PipelineKey {
     /// Names the vertex buffer layouts and group 2 layout given with the key.
     pub inputs: &'static str,
     pub constants: Vec<(&'static str, u32)>,
+    /// Faces culled: `None` (two-sided) for everything but closed surfaces drawn by their fronts.
+    pub cull: Option<wgpu::Face>,
 }
 
 /// What every draw of a pass shares: the target and its bind group layouts. Kinds build their
@@ -189,6 +191,7 @@ impl PassCx<'_> {
             vertex_entry: key.entry,
             depth: Some((self.depth, wgpu::CompareFunction::Less)),
             constants: &key.constants,
+            cull: key.cull,
             ..RenderPipelineDesc::new(key.shader, &groups[..used], vertex, self.colors)
         })?;
         self.built.borrow_mut().insert(key, pipeline.clone());
@@ -199,6 +202,15 @@ impl PassCx<'_> {
     /// transforms as instances) through `stage` into this target: plain meshes, tessellations
     /// and every kind drawn as its mesh somewhere.
     pub fn mesh_pipeline(&self, stage: VertexStage) -> anyhow::Result<wgpu::RenderPipeline> {
+        self.mesh_pipeline_culled(stage, None)
+    }
+
+    /// [`PassCx::mesh_pipeline`] culling `cull` faces: for closed surfaces whose fronts face out.
+    pub fn mesh_pipeline_culled(
+        &self,
+        stage: VertexStage,
+        cull: Option<wgpu::Face>,
+    ) -> anyhow::Result<wgpu::RenderPipeline> {
         use crate::cuboid::NormalMethod::{Direct, TangentSpace};
         let (shader, entry, cells) = match (self.target, stage) {
             (TargetKind::GBuffer, VertexStage::Linear) => ("gbuffer.wgsl", "vs_main", false),
@@ -216,7 +228,7 @@ impl PassCx<'_> {
         let cuboid = matches!(stage, VertexStage::Cuboid(_));
         let items = if cuboid { ItemVertex::cuboid_layout() } else { ItemVertex::layout() };
         let vertex = [Some(crate::mesh::Vertex::shading_layout()), Some(items)];
-        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new() };
+        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull };
         self.pipeline(key, None, &vertex)
     }
 }

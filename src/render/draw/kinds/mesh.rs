@@ -34,9 +34,19 @@ impl ItemKind for PlainMesh {
 
 /// `mesh` drawn through `stage`, one instance per item of the draw.
 pub fn mesh_draw(cx: &mut PrepareCx<'_, '_>, mesh: &Mesh, stage: VertexStage) -> anyhow::Result<KindDraw> {
+    mesh_draw_culled(cx, mesh, stage, None)
+}
+
+/// [`mesh_draw`] culling `cull` faces (closed surfaces wound with their fronts outwards).
+pub fn mesh_draw_culled(
+    cx: &mut PrepareCx<'_, '_>,
+    mesh: &Mesh,
+    stage: VertexStage,
+    cull: Option<wgpu::Face>,
+) -> anyhow::Result<KindDraw> {
     let gpu_mesh = mesh.gpu(cx.pass.gpu);
     Ok(KindDraw {
-        pipeline: cx.pass.mesh_pipeline(stage)?,
+        pipeline: cx.pass.mesh_pipeline_culled(stage, cull)?,
         group2: None,
         mesh: Some(((*gpu_mesh.vertices).clone(), (*gpu_mesh.indices).clone())),
         instances: None,

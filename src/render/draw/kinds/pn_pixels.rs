@@ -41,6 +41,7 @@ impl ItemKind for PnPixels {
             cells: false,
             inputs: "pn mesh",
             constants: Vec::new(),
+            cull: None,
         };
         Ok(Some(KindDraw {
             pipeline: cx.pass.pipeline(key, Some(&layout), &[])?,

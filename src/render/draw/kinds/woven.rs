@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx};
-use crate::render::draw::kinds::mesh::mesh_draw;
+use crate::render::draw::kinds::mesh::mesh_draw_culled;
 use crate::render::scene::DrawItem;
 use crate::woven::gpu::GpuLayer;
 
@@ -26,10 +26,13 @@ impl std::fmt::Debug for WovenGpu {
     }
 }
 
+/// The layers' names, in the order the tessellation gives them.
+pub const LAYER_NAMES: [&str; 3] = ["panel", "weft", "warp"];
+
 /// The kind of a `WovenCloth` item: which layer it is, and how many patches each scale drew.
 #[derive(Clone, Debug)]
 pub struct WovenLayer {
-    /// "panel", "weft" or "warp".
+    /// One of [`LAYER_NAMES`]: "panel", "weft" or "warp".
     pub layer: &'static str,
     /// Patches at the panel, yarn and fibre scales over the whole cloth.
     pub scales: [usize; 3],
@@ -37,6 +40,17 @@ pub struct WovenLayer {
     pub culled: usize,
     /// The layer's buffers when the compute pass evaluated it.
     pub gpu: Option<Arc<WovenGpu>>,
+}
+
+impl WovenLayer {
+    /// The tubes' hidden halves are left out of the G-buffer: every tube (ribbons too, whose two
+    /// sides are two triangles each) is closed and wound with its fronts outwards, and where a
+    /// tube folds on itself (crimp tighter than its radius) the reversed triangles lie inside
+    /// it. The panel layer is a sheet, seen from both sides.
+    fn culled_faces(&self, target: crate::render::draw::kind::TargetKind) -> Option<wgpu::Face> {
+        (self.layer != LAYER_NAMES[0] && target == crate::render::draw::kind::TargetKind::GBuffer)
+            .then_some(wgpu::Face::Back)
+    }
 }
 
 impl ItemKind for WovenLayer {
@@ -67,7 +81,7 @@ impl ItemKind for WovenLayer {
             }
             // Written by the compute pass this frame; the counts are the plan's.
             return Ok(Some(KindDraw {
-                pipeline: cx.pass.mesh_pipeline(stage)?,
+                pipeline: cx.pass.mesh_pipeline_culled(stage, self.culled_faces(cx.pass.target))?,
                 group2: None,
                 mesh: Some(((*g.layer.vertices).clone(), (*g.layer.indices).clone())),
                 instances: None,
@@ -77,7 +91,7 @@ impl ItemKind for WovenLayer {
         if item.mesh.indices.is_empty() {
             return Ok(None);
         }
-        mesh_draw(cx, &item.mesh, stage).map(Some)
+        mesh_draw_culled(cx, &item.mesh, stage, self.culled_faces(cx.pass.target)).map(Some)
     }
 
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
