@@ -134,6 +134,19 @@ impl GpuLayer {
         let indices = read_buffer_range(gpu, &self.indices, self.index_count * 4)?;
         Ok((vertices, indices))
     }
+
+    /// The same as a mesh: positions, normals, UVs and the triangles.
+    pub fn read_back_mesh(&self, gpu: &GpuContext) -> anyhow::Result<crate::mesh::Mesh> {
+        let (vertices, indices) = self.read_back(gpu)?;
+        Ok(crate::mesh::Mesh::from_raw(
+            vertices.iter().map(|v| v.position.into()).collect(),
+            vertices.iter().map(|v| v.normal.into()).collect(),
+            vertices.iter().map(|v| v.uv.into()).collect(),
+            Vec::new(),
+            Vec::new(),
+            indices,
+        ))
+    }
 }
 
 /// A frame's woven layers on the GPU (panel, weft, warp; `None` where a layer is empty), the

@@ -336,15 +336,7 @@ fn culling_the_tubes_back_faces_hides_nothing_seen() {
     let mut two_sided = Vec::new();
     for (k, layer) in frame.layers.into_iter().enumerate() {
         let Some(layer) = layer else { continue };
-        let (vertices, indices) = layer.read_back(gpu()).unwrap();
-        let mesh = werkstatt::mesh::Mesh::from_raw(
-            vertices.iter().map(|v| v.position.into()).collect(),
-            vertices.iter().map(|v| v.normal.into()).collect(),
-            vertices.iter().map(|v| v.uv.into()).collect(),
-            Vec::new(),
-            Vec::new(),
-            indices,
-        );
+        let mesh = layer.read_back_mesh(gpu()).unwrap();
         two_sided.push(DrawItem::plain(Arc::new(mesh), material.clone(), glam::Mat4::IDENTITY));
         let kind = WovenLayer {
             layer: LAYER_NAMES[k],

@@ -96,17 +96,7 @@ impl ItemKind for WovenLayer {
 
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
         let m = match (&self.gpu, cx.device) {
-            (Some(g), ExportDevice::Gpu) => {
-                let (vertices, indices) = g.layer.read_back(cx.gpu)?;
-                crate::mesh::Mesh::from_raw(
-                    vertices.iter().map(|v| v.position.into()).collect(),
-                    vertices.iter().map(|v| v.normal.into()).collect(),
-                    vertices.iter().map(|v| v.uv.into()).collect(),
-                    Vec::new(),
-                    Vec::new(),
-                    indices,
-                )
-            }
+            (Some(g), ExportDevice::Gpu) => g.layer.read_back_mesh(cx.gpu)?,
             (Some(g), ExportDevice::Cpu) => (g.cpu_reference)()?,
             (None, _) => {
                 let m = &item.mesh;
