@@ -8,7 +8,9 @@
 use std::sync::Arc;
 
 use crate::render::draw::compose::VertexStage;
-use crate::render::draw::kind::{DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx};
+use crate::render::draw::kind::{
+    DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx, TargetKind,
+};
 use crate::render::draw::kinds::mesh::mesh_draw_culled;
 use crate::render::scene::DrawItem;
 use crate::woven::gpu::GpuLayer;
@@ -43,13 +45,18 @@ pub struct WovenLayer {
 }
 
 impl WovenLayer {
-    /// The tubes' hidden halves are left out of the G-buffer: every tube (ribbons too, whose two
-    /// sides are two triangles each) is closed and wound with its fronts outwards, and where a
-    /// tube folds on itself (crimp tighter than its radius) the reversed triangles lie inside
-    /// it. The panel layer is a sheet, seen from both sides.
-    fn culled_faces(&self, target: crate::render::draw::kind::TargetKind) -> Option<wgpu::Face> {
-        (self.layer != LAYER_NAMES[0] && target == crate::render::draw::kind::TargetKind::GBuffer)
-            .then_some(wgpu::Face::Back)
+    /// The faces left out of `item`'s draw: the tubes' hidden halves in the G-buffer. Every tube
+    /// (ribbons too, whose two sides are two triangles each) is closed but at the cloth's border
+    /// and wound with its fronts outwards; where a tube folds on itself the reversed triangles
+    /// lie inside it. The panel layer is a sheet, seen from both sides; a mirroring transform
+    /// turns the fronts inwards (cull the other side), and a cuboid deformation can turn some
+    /// cells over (cull nothing).
+    pub fn culled_faces(&self, target: TargetKind, item: &DrawItem, stage: VertexStage) -> Option<wgpu::Face> {
+        let tubes = self.layer == LAYER_NAMES[1] || self.layer == LAYER_NAMES[2];
+        if !tubes || target != TargetKind::GBuffer || stage != VertexStage::Linear {
+            return None;
+        }
+        Some(if item.model.determinant() < 0.0 { wgpu::Face::Front } else { wgpu::Face::Back })
     }
 }
 
@@ -81,7 +88,7 @@ impl ItemKind for WovenLayer {
             }
             // Written by the compute pass this frame; the counts are the plan's.
             return Ok(Some(KindDraw {
-                pipeline: cx.pass.mesh_pipeline_culled(stage, self.culled_faces(cx.pass.target))?,
+                pipeline: cx.pass.mesh_pipeline_culled(stage, self.culled_faces(cx.pass.target, item, stage))?,
                 group2: None,
                 mesh: Some(((*g.layer.vertices).clone(), (*g.layer.indices).clone())),
                 instances: None,
@@ -91,7 +98,7 @@ impl ItemKind for WovenLayer {
         if item.mesh.indices.is_empty() {
             return Ok(None);
         }
-        mesh_draw_culled(cx, &item.mesh, stage, self.culled_faces(cx.pass.target)).map(Some)
+        mesh_draw_culled(cx, &item.mesh, stage, self.culled_faces(cx.pass.target, item, stage)).map(Some)
     }
 
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
