@@ -24,7 +24,6 @@ struct Params {
     weave_w: u32,
     weave_h: u32,
     flip: u32,
-    _pad: u32,
     spacing: f32,
     crimp: f32,
     radius: f32,

@@ -11,7 +11,7 @@ use glam::{DVec3, Vec3};
 
 use crate::app::bench::MarkdownRow;
 use crate::gpu::GpuContext;
-use crate::render::draw::kinds::woven::{LAYER_NAMES, WovenGpu, WovenLayer};
+use crate::render::draw::kinds::woven::WovenLayer;
 use crate::render::scene::{Camera, DrawItem, Material, View};
 use crate::woven::gpu::{GpuWoven, culled_patches, patch_counts, patch_levels};
 use crate::woven::lod::Morph;
@@ -141,23 +141,7 @@ pub fn woven(
                     .into_iter()
                     .enumerate()
                     .filter_map(|(k, l)| l.map(|l| (k, l)))
-                    .map(|(k, layer)| {
-                        let gpu = WovenGpu {
-                            layer,
-                            cpu_reference: Box::new(|| anyhow::bail!("the bench keeps no CPU reference")),
-                        };
-                        DrawItem::plain(
-                            Arc::new(crate::mesh::Mesh::default()),
-                            materials[k].clone(),
-                            glam::Mat4::IDENTITY,
-                        )
-                        .with_kind(WovenLayer {
-                            layer: LAYER_NAMES[k],
-                            scales: out.scales,
-                            culled: 0,
-                            gpu: Some(Arc::new(gpu)),
-                        })
-                    })
+                    .map(|(k, layer)| WovenLayer::gpu_item(k, layer, out.scales, materials[k].clone()))
                     .collect();
                 let g = crate::render::draw::render_gbuffer(gpu, &mut drawer, &items, cam, size.0, size.1)?;
                 gpu.submit_checked()?;

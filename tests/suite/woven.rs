@@ -217,6 +217,15 @@ fn holes(drawn: &[bool], w: usize, h: usize) -> usize {
     (0..w * h).filter(|&k| !drawn[k] && !reached[k]).count()
 }
 
+/// 4x4 patches over [0, 4]^2 on the height field `amp sin(fx x) cos(fz z + 0.4)`.
+fn bumpy_panel(amp: f64, fx: f64, fz: f64) -> Panel {
+    let points = (0..5)
+        .flat_map(|j| (0..5).map(move |i| (i as f64, j as f64)))
+        .map(|(x, z)| glam::DVec3::new(x, amp * (fx * x).sin() * (fz * z + 0.4).cos(), z))
+        .collect();
+    Panel::new(&werkstatt::woven::panel::ControlGrid::new(5, 5, points).unwrap())
+}
+
 /// Issue 33's render check of cracks: a curved 4x4 patch grid at random non-integer panel
 /// levels, evaluated by the compute pass and drawn as it is on screen, seen obliquely through an
 /// orthographic camera over an empty (the "red") background. Every background pixel must join
@@ -226,16 +235,10 @@ fn holes(drawn: &[bool], w: usize, h: usize) -> usize {
 #[test]
 fn an_orthographic_render_of_random_levels_shows_no_background_inside() {
     use std::sync::Arc;
-    use werkstatt::render::draw::kinds::woven::WovenGpu;
     use werkstatt::render::scene::{Camera, DrawItem, Material, View};
     use werkstatt::woven::gpu::GpuWoven;
-    use werkstatt::woven::panel::ControlGrid;
     // A bumpy height field: the chords of coarse edges leave its fine neighbours' points.
-    let points = (0..5)
-        .flat_map(|j| (0..5).map(move |i| (i as f64, j as f64)))
-        .map(|(x, z)| glam::DVec3::new(x, 0.45 * (1.9 * x).sin() * (1.7 * z + 0.4).cos(), z))
-        .collect();
-    let panel = Panel::new(&ControlGrid::new(5, 5, points).unwrap());
+    let panel = bumpy_panel(0.45, 1.9, 1.7);
     let weave = Weave::plain();
     let yarn = YarnParams { nodes: 4, spacing: 0.25, crimp: 0.04, radius: 0.05, fibres: 3, migration: 0.3, twist: 0.5 };
     // Levels in (0, 4) from a fixed LCG, alternating low and high so neighbours differ.
@@ -258,16 +261,7 @@ fn an_orthographic_render_of_random_levels_shows_no_background_inside() {
             .layers
             .into_iter()
             .flatten()
-            .map(|layer| {
-                let kind = WovenLayer {
-                    layer: "panel",
-                    scales: frame.scales,
-                    culled: 0,
-                    gpu: Some(Arc::new(WovenGpu { layer, cpu_reference: Box::new(|| anyhow::bail!("not exported")) })),
-                };
-                DrawItem::plain(Arc::new(werkstatt::mesh::Mesh::default()), material.clone(), glam::Mat4::IDENTITY)
-                    .with_kind(kind)
-            })
+            .map(|layer| WovenLayer::gpu_item(0, layer, frame.scales, material.clone()))
             .collect();
         assert_eq!(items.len(), 1, "panel levels draw the panel layer only");
         let (w, h) = (96u32, 72u32);
@@ -310,15 +304,9 @@ fn an_orthographic_render_of_random_levels_shows_no_background_inside() {
 #[test]
 fn culling_the_tubes_back_faces_hides_nothing_seen() {
     use std::sync::Arc;
-    use werkstatt::render::draw::kinds::woven::{LAYER_NAMES, WovenGpu};
     use werkstatt::render::scene::{Camera, DrawItem, Material};
     use werkstatt::woven::gpu::GpuWoven;
-    use werkstatt::woven::panel::ControlGrid;
-    let points = (0..5)
-        .flat_map(|j| (0..5).map(move |i| (i as f64, j as f64)))
-        .map(|(x, z)| glam::DVec3::new(x, 0.3 * (1.3 * x).sin() * (1.1 * z + 0.4).cos(), z))
-        .collect();
-    let panel = Panel::new(&ControlGrid::new(5, 5, points).unwrap());
+    let panel = bumpy_panel(0.3, 1.3, 1.1);
     let weave = Weave::twill(2, 1).unwrap();
     let yarn = YarnParams { nodes: 4, spacing: 0.25, crimp: 0.06, radius: 0.07, fibres: 3, migration: 0.3, twist: 0.5 };
     let mut state = 0x9e37_79b9_7f4a_7c15_u64;
@@ -338,16 +326,7 @@ fn culling_the_tubes_back_faces_hides_nothing_seen() {
         let Some(layer) = layer else { continue };
         let mesh = layer.read_back_mesh(gpu()).unwrap();
         two_sided.push(DrawItem::plain(Arc::new(mesh), material.clone(), glam::Mat4::IDENTITY));
-        let kind = WovenLayer {
-            layer: LAYER_NAMES[k],
-            scales: frame.scales,
-            culled: 0,
-            gpu: Some(Arc::new(WovenGpu { layer, cpu_reference: Box::new(|| anyhow::bail!("not exported")) })),
-        };
-        culled.push(
-            DrawItem::plain(Arc::new(werkstatt::mesh::Mesh::default()), material.clone(), glam::Mat4::IDENTITY)
-                .with_kind(kind),
-        );
+        culled.push(WovenLayer::gpu_item(k, layer, frame.scales, material.clone()));
     }
     assert_eq!(culled.len(), 2, "tubes only: the weft and the warp");
     // The items drawn here do cull (the comparison would pass trivially if they did not), and a

@@ -45,6 +45,23 @@ pub struct WovenLayer {
 }
 
 impl WovenLayer {
+    /// The item drawing layer `k` (of [`LAYER_NAMES`]) as the compute pass wrote it, with no CPU
+    /// evaluation to export on a CPU adapter (benches, tests).
+    pub fn gpu_item(
+        k: usize,
+        layer: GpuLayer,
+        scales: [usize; 3],
+        material: Arc<crate::render::scene::Material>,
+    ) -> DrawItem {
+        let gpu = WovenGpu { layer, cpu_reference: Box::new(|| anyhow::bail!("no CPU evaluation kept")) };
+        DrawItem::plain(Arc::new(crate::mesh::Mesh::default()), material, glam::Mat4::IDENTITY).with_kind(WovenLayer {
+            layer: LAYER_NAMES[k],
+            scales,
+            culled: 0,
+            gpu: Some(Arc::new(gpu)),
+        })
+    }
+
     /// The faces left out of `item`'s draw: the tubes' hidden halves in the G-buffer. Every tube
     /// (ribbons too, whose two sides are two triangles each) is closed but at the cloth's border
     /// and wound with its fronts outwards; where a tube folds on itself the reversed triangles
