@@ -5,9 +5,16 @@
 // fill one layer's buffers, one workgroup column per patch, as many rows (y of the dispatch) as
 // the pass's largest patch needs; invocations stride by 64 x the rows:
 //   panel_vertices  the patch's geomorphed, crack-snapped vertices, one invocation each;
-//   tube_vertices   the same, one invocation per ring: the ring's panel point, frames and morph
-//                   rings are evaluated once and shared by its vertices (they differ in θ only);
+//   tube_vertices   the same, one invocation per ring (no stride): the ring's panel point,
+//                   frames and morph rings are evaluated once and shared by its vertices (they
+//                   differ in θ only); dispatched twice, with MORPHS off for the patches under
+//                   level 6;
 //   panel_indices, tube_indices    its triangles.
+// Lavapipe (llvmpipe), which CI and most users without a GPU run, executes both sides of every
+// branch under a mask and a loop's body once more than it iterates: the cost of a ring is all the
+// code it could take. So the panel's bilinear grids are read from a lattice, a border frame
+// reads one neighbour per direction, a collapsed ring goes through the same evaluation as the
+// others, and what only levels 6 and up need is compiled out by MORPHS.
 // The parameters (the tube layer's direction too) sit in a storage buffer, not a uniform block:
 // lavapipe specializes shaders on uniforms that branches read and would recompile this one per
 // parameter change. Morph taps are loops with a run-time count, so the heavy tube point is
@@ -51,6 +58,15 @@ struct Plan {
 @group(0) @binding(3) var<storage, read> weave: array<i32>;
 @group(0) @binding(4) var<storage, read_write> out_vertices: array<f32>;
 @group(0) @binding(5) var<storage, read_write> out_indices: array<u32>;
+// 9 x 9 points per patch, the patch at (a / 8, b / 8) at 81 p + 9 b + a: the corners of every
+// bilinear panel the morphs blend toward (grids of 1, 2, 4 and 8 cells), read instead of
+// evaluated (four Bézier evaluations a vertex).
+@group(0) @binding(6) var<storage, read> lattice: array<vec4<f32>>;
+
+// Whether this dispatch's patches may morph along their tubes or reach the fibre scale (level
+// 6 or more): lavapipe runs both sides of every branch, so the coarse rings and the fibre terms
+// are compiled out of the dispatch of the patches that need neither.
+override MORPHS: bool = true;
 
 // #include "vertex_out.wgsl"
 
@@ -66,30 +82,8 @@ fn bernstein_d(t: f32) -> vec4<f32> {
     return vec4<f32>(-3.0 * s * s, 3.0 * s * s - 6.0 * s * t, 6.0 * s * t - 3.0 * t * t, 3.0 * t * t);
 }
 
-fn combine(pid: u32, bu: vec4<f32>, bv: vec4<f32>) -> vec3<f32> {
-    var p = vec3<f32>(0.0);
-    for (var i = 0u; i < 4u; i++) {
-        for (var j = 0u; j < 4u; j++) {
-            p += bu[i] * bv[j] * bezier[16u * pid + 4u * i + j].xyz;
-        }
-    }
-    return p;
-}
-
 fn patch_id(pi: u32, pj: u32) -> u32 {
     return pj * params.patches_u + pi;
-}
-
-fn position(pi: u32, pj: u32, s: f32, t: f32) -> vec3<f32> {
-    return combine(patch_id(pi, pj), bernstein(s), bernstein(t));
-}
-
-fn deriv_u(pi: u32, pj: u32, s: f32, t: f32) -> vec3<f32> {
-    return combine(patch_id(pi, pj), bernstein_d(s), bernstein(t));
-}
-
-fn deriv_v(pi: u32, pj: u32, s: f32, t: f32) -> vec3<f32> {
-    return combine(patch_id(pi, pj), bernstein(s), bernstein_d(t));
 }
 
 struct Frame {
@@ -150,20 +144,45 @@ fn evaluate(pi: u32, pj: u32, s: f32, t: f32) -> Eval {
     return e;
 }
 
+// deriv_u of patch `pid` on its edge s = 1 (`far`) or s = 0, at t: only the two columns of
+// Bézier points next to that edge weigh.
+fn edge_deriv_u(pid: u32, far: bool, t: f32) -> vec3<f32> {
+    let bv = bernstein(t);
+    let i = select(0u, 2u, far);
+    var d = vec3<f32>(0.0);
+    for (var j = 0u; j < 4u; j++) {
+        d += bv[j] * (bezier[16u * pid + 4u * (i + 1u) + j].xyz - bezier[16u * pid + 4u * i + j].xyz);
+    }
+    return 3.0 * d;
+}
+
+// deriv_v of patch `pid` on its edge t = 1 (`far`) or t = 0, at s.
+fn edge_deriv_v(pid: u32, far: bool, s: f32) -> vec3<f32> {
+    let bu = bernstein(s);
+    let j = select(0u, 2u, far);
+    var d = vec3<f32>(0.0);
+    for (var i = 0u; i < 4u; i++) {
+        d += bu[i] * (bezier[16u * pid + 4u * i + j + 1u].xyz - bezier[16u * pid + 4u * i + j].xyz);
+    }
+    return 3.0 * d;
+}
+
 // Panel::frame from the patch's own derivatives at (s, t): the cross derivative on a border is
-// the mean of both patches'.
+// the mean of both patches'. One neighbour per direction is read, picked before the read.
 fn panel_frame_of(pi: u32, pj: u32, s: f32, t: f32, du_own: vec3<f32>, dv_own: vec3<f32>) -> Frame {
     var du = du_own;
     var dv = dv_own;
-    if s == 0.0 && pi > 0u {
-        du = 0.5 * (du + deriv_u(pi - 1u, pj, 1.0, t));
-    } else if s == 1.0 && pi + 1u < params.patches_u {
-        du = 0.5 * (du + deriv_u(pi + 1u, pj, 0.0, t));
+    let left = s == 0.0 && pi > 0u;
+    let right = s == 1.0 && pi + 1u < params.patches_u;
+    if left || right {
+        let ni = select(min(pi + 1u, params.patches_u - 1u), pi - 1u, left);
+        du = 0.5 * (du + edge_deriv_u(patch_id(ni, pj), left, t));
     }
-    if t == 0.0 && pj > 0u {
-        dv = 0.5 * (dv + deriv_v(pi, pj - 1u, s, 1.0));
-    } else if t == 1.0 && pj + 1u < params.patches_v {
-        dv = 0.5 * (dv + deriv_v(pi, pj + 1u, s, 0.0));
+    let below = t == 0.0 && pj > 0u;
+    let above = t == 1.0 && pj + 1u < params.patches_v;
+    if below || above {
+        let nj = select(min(pj + 1u, params.patches_v - 1u), pj - 1u, below);
+        dv = 0.5 * (dv + edge_deriv_v(patch_id(pi, nj), below, s));
     }
     let f = from_derivatives(du, dv);
     if params.flip != 0u {
@@ -328,37 +347,37 @@ struct Pn {
     n: vec3<f32>,
 }
 
+// The patch's bilinear panel of g x g cells (g of 1, 2, 4 or 8) at (s, t), from the lattice.
 fn panel_bilinear(pi: u32, pj: u32, s: f32, t: f32, g: f32) -> vec3<f32> {
     let s0 = min(floor(s * g), g - 1.0);
     let t0 = min(floor(t * g), g - 1.0);
     let ws = s * g - s0;
     let wt = t * g - t0;
-    var p = vec3<f32>(0.0);
-    for (var c = 0u; c < 4u; c++) {
-        let a = f32(c & 1u);
-        let b = f32(c >> 1u);
-        let w = mix(1.0 - ws, ws, a) * mix(1.0 - wt, wt, b);
-        p += w * position(pi, pj, (s0 + a) / g, (t0 + b) / g);
+    let step = u32(8.0 / g);
+    let at = 81u * patch_id(pi, pj) + 9u * u32(t0) * step + u32(s0) * step;
+    let bottom = mix(lattice[at].xyz, lattice[at + step].xyz, ws);
+    let top = mix(lattice[at + 9u * step].xyz, lattice[at + 9u * step + step].xyz, ws);
+    return mix(bottom, top, wt);
+}
+
+// The morphed panel point from the exact one at (s, t): at the panel scale toward the next
+// coarser panel grid (eq. 17), at the yarn scale the panel term of eq. 19.
+fn panel_term(pi: u32, pj: u32, s: f32, t: f32, st: LodState, exact: vec3<f32>) -> vec3<f32> {
+    var w = st.alpha_panel;
+    var g = 8.0;
+    if st.scale == PANEL {
+        w = select(0.0, st.alpha, st.grid > 0u);
+        g = f32(max(panel_res(st.grid) / 2u, 1u));
     }
-    return p;
+    if w > 0.0 {
+        return (1.0 - w) * exact + w * panel_bilinear(pi, pj, s, t, g);
+    }
+    return exact;
 }
 
 fn panel_vertex(pi: u32, pj: u32, s: f32, t: f32, st: LodState) -> Pn {
     let e = evaluate(pi, pj, s, t);
-    var p = e.p;
-    if st.alpha > 0.0 && st.grid > 0u {
-        let g = f32(panel_res(st.grid) / 2u);
-        p = (1.0 - st.alpha) * p + st.alpha * panel_bilinear(pi, pj, s, t, g);
-    }
-    return Pn(p, panel_frame_of(pi, pj, s, t, e.du, e.dv).n);
-}
-
-// The panel term of eq. 19 from the exact point at (s, t).
-fn panel_term(pi: u32, pj: u32, s: f32, t: f32, st: LodState, exact: vec3<f32>) -> vec3<f32> {
-    if st.alpha_panel > 0.0 {
-        return (1.0 - st.alpha_panel) * exact + st.alpha_panel * panel_bilinear(pi, pj, s, t, 8.0);
-    }
-    return exact;
+    return Pn(panel_term(pi, pj, s, t, st, e.p), panel_frame_of(pi, pj, s, t, e.du, e.dv).n);
 }
 
 struct Yarn {
@@ -391,12 +410,14 @@ struct Ring {
     n: vec3<f32>,
 }
 
-fn ring_at(y: Yarn, f: i32, u: f32, st: LodState) -> Ring {
+// `at`: where on the patch the panel is evaluated, the yarn's own (s, t) or, for a ring
+// collapsed onto the panel's edge (a panel-scale state), that edge's vertex; such a ring is its
+// panel point with the panel's normal.
+fn ring_at(y: Yarn, f: i32, u: f32, st: LodState, at: vec2<f32>) -> Ring {
     let nodes = params.nodes;
-    let st2 = yarn_st(y, u);
-    let e = evaluate(y.pi, y.pj, st2.x, st2.y);
-    let lp = panel_term(y.pi, y.pj, st2.x, st2.y, st, e.p);
-    let mp = panel_frame_of(y.pi, y.pj, st2.x, st2.y, e.du, e.dv);
+    let e = evaluate(y.pi, y.pj, at.x, at.y);
+    let lp = panel_term(y.pi, y.pj, at.x, at.y, st, e.p);
+    let mp = panel_frame_of(y.pi, y.pj, at.x, at.y, e.du, e.dv);
     var line = y.pj * nodes + y.index;
     var first = y.pi * nodes;
     if y.dir == 1u {
@@ -412,11 +433,14 @@ fn ring_at(y: Yarn, f: i32, u: f32, st: LodState) -> Ring {
     var m = mpy;
     var lf = vec3<f32>(0.0);
     var k = params.radius;
-    if f >= 0 && st.beta_f > 0.0 {
+    if MORPHS && f >= 0 && st.beta_f > 0.0 {
         let fp = fibre(u32(f), ug, axial, st.beta_f);
         lf = fp.offset;
         m = compose_frames(mpy, fp.frame);
         k = (1.0 - st.beta_f) * params.radius + st.beta_f * params.fibre_radius;
+    }
+    if st.scale == PANEL {
+        return Ring(lp, mp, 0.0, mp.n);
     }
     return Ring(lp + st.beta_y * apply(mp, ly) + apply(mpy, lf), m, k, mpy.n);
 }
@@ -441,7 +465,7 @@ struct Coarse {
 }
 
 fn coarse_of(u: f32, st: LodState) -> Coarse {
-    let morph = st.alpha > 0.0 && st.grid > 5u;
+    let morph = MORPHS && st.alpha > 0.0 && st.grid > 5u;
     var res = vec2<u32>(1u, 2u);
     var taps = 1u;
     if morph {
@@ -574,33 +598,30 @@ fn tube_ring_at(plan: Plan, pi: u32, pj: u32, r: u32) {
     // to the edge's ring, or at the panel scale collapsed onto the panel's edge vertex.
     var s = st;
     var snapped = 0u;
+    var at = st2;
     if e < 4u && plan.edges[e] >= 0.0 {
         s = edge_state(plan, e);
         if s.scale == PANEL {
             let ge = f32(panel_res(s.grid));
-            var drawn: Pn;
             if dir == 0u {
-                drawn = panel_vertex(pi, pj, st2.x, snap(st2.y, ge), s);
+                at.y = snap(st2.y, ge);
             } else {
-                drawn = panel_vertex(pi, pj, snap(st2.x, ge), st2.y, s);
+                at.x = snap(st2.x, ge);
             }
-            for (var k = 0u; k < res.y; k++) {
-                write_vertex(first + k, drawn.p, drawn.n, uv);
-            }
-            return;
+        } else {
+            snapped = tube_res(s.grid).y;
         }
-        snapped = tube_res(s.grid).y;
         if s.scale != FIBRE {
             f = -1;
         }
     }
-    let own = ring_at(y, f, u, s);
+    let own = ring_at(y, f, u, s, at);
     let c = coarse_of(u, s);
     var r0 = own;
     var r1 = own;
     if c.taps > 1u {
-        r0 = ring_at(y, f, c.u0, s);
-        r1 = ring_at(y, f, c.u1, s);
+        r0 = ring_at(y, f, c.u0, s, yarn_st(y, c.u0));
+        r1 = ring_at(y, f, c.u1, s, yarn_st(y, c.u1));
     }
     for (var k = 0u; k < res.y; k++) {
         var theta = f32(k) * TAU / f32(res.y);
@@ -628,16 +649,15 @@ fn panel_vertices(
 }
 
 @compute @workgroup_size(64)
-fn tube_vertices(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
+fn tube_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let plan = plans[wg.x];
     let pi = plan.ids.x % params.patches_u;
     let pj = plan.ids.x / params.patches_u;
     let rings = plan.ids.w / tube_res(lod_at(plan.level.x).grid).y;
-    for (var r = wg.y * 64u + lid; r < rings; r += 64u * groups.y) {
+    // One ring an invocation (the rows cover the largest patch): a loop would run its heavy
+    // body once more, masked, on lavapipe.
+    let r = wg.y * 64u + lid;
+    if r < rings {
         tube_ring_at(plan, pi, pj, r);
     }
 }

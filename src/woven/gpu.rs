@@ -172,10 +172,30 @@ impl Default for GpuWoven {
     }
 }
 
-/// Items (vertices, tube rings or indices) one workgroup row handles per patch before another
-/// row is added: 64 invocations, 16 each. Each pass has its own rows (its item is what it
-/// loops over), so a ring pass is not dispatched as wide as its index pass.
+/// Items (vertices or indices) one workgroup row handles per patch before another row is
+/// added: 64 invocations, 16 each. Each pass has its own rows (its item is what it loops over),
+/// so a vertex pass is not dispatched as wide as its index pass. The ring pass takes one ring
+/// an invocation: 64 a row.
 const PER_ROW: usize = 64 * 16;
+const RINGS_PER_ROW: usize = 64;
+
+/// The lowest level whose tubes morph toward a coarser tube grid (and the fibre scale lies
+/// above it): the ring pass of the patches under it is compiled without either.
+const MORPH_LEVEL: f32 = 6.0;
+
+/// Each patch's 9 x 9 lattice, the patch at (a / 8, b / 8) at 81 p + 9 b + a: the corners of
+/// every bilinear panel grid the morphs blend toward (eq. 18 with 1, 2, 4 or 8 cells a side).
+fn lattice(panel: &Panel) -> Vec<[f32; 4]> {
+    (0..panel.patches_v)
+        .flat_map(|pj| (0..panel.patches_u).map(move |pi| (pi, pj)))
+        .flat_map(|(pi, pj)| {
+            (0..81).map(move |k| {
+                let (a, b) = ((k % 9) as f64 / 8.0, (k / 9) as f64 / 8.0);
+                panel.position(pi, pj, a, b).as_vec3().extend(1.0).to_array()
+            })
+        })
+        .collect()
+}
 
 impl GpuWoven {
     /// Records the tessellation of `w` with `levels` (as [`Woven::tessellate`] with the levels
@@ -199,6 +219,8 @@ impl GpuWoven {
         // The largest patch of each layer in the items of its vertex pass (vertices of the
         // panel, rings of the tubes) and of its index pass.
         let mut largest = [[0usize; 2]; 2];
+        // The most rings of a tube patch under MORPH_LEVEL and of one at or above it.
+        let mut largest_rings = [0usize; 2];
         let mut out = GpuWovenFrame::default();
         anyhow::ensure!(pu * pv <= 65535, "{pu}x{pv} patches are more than one dispatch holds (65535)");
         for pj in 0..pv {
@@ -225,7 +247,12 @@ impl GpuWoven {
                 totals[layer][1] += ni;
                 let items = match scale {
                     Scale::Panel => nv,
-                    _ => nv / LodState::tube_res(LodState::at(l, Morph::Continuous).grid).1,
+                    _ => {
+                        let rings = nv / LodState::tube_res(LodState::at(l, Morph::Continuous).grid).1;
+                        let fine = usize::from(l as f32 >= MORPH_LEVEL);
+                        largest_rings[fine] = largest_rings[fine].max(rings);
+                        rings
+                    }
                 };
                 largest[layer] = [largest[layer][0].max(items), largest[layer][1].max(ni)];
             }
@@ -252,7 +279,17 @@ impl GpuWoven {
             .flat_map(|j| (0..ww).map(move |i| (i, j)))
             .map(|(i, j)| w.weave.eta(i as i64, j as i64) as i32)
             .collect();
+        anyhow::ensure!(
+            largest_rings.iter().all(|&r| r.div_ceil(RINGS_PER_ROW) <= 65535),
+            "a patch of {} tube rings is more than one dispatch holds: lower the level",
+            largest_rings.iter().max().unwrap_or(&0)
+        );
+        // The ring pass runs twice, the patches under MORPH_LEVEL first (their order in the
+        // layer is their ids', not the plans').
+        plans[1].sort_by_key(|p| p.level[0] >= MORPH_LEVEL);
+        let coarse = plans[1].partition_point(|p| p.level[0] < MORPH_LEVEL);
         let y = w.yarn;
+        let lattice = gpu.upload_pooled("woven lattice", bytemuck::cast_slice(&lattice(w.panel)), U::STORAGE);
         let bezier = gpu.upload_pooled("woven bezier", bytemuck::cast_slice(&bezier), U::STORAGE);
         let weave = gpu.upload_pooled("woven weave", bytemuck::cast_slice(&weave), U::STORAGE);
         for (layer, name) in [(0usize, "panel"), (1, "weft"), (2, "warp")] {
@@ -297,18 +334,45 @@ impl GpuWoven {
                 bytemuck::cast_slice(&args),
                 U::STORAGE | U::INDIRECT | U::COPY_SRC,
             );
-            let binds = [
-                Bind::Storage(&params),
-                Bind::Storage(&bezier),
-                Bind::Storage(&plan),
-                Bind::Storage(&weave),
-                Bind::StorageRw(&vertices),
-                Bind::StorageRw(&indices),
-            ];
-            for (pass, items) in self.passes[p].iter_mut().zip(largest[p]) {
-                let rows = items.div_ceil(PER_ROW).clamp(1, 65535) as u32;
-                pass.dispatch(gpu, &[&binds], [plans[p].len() as u32, rows, 1])?;
+            // The ring pass's two groups of patches: (patches, their plans, MORPHS).
+            let ring_groups: Vec<(u32, PooledBuffer, usize)> = if p == 1 {
+                [&plans[1][..coarse], &plans[1][coarse..]]
+                    .into_iter()
+                    .enumerate()
+                    .filter(|(_, g)| !g.is_empty())
+                    .map(|(fine, g)| {
+                        let buffer = gpu.upload_pooled("woven ring plans", bytemuck::cast_slice(g), U::STORAGE);
+                        (g.len() as u32, buffer, fine)
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            let binds = |plan| {
+                [
+                    Bind::Storage(&params),
+                    Bind::Storage(&bezier),
+                    Bind::Storage(plan),
+                    Bind::Storage(&weave),
+                    Bind::StorageRw(&vertices),
+                    Bind::StorageRw(&indices),
+                    Bind::Storage(&lattice),
+                ]
+            };
+            let [vertex_pass, index_pass] = &mut self.passes[p];
+            let rows = |items: usize, per_row| items.div_ceil(per_row).clamp(1, 65535) as u32;
+            if p == 0 {
+                vertex_pass.dispatch(
+                    gpu,
+                    &[&binds(&plan)],
+                    [plans[0].len() as u32, rows(largest[0][0], PER_ROW), 1],
+                )?;
             }
+            for (patches, group, fine) in &ring_groups {
+                let workgroups = [*patches, rows(largest_rings[*fine], RINGS_PER_ROW), 1];
+                vertex_pass.dispatch_specialized(gpu, &[&binds(group)], workgroups, &[("MORPHS", *fine as u32)])?;
+            }
+            index_pass.dispatch(gpu, &[&binds(&plan)], [plans[p].len() as u32, rows(largest[p][1], PER_ROW), 1])?;
             out.layers[layer] =
                 Some(GpuLayer { vertices, indices, indirect, vertex_count: nv as u64, index_count: ni as u64 });
         }

@@ -87,14 +87,7 @@ impl Woven<'_> {
     /// The panel's drawn vertex at (s, t) of patch (pi, pj) in state `st` (eqs. 17/18) and its
     /// normal.
     pub fn panel_vertex(&self, pi: usize, pj: usize, s: f64, t: f64, st: &LodState) -> (DVec3, DVec3) {
-        let exact = self.panel.position(pi, pj, s, t);
-        let p = if st.alpha > 0.0 && st.grid > 0 {
-            let g = (st.panel_res() / 2) as f64;
-            (1.0 - st.alpha) * exact + st.alpha * self.panel_bilinear(pi, pj, s, t, g)
-        } else {
-            exact
-        };
-        (p, self.panel.frame(pi, pj, s, t).n)
+        (self.panel_term(pi, pj, s, t, st), self.panel.frame(pi, pj, s, t).n)
     }
 
     /// Eq. 18: the panel on a g x g grid, bilinearly.
@@ -106,14 +99,16 @@ impl Woven<'_> {
         (1.0 - wt) * ((1.0 - ws) * p00 + ws * p10) + wt * ((1.0 - ws) * p01 + ws * p11)
     }
 
-    /// The panel term l~_p under the yarns.
+    /// The morphed panel point at (s, t): at the panel scale toward the next coarser panel grid
+    /// (eq. 17), at the yarn scale the panel term l~_p under the yarns (toward the finest grid).
     fn panel_term(&self, pi: usize, pj: usize, s: f64, t: f64, st: &LodState) -> DVec3 {
         let exact = self.panel.position(pi, pj, s, t);
-        if st.alpha_panel > 0.0 {
-            (1.0 - st.alpha_panel) * exact + st.alpha_panel * self.panel_bilinear(pi, pj, s, t, 8.0)
-        } else {
-            exact
-        }
+        let (w, g) = match st.scale {
+            Scale::Panel if st.grid > 0 => (st.alpha, (st.panel_res() / 2) as f64),
+            Scale::Panel => (0.0, 1.0),
+            Scale::Yarn | Scale::Fibre => (st.alpha_panel, 8.0),
+        };
+        if w > 0.0 { (1.0 - w) * exact + w * self.panel_bilinear(pi, pj, s, t, g) } else { exact }
     }
 
     /// Patch-local (s, t) of a point of a yarn at yarn parameter `u` (relative to the patch's first node).
