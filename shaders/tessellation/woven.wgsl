@@ -534,29 +534,22 @@ fn panel_vertex_at(plan: Plan, pi: u32, pj: u32, v: u32) {
     let b = v / (g + 1u);
     let s = f32(a) / f32(g);
     let t = f32(b) / f32(g);
+    // The first side the vertex lies on (left, right, bottom, top): a vertex on a shared edge
+    // but not at a corner takes the edge's state, snapped to its grid.
     let corner = (a == 0u || a == g) && (b == 0u || b == g);
-    var side = array<bool, 4>(a == 0u, a == g, b == 0u, b == g);
-    var snapped = 4u;
-    for (var e = 0u; e < 4u; e++) {
-        if side[e] && !corner {
-            if plan.edges[e] >= 0.0 {
-                snapped = e;
-            }
-            break;
-        }
-    }
-    var drawn: Pn;
-    if snapped < 4u {
-        let se = edge_state(plan, snapped);
+    let side = select(select(select(select(4u, 3u, b == g), 2u, b == 0u), 1u, a == g), 0u, a == 0u);
+    var at = vec2<f32>(s, t);
+    var se = st;
+    if !corner && side < 4u && plan.edges[min(side, 3u)] >= 0.0 {
+        se = edge_state(plan, side);
         let ge = f32(panel_res(se.grid));
-        if snapped < 2u {
-            drawn = panel_vertex(pi, pj, s, snap(t, ge), se);
+        if side < 2u {
+            at.y = snap(t, ge);
         } else {
-            drawn = panel_vertex(pi, pj, snap(s, ge), t, se);
+            at.x = snap(s, ge);
         }
-    } else {
-        drawn = panel_vertex(pi, pj, s, t, st);
     }
+    let drawn = panel_vertex(pi, pj, at.x, at.y, se);
     write_vertex(plan.ids.y + v, drawn.p, drawn.n, patch_uv(pi, pj, s, t));
 }
 
@@ -635,15 +628,12 @@ fn tube_ring_at(plan: Plan, pi: u32, pj: u32, r: u32) {
 }
 
 @compute @workgroup_size(64)
-fn panel_vertices(
-    @builtin(workgroup_id) wg: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
+fn panel_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let plan = plans[wg.x];
     let pi = plan.ids.x % params.patches_u;
     let pj = plan.ids.x / params.patches_u;
-    for (var v = wg.y * 64u + lid; v < plan.ids.w; v += 64u * groups.y) {
+    let v = wg.y * 64u + lid;
+    if v < plan.ids.w {
         panel_vertex_at(plan, pi, pj, v);
     }
 }
@@ -669,6 +659,17 @@ fn tube_vertices(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation
 const QUAD_CORNERS = array<u32, 6>(0u, 1u, 3u, 0u, 3u, 2u);
 const QUAD_CORNERS_REVERSED = array<u32, 6>(0u, 3u, 1u, 0u, 2u, 3u);
 
+// Writes quad q's two triangles at `first`: corner c of the quad is vertex `corner_ids[c]`.
+fn write_quad(first: u32, corner_ids: vec4<u32>, reversed: bool) {
+    var corners = QUAD_CORNERS;
+    if reversed {
+        corners = QUAD_CORNERS_REVERSED;
+    }
+    for (var k = 0u; k < 6u; k++) {
+        out_indices[first + k] = corner_ids[corners[k]];
+    }
+}
+
 @compute @workgroup_size(64)
 fn panel_indices(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -676,18 +677,12 @@ fn panel_indices(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let plan = plans[wg.x];
-    let count = bitcast<u32>(plan.level.y);
+    let quads = bitcast<u32>(plan.level.y) / 6u;
     let g = panel_res(lod_at(plan.level.x).grid);
     let row = g + 1u;
-    for (var i = wg.y * 64u + lid; i < count; i += 64u * groups.y) {
-        let q = i / 6u;
-        var corners = QUAD_CORNERS;
-        if params.flip != 0u {
-            corners = QUAD_CORNERS_REVERSED;
-        }
-        let c = corners[i % 6u];
-        let v = (q / g) * row + q % g + (c & 1u) + (c >> 1u) * row;
-        out_indices[plan.ids.z + i] = plan.ids.y + v;
+    for (var q = wg.y * 64u + lid; q < quads; q += 64u * groups.y) {
+        let v = plan.ids.y + (q / g) * row + q % g;
+        write_quad(plan.ids.z + 6u * q, vec4<u32>(v, v + 1u, v + row, v + row + 1u), params.flip != 0u);
     }
 }
 
@@ -698,22 +693,19 @@ fn tube_indices(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let plan = plans[wg.x];
-    let count = bitcast<u32>(plan.level.y);
+    let count = bitcast<u32>(plan.level.y) / 6u;
     let res = tube_res(lod_at(plan.level.x).grid);
     let rings = along_count(res.x);
     let quads = (rings - 1u) * res.y;
-    for (var i = wg.y * 64u + lid; i < count; i += 64u * groups.y) {
-        let q = i / 6u;
-        var corners = QUAD_CORNERS;
-        if params.dir == 0u || params.flip == 0u {
-            corners = QUAD_CORNERS_REVERSED;
-        }
-        let c = corners[i % 6u];
+    for (var q = wg.y * 64u + lid; q < count; q += 64u * groups.y) {
         // Corner c: ring ai + (c & 1), around k + (c >> 1), wrapping.
         let block = q / quads;
         let r = q % quads;
-        let ai = r / res.y + (c & 1u);
-        let k = (r % res.y + (c >> 1u)) % res.y;
-        out_indices[plan.ids.z + i] = plan.ids.y + block * rings * res.y + ai * res.y + k;
+        let ai = r / res.y;
+        let k = r % res.y;
+        let k1 = (k + 1u) % res.y;
+        let v = plan.ids.y + block * rings * res.y + ai * res.y;
+        let ids = vec4<u32>(v + k, v + res.y + k, v + k1, v + res.y + k1);
+        write_quad(plan.ids.z + 6u * q, ids, params.dir == 0u || params.flip == 0u);
     }
 }

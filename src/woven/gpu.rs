@@ -8,7 +8,7 @@
 use glam::{DMat4, DVec3, DVec4};
 
 use super::lod::{LodState, Morph, Scale, along_points, level_from_distance};
-use super::panel::Panel;
+use super::panel::{Panel, bernstein};
 use super::tess::Woven;
 use crate::gpu::{Bind, ComputePass, GpuContext, PooledBuffer};
 use crate::mesh::Vertex;
@@ -172,12 +172,11 @@ impl Default for GpuWoven {
     }
 }
 
-/// Items (vertices or indices) one workgroup row handles per patch before another row is
-/// added: 64 invocations, 16 each. Each pass has its own rows (its item is what it loops over),
-/// so a vertex pass is not dispatched as wide as its index pass. The ring pass takes one ring
-/// an invocation: 64 a row.
-const PER_ROW: usize = 64 * 16;
-const RINGS_PER_ROW: usize = 64;
+/// Quads an index pass's workgroup row handles per patch before another row is added: 64
+/// invocations, 16 each. The vertex passes take one vertex (panel) or ring (tubes) an
+/// invocation, 64 a row: on lavapipe a loop runs its body once more than it iterates, masked.
+const QUADS_PER_ROW: usize = 64 * 16;
+const VERTICES_PER_ROW: usize = 64;
 
 /// The lowest level whose tubes morph toward a coarser tube grid (and the fibre scale lies
 /// above it): the ring pass of the patches under it is compiled without either.
@@ -185,16 +184,24 @@ const MORPH_LEVEL: f32 = 6.0;
 
 /// Each patch's 9 x 9 lattice, the patch at (a / 8, b / 8) at 81 p + 9 b + a: the corners of
 /// every bilinear panel grid the morphs blend toward (eq. 18 with 1, 2, 4 or 8 cells a side).
-fn lattice(panel: &Panel) -> Vec<[f32; 4]> {
-    (0..panel.patches_v)
-        .flat_map(|pj| (0..panel.patches_u).map(move |pi| (pi, pj)))
-        .flat_map(|(pi, pj)| {
-            (0..81).map(move |k| {
-                let (a, b) = ((k % 9) as f64 / 8.0, (k / 9) as f64 / 8.0);
-                panel.position(pi, pj, a, b).as_vec3().extend(1.0).to_array()
-            })
-        })
-        .collect()
+/// Only the patches with `drawn` set are evaluated (the shader reads a drawn patch's own).
+fn lattice(panel: &Panel, drawn: &[bool]) -> Vec<[f32; 4]> {
+    let weights: [[f64; 4]; 9] = std::array::from_fn(|k| bernstein(k as f64 / 8.0));
+    let mut out = vec![[0.0; 4]; 81 * panel.patches.len()];
+    for (patch, points) in
+        panel.patches.iter().zip(out.chunks_exact_mut(81)).zip(drawn).filter(|(_, d)| **d).map(|(x, _)| x)
+    {
+        // The patch's columns of Bézier points combined along t at each lattice row, then
+        // across: 36 + 81 four-term sums instead of 81 sixteen-term ones.
+        let rows: [[DVec3; 4]; 9] =
+            std::array::from_fn(|b| std::array::from_fn(|i| (0..4).map(|j| weights[b][j] * patch.q[i][j]).sum()));
+        for (k, point) in points.iter_mut().enumerate() {
+            let (wa, row) = (&weights[k % 9], &rows[k / 9]);
+            let p: DVec3 = (0..4).map(|i| wa[i] * row[i]).sum();
+            *point = p.as_vec3().extend(1.0).to_array();
+        }
+    }
+    out
 }
 
 impl GpuWoven {
@@ -217,7 +224,7 @@ impl GpuWoven {
         let mut plans: [Vec<Plan>; 2] = Default::default();
         let mut totals = [[0usize; 2]; 2];
         // The largest patch of each layer in the items of its vertex pass (vertices of the
-        // panel, rings of the tubes) and of its index pass.
+        // panel, rings of the tubes) and of its index pass (quads).
         let mut largest = [[0usize; 2]; 2];
         // The most rings of a tube patch under MORPH_LEVEL and of one at or above it.
         let mut largest_rings = [0usize; 2];
@@ -254,7 +261,7 @@ impl GpuWoven {
                         rings
                     }
                 };
-                largest[layer] = [largest[layer][0].max(items), largest[layer][1].max(ni)];
+                largest[layer] = [largest[layer][0].max(items), largest[layer][1].max(ni / 6)];
             }
         }
         let limits = gpu.device.limits();
@@ -280,16 +287,17 @@ impl GpuWoven {
             .map(|(i, j)| w.weave.eta(i as i64, j as i64) as i32)
             .collect();
         anyhow::ensure!(
-            largest_rings.iter().all(|&r| r.div_ceil(RINGS_PER_ROW) <= 65535),
+            largest[0][0].max(largest[1][0]).div_ceil(VERTICES_PER_ROW) <= 65535,
             "a patch of {} tube rings is more than one dispatch holds: lower the level",
-            largest_rings.iter().max().unwrap_or(&0)
+            largest[1][0]
         );
         // The ring pass runs twice, the patches under MORPH_LEVEL first (their order in the
         // layer is their ids', not the plans').
         plans[1].sort_by_key(|p| p.level[0] >= MORPH_LEVEL);
         let coarse = plans[1].partition_point(|p| p.level[0] < MORPH_LEVEL);
         let y = w.yarn;
-        let lattice = gpu.upload_pooled("woven lattice", bytemuck::cast_slice(&lattice(w.panel)), U::STORAGE);
+        let drawn: Vec<bool> = levels.iter().zip(culled).map(|(l, &c)| l.is_some() && !c).collect();
+        let lattice = gpu.upload_pooled("woven lattice", bytemuck::cast_slice(&lattice(w.panel, &drawn)), U::STORAGE);
         let bezier = gpu.upload_pooled("woven bezier", bytemuck::cast_slice(&bezier), U::STORAGE);
         let weave = gpu.upload_pooled("woven weave", bytemuck::cast_slice(&weave), U::STORAGE);
         for (layer, name) in [(0usize, "panel"), (1, "weft"), (2, "warp")] {
@@ -365,14 +373,18 @@ impl GpuWoven {
                 vertex_pass.dispatch(
                     gpu,
                     &[&binds(&plan)],
-                    [plans[0].len() as u32, rows(largest[0][0], PER_ROW), 1],
+                    [plans[0].len() as u32, rows(largest[0][0], VERTICES_PER_ROW), 1],
                 )?;
             }
             for (patches, group, fine) in &ring_groups {
-                let workgroups = [*patches, rows(largest_rings[*fine], RINGS_PER_ROW), 1];
+                let workgroups = [*patches, rows(largest_rings[*fine], VERTICES_PER_ROW), 1];
                 vertex_pass.dispatch_specialized(gpu, &[&binds(group)], workgroups, &[("MORPHS", *fine as u32)])?;
             }
-            index_pass.dispatch(gpu, &[&binds(&plan)], [plans[p].len() as u32, rows(largest[p][1], PER_ROW), 1])?;
+            index_pass.dispatch(
+                gpu,
+                &[&binds(&plan)],
+                [plans[p].len() as u32, rows(largest[p][1], QUADS_PER_ROW), 1],
+            )?;
             out.layers[layer] =
                 Some(GpuLayer { vertices, indices, indirect, vertex_count: nv as u64, index_count: ni as u64 });
         }
