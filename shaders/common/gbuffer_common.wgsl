@@ -9,6 +9,11 @@ struct Frame {
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
+// Whether the draw's material has a base or a gloss map (src/render/draw/kind.rs
+// `PipelineKey::maps`): lavapipe runs both sides of a branch, so maps that are not there are
+// compiled out rather than skipped.
+override MAPS: bool = true;
+
 // #include "object.wgsl"
 
 // #include "vertex_in.wgsl"
@@ -26,7 +31,7 @@ struct GBufferOut {
 // control flow.
 fn write_gbuffer(world: vec3<f32>, world_normal: vec3<f32>, uv: vec2<f32>, view_depth: f32, front: bool) -> GBufferOut {
     var albedo = object.base_color.rgb;
-    if object.has_texture > 0.5 {
+    if MAPS && object.has_texture > 0.5 {
         albedo = albedo * textureSample(base_map, base_sampler, uv * object.uv_scale).rgb;
     }
     // Cloth is two-sided: light the back face with the flipped normal.
@@ -35,7 +40,7 @@ fn write_gbuffer(world: vec3<f32>, world_normal: vec3<f32>, uv: vec2<f32>, view_
         n = -n;
     }
     var gloss = object.base_color.a;
-    if object.has_gloss_map > 0.5 {
+    if MAPS && object.has_gloss_map > 0.5 {
         gloss = mix(object.gloss_min, gloss, textureSample(gloss_map, base_sampler, uv * object.uv_scale).r);
     }
     var out: GBufferOut;

@@ -125,6 +125,13 @@ pub struct Material {
     pub btf_id: u16,
 }
 
+impl Material {
+    /// Whether a base or a gloss map is bound: G-buffer pipelines sample them only then.
+    pub fn has_maps(&self) -> bool {
+        self.texture.is_some() || self.gloss_map.is_some()
+    }
+}
+
 impl Default for Material {
     fn default() -> Self {
         Material {

@@ -159,10 +159,10 @@ impl ItemKind for Lifted {
     fn prepare(
         &self,
         cx: &mut PrepareCx<'_, '_>,
-        _: &DrawItem,
+        item: &DrawItem,
         stage: VertexStage,
     ) -> anyhow::Result<Option<KindDraw>> {
-        mesh_draw(cx, &self.0, stage).map(Some)
+        mesh_draw(cx, &self.0, &item.material, stage).map(Some)
     }
     fn export(&self, _: &mut ExportCx<'_>, _: &DrawItem) -> anyhow::Result<Exported> {
         Ok(Exported::Local((*self.0).clone()))

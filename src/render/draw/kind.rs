@@ -145,6 +145,9 @@ pub struct PipelineKey {
     pub constants: Vec<(&'static str, u32)>,
     /// Faces culled: `None` (two-sided) for everything but closed surfaces drawn by their fronts.
     pub cull: Option<wgpu::Face>,
+    /// Whether the draw's material has a base or a gloss map ([`Material::has_maps`]). Without,
+    /// a G-buffer pipeline is built with `MAPS` off (shaders/common/gbuffer_common.wgsl).
+    pub maps: bool,
 }
 
 /// What every draw of a pass shares: the target and its bind group layouts. Kinds build their
@@ -187,10 +190,14 @@ impl PassCx<'_> {
         } else {
             2
         };
+        let mut constants = key.constants.clone();
+        if self.target == TargetKind::GBuffer && !key.maps {
+            constants.push(("MAPS", 0));
+        }
         let pipeline = self.gpu.render_pipeline(&RenderPipelineDesc {
             vertex_entry: key.entry,
             depth: Some((self.depth, wgpu::CompareFunction::Less)),
-            constants: &key.constants,
+            constants: &constants,
             cull: key.cull,
             ..RenderPipelineDesc::new(key.shader, &groups[..used], vertex, self.colors)
         })?;
@@ -201,8 +208,8 @@ impl PassCx<'_> {
     /// The pipeline that draws a mesh (vertex buffer of [`crate::mesh::Vertex`], the items'
     /// transforms as instances) through `stage` into this target: plain meshes, tessellations
     /// and every kind drawn as its mesh somewhere.
-    pub fn mesh_pipeline(&self, stage: VertexStage) -> anyhow::Result<wgpu::RenderPipeline> {
-        self.mesh_pipeline_culled(stage, None)
+    pub fn mesh_pipeline(&self, stage: VertexStage, maps: bool) -> anyhow::Result<wgpu::RenderPipeline> {
+        self.mesh_pipeline_culled(stage, None, maps)
     }
 
     /// [`PassCx::mesh_pipeline`] culling `cull` faces: for closed surfaces whose fronts face out.
@@ -210,6 +217,7 @@ impl PassCx<'_> {
         &self,
         stage: VertexStage,
         cull: Option<wgpu::Face>,
+        maps: bool,
     ) -> anyhow::Result<wgpu::RenderPipeline> {
         use crate::cuboid::NormalMethod::{Direct, TangentSpace};
         let (shader, entry, cells) = match (self.target, stage) {
@@ -228,7 +236,7 @@ impl PassCx<'_> {
         let cuboid = matches!(stage, VertexStage::Cuboid(_));
         let items = if cuboid { ItemVertex::cuboid_layout() } else { ItemVertex::layout() };
         let vertex = [Some(crate::mesh::Vertex::shading_layout()), Some(items)];
-        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull };
+        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull, maps };
         self.pipeline(key, None, &vertex)
     }
 }

@@ -4,7 +4,7 @@
 use crate::mesh::Mesh;
 use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{DrawCall, ExportCx, Exported, ItemKind, KindDraw, PrepareCx};
-use crate::render::scene::DrawItem;
+use crate::render::scene::{DrawItem, Material};
 
 /// The kind of [`DrawItem::plain`].
 pub struct PlainMesh;
@@ -24,7 +24,7 @@ impl ItemKind for PlainMesh {
         item: &DrawItem,
         stage: VertexStage,
     ) -> anyhow::Result<Option<KindDraw>> {
-        mesh_draw(cx, &item.mesh, stage).map(Some)
+        mesh_draw(cx, &item.mesh, &item.material, stage).map(Some)
     }
 
     fn export(&self, _: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
@@ -32,21 +32,27 @@ impl ItemKind for PlainMesh {
     }
 }
 
-/// `mesh` drawn through `stage`, one instance per item of the draw.
-pub fn mesh_draw(cx: &mut PrepareCx<'_, '_>, mesh: &Mesh, stage: VertexStage) -> anyhow::Result<KindDraw> {
-    mesh_draw_culled(cx, mesh, stage, None)
+/// `mesh` drawn through `stage` in the draw's `material`, one instance per item of the draw.
+pub fn mesh_draw(
+    cx: &mut PrepareCx<'_, '_>,
+    mesh: &Mesh,
+    material: &Material,
+    stage: VertexStage,
+) -> anyhow::Result<KindDraw> {
+    mesh_draw_culled(cx, mesh, material, stage, None)
 }
 
 /// [`mesh_draw`] culling `cull` faces (closed surfaces wound with their fronts outwards).
 pub fn mesh_draw_culled(
     cx: &mut PrepareCx<'_, '_>,
     mesh: &Mesh,
+    material: &Material,
     stage: VertexStage,
     cull: Option<wgpu::Face>,
 ) -> anyhow::Result<KindDraw> {
     let gpu_mesh = mesh.gpu(cx.pass.gpu);
     Ok(KindDraw {
-        pipeline: cx.pass.mesh_pipeline_culled(stage, cull)?,
+        pipeline: cx.pass.mesh_pipeline_culled(stage, cull, material.has_maps())?,
         group2: None,
         mesh: Some(((*gpu_mesh.vertices).clone(), (*gpu_mesh.indices).clone())),
         instances: None,

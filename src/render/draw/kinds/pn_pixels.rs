@@ -28,7 +28,7 @@ impl ItemKind for PnPixels {
         stage: VertexStage,
     ) -> anyhow::Result<Option<KindDraw>> {
         if cx.pass.target != TargetKind::GBuffer || stage != VertexStage::Linear {
-            return mesh_draw(cx, &item.mesh, stage).map(Some);
+            return mesh_draw(cx, &item.mesh, &item.material, stage).map(Some);
         }
         let gpu = cx.pass.gpu;
         let mesh = item.mesh.gpu(gpu);
@@ -42,6 +42,7 @@ impl ItemKind for PnPixels {
             inputs: "pn mesh",
             constants: Vec::new(),
             cull: None,
+            maps: item.material.has_maps(),
         };
         Ok(Some(KindDraw {
             pipeline: cx.pass.pipeline(key, Some(&layout), &[])?,

@@ -22,12 +22,12 @@ impl ItemKind for TessMesh {
     fn prepare(
         &self,
         cx: &mut PrepareCx<'_, '_>,
-        _: &DrawItem,
+        item: &DrawItem,
         stage: VertexStage,
     ) -> anyhow::Result<Option<KindDraw>> {
         // Written by the compute pass this frame: counts never come back to the CPU.
         Ok(Some(KindDraw {
-            pipeline: cx.pass.mesh_pipeline(stage)?,
+            pipeline: cx.pass.mesh_pipeline(stage, item.material.has_maps())?,
             group2: None,
             mesh: Some(((*self.vertices).clone(), (*self.indices).clone())),
             instances: None,

@@ -105,7 +105,11 @@ impl ItemKind for WovenLayer {
             }
             // Written by the compute pass this frame; the counts are the plan's.
             return Ok(Some(KindDraw {
-                pipeline: cx.pass.mesh_pipeline_culled(stage, self.culled_faces(cx.pass.target, item, stage))?,
+                pipeline: cx.pass.mesh_pipeline_culled(
+                    stage,
+                    self.culled_faces(cx.pass.target, item, stage),
+                    item.material.has_maps(),
+                )?,
                 group2: None,
                 mesh: Some(((*g.layer.vertices).clone(), (*g.layer.indices).clone())),
                 instances: None,
@@ -115,7 +119,8 @@ impl ItemKind for WovenLayer {
         if item.mesh.indices.is_empty() {
             return Ok(None);
         }
-        mesh_draw_culled(cx, &item.mesh, stage, self.culled_faces(cx.pass.target, item, stage)).map(Some)
+        mesh_draw_culled(cx, &item.mesh, &item.material, stage, self.culled_faces(cx.pass.target, item, stage))
+            .map(Some)
     }
 
     fn export(&self, cx: &mut ExportCx<'_>, item: &DrawItem) -> anyhow::Result<Exported> {
