@@ -9,10 +9,11 @@ struct Frame {
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
-// Whether the draw's material has a base or a gloss map (src/render/draw/kind.rs
-// `PipelineKey::maps`): lavapipe runs both sides of a branch, so maps that are not there are
-// compiled out rather than skipped.
+// What the draw's material needs (src/render/scene.rs `MaterialFeatures`): a base or a gloss
+// map; a tangent frame in the surface target (a BTF shades it). Lavapipe runs both sides of a
+// branch, so what is not needed is compiled out rather than skipped.
 override MAPS: bool = true;
+override TANGENTS: bool = true;
 
 // #include "object.wgsl"
 
@@ -47,6 +48,10 @@ fn write_gbuffer(world: vec3<f32>, world_normal: vec3<f32>, uv: vec2<f32>, view_
     out.color = vec4<f32>(albedo, gloss);
     out.normal = vec4<f32>(n, object.detail);
     out.depth = view_depth;
-    out.surface = encode_surface(world, n, uv, object.btf_id);
+    // Without a BTF the tangent frame is not read: the UV only, no tangent, id 0.
+    out.surface = vec4<u32>(bitcast<u32>(uv.x), bitcast<u32>(uv.y), 0u, 0u);
+    if TANGENTS {
+        out.surface = encode_surface(world, n, uv, object.btf_id);
+    }
     return out;
 }

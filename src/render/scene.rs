@@ -125,10 +125,21 @@ pub struct Material {
     pub btf_id: u16,
 }
 
+/// What of a material a G-buffer pipeline compiles in (`MAPS` and `TANGENTS` in
+/// shaders/common/gbuffer_common.wgsl). Lavapipe, the rasterizer without a GPU, runs both sides
+/// of every branch, so maps a material lacks and a tangent frame no BTF reads are compiled out
+/// rather than skipped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct MaterialFeatures {
+    /// A base or a gloss map is bound.
+    pub maps: bool,
+    /// A `BtfShading` node shades it (`btf_id` not 0): the surface target gets its tangent frame.
+    pub tangents: bool,
+}
+
 impl Material {
-    /// Whether a base or a gloss map is bound: G-buffer pipelines sample them only then.
-    pub fn has_maps(&self) -> bool {
-        self.texture.is_some() || self.gloss_map.is_some()
+    pub fn features(&self) -> MaterialFeatures {
+        MaterialFeatures { maps: self.texture.is_some() || self.gloss_map.is_some(), tangents: self.btf_id != 0 }
     }
 }
 

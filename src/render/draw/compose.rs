@@ -193,7 +193,8 @@ fn box_after(m: Mat4, lo: glam::Vec3, hi: glam::Vec3) -> (DVec3, DVec3) {
 const CELLS_PER_ROW: usize = 1024;
 
 /// Whether `b` can join the instanced draw of `a`: kinds that instance, one vertex stage, on
-/// one mesh with the same maps (one object group).
+/// one mesh with the same maps (one object group) and one G-buffer pipeline (whether a BTF
+/// shades them, [`crate::render::scene::MaterialFeatures`]).
 fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bool {
     let same_map = |x: &Option<Arc<Image8>>, y: &Option<Arc<Image8>>| match (x, y) {
         (None, None) => true,
@@ -206,6 +207,7 @@ fn same_draw(a: (&DrawItem, &ComposedItem), b: (&DrawItem, &ComposedItem)) -> bo
         && Arc::ptr_eq(&ai.mesh, &bi.mesh)
         && same_map(&ai.material.texture, &bi.material.texture)
         && same_map(&ai.material.gloss_map, &bi.material.gloss_map)
+        && ai.material.features() == bi.material.features()
         && at.stage() == bt.stage()
 }
 

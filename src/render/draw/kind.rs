@@ -16,7 +16,7 @@ use std::collections::HashMap;
 use crate::gpu::pass::Bindings;
 use crate::gpu::{GpuContext, RenderPipelineDesc};
 use crate::mesh::Mesh;
-use crate::render::scene::DrawItem;
+use crate::render::scene::{DrawItem, MaterialFeatures};
 
 use super::compose::{ItemVertex, VertexStage};
 use crate::warp::gpu::{GpuWarper, InstanceResolver};
@@ -145,9 +145,8 @@ pub struct PipelineKey {
     pub constants: Vec<(&'static str, u32)>,
     /// Faces culled: `None` (two-sided) for everything but closed surfaces drawn by their fronts.
     pub cull: Option<wgpu::Face>,
-    /// Whether the draw's material has a base or a gloss map ([`Material::has_maps`]). Without,
-    /// a G-buffer pipeline is built with `MAPS` off (shaders/common/gbuffer_common.wgsl).
-    pub maps: bool,
+    /// What the draw's material needs of a G-buffer pipeline ([`MaterialFeatures`]).
+    pub material: MaterialFeatures,
 }
 
 /// What every draw of a pass shares: the target and its bind group layouts. Kinds build their
@@ -191,8 +190,9 @@ impl PassCx<'_> {
             2
         };
         let mut constants = key.constants.clone();
-        if self.target == TargetKind::GBuffer && !key.maps {
-            constants.push(("MAPS", 0));
+        if self.target == TargetKind::GBuffer {
+            let MaterialFeatures { maps, tangents } = key.material;
+            constants.extend([("MAPS", u32::from(maps)), ("TANGENTS", u32::from(tangents))]);
         }
         let pipeline = self.gpu.render_pipeline(&RenderPipelineDesc {
             vertex_entry: key.entry,
@@ -208,8 +208,12 @@ impl PassCx<'_> {
     /// The pipeline that draws a mesh (vertex buffer of [`crate::mesh::Vertex`], the items'
     /// transforms as instances) through `stage` into this target: plain meshes, tessellations
     /// and every kind drawn as its mesh somewhere.
-    pub fn mesh_pipeline(&self, stage: VertexStage, maps: bool) -> anyhow::Result<wgpu::RenderPipeline> {
-        self.mesh_pipeline_culled(stage, None, maps)
+    pub fn mesh_pipeline(
+        &self,
+        stage: VertexStage,
+        material: MaterialFeatures,
+    ) -> anyhow::Result<wgpu::RenderPipeline> {
+        self.mesh_pipeline_culled(stage, None, material)
     }
 
     /// [`PassCx::mesh_pipeline`] culling `cull` faces: for closed surfaces whose fronts face out.
@@ -217,7 +221,7 @@ impl PassCx<'_> {
         &self,
         stage: VertexStage,
         cull: Option<wgpu::Face>,
-        maps: bool,
+        material: MaterialFeatures,
     ) -> anyhow::Result<wgpu::RenderPipeline> {
         use crate::cuboid::NormalMethod::{Direct, TangentSpace};
         let (shader, entry, cells) = match (self.target, stage) {
@@ -236,7 +240,7 @@ impl PassCx<'_> {
         let cuboid = matches!(stage, VertexStage::Cuboid(_));
         let items = if cuboid { ItemVertex::cuboid_layout() } else { ItemVertex::layout() };
         let vertex = [Some(crate::mesh::Vertex::shading_layout()), Some(items)];
-        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull, maps };
+        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull, material };
         self.pipeline(key, None, &vertex)
     }
 }

@@ -51,8 +51,8 @@ impl ItemKind for AttachedDraw {
         // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp/warp.wgsl).
         let mut constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
         constants.extend(self.settings.constants(self.per_instance_frames()));
-        let maps = item.material.has_maps();
-        let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants, cull: None, maps };
+        let material = item.material.features();
+        let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants, cull: None, material };
         let vertex = [Some(Vertex::layout()), Some(InstanceData::layout())];
         let mesh = item.mesh.gpu(gpu);
         Ok(Some(KindDraw {

@@ -52,7 +52,7 @@ pub fn mesh_draw_culled(
 ) -> anyhow::Result<KindDraw> {
     let gpu_mesh = mesh.gpu(cx.pass.gpu);
     Ok(KindDraw {
-        pipeline: cx.pass.mesh_pipeline_culled(stage, cull, material.has_maps())?,
+        pipeline: cx.pass.mesh_pipeline_culled(stage, cull, material.features())?,
         group2: None,
         mesh: Some(((*gpu_mesh.vertices).clone(), (*gpu_mesh.indices).clone())),
         instances: None,

@@ -42,7 +42,7 @@ impl ItemKind for PnPixels {
             inputs: "pn mesh",
             constants: Vec::new(),
             cull: None,
-            maps: item.material.has_maps(),
+            material: item.material.features(),
         };
         Ok(Some(KindDraw {
             pipeline: cx.pass.pipeline(key, Some(&layout), &[])?,

@@ -27,7 +27,7 @@ impl ItemKind for TessMesh {
     ) -> anyhow::Result<Option<KindDraw>> {
         // Written by the compute pass this frame: counts never come back to the CPU.
         Ok(Some(KindDraw {
-            pipeline: cx.pass.mesh_pipeline(stage, item.material.has_maps())?,
+            pipeline: cx.pass.mesh_pipeline(stage, item.material.features())?,
             group2: None,
             mesh: Some(((*self.vertices).clone(), (*self.indices).clone())),
             instances: None,

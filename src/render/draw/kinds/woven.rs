@@ -108,7 +108,7 @@ impl ItemKind for WovenLayer {
                 pipeline: cx.pass.mesh_pipeline_culled(
                     stage,
                     self.culled_faces(cx.pass.target, item, stage),
-                    item.material.has_maps(),
+                    item.material.features(),
                 )?,
                 group2: None,
                 mesh: Some(((*g.layer.vertices).clone(), (*g.layer.indices).clone())),
