@@ -282,8 +282,10 @@ fn bracket_index(along: u32, x: f32) -> u32 {
 fn eta(i: i32, j: i32) -> f32 {
     let w = i32(params.weave_w);
     let h = i32(params.weave_h);
-    let ii = ((i % w) + w) % w;
-    let jj = ((j % h) + h) % h;
+    // Euclidean remainders by floor division: `%` of a negative operand (the yarns' half-node
+    // ends at u = -0.5) is undefined in GLSL, which the GL backend compiles this to.
+    let ii = i - w * i32(floor(f32(i) / f32(w)));
+    let jj = j - h * i32(floor(f32(j) / f32(h)));
     return f32(weave[jj * w + ii]);
 }
 
