@@ -11,7 +11,7 @@ use crate::render::scene::{Camera, DrawItem, View};
 pub static GBUFFER_PASS: NodeSpec = NodeSpec {
     kind: "GBufferPass",
     category: Category::Render,
-    doc: "Rasterizes a scene into the G-buffer: colour + glossiness, normal + coarse/detail flag, linear depth, and the surface (UV, the tangent frame of the UVs from screen-space derivatives, the material's btf_id) for BtfShading. Attached (deferred-warped) items are drawn instanced through their matrix texture.",
+    doc: "Rasterizes a scene into the G-buffer: colour + glossiness, normal + coarse/detail flag, linear depth, and the surface (UV, the tangent frame of the UVs from screen-space derivatives, the material's btf_id) for BtfShading (the tangent frame only for materials with a btf_id). Attached (deferred-warped) items are drawn instanced through their matrix texture.",
     inputs: &[
         PortSpec::required("scene", PortType::Scene, "What to draw."),
         PortSpec::required("camera", PortType::Camera, "The view."),

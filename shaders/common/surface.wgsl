@@ -5,7 +5,8 @@
 //      two snorm16;
 //   w: bits 0..15 the material's BTF id (0: none), bit 16 the handedness (set where the
 //      direction of decreasing v is -cross(n, tangent) instead of +cross(n, tangent)), bit 17
-//      set where the UVs gave a tangent (clear: no UVs, or degenerate ones).
+//      set where the UVs gave a tangent (clear: no UVs, or degenerate ones). Materials without
+//      a BTF id get no tangent frame (gbuffer_common.wgsl `TANGENTS`): z and w are 0.
 // Cleared to 0: nothing drawn, no BTF.
 
 const SURFACE_ID_MASK: u32 = 0xffffu;

@@ -1,6 +1,8 @@
 // Woven cloth at three scales in compute (Zhang et al. 2012, IDSS; docs/woven.md). The twin of
 // src/woven/tess.rs, lod.rs, panel.rs and yarn.rs: each function here has the name and the
-// arithmetic of its Rust original (f32 here, f64 there). The CPU plans the frame (src/woven/gpu.rs:
+// arithmetic of its Rust original (f32 here, f64 there), but for the panel's bilinear grids,
+// read from the lattice the CPU evaluates, and the border frames' neighbour derivatives, which
+// read only the two columns of Bézier points next to the edge. The CPU plans the frame (src/woven/gpu.rs:
 // each drawn patch's level, its four edge levels, its first vertex and index); four entry points
 // fill one layer's buffers, one workgroup column per patch, as many rows (y of the dispatch) as
 // the pass's largest patch needs; invocations stride by 64 x the rows:
@@ -9,7 +11,7 @@
 //                   frames and morph rings are evaluated once and shared by its vertices (they
 //                   differ in θ only); dispatched twice, with MORPHS off for the patches under
 //                   level 6;
-//   panel_indices, tube_indices    its triangles.
+//   panel_indices, tube_indices    its triangles, a quad per loop iteration.
 // Lavapipe (llvmpipe), which CI and most users without a GPU run, executes both sides of every
 // branch under a mask and a loop's body once more than it iterates: the cost of a ring is all the
 // code it could take. So the panel's bilinear grids are read from a lattice, a border frame
@@ -282,10 +284,16 @@ fn bracket_index(along: u32, x: f32) -> u32 {
 fn eta(i: i32, j: i32) -> f32 {
     let w = i32(params.weave_w);
     let h = i32(params.weave_h);
-    // Euclidean remainders by floor division: `%` of a negative operand (the yarns' half-node
-    // ends at u = -0.5) is undefined in GLSL, which the GL backend compiles this to.
-    let ii = i - w * i32(floor(f32(i) / f32(w)));
-    let jj = j - h * i32(floor(f32(j) / f32(h)));
+    // Euclidean remainders without `%` of a negative operand (the yarns' half-node ends at
+    // u = -0.5), which GLSL, the GL backend's target, leaves undefined: floor division, then
+    // one step back into [0, n) where an inexact divide (GPUs may multiply by a reciprocal)
+    // landed a multiple of n one off.
+    var ii = i - w * i32(floor(f32(i) / f32(w)));
+    ii = select(ii, ii - w, ii >= w);
+    ii = select(ii, ii + w, ii < 0);
+    var jj = j - h * i32(floor(f32(j) / f32(h)));
+    jj = select(jj, jj - h, jj >= h);
+    jj = select(jj, jj + h, jj < 0);
     return f32(weave[jj * w + ii]);
 }
 

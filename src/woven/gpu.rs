@@ -275,6 +275,14 @@ impl GpuWoven {
                 limit >> 20
             );
         }
+        // The lattice: 81 points of 16 bytes per patch.
+        let lattice_bytes = (81 * 16 * pu * pv) as u64;
+        anyhow::ensure!(
+            lattice_bytes <= limit,
+            "{pu}x{pv} patches need a {} MB lattice, more than this GPU's {} MB in one buffer",
+            lattice_bytes >> 20,
+            limit >> 20
+        );
         let bezier: Vec<[f32; 4]> = w
             .panel
             .patches
