@@ -189,6 +189,18 @@ fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec
     }
 }
 
+/// Vertices a thread takes at a time in [`BodyMesh::collide`]; fewer than two chunks run on the
+/// calling thread alone.
+const CONTACT_CHUNK: usize = 512;
+
+/// One vertex's contact in a substep: its clearance (infinite when no body triangle is near),
+/// whether its candidates did not cover it (a fallback search), and where the contact moved it.
+struct VertexContact {
+    clearance: f32,
+    fallback: bool,
+    moved_to: Option<Vec3>,
+}
+
 /// How deep inside the body (m) a cloth vertex beyond its candidates' reach is still pushed
 /// back out by the body's nearest surface. Deeper (a limb moved through the cloth, a drape
 /// started on another pose) the nearest surface is as likely the wrong one.
@@ -647,43 +659,76 @@ impl BodyMesh {
         thickness: f32,
         friction: f32,
     ) {
-        for i in which {
+        let which: Vec<u32> = which.collect();
+        // Each vertex's contact depends on it and the body alone: found on the cores in
+        // chunks, applied in order, so the result is the same for any thread count.
+        let threads = if which.len() >= 2 * CONTACT_CHUNK { 0 } else { 1 };
+        let this = &*self;
+        let positions = &*x;
+        let chunks = crate::core::parallel::map(which.len().div_ceil(CONTACT_CHUNK), threads, |c| {
+            let chunk = &which[c * CONTACT_CHUNK..((c + 1) * CONTACT_CHUNK).min(which.len())];
+            chunk
+                .iter()
+                .map(|&i| this.vertex_contact(i as usize, positions, prev, inv_mass, s0, s1, thickness, friction))
+                .collect::<Vec<_>>()
+        });
+        for (&i, contact) in which.iter().zip(chunks.iter().flatten()) {
             let i = i as usize;
-            self.clearance[i] = f32::INFINITY;
-            if inv_mass[i] == 0.0 {
-                continue;
+            self.clearance[i] = contact.clearance;
+            self.stats.fallbacks += usize::from(contact.fallback);
+            if let Some(xi) = contact.moved_to {
+                self.stats.contacts += 1;
+                x[i] = xi;
             }
-            let p = x[i];
-            let covered = self.query[i].margin(p);
-            let hit = if covered >= thickness {
-                let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
-                if a == b {
-                    continue;
+        }
+    }
+
+    /// Vertex `i`'s contact with the body this substep (what [`BodyMesh::collide`] applies).
+    #[allow(clippy::too_many_arguments)]
+    fn vertex_contact(
+        &self,
+        i: usize,
+        x: &[Vec3],
+        prev: &[Vec3],
+        inv_mass: &[f32],
+        s0: f32,
+        s1: f32,
+        thickness: f32,
+        friction: f32,
+    ) -> VertexContact {
+        let mut out = VertexContact { clearance: f32::INFINITY, fallback: false, moved_to: None };
+        if inv_mass[i] == 0.0 {
+            return out;
+        }
+        let p = x[i];
+        let covered = self.query[i].margin(p);
+        let hit = if covered >= thickness {
+            let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
+            if a == b {
+                return out;
+            }
+            self.closest(p, s1, self.cand[a..b].iter().copied(), covered, DEEPEST_CONTACT)
+        } else {
+            out.fallback = true;
+            let mut near = Vec::new();
+            let q = Aabb::around(p, 2.0 * thickness);
+            self.tree.query(&q, |t| {
+                if self.boxes[t as usize].overlaps(&q) {
+                    near.push(t)
                 }
-                self.closest(p, s1, self.cand[a..b].iter().copied(), covered, DEEPEST_CONTACT)
-            } else {
-                self.stats.fallbacks += 1;
-                let mut near = Vec::new();
-                let q = Aabb::around(p, 2.0 * thickness);
-                self.tree.query(&q, |t| {
-                    if self.boxes[t as usize].overlaps(&q) {
-                        near.push(t)
-                    }
-                });
-                self.closest(p, s1, near.into_iter(), 2.0 * thickness, DEEPEST_CONTACT)
-            };
-            let Some((dist, n, t, bary)) = hit else {
-                continue;
-            };
-            self.clearance[i] = dist.max(thickness);
-            if dist >= thickness {
-                continue;
-            }
-            self.stats.contacts += 1;
+            });
+            self.closest(p, s1, near.into_iter(), 2.0 * thickness, DEEPEST_CONTACT)
+        };
+        let Some((dist, n, t, bary)) = hit else {
+            return out;
+        };
+        out.clearance = dist.max(thickness);
+        if dist < thickness {
             let depth = thickness - dist;
             let xi = p + n * depth;
-            x[i] = xi - self.friction_cut(t, bary, s0, s1, n, xi - prev[i], depth, friction);
+            out.moved_to = Some(xi - self.friction_cut(t, bary, s0, s1, n, xi - prev[i], depth, friction));
         }
+        out
     }
 
     /// PBD Coulomb friction of a contact pushed `depth` out along `n` at barycentrics `bary` of
