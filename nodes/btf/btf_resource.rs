@@ -60,7 +60,7 @@ pub static BTF: NodeSpec = NodeSpec {
         ParamSpec::new(
             "source",
             ParamKind::Choice { default: "lambert", options: BtfSource::OPTIONS },
-            "file: the BTF file at `path`; lambert: rho/pi cos theta_i with `albedo` (stripes of `stripe_albedo`); directions: flat colours per (view, light) pair, for checking the interpolation; bake: a `weave` baked from yarn geometry at `resolution` (at most 32) and `sampling` (the bake's red warp and blue weft).",
+            "file: the BTF file at `path`; lambert: rho/pi cos theta_i with `albedo` (stripes of `stripe_albedo`); directions: flat colours per (view, light) pair, for checking the interpolation; bake: a `weave` baked from yarn geometry at `resolution` (at most 32) and `sampling`, in `warp_color` and `weft_color`.",
         ),
         ParamSpec::new(
             "path",
@@ -100,6 +100,16 @@ pub static BTF: NodeSpec = NodeSpec {
             "Bake: plain, 2/1 twill or 5-satin (one repeat per tile).",
         ),
         ParamSpec::new("supersample", ParamKind::Int { default: 2, min: 1, max: 4 }, "Bake: n x n rays per texel."),
+        ParamSpec::new(
+            "warp_color",
+            ParamKind::Color { default: crate::btf::bake::WARP_COLOUR },
+            "Bake: the warps' albedo, linear RGB (as WovenCloth's warp_color, to shade its panel).",
+        ),
+        ParamSpec::new(
+            "weft_color",
+            ParamKind::Color { default: crate::btf::bake::WEFT_COLOUR },
+            "Bake: the wefts' albedo, linear RGB.",
+        ),
         ParamSpec::new(
             "frontal",
             ParamKind::Bool { default: false },
@@ -241,6 +251,8 @@ fn bake(cx: &EvalCx<'_>, sampling: Sampling, size: usize) -> Result<Btf, NodeErr
         size,
         sampling,
         supersample: cx.int("supersample") as usize,
+        warp_colour: cx.vec3("warp_color").to_array(),
+        weft_colour: cx.vec3("weft_color").to_array(),
         ..BakeParams::tier(pattern, Tier::Test)
     };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -102,6 +102,11 @@ pub static WOVEN_CLOTH: NodeSpec = NodeSpec {
             "Glossiness of all three items.",
         ),
         ParamSpec::new(
+            "panel_btf_id",
+            ParamKind::Int { default: 0, min: 0, max: 65535 },
+            "The panel layer's btf_id (levels 0-4, one quad per patch): a BtfShading node whose material_id equals it shades the far patches with a BTF (a Btf baked from the same weave, tiled once per weave repeat); 0: the panel is shaded as geometry in the warp and weft colours mixed by cover. The yarn and fibre layers are always geometry.",
+        ),
+        ParamSpec::new(
             "fibres",
             ParamKind::Int { default: 6, min: 1, max: 32 },
             "Fibres per yarn, on one ring (radius from packing).",
@@ -213,8 +218,13 @@ impl Node for WovenClothNode {
         let (weft, warp) = (cx.vec3("weft_color"), cx.vec3("warp_color"));
         let cover = weave.weft_cover() as f32;
         let gloss = cx.f32("glossiness");
-        let materials = [weft * cover + warp * (1.0 - cover), weft, warp]
-            .map(|color| Arc::new(Material { base_color: color, glossiness: gloss, ..Default::default() }));
+        // The panel layer carries the BTF id: far patches switch from geometry to the BTF at
+        // the panel scale (L < 4), where the yarns have not yet risen from the panel.
+        let panel_btf = u16::try_from(cx.int("panel_btf_id")).unwrap_or(0);
+        let materials =
+            [(weft * cover + warp * (1.0 - cover), panel_btf), (weft, 0), (warp, 0)].map(|(color, btf_id)| {
+                Arc::new(Material { base_color: color, glossiness: gloss, btf_id, ..Default::default() })
+            });
         let names = LAYER_NAMES;
         let mut planned = 0;
         let mut layers: [Layer; 3] = Default::default();

@@ -57,8 +57,8 @@ impl MarkdownRow for WovenRow {
 
 /// Table 1's rows: patches per side, whether the view is close (most patches culled), C of
 /// eq. 16 for the adaptive mode (the paper does not give its C; these put the nearest patches at
-/// the yarn scale, L 6-8, as most of the paper's adaptive rows are) and the paper's (L = 7,
-/// L = 9, adaptive) figures.
+/// the yarn scale: about L 7.3, 7.3 and 6.3 in rows 0-2, 5.0, 5.1 and 5.5 in rows 3-5) and the
+/// paper's (L = 7, L = 9, adaptive) figures.
 const ROWS: [(usize, bool, f64, [&str; 3]); 6] = [
     (8, true, 0.07, ["115.82 / 8 / 524288", "403.21 / 2 / 2097152", "45.22 / 22 / 196608"]),
     (16, true, 0.07, ["402.35 / 2 / 2097152", "1782.33 / 0 / 8388608", "42.43 / 23 / 188416"]),

@@ -139,6 +139,10 @@ impl Default for YarnShape {
     }
 }
 
+/// The bakes' default albedos (linear RGB): a red warp and a blue weft.
+pub const WARP_COLOUR: [f64; 3] = [0.60, 0.12, 0.10];
+pub const WEFT_COLOUR: [f64; 3] = [0.12, 0.22, 0.55];
+
 /// Everything a bake depends on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BakeParams {
@@ -163,8 +167,8 @@ impl BakeParams {
             size: tier.size(),
             sampling: tier.sampling(),
             supersample: 2,
-            warp_colour: [0.60, 0.12, 0.10],
-            weft_colour: [0.12, 0.22, 0.55],
+            warp_colour: WARP_COLOUR.map(|c| c as f32),
+            weft_colour: WEFT_COLOUR.map(|c| c as f32),
             yarn: YarnShape::default(),
         }
     }

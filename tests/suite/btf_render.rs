@@ -845,3 +845,42 @@ fn eight_bit_layers_shade_like_half_floats_in_half_the_memory() {
     assert!(worst > 0.0 && worst < 0.03 * peak && mean < 0.003 * peak, "worst {worst}, mean {mean} of peak {peak}");
     assert!((byte_bytes as f64) < 0.55 * half_bytes as f64, "{byte_bytes} bytes against {half_bytes}");
 }
+
+/// `WovenCloth`'s panel layer under a BTF (graphs/fig10_woven_btf.ron): the far patches, at the
+/// panel scale, carry `panel_btf_id` into the G-buffer and BtfShading shades them; the near
+/// ones, yarns, are geometry and keep the DirectLight image; with `panel_btf_id` 0 no pixel is
+/// the BTF's.
+#[test]
+fn the_woven_panel_scale_is_shaded_by_the_btf_of_its_weave() {
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/graphs/fig10_woven_btf.ron"));
+    for panel_btf_id in [1, 0] {
+        let mut graph = Graph::load(path).unwrap();
+        graph.set_from_cli(&format!("cloth.panel_btf_id={panel_btf_id}")).unwrap();
+        let ev = evaluate_graph(&graph, 160, 120);
+        let texels = texels(&gbuffer_of(&ev));
+        let (lit, shaded) = (image(&ev, "light"), image(&ev, "shade"));
+        let (mut panel, mut yarns, mut panel_changed, mut yarns_kept) = (0, 0, 0, 0);
+        for (i, t) in texels.iter().enumerate() {
+            let Some(t) = t else { continue };
+            let same = (0..3).all(|c| (lit.rgba[i * 4 + c] - shaded.rgba[i * 4 + c]).abs() < 1e-6);
+            if t.id == 1 {
+                assert!(t.has_tangent, "pixel {i}: a BTF pixel without a tangent frame");
+                panel += 1;
+                panel_changed += usize::from(!same);
+            } else {
+                yarns += 1;
+                yarns_kept += usize::from(same);
+            }
+        }
+        eprintln!(
+            "panel_btf_id {panel_btf_id}: {panel} BTF pixels ({panel_changed} shaded), {yarns} others ({yarns_kept} kept)"
+        );
+        assert_eq!(yarns_kept, yarns, "pixels outside the BTF's material changed");
+        if panel_btf_id == 1 {
+            assert!(panel > 1000 && yarns > 1000, "{panel} panel and {yarns} yarn pixels");
+            assert!(panel_changed * 10 > panel * 9, "BtfShading shaded {panel_changed} of {panel} panel pixels");
+        } else {
+            assert_eq!(panel, 0);
+        }
+    }
+}
