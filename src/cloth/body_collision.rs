@@ -646,7 +646,8 @@ impl BodyMesh {
 
     /// Pushes the free vertices `which` out to `thickness` at time `s1` and
     /// applies friction to their motion since `prev` relative to the body's
-    /// motion since `s0`.
+    /// motion since `s0`. Each vertex at most once in `which` (all of them, or the welded
+    /// groups' disjoint members): the contacts are found from the positions before any move.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn collide(
         &mut self,
