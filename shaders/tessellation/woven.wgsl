@@ -146,25 +146,16 @@ fn evaluate(pi: u32, pj: u32, s: f32, t: f32) -> Eval {
     return e;
 }
 
-// deriv_u of patch `pid` on its edge s = 1 (`far`) or s = 0, at t: only the two columns of
-// Bézier points next to that edge weigh.
-fn edge_deriv_u(pid: u32, far: bool, t: f32) -> vec3<f32> {
-    let bv = bernstein(t);
-    let i = select(0u, 2u, far);
+// The derivative of patch `pid` across one of its edges, at parameter x along it: only the
+// two rows of Bézier points next to the edge weigh. `across`/`along`: the index steps of the
+// two directions (4, 1 for deriv_u on s = 0 or 1; 1, 4 for deriv_v on t = 0 or 1); `far`: the
+// edge at 1.
+fn edge_deriv(pid: u32, far: bool, x: f32, across: u32, along: u32) -> vec3<f32> {
+    let b = bernstein(x);
+    let first = 16u * pid + select(0u, 2u, far) * across;
     var d = vec3<f32>(0.0);
-    for (var j = 0u; j < 4u; j++) {
-        d += bv[j] * (bezier[16u * pid + 4u * (i + 1u) + j].xyz - bezier[16u * pid + 4u * i + j].xyz);
-    }
-    return 3.0 * d;
-}
-
-// deriv_v of patch `pid` on its edge t = 1 (`far`) or t = 0, at s.
-fn edge_deriv_v(pid: u32, far: bool, s: f32) -> vec3<f32> {
-    let bu = bernstein(s);
-    let j = select(0u, 2u, far);
-    var d = vec3<f32>(0.0);
-    for (var i = 0u; i < 4u; i++) {
-        d += bu[i] * (bezier[16u * pid + 4u * i + j + 1u].xyz - bezier[16u * pid + 4u * i + j].xyz);
+    for (var k = 0u; k < 4u; k++) {
+        d += b[k] * (bezier[first + across + k * along].xyz - bezier[first + k * along].xyz);
     }
     return 3.0 * d;
 }
@@ -178,13 +169,13 @@ fn panel_frame_of(pi: u32, pj: u32, s: f32, t: f32, du_own: vec3<f32>, dv_own: v
     let right = s == 1.0 && pi + 1u < params.patches_u;
     if left || right {
         let ni = select(min(pi + 1u, params.patches_u - 1u), pi - 1u, left);
-        du = 0.5 * (du + edge_deriv_u(patch_id(ni, pj), left, t));
+        du = 0.5 * (du + edge_deriv(patch_id(ni, pj), left, t, 4u, 1u));
     }
     let below = t == 0.0 && pj > 0u;
     let above = t == 1.0 && pj + 1u < params.patches_v;
     if below || above {
         let nj = select(min(pj + 1u, params.patches_v - 1u), pj - 1u, below);
-        dv = 0.5 * (dv + edge_deriv_v(patch_id(pi, nj), below, s));
+        dv = 0.5 * (dv + edge_deriv(patch_id(pi, nj), below, s, 1u, 4u));
     }
     let f = from_derivatives(du, dv);
     if params.flip != 0u {
@@ -281,20 +272,20 @@ fn bracket_index(along: u32, x: f32) -> u32 {
 
 // ---- yarn.rs ----
 
+// i's Euclidean remainder by n, without `%` of a negative operand (the yarns' half-node ends
+// at u = -0.5), which GLSL, the GL backend's target, leaves undefined: floor division, then
+// one step back into [0, n) where an inexact divide (GPUs may multiply by a reciprocal) landed
+// a multiple of n one off.
+fn wrap(i: i32, n: i32) -> i32 {
+    var r = i - n * i32(floor(f32(i) / f32(n)));
+    r = select(r, r - n, r >= n);
+    return select(r, r + n, r < 0);
+}
+
 fn eta(i: i32, j: i32) -> f32 {
     let w = i32(params.weave_w);
     let h = i32(params.weave_h);
-    // Euclidean remainders without `%` of a negative operand (the yarns' half-node ends at
-    // u = -0.5), which GLSL, the GL backend's target, leaves undefined: floor division, then
-    // one step back into [0, n) where an inexact divide (GPUs may multiply by a reciprocal)
-    // landed a multiple of n one off.
-    var ii = i - w * i32(floor(f32(i) / f32(w)));
-    ii = select(ii, ii - w, ii >= w);
-    ii = select(ii, ii + w, ii < 0);
-    var jj = j - h * i32(floor(f32(j) / f32(h)));
-    jj = select(jj, jj - h, jj >= h);
-    jj = select(jj, jj + h, jj < 0);
-    return f32(weave[jj * w + ii]);
+    return f32(weave[wrap(j, h) * w + wrap(i, w)]);
 }
 
 // Eq. 11: (h, dh/du); dir 0 weft, 1 warp.

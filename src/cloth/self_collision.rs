@@ -27,13 +27,13 @@ use super::bvh::{Aabb, AabbTree};
 /// triangle, pairs would otherwise grow with the square of the mesh (gigabytes at 1 cm edges).
 pub const MAX_PAIRS_PER_VERTEX: usize = 64;
 
+/// Vertices a thread takes at a time in [`SelfCollision::begin_frame`]'s pair search
+/// (`parallel::map_in_chunks`).
+const PAIR_CHUNK: usize = 512;
+
 /// One vertex's pairs `pairs[first..]` `(vertex, triangle, key)`: keeps the
 /// [`MAX_PAIRS_PER_VERTEX`] of smallest key (ties by triangle) and sorts them by triangle.
 /// Returns whether any were dropped.
-/// Vertices a thread takes at a time in [`SelfCollision::begin_frame`]'s pair search; fewer
-/// than two chunks run on the calling thread alone.
-const PAIR_CHUNK: usize = 512;
-
 pub(crate) fn cap_and_sort(pairs: &mut Vec<(u32, u32, f32)>, first: usize) -> bool {
     let capped = pairs.len() - first > MAX_PAIRS_PER_VERTEX;
     if capped {
@@ -113,43 +113,38 @@ impl SelfCollision {
         // Each vertex's pairs (its query of the tree, capped and sorted) on the cores in chunks,
         // then appended and given their sides in vertex order: the same for any thread count.
         let (tree, boxes) = (&self.tree, &self.boxes);
-        let threads = if x.len() >= 2 * PAIR_CHUNK { 0 } else { 1 };
-        let found = crate::core::parallel::map(x.len().div_ceil(PAIR_CHUNK), threads, |c| {
-            let mut out = Vec::with_capacity(PAIR_CHUNK);
-            for i in c * PAIR_CHUNK..((c + 1) * PAIR_CHUNK).min(x.len()) {
-                let q = sweep(i).inflate(r);
-                let mut pairs = Vec::new();
-                tree.query(&q, |t| {
-                    let tri = triangles[t as usize];
-                    // Not its own triangles, nor those of the vertices it is sewn to.
-                    if tri.iter().any(|&j| rep[j as usize] == rep[i]) || !boxes[t as usize].overlaps(&q) {
-                        return;
-                    }
-                    if inv_mass[i] == 0.0 && tri.iter().all(|&j| inv_mass[j as usize] == 0.0) {
-                        return;
-                    }
-                    if !excluded.is_empty() && excluded.binary_search(&(i as u32, t)).is_ok() {
-                        return;
-                    }
-                    // Near enough at the frame start for what the two can close
-                    // in on each other this frame.
-                    let [a, b, c] = tri.map(|j| j as usize);
-                    let closing = (v[i] - (v[a] + v[b] + v[c]) / 3.0).length() * (1.25 * dt);
-                    let q_near = super::collider::closest_point_on_triangle(x[i], x[a], x[b], x[c]);
-                    let d = x[i].distance(q_near);
-                    if d <= thickness + slack + closing {
-                        // How soon the two can meet (distance less closing) rides in the side's
-                        // place until the side is set below: the cap keeps the soonest.
-                        pairs.push((i as u32, t, d - closing));
-                    }
-                });
-                let capped = cap_and_sort(&mut pairs, 0);
-                out.push((pairs, capped));
-            }
-            out
+        let found = crate::core::parallel::map_in_chunks(x.len(), PAIR_CHUNK, |i| {
+            let q = sweep(i).inflate(r);
+            let mut pairs = Vec::new();
+            tree.query(&q, |t| {
+                let tri = triangles[t as usize];
+                // Not its own triangles, nor those of the vertices it is sewn to.
+                if tri.iter().any(|&j| rep[j as usize] == rep[i]) || !boxes[t as usize].overlaps(&q) {
+                    return;
+                }
+                if inv_mass[i] == 0.0 && tri.iter().all(|&j| inv_mass[j as usize] == 0.0) {
+                    return;
+                }
+                if !excluded.is_empty() && excluded.binary_search(&(i as u32, t)).is_ok() {
+                    return;
+                }
+                // Near enough at the frame start for what the two can close
+                // in on each other this frame.
+                let [a, b, c] = tri.map(|j| j as usize);
+                let closing = (v[i] - (v[a] + v[b] + v[c]) / 3.0).length() * (1.25 * dt);
+                let q_near = super::collider::closest_point_on_triangle(x[i], x[a], x[b], x[c]);
+                let d = x[i].distance(q_near);
+                if d <= thickness + slack + closing {
+                    // How soon the two can meet (distance less closing) rides in the side's
+                    // place until the side is set below: the cap keeps the soonest.
+                    pairs.push((i as u32, t, d - closing));
+                }
+            });
+            let capped = cap_and_sort(&mut pairs, 0);
+            (pairs, capped)
         });
         let mut prev_k = 0;
-        for (i, (pairs, capped)) in found.into_iter().flatten().enumerate() {
+        for (i, (pairs, capped)) in found.into_iter().enumerate() {
             let start = self.pairs.len();
             self.pairs.extend(pairs);
             if capped {

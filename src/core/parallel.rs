@@ -38,6 +38,17 @@ pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync)
     done.into_iter().map(|(_, t)| t).collect()
 }
 
+/// `f(0), ..., f(count - 1)` in index order, computed `chunk_len` items at a time on one thread
+/// per core; below two chunks on the calling thread alone (spawning costs more than it saves).
+pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let chunk_len = chunk_len.max(1);
+    let threads = if count >= 2 * chunk_len { 0 } else { 1 };
+    let chunks = map(count.div_ceil(chunk_len), threads, |c| {
+        (c * chunk_len..((c + 1) * chunk_len).min(count)).map(&f).collect::<Vec<T>>()
+    });
+    chunks.into_iter().flatten().collect()
+}
+
 /// `f(index, chunk)` for every `chunk_len`-long chunk of `out` (the last may be shorter), on
 /// `threads` threads (0: one per core); each chunk is written by one call alone, so the result
 /// does not depend on the thread count when `f` does not.
@@ -65,6 +76,13 @@ mod tests {
             assert_eq!(super::map(10, threads, |i| i * i), (0..10).map(|i| i * i).collect::<Vec<_>>());
         }
         assert!(super::map(0, 3, |i| i).is_empty());
+    }
+
+    #[test]
+    fn chunked_results_come_in_index_order() {
+        for (count, chunk) in [(0, 4), (3, 4), (10, 4), (10, 3), (9, 3)] {
+            assert_eq!(super::map_in_chunks(count, chunk, |i| i * i), (0..count).map(|i| i * i).collect::<Vec<_>>());
+        }
     }
 
     #[test]

@@ -308,11 +308,23 @@ impl GpuWoven {
         let lattice = gpu.upload_pooled("woven lattice", bytemuck::cast_slice(&lattice(w.panel, &drawn)), U::STORAGE);
         let bezier = gpu.upload_pooled("woven bezier", bytemuck::cast_slice(&bezier), U::STORAGE);
         let weave = gpu.upload_pooled("woven weave", bytemuck::cast_slice(&weave), U::STORAGE);
+        // Each pass's plans, uploaded once: the weft and the warp share the tubes'.
+        let plan_buffers = plans
+            .each_ref()
+            .map(|p| (!p.is_empty()).then(|| gpu.upload_pooled("woven plans", bytemuck::cast_slice(p), U::STORAGE)));
+        // The ring pass's two groups of patches: (patches, their plans, MORPHS).
+        let ring_groups: Vec<(u32, PooledBuffer, usize)> = [&plans[1][..coarse], &plans[1][coarse..]]
+            .into_iter()
+            .enumerate()
+            .filter(|(_, g)| !g.is_empty())
+            .map(|(fine, g)| {
+                let buffer = gpu.upload_pooled("woven ring plans", bytemuck::cast_slice(g), U::STORAGE);
+                (g.len() as u32, buffer, fine)
+            })
+            .collect();
         for (layer, name) in [(0usize, "panel"), (1, "weft"), (2, "warp")] {
             let p = usize::from(layer > 0);
-            if plans[p].is_empty() {
-                continue;
-            }
+            let Some(plan) = &plan_buffers[p] else { continue };
             let params = Params {
                 patches_u: pu as u32,
                 patches_v: pv as u32,
@@ -332,7 +344,6 @@ impl GpuWoven {
             };
             let [nv, ni] = totals[p];
             let params = gpu.upload_pooled("woven params", bytemuck::bytes_of(&params), U::STORAGE);
-            let plan = gpu.upload_pooled("woven plans", bytemuck::cast_slice(&plans[p]), U::STORAGE);
             let vertices = gpu.scratch_pooled(
                 &format!("woven {name} vertices"),
                 (nv * std::mem::size_of::<Vertex>()) as u64,
@@ -350,20 +361,6 @@ impl GpuWoven {
                 bytemuck::cast_slice(&args),
                 U::STORAGE | U::INDIRECT | U::COPY_SRC,
             );
-            // The ring pass's two groups of patches: (patches, their plans, MORPHS).
-            let ring_groups: Vec<(u32, PooledBuffer, usize)> = if p == 1 {
-                [&plans[1][..coarse], &plans[1][coarse..]]
-                    .into_iter()
-                    .enumerate()
-                    .filter(|(_, g)| !g.is_empty())
-                    .map(|(fine, g)| {
-                        let buffer = gpu.upload_pooled("woven ring plans", bytemuck::cast_slice(g), U::STORAGE);
-                        (g.len() as u32, buffer, fine)
-                    })
-                    .collect()
-            } else {
-                Vec::new()
-            };
             let binds = |plan| {
                 [
                     Bind::Storage(&params),
@@ -378,19 +375,17 @@ impl GpuWoven {
             let [vertex_pass, index_pass] = &mut self.passes[p];
             let rows = |items: usize, per_row| items.div_ceil(per_row).clamp(1, 65535) as u32;
             if p == 0 {
-                vertex_pass.dispatch(
-                    gpu,
-                    &[&binds(&plan)],
-                    [plans[0].len() as u32, rows(largest[0][0], VERTICES_PER_ROW), 1],
-                )?;
-            }
-            for (patches, group, fine) in &ring_groups {
-                let workgroups = [*patches, rows(largest_rings[*fine], VERTICES_PER_ROW), 1];
-                vertex_pass.dispatch_specialized(gpu, &[&binds(group)], workgroups, &[("MORPHS", *fine as u32)])?;
+                let workgroups = [plans[0].len() as u32, rows(largest[0][0], VERTICES_PER_ROW), 1];
+                vertex_pass.dispatch(gpu, &[&binds(plan)], workgroups)?;
+            } else {
+                for (patches, group, fine) in &ring_groups {
+                    let workgroups = [*patches, rows(largest_rings[*fine], VERTICES_PER_ROW), 1];
+                    vertex_pass.dispatch_specialized(gpu, &[&binds(group)], workgroups, &[("MORPHS", *fine as u32)])?;
+                }
             }
             index_pass.dispatch(
                 gpu,
-                &[&binds(&plan)],
+                &[&binds(plan)],
                 [plans[p].len() as u32, rows(largest[p][1], QUADS_PER_ROW), 1],
             )?;
             out.layers[layer] =

@@ -61,7 +61,7 @@ pub fn mesh_draw_culled(
 }
 
 /// What a drawn mesh exports: positions, normals, UVs and triangles (tangents are derived data).
-fn local_copy(mesh: &Mesh) -> Mesh {
+pub(crate) fn local_copy(mesh: &Mesh) -> Mesh {
     Mesh::from_raw(
         mesh.positions.clone(),
         mesh.normals.clone(),

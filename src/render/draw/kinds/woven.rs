@@ -11,7 +11,7 @@ use crate::render::draw::compose::VertexStage;
 use crate::render::draw::kind::{
     DrawCall, ExportCx, ExportDevice, Exported, ItemKind, KindDraw, PrepareCx, TargetKind,
 };
-use crate::render::draw::kinds::mesh::mesh_draw_culled;
+use crate::render::draw::kinds::mesh::{local_copy, mesh_draw_culled};
 use crate::render::scene::DrawItem;
 use crate::woven::gpu::GpuLayer;
 
@@ -127,17 +127,7 @@ impl ItemKind for WovenLayer {
         let m = match (&self.gpu, cx.device) {
             (Some(g), ExportDevice::Gpu) => g.layer.read_back_mesh(cx.gpu)?,
             (Some(g), ExportDevice::Cpu) => (g.cpu_reference)()?,
-            (None, _) => {
-                let m = &item.mesh;
-                crate::mesh::Mesh::from_raw(
-                    m.positions.clone(),
-                    m.normals.clone(),
-                    m.uvs.clone(),
-                    Vec::new(),
-                    Vec::new(),
-                    m.indices.clone(),
-                )
-            }
+            (None, _) => local_copy(&item.mesh),
         };
         Ok(Exported::Local(m))
     }
