@@ -22,6 +22,9 @@ pub struct WalkingAvatar {
     pub skinning: Skinning,
     /// Radians each upper arm turns away from the body on top of the walk ([`Pose::spread_arms`]).
     pub arm_spread: f64,
+    /// The body's lowest visible point at rest ([`Body::floor`]), found once: placing a pose
+    /// looks it up for every vertex.
+    floor: f32,
 }
 
 impl WalkingAvatar {
@@ -42,13 +45,14 @@ impl WalkingAvatar {
         let bvh = Bvh::load(&dir.join("walk1.bvh"))?;
         let (map, text) = JointMap::load(&dir.join("makehuman-old-rig.ron"))?;
         let retarget = Retarget::new(&map, "makehuman-old-rig.ron", &text, &bvh, "walk1.bvh", &skeleton)?;
-        Ok(WalkingAvatar { body, skeleton, weights, bvh, retarget, skinning: Skinning::Linear, arm_spread: 0.0 })
+        let floor = body.floor();
+        Ok(WalkingAvatar { body, skeleton, weights, bvh, retarget, skinning: Skinning::Linear, arm_spread: 0.0, floor })
     }
 
     /// Base-mesh units (decimetres, feet at the mesh's floor) to metres with the feet on y = 0,
     /// as the `Avatar` node's default `units` places the body.
     pub fn place(&self, p: Vec3) -> Vec3 {
-        (p - Vec3::Y * self.body.floor()) * 0.1
+        (p - Vec3::Y * self.floor) * 0.1
     }
 
     /// The collision body's vertices (metres) in `pose`.
