@@ -74,6 +74,11 @@ pub static GARMENT: NodeSpec = NodeSpec {
         ),
         ParamSpec::new("self_collision", ParamKind::Bool { default: false }, "Cloth-cloth contacts (slower)."),
         ParamSpec::new(
+            "untangle",
+            ParamKind::Bool { default: false },
+            "With self-collision: once the seams have closed, pull back cloth found through the cloth.",
+        ),
+        ParamSpec::new(
             "start_state",
             ParamKind::Path { default: "", extensions: &["drape"] },
             "A drape saved by `save_state` (relative to the graph's folder): the simulation starts from it at frame 0, seams closed, instead of from the flat panels. It must have been saved for the same garment (pattern, edge length, placement, sleeves), simulation settings and body vertex count; otherwise a warning says so and the garment is sewn from the start. Where the body stands at frame 0 is up to the graph: start the motion where the saving graph's was.",
@@ -149,7 +154,11 @@ impl Node for GarmentNode {
         let body: Option<Arc<Mesh>> = cx.optional("body");
         let body_n = body.as_ref().map(|b| b.positions.len());
         let params = DrapeParams {
-            sim: crate::cloth::SimParams { self_collision: cx.bool("self_collision"), ..DrapeParams::default().sim },
+            sim: crate::cloth::SimParams {
+                self_collision: cx.bool("self_collision"),
+                untangle: cx.bool("untangle"),
+                ..DrapeParams::default().sim
+            },
             sewing_frames: cx.int("sewing_frames") as u64,
         };
         let start: Option<Arc<DrapeState>> = match cx.str("start_state").trim() {
@@ -224,6 +233,8 @@ impl Node for GarmentNode {
             // cap (a heap, a burst of speed) and kept the nearest.
             cx.count("self_pairs", self_stats.pairs);
             cx.count("self_pairs_capped_vertices", self_stats.capped);
+            cx.count("self_crossings_found", self_stats.crossings);
+            cx.count("self_pairs_forced_back", self_stats.forced);
         }
         cx.count("panels", sewn.piece_names.len());
         cx.count("stitches", pattern.stitches.len());

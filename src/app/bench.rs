@@ -1825,7 +1825,7 @@ pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
-    (substeps, iterations): (u32, u32),
+    (substeps, iterations, untangle): (u32, u32, bool),
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1843,7 +1843,13 @@ pub fn drape_garment(
     let rest = body.positions().to_vec();
     let body_tris = body.triangles().to_vec();
     let params = DrapeParams {
-        sim: crate::cloth::SimParams { self_collision: true, substeps, iterations, ..DrapeParams::default().sim },
+        sim: crate::cloth::SimParams {
+            self_collision: true,
+            untangle,
+            substeps,
+            iterations,
+            ..DrapeParams::default().sim
+        },
         ..DrapeParams::default()
     };
     let mut drape = Drape::new(&sewn, &params, Some(body));

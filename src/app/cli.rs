@@ -445,6 +445,9 @@ enum BenchWhat {
         /// Count crossings every N walking frames (0: never).
         #[arg(long, default_value_t = 10)]
         check_every: usize,
+        /// Pull back cloth found through the cloth once the seams have closed (garments only).
+        #[arg(long)]
+        untangle: bool,
         /// Write the start, settled and last cloth and every body pose as OBJ here (the
         /// Blender peer, peers/blender_drape.py, reads them).
         #[arg(long)]
@@ -1278,14 +1281,16 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     settle,
                     frames,
                     check_every,
+                    untangle,
                     obj_dir,
                     json,
                     ..
                 },
         } => {
             println!(
-                "{} on the walking MakeHuman avatar, self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking",
-                pattern.display()
+                "{} on the walking MakeHuman avatar, self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
+                pattern.display(),
+                if untangle { ", untangling on" } else { "" }
             );
             let mut rows = Vec::new();
             for edge in edges {
@@ -1294,7 +1299,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
-                    (substeps, iterations),
+                    (substeps, iterations, untangle),
                     settle,
                     frames,
                     check_every,

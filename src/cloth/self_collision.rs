@@ -16,6 +16,11 @@
 //! never flips while the pair lives, so a vertex cannot pass through a
 //! triangle it was gathered against; a pair the cap left out for a frame
 //! comes back with the side it then has.
+//!
+//! What got through anyway (a seam closing across a folded panel pulls harder than the
+//! contacts) would be held there by the same rule, so each frame also looks for cloth edges
+//! crossing cloth triangles and forces the pairs of what is through back to the other side
+//! ([`SelfCollision::untangle`]).
 
 use glam::Vec3;
 
@@ -26,6 +31,10 @@ use super::bvh::{Aabb, AabbTree};
 /// meets a handful; where a crumpled heap or a burst of speed makes every vertex meet every
 /// triangle, pairs would otherwise grow with the square of the mesh (gigabytes at 1 cm edges).
 pub const MAX_PAIRS_PER_VERTEX: usize = 64;
+
+/// A recorded side of this magnitude (times the sign) marks a pair whose vertex went through
+/// its triangle: [`track_side`] pushes it back to that side from any depth.
+const FORCED: f32 = 2.0;
 
 /// Vertices a thread takes at a time in [`SelfCollision::begin_frame`]'s pair search
 /// (`parallel::map_in_chunks`).
@@ -52,6 +61,18 @@ pub struct SelfCollision {
     /// `(vertex, triangle, side)`, sorted by vertex then triangle.
     pairs: Vec<(u32, u32, f32)>,
     previous: Vec<(u32, u32, f32)>,
+    /// Each vertex's neighbours on the mesh (CSR) and the mesh's edges, for untangling.
+    ring_start: Vec<u32>,
+    ring: Vec<u32>,
+    /// The edge (index into `edges`) of each `ring` entry.
+    ring_edge: Vec<u32>,
+    edges: Vec<[u32; 2]>,
+    /// Whether [`SelfCollision::untangle`] runs (the simulator turns it on once the seams have
+    /// closed: while they close, panels pass each other on their way).
+    pub(crate) untangling: bool,
+    /// Each vertex's and each triangle's pattern piece.
+    piece: Vec<u32>,
+    tri_piece: Vec<u32>,
     pub stats: SelfStats,
 }
 
@@ -63,16 +84,54 @@ pub struct SelfStats {
     pub contacts: usize,
     /// Vertices that met more than [`MAX_PAIRS_PER_VERTEX`] triangles and kept the soonest.
     pub capped: usize,
+    /// Cloth edges found crossing cloth triangles at the frame start.
+    pub crossings: usize,
+    /// Pairs whose vertex was found through its triangle and is pulled back (see
+    /// [`SelfCollision::untangle`]).
+    pub forced: usize,
 }
 
 impl SelfCollision {
-    pub fn new(x: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+    /// `pieces`: each vertex's pattern piece (empty: one piece).
+    pub fn new(x: &[Vec3], triangles: &[[u32; 3]], pieces: &[u32]) -> Self {
         let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(|i| x[i as usize]))).collect();
+        let mut edges: Vec<[u32; 2]> = triangles
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])]))
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let mut ring_start = vec![0u32; x.len() + 1];
+        for &[a, b] in &edges {
+            ring_start[a as usize + 1] += 1;
+            ring_start[b as usize + 1] += 1;
+        }
+        for i in 0..x.len() {
+            ring_start[i + 1] += ring_start[i];
+        }
+        let mut fill = ring_start.clone();
+        let mut ring = vec![0u32; 2 * edges.len()];
+        let mut ring_edge = vec![0u32; 2 * edges.len()];
+        for (k, &[a, b]) in edges.iter().enumerate() {
+            for (from, to) in [(a, b), (b, a)] {
+                ring[fill[from as usize] as usize] = to;
+                ring_edge[fill[from as usize] as usize] = k as u32;
+                fill[from as usize] += 1;
+            }
+        }
+        let tri_piece = triangles.iter().map(|t| pieces.get(t[0] as usize).copied().unwrap_or(0)).collect();
         SelfCollision {
             tree: AabbTree::build(&boxes),
             boxes,
             pairs: Vec::new(),
             previous: Vec::new(),
+            ring_start,
+            ring,
+            ring_edge,
+            edges,
+            untangling: false,
+            piece: pieces.to_vec(),
+            tri_piece,
             stats: SelfStats::default(),
         }
     }
@@ -83,8 +142,8 @@ impl SelfCollision {
     }
 
     /// `new` for a cloth saved mid-run, with the sides its last frame recorded.
-    pub(crate) fn with_sides(x: &[Vec3], triangles: &[[u32; 3]], sides: &[(u32, u32, f32)]) -> Self {
-        SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles) }
+    pub(crate) fn with_sides(x: &[Vec3], triangles: &[[u32; 3]], pieces: &[u32], sides: &[(u32, u32, f32)]) -> Self {
+        SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles, pieces) }
     }
 
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
@@ -168,7 +227,197 @@ impl SelfCollision {
                 pair.2 = side;
             }
         }
+        if self.untangling {
+            self.untangle(x, rep, triangles);
+        }
         self.stats.pairs = self.pairs.len();
+    }
+
+    /// Finds the cloth's edges that cross its triangles at the frame start and pulls what went
+    /// through back. Side tracking keeps a vertex on the side it was gathered on, so cloth that
+    /// got through (pulled by a seam closing across a folded panel, or out of the pairs' reach
+    /// for a frame) would be held on the wrong side for good. Two ways find what is through,
+    /// a local form of Baraff, Witkin and Kass's global intersection analysis (2003):
+    /// - the crossing edges cut a panel's mesh (sewn vertices block the fill too, as the seam
+    ///   bounds a panel); where they cut off a part, the smaller part is through the other
+    ///   surface, and each of its vertices' pairs with a triangle near the crossing is given
+    ///   the other side;
+    /// - an end of a crossing edge whose mesh neighbours lie mostly on the other side of the
+    ///   triangle's plane is through it.
+    ///
+    /// Such pairs are forced: pushed back however deep, until back on their side.
+    fn untangle(&mut self, x: &[Vec3], rep: &[u32], triangles: &[[u32; 3]]) {
+        // An edge through a triangle has an end within half its length of it: the triangles
+        // its ends are paired with are the candidates.
+        let mut first = vec![0u32; x.len() + 1];
+        for p in &self.pairs {
+            first[p.0 as usize + 1] += 1;
+        }
+        for i in 0..x.len() {
+            first[i + 1] += first[i];
+        }
+        let (edges, pairs) = (&self.edges, &self.pairs);
+        let of = |v: u32| &pairs[first[v as usize] as usize..first[v as usize + 1] as usize];
+        let found = crate::core::parallel::map_in_chunks(edges.len(), PAIR_CHUNK, |k| {
+            let [ia, ib] = edges[k];
+            let (a, b) = (x[ia as usize], x[ib as usize]);
+            let ends = [rep[ia as usize], rep[ib as usize]];
+            let mut hits: Vec<u32> = Vec::new();
+            for &(_, t, _) in of(ia).iter().chain(of(ib)) {
+                let tri = triangles[t as usize];
+                if hits.contains(&t) || tri.iter().any(|&j| ends.contains(&rep[j as usize])) {
+                    continue;
+                }
+                let [p0, p1, p2] = tri.map(|j| x[j as usize]);
+                if super::intersections::segment_hits_triangle(a, b, p0, p1, p2) {
+                    hits.push(t);
+                }
+            }
+            hits.sort_unstable();
+            hits
+        });
+        let crossing: Vec<(usize, u32)> =
+            found.iter().enumerate().flat_map(|(k, hits)| hits.iter().map(move |&t| (k, t))).collect();
+        self.stats.crossings = crossing.len();
+        if crossing.is_empty() {
+            return;
+        }
+        let n = x.len();
+        // Pairs to force: (vertex, triangle, side it belongs on).
+        let mut force: Vec<(u32, u32, f32)> = Vec::new();
+
+        // The parts the crossing edges cut off.
+        let mut cut = vec![false; edges.len()];
+        for &(k, _) in &crossing {
+            cut[k] = true;
+        }
+        let mut sewn = vec![false; n];
+        for (v, &r) in rep.iter().enumerate() {
+            if r as usize != v {
+                sewn[v] = true;
+                sewn[r as usize] = true;
+            }
+        }
+        let mut part = vec![u32::MAX; n];
+        let mut sizes: Vec<usize> = Vec::new();
+        let mut stack = Vec::new();
+        for &(k, _) in &crossing {
+            for v in edges[k] {
+                if sewn[v as usize] || part[v as usize] != u32::MAX {
+                    continue;
+                }
+                let id = sizes.len() as u32;
+                part[v as usize] = id;
+                stack.push(v);
+                let mut size = 0;
+                while let Some(u) = stack.pop() {
+                    size += 1;
+                    let (lo, hi) = (self.ring_start[u as usize] as usize, self.ring_start[u as usize + 1] as usize);
+                    for j in lo..hi {
+                        let w = self.ring[j];
+                        if !cut[self.ring_edge[j] as usize] && !sewn[w as usize] && part[w as usize] == u32::MAX {
+                            part[w as usize] = id;
+                            stack.push(w);
+                        }
+                    }
+                }
+                sizes.push(size);
+            }
+        }
+        // Of a cut edge whose ends fell into two parts, the smaller part is through.
+        let mut through_part = vec![false; sizes.len()];
+        for &(k, _) in &crossing {
+            let [a, b] = edges[k].map(|v| part[v as usize]);
+            if a != u32::MAX && b != u32::MAX && a != b {
+                let smaller = if sizes[a as usize] <= sizes[b as usize] { a } else { b };
+                through_part[smaller as usize] = true;
+            }
+        }
+        if through_part.iter().any(|&t| t) {
+            // Near the crossing: the crossed triangles, those sharing a corner with them, and
+            // those with a corner in a part that is through.
+            let mut near_vertex = vec![false; n];
+            for &(_, t) in &crossing {
+                for v in triangles[t as usize] {
+                    near_vertex[v as usize] = true;
+                }
+            }
+            let crossed: std::collections::HashSet<u32> = crossing.iter().map(|c| c.1).collect();
+            let in_through = |v: u32| part[v as usize] != u32::MAX && through_part[part[v as usize] as usize];
+            for v in 0..n as u32 {
+                if !in_through(v) {
+                    continue;
+                }
+                let lo = self.pairs.partition_point(|p| p.0 < v);
+                let hi = self.pairs.partition_point(|p| p.0 <= v);
+                for pair in &self.pairs[lo..hi] {
+                    let t = pair.1;
+                    let tri = triangles[t as usize];
+                    // Within its own piece only a crossed triangle: the rest of the piece
+                    // around it is flat beside it, not across.
+                    let other_piece = self.tri_piece[t as usize] != self.piece.get(v as usize).copied().unwrap_or(0);
+                    let near = crossed.contains(&t)
+                        || (other_piece && tri.iter().any(|&c| near_vertex[c as usize] || in_through(c)));
+                    if !near {
+                        continue;
+                    }
+                    let [a, b, c] = tri.map(|j| x[j as usize]);
+                    let d = (x[v as usize] - a).dot((b - a).cross(c - a));
+                    if d != 0.0 {
+                        force.push((v, t, -d.signum()));
+                    }
+                }
+            }
+        }
+
+        // Ends of crossing edges through the triangle by their neighbours.
+        let mut through: Vec<u32> = Vec::new();
+        for &(k, t) in &crossing {
+            through.extend(
+                edges[k].into_iter().filter(|&v| self.through_side(x, rep, v, triangles[t as usize]).is_some()),
+            );
+        }
+        through.sort_unstable();
+        through.dedup();
+        for v in through {
+            let lo = self.pairs.partition_point(|p| p.0 < v);
+            let hi = self.pairs.partition_point(|p| p.0 <= v);
+            for pair in &self.pairs[lo..hi] {
+                if let Some(side) = self.through_side(x, rep, v, triangles[pair.1 as usize]) {
+                    force.push((v, pair.1, side));
+                }
+            }
+        }
+        force.sort_unstable_by_key(|a| (a.0, a.1));
+        force.dedup_by(|a, b| (a.0, a.1) == (b.0, b.1));
+        for (v, t, side) in force {
+            if let Ok(k) = self.pairs.binary_search_by(|p| (p.0, p.1).cmp(&(v, t))) {
+                self.pairs[k].2 = FORCED * side;
+                self.stats.forced += 1;
+            }
+        }
+    }
+
+    /// The side of `tri`'s plane that vertex `v` belongs on, when it is on the other: at least
+    /// two thirds of its mesh neighbours (two or more, not sewn to the triangle) are there.
+    fn through_side(&self, x: &[Vec3], rep: &[u32], v: u32, tri: [u32; 3]) -> Option<f32> {
+        let [a, b, c] = tri.map(|j| x[j as usize]);
+        let n = (b - a).cross(c - a);
+        let side = |p: Vec3| (p - a).dot(n);
+        let own = side(x[v as usize]);
+        if own == 0.0 {
+            return None;
+        }
+        let corners = tri.map(|j| rep[j as usize]);
+        let (mut counted, mut other) = (0, 0);
+        for &u in &self.ring[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize] {
+            if corners.contains(&rep[u as usize]) {
+                continue;
+            }
+            counted += 1;
+            other += usize::from(side(x[u as usize]) * own < 0.0);
+        }
+        (counted >= 2 && 3 * other >= 2 * counted).then(|| -own.signum())
     }
 
     /// One Gauss-Seidel sweep over the pairs.
@@ -223,7 +472,13 @@ pub(crate) fn track_side(
     let n = cross / len2.sqrt();
     let rel = p - a;
     let d_raw = rel.dot(n);
-    let d = d_raw * *side;
+    let forced = side.abs() > 1.0;
+    let sign = side.signum();
+    let d = d_raw * sign;
+    if forced && d >= 0.0 {
+        // Back on its side: an ordinary pair again.
+        *side = sign;
+    }
     if d >= thickness {
         return None;
     }
@@ -232,11 +487,17 @@ pub(crate) fn track_side(
     let bv = e1.cross(rel).dot(cross) * inv;
     let ba = 1.0 - bu - bv;
     let eps = -0.05;
-    if ba < eps || bu < eps || bv < eps || d < -reach {
+    if ba < eps || bu < eps || bv < eps {
+        if d_raw != 0.0 && !forced {
+            *side = d_raw.signum();
+        }
+        return None;
+    }
+    if d < -reach && side.abs() <= 1.0 {
         if d_raw != 0.0 {
             *side = d_raw.signum();
         }
         return None;
     }
-    Some((n * *side, d, [ba, bu, bv]))
+    Some((n * sign, d, [ba, bu, bv]))
 }

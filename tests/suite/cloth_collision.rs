@@ -226,3 +226,50 @@ fn speed_limit_bounds_free_fall() {
     assert!(v <= 2.0 * 1.0001 && v > 1.9, "max speed {v}");
     assert_finite(&c);
 }
+
+/// Two 30 cm sheets 5 mm apart, the lower one's middle pushed up through the upper one: side
+/// tracking alone would hold the bump where it starts, on the wrong side; the untangling
+/// finds the crossing edges, the part they cut off, and pulls it back under.
+#[test]
+fn a_patch_pushed_through_another_sheet_is_pulled_back() {
+    let (w, edge) = (30.0, 2.0);
+    let pieces = vec![Piece::new("under", rectangle_outline(w, w)), Piece::new("over", rectangle_outline(w, w))];
+    let mesh = PatternMesh::build(pieces, vec![], edge).unwrap();
+    let ids = mesh.piece_ids().to_vec();
+    let start: Vec<Vec3> = mesh
+        .rest_positions()
+        .iter()
+        .zip(&ids)
+        .map(|(p, &id)| {
+            let flat = Vec3::new(p.x - 0.5 * w, 0.0, 0.5 * w - p.y) * CM;
+            let y = if id == 1 {
+                0.105
+            } else if flat.length() < 0.05 {
+                0.112
+            } else {
+                0.1
+            };
+            flat + Vec3::Y * y
+        })
+        .collect();
+    let params = SimParams { self_collision: true, untangle: true, ..SimParams::default() };
+    let mut c = Cloth::new(mesh, start, params);
+    c.set_gravity(Vec3::ZERO);
+    let before = c.self_crossings();
+    assert!(before > 0, "the scene starts tangled");
+    for _ in 0..60 {
+        c.step_frame(FRAME_DT);
+    }
+    assert_finite(&c);
+    assert_eq!(c.self_crossings(), 0, "{before} crossing edges at the start");
+    let (bump_under, over) = c.positions().iter().zip(&ids).fold((f32::MIN, f32::MAX), |(u, o), (p, &id)| {
+        if id == 0 && Vec3::new(p.x, 0.0, p.z).length() < 0.03 {
+            (u.max(p.y), o)
+        } else if id == 1 && Vec3::new(p.x, 0.0, p.z).length() < 0.03 {
+            (u, o.min(p.y))
+        } else {
+            (u, o)
+        }
+    });
+    assert!(bump_under < over, "the bump (top {bump_under} m) is back under the sheet over it (lowest {over} m)");
+}
