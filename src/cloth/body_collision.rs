@@ -201,6 +201,17 @@ struct VertexContact {
     moved_to: Option<Vec3>,
 }
 
+/// A cloth edge's contact with the body: the point at `f` along the edge moves `depth` along
+/// `n`, off triangle `t` at `bary`; `wsum` is the two vertices' weight for that point.
+struct EdgeContact {
+    f: f32,
+    n: Vec3,
+    depth: f32,
+    t: u32,
+    bary: [f32; 3],
+    wsum: f32,
+}
+
 /// How deep inside the body (m) a cloth vertex beyond its candidates' reach is still pushed
 /// back out by the body's nearest surface. Deeper (a limb moved through the cloth, a drape
 /// started on another pose) the nearest surface is as likely the wrong one.
@@ -438,7 +449,8 @@ impl BodyMesh {
 
     /// Pushes cloth triangles off the body vertices at time `s` (the body
     /// does not move): the body vertex ends `thickness` from the triangle on
-    /// its recorded side.
+    /// its recorded side. Which pairs act is found on the cores first, as in
+    /// [`BodyMesh::push_edges`].
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn push_triangles(
         &mut self,
@@ -450,27 +462,62 @@ impl BodyMesh {
         s: f32,
         thickness: f32,
     ) {
+        let mut acts = vec![false; self.vt_pairs.len()];
+        {
+            let (this, x) = (&*self, &*x);
+            crate::core::parallel::for_each_chunk(&mut acts, 4 * CONTACT_CHUNK, 0, |c, out| {
+                for (j, flag) in out.iter_mut().enumerate() {
+                    let mut pair = this.vt_pairs[c * 4 * CONTACT_CHUNK + j];
+                    let side = pair.2;
+                    *flag = this.triangle_contact(&mut pair, x, prev, w, tris, s0, s, thickness).is_some()
+                        || pair.2 != side;
+                }
+            });
+        }
+        let mut moved = vec![false; x.len()];
         for k in 0..self.vt_pairs.len() {
-            let (b, t) = (self.vt_pairs[k].0, self.vt_pairs[k].1);
-            let p = self.corner(b, s);
-            let [ia, ib, ic] = tris[t as usize].map(|j| j as usize);
-            let moved = |i: usize| x[i].distance(prev[i]);
-            let reach = thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
-            let side = &mut self.vt_pairs[k].2;
-            let Some((n, d, [ba, bu, bv])) = track_side(p, [x[ia], x[ib], x[ic]], side, thickness, reach) else {
-                continue;
-            };
-            let wsum = w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
-            if wsum == 0.0 {
+            let [ia, ib, ic] = tris[self.vt_pairs[k].1 as usize].map(|j| j as usize);
+            if !acts[k] && !moved[ia] && !moved[ib] && !moved[ic] {
                 continue;
             }
+            let mut pair = self.vt_pairs[k];
+            let contact = self.triangle_contact(&mut pair, x, prev, w, tris, s0, s, thickness);
+            self.vt_pairs[k] = pair;
+            let Some((n, step, [ba, bu, bv])) = contact else { continue };
             // The triangle moves against n by (thickness - d) at the body point.
-            let k = (thickness - d) / wsum;
-            x[ia] -= n * (w[ia] * ba * k);
-            x[ib] -= n * (w[ib] * bu * k);
-            x[ic] -= n * (w[ic] * bv * k);
+            x[ia] -= n * (w[ia] * ba * step);
+            x[ib] -= n * (w[ib] * bu * step);
+            x[ic] -= n * (w[ic] * bv * step);
+            (moved[ia], moved[ib], moved[ic]) = (true, true, true);
             self.stats.triangle_contacts += 1;
         }
+    }
+
+    /// A body-vertex / cloth-triangle pair's push at time `s` (normal, step per inverse mass,
+    /// barycentrics), its side tracked.
+    #[allow(clippy::too_many_arguments)]
+    fn triangle_contact(
+        &self,
+        pair: &mut (u32, u32, f32),
+        x: &[Vec3],
+        prev: &[Vec3],
+        w: &[f32],
+        tris: &[[u32; 3]],
+        s0: f32,
+        s: f32,
+        thickness: f32,
+    ) -> Option<(Vec3, f32, [f32; 3])> {
+        let (b, t) = (pair.0, pair.1);
+        let p = self.corner(b, s);
+        let [ia, ib, ic] = tris[t as usize].map(|j| j as usize);
+        let moved = |i: usize| x[i].distance(prev[i]);
+        let reach = thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
+        let (n, d, [ba, bu, bv]) = track_side(p, [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)?;
+        let wsum = w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
+        if wsum == 0.0 {
+            return None;
+        }
+        Some((n, (thickness - d) / wsum, [ba, bu, bv]))
     }
 
     /// Pushes cloth edges off the body at time `s`: where a body edge (a ridge of the body)
@@ -478,6 +525,11 @@ impl BodyMesh {
     /// point of the cloth edge nearest that body edge is moved out to `thickness` (inside or
     /// outside decided as for vertices, by the nearest feature's pseudo-normal), the two
     /// cloth vertices sharing the move by their barycentric weight and inverse mass.
+    ///
+    /// Gauss-Seidel in edge order, but few edges are in contact in a substep: which are is
+    /// found on the cores from the positions before the pass, and the pass in order visits
+    /// those and the edges with a vertex an earlier contact of the pass moved; an edge's
+    /// contact depends only on its vertices, so the result is the one of visiting every edge.
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn push_edges(
         &mut self,
@@ -490,76 +542,107 @@ impl BodyMesh {
         thickness: f32,
         friction: f32,
     ) {
+        let mut in_contact = vec![false; edges.len()];
+        {
+            let (this, x) = (&*self, &*x);
+            crate::core::parallel::for_each_chunk(&mut in_contact, CONTACT_CHUNK, 0, |c, out| {
+                for (j, flag) in out.iter_mut().enumerate() {
+                    let k = c * CONTACT_CHUNK + j;
+                    *flag = this.edge_contact(k, edges[k], x, w, s, thickness).is_some();
+                }
+            });
+        }
+        let mut moved = vec![false; x.len()];
         for (k, &[ia, ib]) in edges.iter().enumerate() {
-            let (lo, hi) = (self.edge_cand_start[k] as usize, self.edge_cand_start[k + 1] as usize);
-            if lo == hi {
-                continue;
-            }
             let (ia, ib) = (ia as usize, ib as usize);
-            let (a, b) = (x[ia], x[ib]);
-            let reach = 0.25 * a.distance(b) + thickness;
-            // An edge whose ends are both farther from the body than it can sag is clear of it
-            // (a body ridge sharp enough to poke through it anyway meets the cloth triangles
-            // as body-vertex contacts).
-            if self.clearance[ia].min(self.clearance[ib]) > reach {
+            if !in_contact[k] && !moved[ia] && !moved[ib] {
                 continue;
             }
-            // The body edge that goes deepest through the cloth edge, or comes nearest it from
-            // outside, judged by the body edge's pseudo-normal; the nearest feature decides below.
-            let mut best: Option<(f32, f32)> = None;
-            let cands = &self.edge_cand[lo..hi];
-            for &t in cands {
-                let c = self.triangles[t as usize].map(|i| self.corner(i, s));
-                let centre = (c[0] + c[1] + c[2]) / 3.0;
-                let r = centre.distance(c[0]).max(centre.distance(c[1])).max(centre.distance(c[2]));
-                if point_segment_distance(centre, a, b) > r + reach {
-                    continue;
-                }
-                for j in 0..3 {
-                    // A body edge shared by two candidates: once.
-                    let other = self.adjacent[t as usize][j];
-                    if other < t && cands.contains(&other) {
-                        continue;
-                    }
-                    let (f, g, d2) = segment_closest_params(a, b, c[j], c[(j + 1) % 3]);
-                    // At an end of the cloth edge the vertex contacts act; a body edge farther
-                    // than a chord can sag over a limb is another part of the body.
-                    if !(0.01..=0.99).contains(&f) || d2 > reach * reach {
-                        continue;
-                    }
-                    let q = c[j].lerp(c[(j + 1) % 3], g);
-                    let n = self.pseudo_normal(t, Feature::Edge(j as u8), s).normalize_or_zero();
-                    let signed = (a.lerp(b, f) - q).dot(n);
-                    if signed < thickness && best.is_none_or(|(_, bs)| signed < bs) {
-                        best = Some((f, signed));
-                    }
-                }
-            }
-            let Some((f, _)) = best else { continue };
-            let p = a.lerp(b, f);
-            // The nearest of the triangles around this edge, however deep: the candidates all
-            // come within a sweep of the segment (not only of its box), and a body ridge
-            // through the edge is pushed back by the surfaces around it, not by another part
-            // of the body that happens to be nearer a deep point (an arm through the torso).
-            let local = f32::INFINITY;
-            let Some((d, n, t, bary)) = self.closest(p, s, self.edge_cand[lo..hi].iter().copied(), local, local) else {
+            let Some(EdgeContact { f, n, depth, t, bary, wsum }) = self.edge_contact(k, edges[k], x, w, s, thickness)
+            else {
                 continue;
             };
-            let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
-            if d >= thickness || wsum == 0.0 {
-                continue;
-            }
             // The edge point moves by `delta`, its vertices by their share of it.
             let apply = |delta: Vec3, x: &mut [Vec3]| {
                 x[ia] += delta * (w[ia] * (1.0 - f) / wsum);
                 x[ib] += delta * (w[ib] * f / wsum);
             };
-            let depth = thickness - d;
             apply(n * depth, x);
-            let moved = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f);
-            apply(-self.friction_cut(t, bary, s0, s, n, moved, depth, friction), x);
+            let moved_by = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f);
+            apply(-self.friction_cut(t, bary, s0, s, n, moved_by, depth, friction), x);
+            (moved[ia], moved[ib]) = (true, true);
             self.stats.edge_contacts += 1;
         }
+    }
+
+    /// Cloth edge `k`'s contact with the body at time `s` (what [`BodyMesh::push_edges`]
+    /// applies), from its vertices' positions in `x`.
+    fn edge_contact(
+        &self,
+        k: usize,
+        [ia, ib]: [u32; 2],
+        x: &[Vec3],
+        w: &[f32],
+        s: f32,
+        thickness: f32,
+    ) -> Option<EdgeContact> {
+        let (lo, hi) = (self.edge_cand_start[k] as usize, self.edge_cand_start[k + 1] as usize);
+        if lo == hi {
+            return None;
+        }
+        let (ia, ib) = (ia as usize, ib as usize);
+        let (a, b) = (x[ia], x[ib]);
+        let reach = 0.25 * a.distance(b) + thickness;
+        // An edge whose ends are both farther from the body than it can sag is clear of it
+        // (a body ridge sharp enough to poke through it anyway meets the cloth triangles
+        // as body-vertex contacts).
+        if self.clearance[ia].min(self.clearance[ib]) > reach {
+            return None;
+        }
+        // The body edge that goes deepest through the cloth edge, or comes nearest it from
+        // outside, judged by the body edge's pseudo-normal; the nearest feature decides below.
+        let mut best: Option<(f32, f32)> = None;
+        let cands = &self.edge_cand[lo..hi];
+        for &t in cands {
+            let c = self.triangles[t as usize].map(|i| self.corner(i, s));
+            let centre = (c[0] + c[1] + c[2]) / 3.0;
+            let r = centre.distance(c[0]).max(centre.distance(c[1])).max(centre.distance(c[2]));
+            if point_segment_distance(centre, a, b) > r + reach {
+                continue;
+            }
+            for j in 0..3 {
+                // A body edge shared by two candidates: once.
+                let other = self.adjacent[t as usize][j];
+                if other < t && cands.contains(&other) {
+                    continue;
+                }
+                let (f, g, d2) = segment_closest_params(a, b, c[j], c[(j + 1) % 3]);
+                // At an end of the cloth edge the vertex contacts act; a body edge farther
+                // than a chord can sag over a limb is another part of the body.
+                if !(0.01..=0.99).contains(&f) || d2 > reach * reach {
+                    continue;
+                }
+                let q = c[j].lerp(c[(j + 1) % 3], g);
+                let n = self.pseudo_normal(t, Feature::Edge(j as u8), s).normalize_or_zero();
+                let signed = (a.lerp(b, f) - q).dot(n);
+                if signed < thickness && best.is_none_or(|(_, bs)| signed < bs) {
+                    best = Some((f, signed));
+                }
+            }
+        }
+        let (f, _) = best?;
+        let p = a.lerp(b, f);
+        // The nearest of the triangles around this edge, however deep: the candidates all
+        // come within a sweep of the segment (not only of its box), and a body ridge
+        // through the edge is pushed back by the surfaces around it, not by another part
+        // of the body that happens to be nearer a deep point (an arm through the torso).
+        let local = f32::INFINITY;
+        let (d, n, t, bary) = self.closest(p, s, cands.iter().copied(), local, local)?;
+        let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
+        if d >= thickness || wsum == 0.0 {
+            return None;
+        }
+        Some(EdgeContact { f, n, depth: thickness - d, t, bary, wsum })
     }
 
     /// The frame is done: its end pose is the next frame's start.

@@ -40,6 +40,9 @@ const FORCED: f32 = 2.0;
 /// (`parallel::map_in_chunks`).
 const PAIR_CHUNK: usize = 512;
 
+/// Pairs a thread takes at a time in [`SelfCollision::solve`]'s search for those that act.
+const SOLVE_CHUNK: usize = 2048;
+
 /// One vertex's pairs `pairs[first..]` `(vertex, triangle, key)`: keeps the
 /// [`MAX_PAIRS_PER_VERTEX`] of smallest key (ties by triangle) and sorts them by triangle.
 /// Returns whether any were dropped.
@@ -423,28 +426,66 @@ impl SelfCollision {
     /// One Gauss-Seidel sweep over the pairs.
     /// `prev` are the positions at the substep's start: a vertex can get
     /// behind a triangle by at most what the two moved.
+    ///
+    /// Few pairs act in a substep: which would (push, or set their side) is found on the cores
+    /// from the positions before the sweep, and the sweep in order visits those and the pairs
+    /// with a vertex an earlier contact of the sweep moved. A pair's action depends only on its
+    /// four vertices and its side, so the result is the one of visiting every pair.
     pub(crate) fn solve(&mut self, x: &mut [Vec3], prev: &[Vec3], w: &[f32], triangles: &[[u32; 3]], thickness: f32) {
-        for pair in &mut self.pairs {
-            let (i, t) = (pair.0 as usize, pair.1);
-            let [ia, ib, ic] = triangles[t as usize].map(|j| j as usize);
-            let moved = |k: usize| x[k].distance(prev[k]);
-            let reach = thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
-            let Some((n, d, [ba, bu, bv])) = track_side(x[i], [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)
-            else {
-                continue;
-            };
-            let wsum = w[i] + w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
-            if wsum == 0.0 {
+        let mut acts = vec![false; self.pairs.len()];
+        {
+            let (pairs, x) = (&self.pairs, &*x);
+            crate::core::parallel::for_each_chunk(&mut acts, SOLVE_CHUNK, 0, |c, out| {
+                for (j, flag) in out.iter_mut().enumerate() {
+                    let mut pair = pairs[c * SOLVE_CHUNK + j];
+                    let side = pair.2;
+                    *flag = pair_contact(&mut pair, x, prev, w, triangles, thickness).is_some() || pair.2 != side;
+                }
+            });
+        }
+        let mut moved = vec![false; x.len()];
+        for (k, pair) in self.pairs.iter_mut().enumerate() {
+            let (i, t) = (pair.0 as usize, pair.1 as usize);
+            let [ia, ib, ic] = triangles[t].map(|j| j as usize);
+            if !acts[k] && !moved[i] && !moved[ia] && !moved[ib] && !moved[ic] {
                 continue;
             }
-            let s = (thickness - d) / wsum;
+            let Some((n, s, [ba, bu, bv])) = pair_contact(pair, x, prev, w, triangles, thickness) else {
+                continue;
+            };
             x[i] += n * (w[i] * s);
             x[ia] -= n * (w[ia] * ba * s);
             x[ib] -= n * (w[ib] * bu * s);
             x[ic] -= n * (w[ic] * bv * s);
+            for v in [i, ia, ib, ic] {
+                moved[v] = true;
+            }
             self.stats.contacts += 1;
         }
     }
+}
+
+/// A self-contact pair's push (normal, step along it per inverse mass, barycentrics), with its
+/// side tracked ([`track_side`]).
+#[inline]
+fn pair_contact(
+    pair: &mut (u32, u32, f32),
+    x: &[Vec3],
+    prev: &[Vec3],
+    w: &[f32],
+    triangles: &[[u32; 3]],
+    thickness: f32,
+) -> Option<(Vec3, f32, [f32; 3])> {
+    let (i, t) = (pair.0 as usize, pair.1);
+    let [ia, ib, ic] = triangles[t as usize].map(|j| j as usize);
+    let moved = |k: usize| x[k].distance(prev[k]);
+    let reach = thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
+    let (n, d, [ba, bu, bv]) = track_side(x[i], [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)?;
+    let wsum = w[i] + w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
+    if wsum == 0.0 {
+        return None;
+    }
+    Some((n, (thickness - d) / wsum, [ba, bu, bv]))
 }
 
 /// The side tracking shared by vertex-triangle pairs: returns the unit
