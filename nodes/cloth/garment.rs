@@ -75,7 +75,7 @@ pub static GARMENT: NodeSpec = NodeSpec {
         ParamSpec::new("self_collision", ParamKind::Bool { default: false }, "Cloth-cloth contacts (slower)."),
         ParamSpec::new(
             "untangle",
-            ParamKind::Bool { default: false },
+            ParamKind::Bool { default: true },
             "With self-collision: once the seams have closed, pull back cloth found through the cloth.",
         ),
         ParamSpec::new(

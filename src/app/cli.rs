@@ -445,9 +445,9 @@ enum BenchWhat {
         /// Count crossings every N walking frames (0: never).
         #[arg(long, default_value_t = 10)]
         check_every: usize,
-        /// Pull back cloth found through the cloth once the seams have closed (garments only).
+        /// Leave cloth found through the cloth where it is (the `Garment` node's `untangle` off).
         #[arg(long)]
-        untangle: bool,
+        no_untangle: bool,
         /// Write the start, settled and last cloth and every body pose as OBJ here (the
         /// Blender peer, peers/blender_drape.py, reads them).
         #[arg(long)]
@@ -1281,7 +1281,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     settle,
                     frames,
                     check_every,
-                    untangle,
+                    no_untangle,
                     obj_dir,
                     json,
                     ..
@@ -1290,7 +1290,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
             println!(
                 "{} on the walking MakeHuman avatar, self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
                 pattern.display(),
-                if untangle { ", untangling on" } else { "" }
+                if no_untangle { ", untangling off" } else { "" }
             );
             let mut rows = Vec::new();
             for edge in edges {
@@ -1299,7 +1299,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
-                    (substeps, iterations, untangle),
+                    (substeps, iterations, !no_untangle),
                     settle,
                     frames,
                     check_every,

@@ -480,12 +480,15 @@ fn pair_contact(
     let [ia, ib, ic] = triangles[t as usize].map(|j| j as usize);
     let moved = |k: usize| x[k].distance(prev[k]);
     let reach = thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
+    let forced = pair.2.abs() > 1.0;
     let (n, d, [ba, bu, bv]) = track_side(x[i], [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)?;
     let wsum = w[i] + w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
     if wsum == 0.0 {
         return None;
     }
-    Some((n, (thickness - d) / wsum, [ba, bu, bv]))
+    // What went through comes back a thickness a substep at most, not in one jump.
+    let push = if forced { (thickness - d).min(thickness) } else { thickness - d };
+    Some((n, push / wsum, [ba, bu, bv]))
 }
 
 /// The side tracking shared by vertex-triangle pairs: returns the unit

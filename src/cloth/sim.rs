@@ -144,8 +144,7 @@ pub struct SimParams {
     /// Distance kept between a vertex and the cloth's other triangles (m).
     pub self_thickness: f32,
     /// With self-collision, pull back what got through the cloth (once the seams have closed;
-    /// see `SelfCollision::untangle`). Off by default: on the pencil dress at 4 cm edges it
-    /// pulled the straps off the shoulders.
+    /// see `SelfCollision::untangle`). Off by default here; the `Garment` node turns it on.
     pub untangle: bool,
     /// Speed limit (m/s) applied to every vertex each substep (GarmentCode: 25).
     pub max_speed: f32,
