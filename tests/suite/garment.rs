@@ -424,8 +424,10 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
     let (rest_body, arms) = (avatar.rest_body(), ArmAxis::of_avatar(&avatar).unwrap());
     let rest = rest_body.positions().to_vec();
     let (sewn, _) = shirt_on(Some(&arms));
-    let params =
-        DrapeParams { sim: SimParams { self_collision: true, ..DrapeParams::default().sim }, ..DrapeParams::default() };
+    let params = DrapeParams {
+        sim: SimParams { self_collision: true, untangle: true, ..DrapeParams::default().sim },
+        ..DrapeParams::default()
+    };
     let mut drape = Drape::new(&sewn, &params, Some(rest_body));
     for _ in 0..40 {
         drape.step(None);
