@@ -217,15 +217,17 @@ impl SelfCollision {
                 let n = (b - a).cross(c - a).normalize_or_zero();
                 let d = (x[i] - a).dot(n);
                 let mut side = if d >= 0.0 { 1.0 } else { -1.0 };
-                if d.abs() < thickness {
-                    while prev_k < self.previous.len()
-                        && (self.previous[prev_k].0, self.previous[prev_k].1) < (pair.0, pair.1)
-                    {
-                        prev_k += 1;
-                    }
-                    if let Some(p) = self.previous.get(prev_k).filter(|p| (p.0, p.1) == (pair.0, pair.1)) {
-                        side = p.2;
-                    }
+                while prev_k < self.previous.len()
+                    && (self.previous[prev_k].0, self.previous[prev_k].1) < (pair.0, pair.1)
+                {
+                    prev_k += 1;
+                }
+                // In contact, the side last frame had (a pair forced back by the untangling
+                // deeper than that is forced again while its crossing is found).
+                if let Some(p) = self.previous.get(prev_k).filter(|p| (p.0, p.1) == (pair.0, pair.1))
+                    && d.abs() < thickness
+                {
+                    side = p.2;
                 }
                 pair.2 = side;
             }
@@ -243,15 +245,18 @@ impl SelfCollision {
     /// a local form of Baraff, Witkin and Kass's global intersection analysis (2003):
     /// - the crossing edges cut a panel's mesh (sewn vertices block the fill too, as the seam
     ///   bounds a panel); where they cut off a part, the smaller part is through the other
-    ///   surface, and each of its vertices' pairs with a triangle near the crossing is given
-    ///   the other side;
+    ///   surface, and each of its vertices' pairs with a triangle near the crossing (a crossed
+    ///   triangle of its own piece; of another piece, one sharing a corner with a crossed
+    ///   triangle or with a corner in a part that is through) is given the other side;
     /// - an end of a crossing edge whose mesh neighbours lie mostly on the other side of the
     ///   triangle's plane is through it.
     ///
-    /// Such pairs are forced: pushed back however deep, until back on their side.
+    /// Such pairs are forced: pushed back however deep (a thickness per pair and substep at
+    /// most) until back on their side or off the triangle's border, in the frames their
+    /// crossing is found (and while within a thickness of the triangle).
     fn untangle(&mut self, x: &[Vec3], rep: &[u32], triangles: &[[u32; 3]]) {
-        // An edge through a triangle has an end within half its length of it: the triangles
-        // its ends are paired with are the candidates.
+        // The candidates of an edge are the triangles its ends are paired with: a crossing
+        // farther from both ends than the pairs reach (long edges) is not found.
         let mut first = vec![0u32; x.len() + 1];
         for p in &self.pairs {
             first[p.0 as usize + 1] += 1;
@@ -532,7 +537,9 @@ pub(crate) fn track_side(
     let ba = 1.0 - bu - bv;
     let eps = -0.05;
     if ba < eps || bu < eps || bv < eps {
-        if d_raw != 0.0 && !forced {
+        // Around the border: an ordinary side again (a forced one too, or it would push the
+        // vertex through from wherever it comes back over the triangle).
+        if d_raw != 0.0 {
             *side = d_raw.signum();
         }
         return None;

@@ -415,7 +415,7 @@ fn a_short_drape_on_the_avatar_closes_the_seams() {
 }
 
 #[test]
-#[ignore = "known failure: with the arms spread 30 degrees up to 4 cloth edges cross the body at the underarm seam corner, where the back sleeve meets the back torso (130 edge-frames in 150 frames; 3020 without the spread); the clearance holds: docs/garments.md, On the walking avatar"]
+#[ignore = "known failure: with the arms spread 30 degrees cloth edges cross the body at the underarm seam corner, where the back sleeve meets the back torso (first at frame 17, one edge); the clearance holds: docs/garments.md, On the walking avatar"]
 fn the_shirt_stays_outside_the_body_through_the_walk() {
     // The arms spread 30 degrees: without it they pass through the torso at the armpits.
     let mut avatar = avatar();
