@@ -95,17 +95,12 @@ pub struct SelfStats {
 }
 
 impl SelfCollision {
-    /// `pieces`: each vertex's pattern piece (empty: one piece).
-    pub fn new(x: &[Vec3], triangles: &[[u32; 3]], pieces: &[u32]) -> Self {
+    /// `edges`: the mesh's edges, each once; `pieces`: each vertex's pattern piece (empty: one
+    /// piece).
+    pub fn new(x: &[Vec3], triangles: &[[u32; 3]], edges: &[[u32; 2]], pieces: &[u32]) -> Self {
         let boxes: Vec<Aabb> = triangles.iter().map(|t| Aabb::from_points(&t.map(|i| x[i as usize]))).collect();
-        let mut edges: Vec<[u32; 2]> = triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])]))
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
         let mut ring_start = vec![0u32; x.len() + 1];
-        for &[a, b] in &edges {
+        for &[a, b] in edges {
             ring_start[a as usize + 1] += 1;
             ring_start[b as usize + 1] += 1;
         }
@@ -131,7 +126,7 @@ impl SelfCollision {
             ring_start,
             ring,
             ring_edge,
-            edges,
+            edges: edges.to_vec(),
             untangling: false,
             piece: pieces.to_vec(),
             tri_piece,
@@ -145,8 +140,14 @@ impl SelfCollision {
     }
 
     /// `new` for a cloth saved mid-run, with the sides its last frame recorded.
-    pub(crate) fn with_sides(x: &[Vec3], triangles: &[[u32; 3]], pieces: &[u32], sides: &[(u32, u32, f32)]) -> Self {
-        SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles, pieces) }
+    pub(crate) fn with_sides(
+        x: &[Vec3],
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
+        pieces: &[u32],
+        sides: &[(u32, u32, f32)],
+    ) -> Self {
+        SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles, edges, pieces) }
     }
 
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
@@ -291,8 +292,9 @@ impl SelfCollision {
             return;
         }
         let n = x.len();
-        // Pairs to force: (vertex, triangle, side it belongs on).
-        let mut force: Vec<(u32, u32, f32)> = Vec::new();
+        let range = |v: u32| first[v as usize] as usize..first[v as usize + 1] as usize;
+        // Pairs to force: (index in `pairs`, side it belongs on).
+        let mut force: Vec<(usize, f32)> = Vec::new();
 
         // The parts the crossing edges cut off.
         let mut cut = vec![false; edges.len()];
@@ -356,10 +358,8 @@ impl SelfCollision {
                 if !in_through(v) {
                     continue;
                 }
-                let lo = self.pairs.partition_point(|p| p.0 < v);
-                let hi = self.pairs.partition_point(|p| p.0 <= v);
-                for pair in &self.pairs[lo..hi] {
-                    let t = pair.1;
+                for k in range(v) {
+                    let t = self.pairs[k].1;
                     let tri = triangles[t as usize];
                     // Within its own piece only a crossed triangle: the rest of the piece
                     // around it is flat beside it, not across.
@@ -372,7 +372,7 @@ impl SelfCollision {
                     let [a, b, c] = tri.map(|j| x[j as usize]);
                     let d = (x[v as usize] - a).dot((b - a).cross(c - a));
                     if d != 0.0 {
-                        force.push((v, t, -d.signum()));
+                        force.push((k, -d.signum()));
                     }
                 }
             }
@@ -388,21 +388,18 @@ impl SelfCollision {
         through.sort_unstable();
         through.dedup();
         for v in through {
-            let lo = self.pairs.partition_point(|p| p.0 < v);
-            let hi = self.pairs.partition_point(|p| p.0 <= v);
-            for pair in &self.pairs[lo..hi] {
-                if let Some(side) = self.through_side(x, rep, v, triangles[pair.1 as usize]) {
-                    force.push((v, pair.1, side));
+            for k in range(v) {
+                if let Some(side) = self.through_side(x, rep, v, triangles[self.pairs[k].1 as usize]) {
+                    force.push((k, side));
                 }
             }
         }
-        force.sort_unstable_by_key(|a| (a.0, a.1));
-        force.dedup_by(|a, b| (a.0, a.1) == (b.0, b.1));
-        for (v, t, side) in force {
-            if let Ok(k) = self.pairs.binary_search_by(|p| (p.0, p.1).cmp(&(v, t))) {
-                self.pairs[k].2 = FORCED * side;
-                self.stats.forced += 1;
-            }
+        // A pair found both ways once (both give the side opposite the vertex's).
+        force.sort_unstable_by_key(|f| f.0);
+        force.dedup_by_key(|f| f.0);
+        for (k, side) in force {
+            self.pairs[k].2 = FORCED * side;
+            self.stats.forced += 1;
         }
     }
 

@@ -670,8 +670,9 @@ impl Cloth {
         }
         if self.params.self_collision {
             let tris = self.mesh.triangles();
-            let sc =
-                self.self_collision.get_or_insert_with(|| SelfCollision::new(&self.x, tris, self.mesh.piece_ids()));
+            let sc = self
+                .self_collision
+                .get_or_insert_with(|| SelfCollision::new(&self.x, tris, &self.edges, self.mesh.piece_ids()));
             let (th, rep) = (self.params.self_thickness, &self.seam_rep);
             let excluded = &self.self_excluded;
             sc.untangling = self.params.untangle && self.time as f32 >= self.params.seam_close_time;
@@ -976,10 +977,9 @@ impl Cloth {
         self.v.copy_from_slice(velocities);
         self.time = *time;
         self.frame = *frame;
-        self.self_collision = self
-            .params
-            .self_collision
-            .then(|| SelfCollision::with_sides(&self.x, self.mesh.triangles(), self.mesh.piece_ids(), sides));
+        self.self_collision = self.params.self_collision.then(|| {
+            SelfCollision::with_sides(&self.x, self.mesh.triangles(), &self.edges, self.mesh.piece_ids(), sides)
+        });
         if let Some(body) = &mut self.body {
             body.set_sides(body_sides);
         }
