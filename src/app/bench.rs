@@ -1825,7 +1825,7 @@ pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
-    (substeps, iterations, untangle): (u32, u32, bool),
+    (substeps, iterations, untangle, arm_spread): (u32, u32, bool, f64),
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1835,7 +1835,8 @@ pub fn drape_garment(
     use crate::cloth::FRAME_DT;
     use crate::garment::drape::{Drape, DrapeParams};
     use crate::garment::{Fit, garmentcode, sleeves::fit_sleeves};
-    let avatar = WalkingAvatar::load(avatar_dir)?;
+    let mut avatar = WalkingAvatar::load(avatar_dir)?;
+    avatar.arm_spread = arm_spread.to_radians();
     let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
     let mut sewn = garmentcode::load(pattern)?.sew(edge_cm, fit)?;
     fit_sleeves(&mut sewn, &crate::garment::sleeves::ArmAxis::of_avatar(&avatar)?);

@@ -448,6 +448,10 @@ enum BenchWhat {
         /// Leave cloth found through the cloth where it is (the `Garment` node's `untangle` off).
         #[arg(long)]
         no_untangle: bool,
+        /// The avatar's arms spread out from its sides (degrees), as the graphs have them: at 0
+        /// MakeHuman's arms pass through its torso in the walk, with the cloth between.
+        #[arg(long, default_value_t = 30.0)]
+        arm_spread: f64,
         /// Write the start, settled and last cloth and every body pose as OBJ here (the
         /// Blender peer, peers/blender_drape.py, reads them).
         #[arg(long)]
@@ -1282,13 +1286,14 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     frames,
                     check_every,
                     no_untangle,
+                    arm_spread,
                     obj_dir,
                     json,
                     ..
                 },
         } => {
             println!(
-                "{} on the walking MakeHuman avatar, self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
+                "{} on the walking MakeHuman avatar (arms spread {arm_spread} degrees), self-collision on, {substeps} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
                 pattern.display(),
                 if no_untangle { ", untangling off" } else { "" }
             );
@@ -1299,7 +1304,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
-                    (substeps, iterations, !no_untangle),
+                    (substeps, iterations, !no_untangle, arm_spread),
                     settle,
                     frames,
                     check_every,
