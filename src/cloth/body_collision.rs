@@ -60,6 +60,32 @@ pub struct BodyMesh {
     pub stats: BodyStats,
 }
 
+/// Seam groups welded into one point each, as a contact must move them: per vertex its group
+/// (`u32::MAX` when not sewn).
+pub(crate) struct Welds<'a> {
+    pub group_of: &'a [u32],
+    pub groups: &'a [Vec<u32>],
+}
+
+impl Welds<'_> {
+    fn group(&self, v: usize) -> Option<&[u32]> {
+        self.groups.get(self.group_of[v] as usize).map(Vec::as_slice)
+    }
+
+    /// `w` with each group's vertices carrying the group's inverse mass (zero when one of
+    /// them is pinned): how hard the group as a whole is to move.
+    pub fn inv_masses(&self, w: &[f32]) -> Vec<f32> {
+        let mut out = w.to_vec();
+        for g in self.groups {
+            let pinned = g.iter().any(|&v| w[v as usize] == 0.0);
+            let mass: f32 = g.iter().map(|&v| 1.0 / w[v as usize]).sum();
+            let gw = if pinned { 0.0 } else { 1.0 / mass };
+            g.iter().for_each(|&v| out[v as usize] = gw);
+        }
+        out
+    }
+}
+
 /// Work counters of the last frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BodyStats {
@@ -193,13 +219,17 @@ fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec
 /// calling thread alone.
 const CONTACT_CHUNK: usize = 512;
 
-/// One vertex's contact in a substep: its clearance (infinite when no body triangle is near),
+/// One vertex's contact in a substep: its clearance (a lower bound where no body triangle is
+/// within its candidates' reach; zero for a pinned vertex, which is not looked at),
 /// whether its candidates did not cover it (a fallback search), and where the contact moved it.
 struct VertexContact {
     clearance: f32,
     fallback: bool,
     moved_to: Option<Vec3>,
 }
+
+/// The body's nearest point: `(signed distance, outward unit normal, triangle, barycentrics)`.
+type Nearest = (f32, Vec3, u32, [f32; 3]);
 
 /// A cloth edge's contact with the body: the point at `f` along the edge moves `depth` along
 /// `n`, off triangle `t` at `bary`; `wsum` is the two vertices' weight for that point.
@@ -530,6 +560,14 @@ impl BodyMesh {
     /// found on the cores from the positions before the pass, and the pass in order visits
     /// those and the edges with a vertex an earlier contact of the pass moved; an edge's
     /// contact depends only on its vertices, so the result is the one of visiting every edge.
+    ///
+    /// With `welds`, a welded seam group moves as one: a contact moving one of its vertices
+    /// moves them all, weighed by the group's mass (`w` then holds the groups' inverse
+    /// masses, see [`Welds`]).
+    ///
+    /// Returns the vertices the pass moved, or `None` when it moved none. A pass again at
+    /// the same `s` gives them as `since`: an edge with neither vertex among them is as the
+    /// pass left it, out of contact, and is not looked at.
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn push_edges(
         &mut self,
@@ -537,22 +575,27 @@ impl BodyMesh {
         prev: &[Vec3],
         w: &[f32],
         edges: &[[u32; 2]],
+        welds: Option<&Welds>,
+        since: Option<&[bool]>,
         s0: f32,
         s: f32,
         thickness: f32,
         friction: f32,
-    ) {
+    ) -> Option<Vec<bool>> {
         let mut in_contact = vec![false; edges.len()];
         {
             let (this, x) = (&*self, &*x);
             crate::core::parallel::for_each_chunk(&mut in_contact, CONTACT_CHUNK, 0, |c, out| {
                 for (j, flag) in out.iter_mut().enumerate() {
                     let k = c * CONTACT_CHUNK + j;
-                    *flag = this.edge_contact(k, edges[k], x, w, s, thickness).is_some();
+                    let [ia, ib] = edges[k];
+                    let changed = since.is_none_or(|m| m[ia as usize] || m[ib as usize]);
+                    *flag = changed && this.edge_contact(k, edges[k], x, w, s, thickness).is_some();
                 }
             });
         }
         let mut moved = vec![false; x.len()];
+        let mut applied = 0;
         for (k, &[ia, ib]) in edges.iter().enumerate() {
             let (ia, ib) = (ia as usize, ib as usize);
             if !in_contact[k] && !moved[ia] && !moved[ib] {
@@ -562,17 +605,28 @@ impl BodyMesh {
             else {
                 continue;
             };
-            // The edge point moves by `delta`, its vertices by their share of it.
-            let apply = |delta: Vec3, x: &mut [Vec3]| {
-                x[ia] += delta * (w[ia] * (1.0 - f) / wsum);
-                x[ib] += delta * (w[ib] * f / wsum);
+            // The edge point moves by `delta`, its vertices (or their groups) by their share.
+            let apply = |delta: Vec3, x: &mut [Vec3], moved: &mut [bool]| {
+                for (v, share) in [(ia, w[ia] * (1.0 - f) / wsum), (ib, w[ib] * f / wsum)] {
+                    match welds.and_then(|g| g.group(v)) {
+                        Some(group) => group.iter().for_each(|&u| {
+                            x[u as usize] += delta * share;
+                            moved[u as usize] = true;
+                        }),
+                        None => {
+                            x[v] += delta * share;
+                            moved[v] = true;
+                        }
+                    }
+                }
             };
-            apply(n * depth, x);
+            apply(n * depth, x, &mut moved);
             let moved_by = (x[ia] - prev[ia]).lerp(x[ib] - prev[ib], f);
-            apply(-self.friction_cut(t, bary, s0, s, n, moved_by, depth, friction), x);
-            (moved[ia], moved[ib]) = (true, true);
-            self.stats.edge_contacts += 1;
+            apply(-self.friction_cut(t, bary, s0, s, n, moved_by, depth, friction), x, &mut moved);
+            applied += 1;
         }
+        self.stats.edge_contacts += applied;
+        (applied > 0).then_some(moved)
     }
 
     /// Cloth edge `k`'s contact with the body at time `s` (what [`BodyMesh::push_edges`]
@@ -599,9 +653,17 @@ impl BodyMesh {
         if self.clearance[ia].min(self.clearance[ib]) > reach {
             return None;
         }
-        // The body edge that goes deepest through the cloth edge, or comes nearest it from
-        // outside, judged by the body edge's pseudo-normal; the nearest feature decides below.
-        let mut best: Option<(f32, f32)> = None;
+        // The points of the cloth edge nearest each body edge that comes within `thickness`
+        // of it by that edge's pseudo-normal. That sign holds only where the body edge is the
+        // body's nearest feature: beside a body vertex that pokes through the cloth edge, a
+        // body edge a centimetre off to the side read deeper than the vertex. So each such
+        // point is judged by the body's nearest point (the candidates around the edge, however
+        // deep: they all come within a sweep of the segment, and a ridge through the edge is
+        // pushed back by the surfaces around it, not by another part of the body that happens
+        // to be nearer a deep point, an arm through the torso), and the deepest acts.
+        let mut best: Option<(f32, Nearest)> = None;
+        let mut judged = [f32::NAN; 8];
+        let mut n_judged = 0;
         let cands = &self.edge_cand[lo..hi];
         for &t in cands {
             let c = self.triangles[t as usize].map(|i| self.corner(i, s));
@@ -610,12 +672,9 @@ impl BodyMesh {
             if point_segment_distance(centre, a, b) > r + reach {
                 continue;
             }
+            // A body edge shared by two candidates is met twice: cheaper than looking for
+            // the other among the candidates, and its point is judged once (below).
             for j in 0..3 {
-                // A body edge shared by two candidates: once.
-                let other = self.adjacent[t as usize][j];
-                if other < t && cands.contains(&other) {
-                    continue;
-                }
                 let (f, g, d2) = segment_closest_params(a, b, c[j], c[(j + 1) % 3]);
                 // At an end of the cloth edge the vertex contacts act; a body edge farther
                 // than a chord can sag over a limb is another part of the body.
@@ -624,20 +683,27 @@ impl BodyMesh {
                 }
                 let q = c[j].lerp(c[(j + 1) % 3], g);
                 let n = self.pseudo_normal(t, Feature::Edge(j as u8), s).normalize_or_zero();
-                let signed = (a.lerp(b, f) - q).dot(n);
-                if signed < thickness && best.is_none_or(|(_, bs)| signed < bs) {
-                    best = Some((f, signed));
+                if (a.lerp(b, f) - q).dot(n) >= thickness {
+                    continue;
+                }
+                // Body edges that meet at a vertex share their nearest point: judge it once.
+                if judged[..n_judged].iter().any(|&u| (u - f).abs() < 1e-4) {
+                    continue;
+                }
+                if n_judged < judged.len() {
+                    judged[n_judged] = f;
+                    n_judged += 1;
+                }
+                let local = f32::INFINITY;
+                let Some(hit) = self.closest(a.lerp(b, f), s, cands.iter().copied(), local, local) else {
+                    continue;
+                };
+                if best.is_none_or(|(_, b)| hit.0 < b.0) {
+                    best = Some((f, hit));
                 }
             }
         }
-        let (f, _) = best?;
-        let p = a.lerp(b, f);
-        // The nearest of the triangles around this edge, however deep: the candidates all
-        // come within a sweep of the segment (not only of its box), and a body ridge
-        // through the edge is pushed back by the surfaces around it, not by another part
-        // of the body that happens to be nearer a deep point (an arm through the torso).
-        let local = f32::INFINITY;
-        let (d, n, t, bary) = self.closest(p, s, cands.iter().copied(), local, local)?;
+        let (f, (d, n, t, bary)) = best?;
         let wsum = w[ia] * (1.0 - f) * (1.0 - f) + w[ib] * f * f;
         if d >= thickness || wsum == 0.0 {
             return None;
@@ -682,14 +748,7 @@ impl BodyMesh {
     /// and pushed them through the body. Beyond `covered`, an outside point is out of contact
     /// (`None`), and an inside one is checked against the body's triangles out to `reach`:
     /// deeper than that it is left alone (`None`).
-    fn closest(
-        &self,
-        p: Vec3,
-        s: f32,
-        tris: impl Iterator<Item = u32>,
-        covered: f32,
-        reach: f32,
-    ) -> Option<(f32, Vec3, u32, [f32; 3])> {
+    fn closest(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>, covered: f32, reach: f32) -> Option<Nearest> {
         let hit = self.closest_among(p, s, tris)?;
         if hit.0.abs() <= covered {
             return Some(hit);
@@ -709,7 +768,7 @@ impl BodyMesh {
     }
 
     /// Closest body point to `p` among `tris` at time `s`, as [`BodyMesh::closest`].
-    fn closest_among(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<(f32, Vec3, u32, [f32; 3])> {
+    fn closest_among(&self, p: Vec3, s: f32, tris: impl Iterator<Item = u32>) -> Option<Nearest> {
         let mut best: Option<(f32, u32, Vec3, [f32; 3], Feature)> = None;
         for t in tris {
             let [a, b, c] = self.triangles[t as usize].map(|i| self.corner(i, s));
@@ -780,12 +839,16 @@ impl BodyMesh {
         thickness: f32,
         friction: f32,
     ) -> VertexContact {
-        let mut out = VertexContact { clearance: f32::INFINITY, fallback: false, moved_to: None };
+        let mut out = VertexContact { clearance: 0.0, fallback: false, moved_to: None };
         if inv_mass[i] == 0.0 {
             return out;
         }
         let p = x[i];
         let covered = self.query[i].margin(p);
+        // No hit: no body triangle within the candidates' reach. The edge contacts read this
+        // as how far the body is at least; infinity let a chord between two vertices 5 mm
+        // out (beyond their reach) skip its check while a body ridge poked through it.
+        out.clearance = covered.max(0.0);
         let hit = if covered >= thickness {
             let (a, b) = (self.cand_start[i] as usize, self.cand_start[i + 1] as usize);
             if a == b {
@@ -794,6 +857,7 @@ impl BodyMesh {
             self.closest(p, s1, self.cand[a..b].iter().copied(), covered, DEEPEST_CONTACT)
         } else {
             out.fallback = true;
+            out.clearance = 2.0 * thickness;
             let mut near = Vec::new();
             let q = Aabb::around(p, 2.0 * thickness);
             self.tree.query(&q, |t| {

@@ -18,7 +18,7 @@ use glam::{Vec2, Vec3};
 use std::time::Instant;
 
 use super::SurfaceFrame;
-use super::body_collision::BodyMesh;
+use super::body_collision::{BodyMesh, Welds};
 use super::bvh::{Aabb, AabbTree};
 use super::collider::Collider;
 use super::pattern::PatternMesh;
@@ -26,6 +26,9 @@ use super::self_collision::SelfCollision;
 
 /// Self-collision ignores a vertex and a triangle closer at rest than this many self-thicknesses.
 const SELF_EXCLUSION: f32 = 1.5;
+
+/// Most passes of the body's edge contacts on a frame's last substep.
+const LAST_EDGE_PASSES: usize = 4;
 
 /// Pattern coordinates are centimetres; the simulation runs in metres.
 pub const CM: f32 = 0.01;
@@ -323,6 +326,8 @@ pub struct Cloth {
     seam_gap: Vec<f32>,
     /// Vertices joined by seams, transitively (four at a corner where four panels meet).
     seam_groups: Vec<Vec<u32>>,
+    /// Per vertex, the index of its seam group (`u32::MAX` when not sewn).
+    seam_group_of: Vec<u32>,
     /// Per vertex, the first vertex of its seam group (itself when not sewn).
     seam_rep: Vec<u32>,
     /// `(vertex, triangle)` pairs, sorted, that self-collision leaves alone: closer at rest
@@ -444,6 +449,10 @@ impl Cloth {
         let seam_gap = seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
         let seam_groups = seam_groups(&seams, n);
+        let mut seam_group_of = vec![u32::MAX; n];
+        for (k, g) in seam_groups.iter().enumerate() {
+            g.iter().for_each(|&v| seam_group_of[v as usize] = k as u32);
+        }
         let mut seam_rep: Vec<u32> = (0..n as u32).collect();
         for g in &seam_groups {
             for &v in g {
@@ -473,6 +482,7 @@ impl Cloth {
             seams,
             seam_gap,
             seam_groups,
+            seam_group_of,
             seam_rep,
             self_excluded,
             tethers: Vec::new(),
@@ -683,8 +693,10 @@ impl Cloth {
         for k in 0..n {
             // Chords sag into the body slowly (they move with their vertices, which the vertex
             // contacts hold every substep): edge contacts every fourth substep and the last.
-            let edge_contacts = k % 4 == 3 || k + 1 == n;
-            self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32, edge_contacts);
+            // On the last, passes until none acts (at most `LAST_EDGE_PASSES`): pushed off one
+            // body edge, a chord may come to another, and the frame ends with no crossing.
+            let edge_passes = if k + 1 == n { LAST_EDGE_PASSES } else { usize::from(k % 4 == 3) };
+            self.substep(h, k as f32 / n as f32, (k + 1) as f32 / n as f32, edge_passes);
             self.time += h as f64;
         }
         if let Some(body) = &mut self.body {
@@ -694,8 +706,8 @@ impl Cloth {
     }
 
     /// One substep from `s0` to `s1` (fractions of the frame, for the body's motion), with
-    /// or without the body's edge contacts.
-    fn substep(&mut self, h: f32, s0: f32, s1: f32, edge_contacts: bool) {
+    /// up to `edge_passes` passes of the body's edge contacts.
+    fn substep(&mut self, h: f32, s0: f32, s1: f32, edge_passes: usize) {
         let t0 = Instant::now();
         self.apply_wind();
         let g = self.params.gravity;
@@ -772,16 +784,29 @@ impl Cloth {
             );
             let all = 0..self.x.len() as u32;
             body.collide(all, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
-            if edge_contacts {
-                let (x, prev, w) = (&mut self.x, &self.prev, &self.inv_mass);
-                body.push_edges(x, prev, w, &self.edges, s0, s1, 0.5 * p.body_thickness, p.body_friction);
-            }
             if welded {
                 // The contacts above moved sewn vertices apart; join them again and keep the
                 // joined point out of the body (without friction, so they move as one).
                 weld(&mut self.x, &self.inv_mass, &self.seam_groups);
                 let sewn = self.seam_groups.iter().flatten().copied();
                 body.collide(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0);
+            }
+            if edge_passes > 0 {
+                // After the weld, and moving each welded group as one: a weld after the
+                // edge contacts undid them where a sewn vertex ends a chord.
+                let welds = welded.then(|| Welds { group_of: &self.seam_group_of, groups: &self.seam_groups });
+                let group_w = welds.as_ref().map(|g| g.inv_masses(&self.inv_mass));
+                let w = group_w.as_deref().unwrap_or(&self.inv_mass);
+                let (x, prev, th) = (&mut self.x, &self.prev, 0.5 * p.body_thickness);
+                let mut since: Option<Vec<bool>> = None;
+                for _ in 0..edge_passes {
+                    let edges = &self.edges;
+                    let welds = welds.as_ref();
+                    since = body.push_edges(x, prev, w, edges, welds, since.as_deref(), s0, s1, th, p.body_friction);
+                    if since.is_none() {
+                        break;
+                    }
+                }
             }
         }
         self.timings.body_collision_ms += t2.elapsed().as_secs_f64() * 1e3;
