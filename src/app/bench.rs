@@ -1498,6 +1498,8 @@ pub struct DrapeReport {
     pub max_body_crossings: usize,
     pub max_self_crossings: usize,
     pub min_clearance_mm: f32,
+    /// Worst 99th-percentile edge strain (%) over the checked frames.
+    pub max_p99_strain_percent: f32,
     pub max_speed: f32,
 }
 
@@ -1608,6 +1610,7 @@ impl DrapeReport {
             if let Some(c) = cloth.body_clearance(0.05) {
                 self.min_clearance_mm = self.min_clearance_mm.min(c * 1e3);
             }
+            self.max_p99_strain_percent = self.max_p99_strain_percent.max(100.0 * cloth.strain_percentile(0.99));
         }
     }
 
@@ -1921,11 +1924,11 @@ pub fn drape_garment(
 }
 
 impl MarkdownRow for GarmentDrapeReport {
-    const HEADER: &'static str = "| edge cm | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm |\n|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|";
+    const HEADER: &'static str = "| edge cm | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
     fn markdown(&self) -> String {
         let d = &self.drape;
         format!(
-            "| {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} |",
+            "| {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} | {:.1} |",
             self.edge_cm,
             d.particles,
             d.settled_after_frames,
@@ -1940,7 +1943,8 @@ impl MarkdownRow for GarmentDrapeReport {
             self.settled_self_crossings,
             d.max_self_crossings,
             d.min_clearance_mm,
-            self.max_seam_gap_mm
+            self.max_seam_gap_mm,
+            d.max_p99_strain_percent
         )
     }
 }

@@ -320,18 +320,6 @@ fn shirt_on(arms: Option<&[ArmAxis]>) -> (Sewn, Vec<SleeveFit>) {
     (sewn, fits)
 }
 
-/// The 99th percentile of the cloth's edge strain (length over rest length, less one).
-fn p99_strain(c: &werkstatt::cloth::Cloth) -> f32 {
-    let mut strain: Vec<f32> = c
-        .edges()
-        .iter()
-        .zip(c.rest_edge_lengths())
-        .map(|(e, r)| c.positions()[e[0] as usize].distance(c.positions()[e[1] as usize]) / r - 1.0)
-        .collect();
-    strain.sort_by(f32::total_cmp);
-    strain[strain.len() * 99 / 100]
-}
-
 /// The shirt draped for `frames` frames with or without the rest-pose avatar.
 fn drape_shirt(on_body: bool, params: &DrapeParams, frames: u32) -> Drape {
     let avatar = on_body.then(rest_avatar);
@@ -407,7 +395,7 @@ fn a_short_drape_on_the_avatar_closes_the_seams() {
     let gap = drape.max_seam_gap();
     let th = c.params().body_thickness;
     let clearance = c.body_clearance(0.05).expect("the shirt rests on the body");
-    let p99 = p99_strain(c);
+    let p99 = c.strain_percentile(0.99);
     eprintln!(
         "after 70 frames: seam gap {gap} m, body crossings {}, self crossings {}, clearance {clearance} m (thickness {th} m), p99 strain {p99}, max speed {}",
         c.body_crossings(),
@@ -459,7 +447,7 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
             "frame {f}: seam gap {gap} m, body crossings {}, self crossings {}, clearance {clearance:?} m, p99 strain {}, max speed {}",
             crossings.len(),
             c.self_crossings(),
-            p99_strain(c),
+            c.strain_percentile(0.99),
             c.max_speed()
         );
         assert!(c.positions().iter().chain(c.velocities()).all(|v| v.is_finite()), "NaN at frame {f}");
