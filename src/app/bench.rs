@@ -1791,6 +1791,7 @@ impl MarkdownRow for ShadowRow {
 #[derive(Debug, Default, serde::Serialize)]
 pub struct GarmentDrapeReport {
     pub edge_cm: f64,
+    pub substeps: u32,
     /// Settling and the timed walk, as for the skirt.
     #[serde(flatten)]
     pub drape: DrapeReport,
@@ -1828,7 +1829,7 @@ pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
-    (substeps, iterations, untangle, arm_spread): (u32, u32, bool, f64),
+    (substeps, iterations, untangle, arm_spread): (Option<u32>, u32, bool, f64),
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1838,6 +1839,7 @@ pub fn drape_garment(
     use crate::cloth::FRAME_DT;
     use crate::garment::drape::{Drape, DrapeParams};
     use crate::garment::{Fit, garmentcode, sleeves::fit_sleeves};
+    let substeps = substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm));
     let mut avatar = WalkingAvatar::load(avatar_dir)?;
     avatar.arm_spread = arm_spread.to_radians();
     let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
@@ -1859,6 +1861,7 @@ pub fn drape_garment(
     let mut drape = Drape::new(&sewn, &params, Some(body));
     let mut r = GarmentDrapeReport {
         edge_cm,
+        substeps,
         drape: DrapeReport {
             particles: drape.cloth.vertex_count(),
             triangles: drape.cloth.triangle_count(),
@@ -1924,12 +1927,13 @@ pub fn drape_garment(
 }
 
 impl MarkdownRow for GarmentDrapeReport {
-    const HEADER: &'static str = "| edge cm | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
+    const HEADER: &'static str = "| edge cm | substeps | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
     fn markdown(&self) -> String {
         let d = &self.drape;
         format!(
-            "| {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} | {:.1} |",
+            "| {} | {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} | {:.1} |",
             self.edge_cm,
+            self.substeps,
             d.particles,
             d.settled_after_frames,
             d.settle_ms,

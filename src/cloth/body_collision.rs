@@ -47,8 +47,9 @@ pub struct BodyMesh {
     /// Per cloth edge, the candidate triangles (CSR) for edge contacts.
     edge_cand_start: Vec<u32>,
     edge_cand: Vec<u32>,
-    /// Per cloth vertex, its distance to the body after this substep's vertex contact
-    /// (infinite where it has no candidate triangles).
+    /// Per cloth vertex, its distance to the body at this substep's vertex contact, or a lower
+    /// bound (its candidates' reach) where none is that near; 0 for a pinned vertex; infinite
+    /// until the frame's first vertex contacts.
     clearance: Vec<f32>,
     /// Tree over the cloth triangles (built on the first frame), their boxes,
     /// and the `(body vertex, cloth triangle, side)` pairs of this frame and
@@ -72,15 +73,14 @@ impl Welds<'_> {
         self.groups.get(self.group_of[v] as usize).map(Vec::as_slice)
     }
 
-    /// `w` with each group's vertices carrying the group's inverse mass (zero when one of
-    /// them is pinned): how hard the group as a whole is to move.
+    /// `w` with each group's vertices carrying the group's inverse mass, 1 / Σ (1 / w): how
+    /// hard the group as a whole is to move (zero when one of them is pinned, its mass
+    /// infinite).
     pub fn inv_masses(&self, w: &[f32]) -> Vec<f32> {
         let mut out = w.to_vec();
         for g in self.groups {
-            let pinned = g.iter().any(|&v| w[v as usize] == 0.0);
             let mass: f32 = g.iter().map(|&v| 1.0 / w[v as usize]).sum();
-            let gw = if pinned { 0.0 } else { 1.0 / mass };
-            g.iter().for_each(|&v| out[v as usize] = gw);
+            g.iter().for_each(|&v| out[v as usize] = 1.0 / mass);
         }
         out
     }
@@ -550,11 +550,11 @@ impl BodyMesh {
         Some((n, (thickness - d) / wsum, [ba, bu, bv]))
     }
 
-    /// Pushes cloth edges off the body at time `s`: where a body edge (a ridge of the body)
-    /// comes within `thickness` of a cloth edge between its ends, or pokes through it, the
-    /// point of the cloth edge nearest that body edge is moved out to `thickness` (inside or
-    /// outside decided as for vertices, by the nearest feature's pseudo-normal), the two
-    /// cloth vertices sharing the move by their barycentric weight and inverse mass.
+    /// Pushes cloth edges off the body at time `s`: where body edges (ridges of the body)
+    /// come within `thickness` of a cloth edge between its ends, or poke through it, the
+    /// points of the cloth edge nearest them are judged by the body's nearest point (inside or
+    /// outside as for vertices), and the deepest is moved out to `thickness`, the two cloth
+    /// vertices sharing the move by their barycentric weight and inverse mass.
     ///
     /// Gauss-Seidel in edge order, but few edges are in contact in a substep: which are is
     /// found on the cores from the positions before the pass, and the pass in order visits
@@ -565,7 +565,7 @@ impl BodyMesh {
     /// moves them all, weighed by the group's mass (`w` then holds the groups' inverse
     /// masses, see [`Welds`]).
     ///
-    /// Returns the vertices the pass moved, or `None` when it moved none. A pass again at
+    /// Returns the vertices the pass moved, or `None` when no contact acted. A pass again at
     /// the same `s` gives them as `since`: an edge with neither vertex among them is as the
     /// pass left it, out of contact, and is not looked at.
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
@@ -605,18 +605,14 @@ impl BodyMesh {
             else {
                 continue;
             };
-            // The edge point moves by `delta`, its vertices (or their groups) by their share.
+            // The edge point moves by `delta`, its vertices (their groups, a vertex not sewn
+            // being a group of one) by their share.
             let apply = |delta: Vec3, x: &mut [Vec3], moved: &mut [bool]| {
                 for (v, share) in [(ia, w[ia] * (1.0 - f) / wsum), (ib, w[ib] * f / wsum)] {
-                    match welds.and_then(|g| g.group(v)) {
-                        Some(group) => group.iter().for_each(|&u| {
-                            x[u as usize] += delta * share;
-                            moved[u as usize] = true;
-                        }),
-                        None => {
-                            x[v] += delta * share;
-                            moved[v] = true;
-                        }
+                    let alone = [v as u32];
+                    for &u in welds.and_then(|g| g.group(v)).unwrap_or(&alone) {
+                        x[u as usize] += delta * share;
+                        moved[u as usize] = true;
                     }
                 }
             };
@@ -698,7 +694,7 @@ impl BodyMesh {
                 let Some(hit) = self.closest(a.lerp(b, f), s, cands.iter().copied(), local, local) else {
                     continue;
                 };
-                if best.is_none_or(|(_, b)| hit.0 < b.0) {
+                if best.is_none_or(|(_, deepest)| hit.0 < deepest.0) {
                     best = Some((f, hit));
                 }
             }

@@ -32,6 +32,19 @@ impl Default for DrapeParams {
     }
 }
 
+impl DrapeParams {
+    /// Simulator substeps per 1/60 s frame for a garment of `edge_cm` edges: 20 per
+    /// centimetre of resolution (20 at 1 cm, 40 at 0.5 cm), never fewer than 20. A fixed number
+    /// of Gauss-Seidel sweeps carries a load across fewer edges the finer the mesh, so the
+    /// same substeps make a finer garment stretchier: the shirt's 99th-percentile edge strain
+    /// was 11 % at 1 cm with 20 substeps (6.8 % with 30, 5.1 % with 40), and at 0.5 cm with 20
+    /// it stretched 38 % and slid off the shoulders (docs/garments.md).
+    pub fn substeps_for(edge_cm: f64) -> u32 {
+        let per_cm = 20.0 / edge_cm.max(1e-3);
+        (per_cm.round() as u32).clamp(20, 200)
+    }
+}
+
 /// A garment being sewn and draped.
 pub struct Drape {
     pub cloth: Cloth,
