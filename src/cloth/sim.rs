@@ -1053,7 +1053,7 @@ impl Cloth {
         self.edge_strains().fold(f32::MIN, f32::max)
     }
     /// The edge strain below which a fraction `q` (0 to 1) of the edges lie: `0.99` gives the
-    /// 99th percentile the drape's gate holds under 5 %.
+    /// 99th percentile that the garment gate wants under 5 %.
     pub fn strain_percentile(&self, q: f32) -> f32 {
         let mut strain: Vec<f32> = self.edge_strains().collect();
         strain.sort_by(f32::total_cmp);
