@@ -1839,7 +1839,7 @@ pub fn drape_garment(
     use crate::cloth::FRAME_DT;
     use crate::garment::drape::{Drape, DrapeParams};
     use crate::garment::{Fit, garmentcode, sleeves::fit_sleeves};
-    let substeps = substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm));
+    let substeps = substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm, DrapeParams::SUBSTEPS_PER_CM));
     let mut avatar = WalkingAvatar::load(avatar_dir)?;
     avatar.arm_spread = arm_spread.to_radians();
     let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
