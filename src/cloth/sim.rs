@@ -328,6 +328,9 @@ pub struct Cloth {
     seam_groups: Vec<Vec<u32>>,
     /// Per vertex, the index of its seam group (`u32::MAX` when not sewn).
     seam_group_of: Vec<u32>,
+    /// Per vertex, its welded group's inverse mass (its own when not sewn): what the edge
+    /// contacts move a welded group by. Follows `inv_mass` (pins).
+    weld_inv_mass: Vec<f32>,
     /// Per vertex, the first vertex of its seam group (itself when not sewn).
     seam_rep: Vec<u32>,
     /// `(vertex, triangle)` pairs, sorted, that self-collision leaves alone: closer at rest
@@ -404,7 +407,7 @@ impl Cloth {
                 shear_area.push(area);
             }
         }
-        let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
+        let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
 
         // Each undirected edge once; an edge seen twice is interior and gets
         // a bending stencil (the edge plus both opposite vertices).
@@ -453,12 +456,9 @@ impl Cloth {
         for (k, g) in seam_groups.iter().enumerate() {
             g.iter().for_each(|&v| seam_group_of[v as usize] = k as u32);
         }
-        let mut seam_rep: Vec<u32> = (0..n as u32).collect();
-        for g in &seam_groups {
-            for &v in g {
-                seam_rep[v as usize] = g[0];
-            }
-        }
+        let seam_rep: Vec<u32> =
+            (0..n as u32).map(|v| seam_groups.get(seam_group_of[v as usize] as usize).map_or(v, |g| g[0])).collect();
+        let weld_inv_mass = Welds { group_of: &seam_group_of, groups: &seam_groups }.inv_masses(&inv_mass);
         let self_excluded = rest.near_pairs(mesh.triangles(), mesh.piece_ids(), SELF_EXCLUSION * params.self_thickness);
         let n_constraints = edges.len() + bends.len() + shears.len() + seams.len();
         Cloth {
@@ -483,6 +483,7 @@ impl Cloth {
             seam_gap,
             seam_groups,
             seam_group_of,
+            weld_inv_mass,
             seam_rep,
             self_excluded,
             tethers: Vec::new(),
@@ -554,6 +555,8 @@ impl Cloth {
         self.pinned.extend_from_slice(vertices);
         self.pinned.sort_unstable();
         self.pinned.dedup();
+        let welds = Welds { group_of: &self.seam_group_of, groups: &self.seam_groups };
+        self.weld_inv_mass = welds.inv_masses(&self.inv_mass);
         self.build_tethers();
     }
 
@@ -795,8 +798,7 @@ impl Cloth {
                 // After the weld, and moving each welded group as one: a weld after the
                 // edge contacts undid them where a sewn vertex ends a chord.
                 let welds = welded.then(|| Welds { group_of: &self.seam_group_of, groups: &self.seam_groups });
-                let group_w = welds.as_ref().map(|g| g.inv_masses(&self.inv_mass));
-                let w = group_w.as_deref().unwrap_or(&self.inv_mass);
+                let w = if welded { &self.weld_inv_mass } else { &self.inv_mass };
                 let (x, prev, th) = (&mut self.x, &self.prev, 0.5 * p.body_thickness);
                 let mut since: Option<Vec<bool>> = None;
                 for _ in 0..edge_passes {
