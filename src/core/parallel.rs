@@ -1,46 +1,40 @@
 //! Work spread over threads with results in a fixed order, so that what is computed never
 //! depends on the thread count.
+//!
+//! The work runs on rayon's pool, started once: the cloth's collision passes call these dozens
+//! of times a frame, and spawning threads for each call cost about 5 % of the frame.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use rayon::prelude::*;
 
-/// Threads for `items` items: `threads`, or one per core for 0, and never more than the items.
-fn workers(threads: usize, items: usize) -> usize {
-    let threads = match threads {
-        0 => std::thread::available_parallelism().map_or(1, |t| t.get()),
-        t => t,
-    };
-    threads.min(items.max(1))
+/// Runs `f` on `threads` threads: 1 on the calling thread, 0 on the shared pool (one per core),
+/// another count on a pool of its own.
+fn on_threads<R: Send>(threads: usize, f: impl FnOnce(bool) -> R + Send) -> R {
+    match threads {
+        0 => f(true),
+        1 => f(false),
+        t => match rayon::ThreadPoolBuilder::new().num_threads(t).build() {
+            Ok(pool) => pool.install(|| f(true)),
+            // No threads to be had: the same result on this one.
+            Err(_) => f(false),
+        },
+    }
 }
 
 /// `f(0), f(1), ..., f(count - 1)` computed on `threads` threads (0: one per core), in index
 /// order. Items are handed out one at a time, so uneven items balance.
-pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let threads = workers(threads, count);
-    let next = AtomicUsize::new(0);
-    let mut done: Vec<(usize, T)> = std::thread::scope(|s| {
-        let workers: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= count {
-                            return done;
-                        }
-                        done.push((i, f(i)));
-                    }
-                })
-            })
-            .collect();
-        workers.into_iter().flat_map(|w| w.join().expect("a worker thread panicked")).collect()
-    });
-    done.sort_by_key(|(i, _)| *i);
-    done.into_iter().map(|(_, t)| t).collect()
+pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    on_threads(threads, |parallel| {
+        if parallel && count > 1 {
+            (0..count).into_par_iter().with_max_len(1).map(&f).collect()
+        } else {
+            (0..count).map(&f).collect()
+        }
+    })
 }
 
 /// `f(0), ..., f(count - 1)` in index order, computed `chunk_len` items at a time on one thread
 /// per core; below two chunks on the calling thread alone (spawning costs more than it saves).
-pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
     let chunk_len = chunk_len.max(1);
     let threads = if count >= 2 * chunk_len { 0 } else { 1 };
     let chunks = map(count.div_ceil(chunk_len), threads, |c| {
@@ -52,20 +46,20 @@ pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) 
 /// `f(index, chunk)` for every `chunk_len`-long chunk of `out` (the last may be shorter), on
 /// `threads` threads (0: one per core); each chunk is written by one call alone, so the result
 /// does not depend on the thread count when `f` does not.
-pub fn for_each_chunk<T: Send>(out: &mut [T], chunk_len: usize, threads: usize, f: impl Fn(usize, &mut [T]) + Sync) {
-    let chunks: Vec<(usize, &mut [T])> = out.chunks_mut(chunk_len.max(1)).enumerate().collect();
-    let threads = workers(threads, chunks.len());
-    let queue = std::sync::Mutex::new(chunks.into_iter());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| {
-                loop {
-                    let Some((i, chunk)) = queue.lock().expect("a worker thread panicked").next() else { return };
-                    f(i, chunk);
-                }
-            });
+pub fn for_each_chunk<T: Send>(
+    out: &mut [T],
+    chunk_len: usize,
+    threads: usize,
+    f: impl Fn(usize, &mut [T]) + Sync + Send,
+) {
+    let chunk_len = chunk_len.max(1);
+    on_threads(threads, |parallel| {
+        if parallel && out.len() > chunk_len {
+            out.par_chunks_mut(chunk_len).with_max_len(1).enumerate().for_each(|(i, chunk)| f(i, chunk));
+        } else {
+            out.chunks_mut(chunk_len).enumerate().for_each(|(i, chunk)| f(i, chunk));
         }
-    });
+    })
 }
 
 #[cfg(test)]
