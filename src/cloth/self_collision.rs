@@ -73,6 +73,9 @@ pub struct SelfCollision {
     /// Whether [`SelfCollision::untangle`] runs (the simulator turns it on once the seams have
     /// closed: while they close, panels pass each other on their way).
     pub(crate) untangling: bool,
+    /// Where each vertex may go before the frame's pairs no longer cover it: its predicted
+    /// sweep widened by half the slack ([`SelfCollision::escaped`]).
+    reach: Vec<Aabb>,
     /// Each vertex's and each triangle's pattern piece.
     piece: Vec<u32>,
     tri_piece: Vec<u32>,
@@ -87,6 +90,8 @@ pub struct SelfStats {
     pub contacts: usize,
     /// Vertices that met more than [`MAX_PAIRS_PER_VERTEX`] triangles and kept the soonest.
     pub capped: usize,
+    /// Times the pairs were gathered again within the frame ([`SelfCollision::escaped`]).
+    pub regathers: usize,
     /// Cloth edges found crossing cloth triangles at the frame start.
     pub crossings: usize,
     /// Pairs whose vertex was found through its triangle and is pulled back (see
@@ -128,6 +133,7 @@ impl SelfCollision {
             ring_edge,
             edges: edges.to_vec(),
             untangling: false,
+            reach: Vec::new(),
             piece: pieces.to_vec(),
             tri_piece,
             stats: SelfStats::default(),
@@ -164,6 +170,30 @@ impl SelfCollision {
         slack: f32,
     ) {
         self.stats = SelfStats::default();
+        self.gather(x, v, inv_mass, rep, excluded, triangles, dt, thickness, slack, None);
+        if self.untangling {
+            self.untangle(x, rep, triangles);
+        }
+        self.stats.pairs = self.pairs.len();
+    }
+
+    /// The pairs over the next `dt` from `x` moving at `v`: every vertex's, or with `escaped`
+    /// only those of the vertices near the triangles around an escaped vertex (the others keep
+    /// theirs). See [`SelfCollision::begin_frame`].
+    #[allow(clippy::too_many_arguments)] // as begin_frame
+    fn gather(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        rep: &[u32],
+        excluded: &[(u32, u32)],
+        triangles: &[[u32; 3]],
+        dt: f32,
+        thickness: f32,
+        slack: f32,
+        escaped: Option<&[u32]>,
+    ) {
         let sweep = |i: usize| Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]);
         let r = 0.5 * (thickness + slack);
         for (k, t) in triangles.iter().enumerate() {
@@ -171,12 +201,39 @@ impl SelfCollision {
             self.boxes[k] = sweep(a).union(sweep(b)).union(sweep(c)).inflate(r);
         }
         self.tree.refit(&self.boxes);
+        // Those near the triangles around an escaped vertex (as far as its longest edge).
+        let affected = escaped.map(|escaped| {
+            let mut affected = vec![false; x.len()];
+            for &e in escaped {
+                let e = e as usize;
+                let ring = &self.ring[self.ring_start[e] as usize..self.ring_start[e + 1] as usize];
+                let arm = ring.iter().map(|&u| x[u as usize].distance(x[e])).fold(0.0, f32::max);
+                affected[e] = true;
+                self.tree.query(&sweep(e).inflate(r + arm), |t| {
+                    triangles[t as usize].iter().for_each(|&c| affected[c as usize] = true)
+                });
+            }
+            affected
+        });
+        let gathered = |i: usize| affected.as_ref().is_none_or(|a| a[i]);
+        if escaped.is_none() {
+            self.reach.clear();
+            self.reach.resize(x.len(), Aabb::EMPTY);
+        }
+        for (i, reach) in self.reach.iter_mut().enumerate() {
+            if gathered(i) {
+                *reach = sweep(i).inflate(0.5 * slack);
+            }
+        }
         std::mem::swap(&mut self.pairs, &mut self.previous);
         self.pairs.clear();
         // Each vertex's pairs (its query of the tree, capped and sorted) on the cores in chunks,
         // then appended and given their sides in vertex order: the same for any thread count.
         let (tree, boxes) = (&self.tree, &self.boxes);
         let found = crate::core::parallel::map_in_chunks(x.len(), PAIR_CHUNK, |i| {
+            if !gathered(i) {
+                return None;
+            }
             let q = sweep(i).inflate(r);
             let mut pairs = Vec::new();
             tree.query(&q, |t| {
@@ -204,10 +261,21 @@ impl SelfCollision {
                 }
             });
             let capped = cap_and_sort(&mut pairs, 0);
-            (pairs, capped)
+            Some((pairs, capped))
         });
         let mut prev_k = 0;
-        for (i, (pairs, capped)) in found.into_iter().enumerate() {
+        for (i, found) in found.into_iter().enumerate() {
+            let Some((pairs, capped)) = found else {
+                // Not gathered again: the pairs it has.
+                while self.previous.get(prev_k).is_some_and(|p| (p.0 as usize) < i) {
+                    prev_k += 1;
+                }
+                while let Some(&p) = self.previous.get(prev_k).filter(|p| p.0 as usize == i) {
+                    self.pairs.push(p);
+                    prev_k += 1;
+                }
+                continue;
+            };
             let start = self.pairs.len();
             self.pairs.extend(pairs);
             if capped {
@@ -233,10 +301,37 @@ impl SelfCollision {
                 pair.2 = side;
             }
         }
-        if self.untangling {
-            self.untangle(x, rep, triangles);
-        }
-        self.stats.pairs = self.pairs.len();
+    }
+
+    /// The vertices at `x` that have left the region their frame's pairs were gathered for (their
+    /// predicted sweep, widened by half the slack): a fold springing open or a hard push moves
+    /// cloth faster than the frame start's velocities said, onto triangles it was not paired
+    /// with, and through them. The simulator then gathers again ([`SelfCollision::regather`]).
+    pub(crate) fn escaped(&self, x: &[Vec3]) -> Vec<u32> {
+        (0..x.len() as u32).filter(|&i| self.reach[i as usize].margin(x[i as usize]) < 0.0).collect()
+    }
+
+    /// The pairs gathered again within the frame for what is near the `escaped` vertices, from
+    /// `x` (the positions at the substep's start, before the escape, each vertex still on its
+    /// side) over the frame's `remaining` time: pairs still in contact keep their sides (forced
+    /// ones included), new ones take the side they have in `x`.
+    #[allow(clippy::too_many_arguments)] // as begin_frame
+    pub(crate) fn regather(
+        &mut self,
+        x: &[Vec3],
+        v: &[Vec3],
+        inv_mass: &[f32],
+        rep: &[u32],
+        excluded: &[(u32, u32)],
+        triangles: &[[u32; 3]],
+        remaining: f32,
+        thickness: f32,
+        slack: f32,
+        escaped: &[u32],
+    ) {
+        self.gather(x, v, inv_mass, rep, excluded, triangles, remaining, thickness, slack, Some(escaped));
+        self.stats.regathers += 1;
+        self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
 
     /// Finds the cloth's edges that cross its triangles at the frame start and pulls what went

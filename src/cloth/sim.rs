@@ -322,6 +322,13 @@ pub struct Cloth {
     /// Inverse of the rest edge matrix `[u1 - u0, u2 - u0]`, column-major.
     shear_inv: Vec<[f32; 4]>,
     shear_area: Vec<f32>,
+    /// Where the vertex ranges of the sweep's parts start and end ([`SWEEP_PARTS`]).
+    part_vertices: Vec<usize>,
+    /// Where each part's edges, shear triangles and bending stencils start and end in their
+    /// lists, then where the ones spanning parts end ([`sweep_order`]).
+    part_edges: Vec<usize>,
+    part_shears: Vec<usize>,
+    part_bends: Vec<usize>,
     seams: Vec<[u32; 2]>,
     seam_gap: Vec<f32>,
     /// Vertices joined by seams, transitively (four at a corner where four panels meet).
@@ -432,10 +439,12 @@ impl Cloth {
                 i += 1;
             }
         }
-        color_order(&mut edges, n);
-        color_order(&mut bends, n);
-        let mut order: Vec<usize> = (0..shears.len()).collect();
-        color_order_by(&mut order, n, |&k| shears[k]);
+        let part_vertices: Vec<usize> = (0..=SWEEP_PARTS).map(|p| p * n / SWEEP_PARTS).collect();
+        let (order, part_edges) = sweep_order(&edges, &part_vertices);
+        let edges: Vec<[u32; 2]> = order.iter().map(|&k| edges[k]).collect();
+        let (order, part_bends) = sweep_order(&bends, &part_vertices);
+        let bends: Vec<[u32; 4]> = order.iter().map(|&k| bends[k]).collect();
+        let (order, part_shears) = sweep_order(&shears, &part_vertices);
         let shears: Vec<[u32; 3]> = order.iter().map(|&k| shears[k]).collect();
         let shear_inv: Vec<[f32; 4]> = order.iter().map(|&k| shear_inv[k]).collect();
         let shear_area: Vec<f32> = order.iter().map(|&k| shear_area[k]).collect();
@@ -479,6 +488,10 @@ impl Cloth {
             shears,
             shear_inv,
             shear_area,
+            part_vertices,
+            part_edges,
+            part_shears,
+            part_bends,
             seams,
             seam_gap,
             seam_groups,
@@ -667,6 +680,12 @@ impl Cloth {
             .collect();
     }
 
+    /// What contacts gathered once per frame over the predicted motion allow for the motion the
+    /// prediction misses.
+    fn slack(&self) -> f32 {
+        2.0 * self.params.body_thickness.max(self.params.self_thickness)
+    }
+
     /// Advances one frame of length `dt` seconds in `substeps` fixed
     /// substeps. Pass the same `dt` every frame for reproducible results.
     pub fn step_frame(&mut self, dt: f32) {
@@ -676,7 +695,7 @@ impl Cloth {
         let t0 = Instant::now();
         // Contacts are gathered once per frame over the predicted motion;
         // the slack covers motion the prediction misses.
-        let slack = 2.0 * self.params.body_thickness.max(self.params.self_thickness);
+        let slack = self.slack();
         if let Some(body) = &mut self.body {
             let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
             body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, &self.edges, dt, th, th + slack);
@@ -740,20 +759,48 @@ impl Cloth {
             let (l_edge, rest) = self.lambda.split_at_mut(self.edges.len());
             let (l_bend, rest) = rest.split_at_mut(self.bends.len());
             let (l_shear, l_seam) = rest.split_at_mut(self.shears.len());
-            let x = &mut self.x;
             let w = &self.inv_mass;
             let p = &self.params;
-            solve_distances(x, w, &self.edges, |k| self.edge_rest[k], l_edge, p.stretch_compliance, h);
-            let shear = ShearSet { tris: &self.shears, inv: &self.shear_inv, area: &self.shear_area };
-            solve_shear(x, w, &shear, l_shear, p.shear_compliance, h);
-            solve_bending(x, w, &self.bends, &self.bend_k, l_bend, p.bend_compliance, h);
+            // Each part's constraints touch its vertices alone: the parts in parallel, then
+            // the constraints spanning them.
+            let [edges, shears, bends] = [&self.part_edges, &self.part_shears, &self.part_bends];
+            let sweep = |part: usize, x: &mut [Vec3], l_edge: &mut [f32], l_shear: &mut [f32], l_bend: &mut [f32]| {
+                let base = if part < SWEEP_PARTS { self.part_vertices[part] } else { 0 };
+                let (e, t, b) =
+                    (edges[part]..edges[part + 1], shears[part]..shears[part + 1], bends[part]..bends[part + 1]);
+                let rest = &self.edge_rest[e.clone()];
+                solve_distances(x, base, w, &self.edges[e], |k| rest[k], l_edge, p.stretch_compliance / (h * h));
+                let (tris, inv, area) = (&self.shears[t.clone()], &self.shear_inv[t.clone()], &self.shear_area[t]);
+                solve_shear(x, base, w, &ShearSet { tris, inv, area }, l_shear, p.shear_compliance / (h * h));
+                solve_bending(x, base, w, &self.bends[b.clone()], &self.bend_k[b], l_bend, p.bend_compliance / (h * h));
+            };
+            let mut l_edges = split_at_bounds(l_edge, edges);
+            let mut l_shears = split_at_bounds(l_shear, shears);
+            let mut l_bends = split_at_bounds(l_bend, bends);
+            let within: Vec<_> = split_at_bounds(&mut self.x, &self.part_vertices)
+                .into_iter()
+                .zip(l_edges.drain(..SWEEP_PARTS))
+                .zip(l_shears.drain(..SWEEP_PARTS).zip(l_bends.drain(..SWEEP_PARTS)))
+                .enumerate()
+                .collect();
+            crate::core::parallel::for_each(within, |(part, ((x, le), (ls, lb)))| sweep(part, x, le, ls, lb));
+            sweep(SWEEP_PARTS, &mut self.x, l_edges[0], l_shears[0], l_bends[0]);
+            let x = &mut self.x;
             if welded {
                 // Closed rigid seams: the exact projection of each group at once. Pair by pair,
                 // a corner where three or four panels meet stays millimetres open against the
                 // cloth's stretch at the sweep counts used here.
                 weld(x, w, &self.seam_groups);
             } else {
-                solve_distances(x, w, &self.seams, |k| self.seam_gap[k] * seam_scale, l_seam, p.seam_compliance, h);
+                solve_distances(
+                    x,
+                    0,
+                    w,
+                    &self.seams,
+                    |k| self.seam_gap[k] * seam_scale,
+                    l_seam,
+                    p.seam_compliance / (h * h),
+                );
             }
             if p.tethers {
                 solve_tethers(x, &self.tethers);
@@ -765,8 +812,17 @@ impl Cloth {
 
         let t1 = Instant::now();
         self.timings.constraints_ms += (t1 - t0).as_secs_f64() * 1e3;
+        let slack = self.slack();
         if let Some(sc) = &mut self.self_collision {
             let th = self.params.self_thickness;
+            let escaped = sc.escaped(&self.x);
+            if !escaped.is_empty() {
+                // Gathered again from the substep's start, where every vertex was still on
+                // its side, over what is left of the frame.
+                let (rep, excluded, tris) = (&self.seam_rep, &self.self_excluded, self.mesh.triangles());
+                let remaining = h / (s1 - s0) * (1.0 - s0);
+                sc.regather(&self.prev, &self.v, &self.inv_mass, rep, excluded, tris, remaining, th, slack, &escaped);
+            }
             sc.solve(&mut self.x, &self.prev, &self.inv_mass, self.mesh.triangles(), th);
         }
         let t2 = Instant::now();
@@ -1071,46 +1127,85 @@ impl Cloth {
     }
 }
 
-/// Reorders constraints so that each colour class (no two constraints in it
-/// share a vertex) is contiguous. Gauss-Seidel then sweeps colour by colour:
-/// consecutive constraints are independent, so the CPU can overlap their
-/// square roots and divisions instead of waiting on the previous write.
-fn color_order<const N: usize>(items: &mut Vec<[u32; N]>, n_vertices: usize) {
+/// Parts the constraint sweeps split the vertices into, as index ranges (a pattern's vertices
+/// are numbered panel by panel, so a range is mostly whole panels): the constraints within a
+/// part are swept on its own thread, those spanning parts after them. A fixed count, not one
+/// per core, so the sweep order, and with it the result, is the same on every machine.
+const SWEEP_PARTS: usize = 4;
+
+/// The sweep order of `items` (constraints by their vertices): part by part ([`SWEEP_PARTS`],
+/// the ranges `part_vertices`), then the ones spanning parts; within each, by colour class (no
+/// two constraints of a class share a vertex), so consecutive constraints are independent and
+/// the CPU overlaps their square roots and divisions instead of waiting on the previous write.
+/// Returns the order and where each part's constraints start, then where the spanning ones do
+/// and end.
+fn sweep_order<const N: usize>(items: &[[u32; N]], part_vertices: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let parts = part_vertices.len() - 1;
+    let part_of = |v: u32| part_vertices.partition_point(|&start| start <= v as usize) - 1;
+    let group = |item: &[u32; N]| {
+        let first = part_of(item[0]);
+        if item.iter().all(|&v| part_of(v) == first) { first } else { parts }
+    };
     let mut order: Vec<usize> = (0..items.len()).collect();
-    color_order_by(&mut order, n_vertices, |&k| items[k]);
-    *items = order.iter().map(|&k| items[k]).collect();
+    order.sort_by_key(|&k| group(&items[k]));
+    let mut bounds = vec![0; parts + 2];
+    for item in items {
+        bounds[group(item) + 1] += 1;
+    }
+    for p in 0..=parts {
+        bounds[p + 1] += bounds[p];
+    }
+    let n_vertices = part_vertices[parts];
+    for g in bounds.windows(2) {
+        color_order_by(&mut order[g[0]..g[1]], n_vertices, |&k| items[k]);
+    }
+    (order, bounds)
 }
 
 /// Greedy colouring in the given order, then a stable sort by colour (the
 /// original order is kept within a colour for memory locality).
 fn color_order_by<const N: usize>(order: &mut [usize], n_vertices: usize, verts: impl Fn(&usize) -> [u32; N]) {
     let mut used = vec![0u64; n_vertices];
-    let mut color = vec![0u32; order.len()];
+    let mut colored: Vec<(u32, usize)> = Vec::with_capacity(order.len());
     for &k in order.iter() {
         let vs = verts(&k);
         let taken = vs.iter().fold(0u64, |m, &v| m | used[v as usize]);
         // More than 63 colours cannot happen on a triangle mesh; if it did,
         // sharing the last colour only costs speed, not correctness.
         let c = (!taken).trailing_zeros().min(63);
-        color[k] = c;
+        colored.push((c, k));
         for &v in &vs {
             used[v as usize] |= 1 << c;
         }
     }
-    order.sort_by_key(|&k| color[k]);
+    colored.sort_by_key(|&(c, _)| c);
+    for (slot, (_, k)) in order.iter_mut().zip(colored) {
+        *slot = k;
+    }
 }
 
-/// XPBD distance constraints `|x_a - x_b| = rest(k)`.
+/// `s` cut at `bounds` (ascending, from 0): the pieces `bounds[i]..bounds[i + 1]`.
+fn split_at_bounds<'a, T>(mut s: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
+    let mut pieces = Vec::with_capacity(bounds.len().saturating_sub(1));
+    for b in bounds.windows(2) {
+        let (piece, rest) = std::mem::take(&mut s).split_at_mut(b[1] - b[0]);
+        pieces.push(piece);
+        s = rest;
+    }
+    pieces
+}
+
+/// XPBD distance constraints `|x_a - x_b| = rest(k)`, with `alpha` the compliance over the
+/// substep squared. `x` holds the vertices from index `base` on (a part of the sweep).
 fn solve_distances(
     x: &mut [Vec3],
+    base: usize,
     w: &[f32],
     pairs: &[[u32; 2]],
     rest: impl Fn(usize) -> f32,
     lambda: &mut [f32],
-    compliance: f32,
-    h: f32,
+    alpha: f32,
 ) {
-    let alpha = compliance / (h * h);
     for (k, &[a, b]) in pairs.iter().enumerate() {
         let (a, b) = (a as usize, b as usize);
         let (wa, wb) = (w[a], w[b]);
@@ -1118,6 +1213,7 @@ fn solve_distances(
         if wsum == 0.0 {
             continue;
         }
+        let (a, b) = (a - base, b - base);
         let d = x[a] - x[b];
         let len = d.length();
         if len < 1e-9 {
@@ -1146,12 +1242,11 @@ struct ShearSet<'a> {
     area: &'a [f32],
 }
 
-fn solve_shear(x: &mut [Vec3], w: &[f32], set: &ShearSet, lambda: &mut [f32], compliance: f32, h: f32) {
-    let alpha_base = compliance / (h * h);
+fn solve_shear(x: &mut [Vec3], base: usize, w: &[f32], set: &ShearSet, lambda: &mut [f32], alpha_base: f32) {
     for (k, t) in set.tris.iter().enumerate() {
         let [i0, i1, i2] = t.map(|i| i as usize);
         let [b00, b10, b01, b11] = set.inv[k];
-        let (d1, d2) = (x[i1] - x[i0], x[i2] - x[i0]);
+        let (d1, d2) = (x[i1 - base] - x[i0 - base], x[i2 - base] - x[i0 - base]);
         let fu = d1 * b00 + d2 * b10;
         let fv = d1 * b01 + d2 * b11;
         let c = fu.dot(fv);
@@ -1167,7 +1262,7 @@ fn solve_shear(x: &mut [Vec3], w: &[f32], set: &ShearSet, lambda: &mut [f32], co
         lambda[k] += dl;
         for (i, g) in [(i0, g0), (i1, g1), (i2, g2)] {
             if w[i] > 0.0 {
-                x[i] += g * (w[i] * dl);
+                x[i - base] += g * (w[i] * dl);
             }
         }
     }
@@ -1246,18 +1341,17 @@ fn isometric_bending_weights(p: [Vec2; 4]) -> ([f32; 4], f32) {
 /// resolution.
 fn solve_bending(
     x: &mut [Vec3],
+    base: usize,
     w: &[f32],
     stencils: &[[u32; 4]],
     weights: &[([f32; 4], f32, f32)],
     lambda: &mut [f32],
-    compliance: f32,
-    h: f32,
+    alpha_base: f32,
 ) {
-    let alpha_base = compliance / (h * h);
     for (k, s) in stencils.iter().enumerate() {
         let v = s.map(|i| i as usize);
         let (kw, area, rest) = weights[k];
-        let hv = x[v[0]] * kw[0] + x[v[1]] * kw[1] + x[v[2]] * kw[2] + x[v[3]] * kw[3];
+        let hv = x[v[0] - base] * kw[0] + x[v[1] - base] * kw[1] + x[v[2] - base] * kw[2] + x[v[3] - base] * kw[3];
         let c = hv.length();
         if c < 1e-9 {
             continue;
@@ -1269,7 +1363,7 @@ fn solve_bending(
         lambda[k] += dl;
         for j in 0..4 {
             if w[v[j]] > 0.0 {
-                x[v[j]] += n * (w[v[j]] * kw[j] * dl);
+                x[v[j] - base] += n * (w[v[j]] * kw[j] * dl);
             }
         }
     }
@@ -1333,5 +1427,66 @@ fn solve_tethers(x: &mut [Vec3], tethers: &[(u32, u32, f32)]) {
         if len > max {
             x[i as usize] -= d * ((len - max) / len);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_part_of_the_sweep_touches_its_own_vertices_alone() {
+        // A strip of quads 3 wide and 12 long, numbered row by row along its length.
+        let (cols, rows) = (4u32, 13u32);
+        let id = |c: u32, r: u32| r * cols + c;
+        let mut tris = Vec::new();
+        for r in 0..rows - 1 {
+            for c in 0..cols - 1 {
+                tris.push([id(c, r), id(c + 1, r), id(c + 1, r + 1)]);
+                tris.push([id(c, r), id(c + 1, r + 1), id(c, r + 1)]);
+            }
+        }
+        let n = (cols * rows) as usize;
+        let part_vertices: Vec<usize> = (0..=SWEEP_PARTS).map(|p| p * n / SWEEP_PARTS).collect();
+        let (order, bounds) = sweep_order(&tris, &part_vertices);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..tris.len()).collect::<Vec<_>>(), "every triangle once");
+        assert_eq!((bounds.len(), bounds[0], bounds[SWEEP_PARTS + 1]), (SWEEP_PARTS + 2, 0, tris.len()));
+        for p in 0..SWEEP_PARTS {
+            let range = part_vertices[p]..part_vertices[p + 1];
+            for &k in &order[bounds[p]..bounds[p + 1]] {
+                assert!(tris[k].iter().all(|&v| range.contains(&(v as usize))), "part {p}: triangle {:?}", tris[k]);
+            }
+        }
+        let spanning = &order[bounds[SWEEP_PARTS]..];
+        assert!(!spanning.is_empty() && spanning.len() < tris.len() / 2, "{} spanning", spanning.len());
+        for &k in spanning {
+            let first = part_vertices.partition_point(|&s| s <= tris[k][0] as usize);
+            assert!(tris[k].iter().any(|&v| part_vertices.partition_point(|&s| s <= v as usize) != first));
+        }
+        // Within a group, consecutive triangles of one colour share no vertex: the colours come
+        // in runs, so no vertex repeats before the run ends. Checked on the first part.
+        let first: Vec<[u32; 3]> = order[bounds[0]..bounds[1]].iter().map(|&k| tris[k]).collect();
+        let mut runs = 1;
+        let mut seen = std::collections::HashSet::new();
+        for t in &first {
+            if t.iter().any(|v| seen.contains(v)) {
+                runs += 1;
+                seen.clear();
+            }
+            seen.extend(t.iter().copied());
+        }
+        assert!(runs <= 8, "{runs} colour runs");
+    }
+
+    #[test]
+    fn split_at_bounds_gives_the_ranges() {
+        let mut v: Vec<u32> = (0..10).collect();
+        let pieces = split_at_bounds(&mut v, &[0, 3, 3, 7, 10]);
+        assert_eq!(
+            pieces.iter().map(|p| p.to_vec()).collect::<Vec<_>>(),
+            [vec![0, 1, 2], vec![], vec![3, 4, 5, 6], vec![7, 8, 9]]
+        );
     }
 }

@@ -62,6 +62,12 @@ pub fn for_each_chunk<T: Send>(
     })
 }
 
+/// `f(item)` for every item on one thread per core, in any order: for items that work on data
+/// of their own, whose results then do not depend on the order.
+pub fn for_each<T: Send>(items: Vec<T>, f: impl Fn(T) + Sync + Send) {
+    items.into_par_iter().with_max_len(1).for_each(f);
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
