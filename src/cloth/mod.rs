@@ -7,8 +7,10 @@
 //! scenes. A renderer calls [`Cloth::step_frame`] and [`Cloth::surface`]
 //! once per frame.
 //!
-//! Everything is single-threaded with a fixed operation order: the same
-//! inputs give bit-identical positions on the same build and platform.
+//! The work runs on all cores, but in an order fixed by the input alone (the
+//! constraint sweep's parts, the contacts found in parallel and applied in
+//! order): the same inputs give bit-identical positions on the same build and
+//! platform, for any thread count.
 //!
 //! ```
 //! use werkstatt::cloth::{FRAME_DT, FlagParams, Preset};

@@ -8,10 +8,12 @@
 //! et al. 2019: many substeps with one iteration converge better than few
 //! substeps with many iterations).
 //!
-//! Each constraint family is stored grouped by graph colour (no two
-//! constraints of a colour share a vertex), which lets the CPU overlap
-//! consecutive projections; the order is fixed at creation and nothing is
-//! threaded, so a given input always produces bit-identical output.
+//! Each constraint family is stored in four parts by vertex range,
+//! swept on the cores at once, then the constraints spanning parts; within
+//! each, grouped by graph colour (no two constraints of a colour share a
+//! vertex), which lets the CPU overlap consecutive projections. The order is
+//! fixed at creation, not by the thread count, so a given input always
+//! produces bit-identical output.
 
 use glam::{Vec2, Vec3};
 
@@ -22,7 +24,7 @@ use super::body_collision::{BodyMesh, Welds};
 use super::bvh::{Aabb, AabbTree};
 use super::collider::Collider;
 use super::pattern::PatternMesh;
-use super::self_collision::SelfCollision;
+use super::self_collision::{Escape, SelfCollision};
 
 /// Self-collision ignores a vertex and a triangle closer at rest than this many self-thicknesses.
 const SELF_EXCLUSION: f32 = 1.5;
@@ -693,8 +695,8 @@ impl Cloth {
         let h = dt / self.params.substeps as f32;
         self.timings = StepTimings::default();
         let t0 = Instant::now();
-        // Contacts are gathered once per frame over the predicted motion;
-        // the slack covers motion the prediction misses.
+        // Contacts are gathered once per frame over the predicted motion; the slack covers
+        // motion the prediction misses (self-contacts are gathered again where it does not).
         let slack = self.slack();
         if let Some(body) = &mut self.body {
             let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
@@ -821,7 +823,8 @@ impl Cloth {
                 // its side, over what is left of the frame.
                 let (rep, excluded, tris) = (&self.seam_rep, &self.self_excluded, self.mesh.triangles());
                 let remaining = h / (s1 - s0) * (1.0 - s0);
-                sc.regather(&self.prev, &self.v, &self.inv_mass, rep, excluded, tris, remaining, th, slack, &escaped);
+                let escape = Escape { now: &self.x, escaped: &escaped };
+                sc.regather(&self.prev, &self.v, &self.inv_mass, rep, excluded, tris, remaining, th, slack, escape);
             }
             sc.solve(&mut self.x, &self.prev, &self.inv_mass, self.mesh.triangles(), th);
         }

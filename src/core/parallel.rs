@@ -33,7 +33,7 @@ pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync 
 }
 
 /// `f(0), ..., f(count - 1)` in index order, computed `chunk_len` items at a time on one thread
-/// per core; below two chunks on the calling thread alone (spawning costs more than it saves).
+/// per core; below two chunks on the calling thread alone (handing out costs more than it saves).
 pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
     let chunk_len = chunk_len.max(1);
     let threads = if count >= 2 * chunk_len { 0 } else { 1 };
