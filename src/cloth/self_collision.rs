@@ -168,6 +168,8 @@ impl SelfCollision {
         SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles, edges, pieces) }
     }
 
+    /// The frame's pairs over `dt` from `x` moving at `v` (see the module's doc), then, when
+    /// untangling, what the frame starts with through the cloth forced back.
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
     pub(crate) fn begin_frame(
         &mut self,
