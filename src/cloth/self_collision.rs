@@ -17,7 +17,7 @@
 //! triangle it was gathered against; a pair the cap left out for a frame
 //! comes back with the side it then has. A vertex that moves out of the region
 //! its pairs cover within the frame (faster than predicted) has the pairs near
-//! it gathered again from the substep's start ([`SelfCollision::regather`]),
+//! it gathered again from the substep's start ([`SelfCollision::gather`]),
 //! by the same rule for sides.
 //!
 //! What got through anyway (a seam closing across a folded panel pulls harder than the
@@ -39,7 +39,7 @@ pub const MAX_PAIRS_PER_VERTEX: usize = 64;
 /// its triangle: [`track_side`] pushes it back to that side from any depth.
 const FORCED: f32 = 2.0;
 
-/// Vertices a thread takes at a time in the pair search ([`SelfCollision::begin_frame`])
+/// Vertices a thread takes at a time in the pair search ([`SelfCollision::gather`])
 /// (`parallel::map_in_chunks`).
 const PAIR_CHUNK: usize = 512;
 
@@ -168,35 +168,18 @@ impl SelfCollision {
         SelfCollision { pairs: sides.to_vec(), ..SelfCollision::new(x, triangles, edges, pieces) }
     }
 
-    /// The frame's pairs over `dt` from `x` moving at `v` (see the module's doc), then, when
-    /// untangling, what the frame starts with through the cloth forced back.
+    /// The pairs over the next `dt` from `x` moving at `v` (see the module's doc).
+    ///
+    /// At the frame start (`within` is `None`): every vertex's, then, when untangling, what the
+    /// frame starts with through the cloth forced back. Within the frame, for the vertices that
+    /// [`SelfCollision::escaped`] (`x` then the positions at the substep's start, before the
+    /// escape, each vertex still on its side, and `dt` what is left of the frame): only those
+    /// of the vertices near the triangles around an escaped vertex (the others keep theirs; all
+    /// when many escaped), their sweeps also taking in where they are now. Pairs a vertex had
+    /// keep their sides while in contact (as at a frame's start); the others and new ones take
+    /// the side they have in `x`.
     #[allow(clippy::too_many_arguments)] // the cloth's state, as the simulator keeps it
-    pub(crate) fn begin_frame(
-        &mut self,
-        x: &[Vec3],
-        v: &[Vec3],
-        inv_mass: &[f32],
-        rep: &[u32],
-        excluded: &[(u32, u32)],
-        triangles: &[[u32; 3]],
-        dt: f32,
-        thickness: f32,
-        slack: f32,
-    ) {
-        self.stats = SelfStats::default();
-        self.gather(x, v, inv_mass, rep, excluded, triangles, dt, thickness, slack, None);
-        if self.untangling {
-            self.untangle(x, rep, triangles);
-        }
-        self.stats.pairs = self.pairs.len();
-    }
-
-    /// The pairs over the next `dt` from `x` moving at `v`: every vertex's, or `within` a frame
-    /// only those of the vertices near the triangles around an escaped vertex (the others keep
-    /// theirs; all are gathered when many escaped), their sweeps also taking in where they are
-    /// now.
-    #[allow(clippy::too_many_arguments)] // as begin_frame
-    fn gather(
+    pub(crate) fn gather(
         &mut self,
         x: &[Vec3],
         v: &[Vec3],
@@ -209,6 +192,10 @@ impl SelfCollision {
         slack: f32,
         within: Option<Escape>,
     ) {
+        match within {
+            None => self.stats = SelfStats::default(),
+            Some(_) => self.stats.regathers += 1,
+        }
         let sweep = |i: usize| {
             let predicted = Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]);
             within.map_or(predicted, |w| predicted.grow(w.now[i]))
@@ -326,41 +313,21 @@ impl SelfCollision {
                 pair.2 = side;
             }
         }
+        if within.is_none() && self.untangling {
+            self.untangle(x, rep, triangles);
+        }
+        self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
 
     /// The vertices at `x` that have left the region their frame's pairs were gathered for (their
     /// predicted sweep, widened by half the slack): a fold springing open or a hard push moves
     /// cloth faster than the frame start's velocities said, onto triangles it was not paired
-    /// with, and through them. The simulator then gathers again ([`SelfCollision::regather`]).
+    /// with, and through them. The simulator then gathers again ([`SelfCollision::gather`]).
     pub(crate) fn escaped(&self, x: &[Vec3]) -> Vec<u32> {
         if self.reach.len() != x.len() {
             return Vec::new();
         }
         (0..x.len() as u32).filter(|&i| self.reach[i as usize].margin(x[i as usize]) < 0.0).collect()
-    }
-
-    /// The pairs gathered again within the frame for what is near the `escaped` vertices, from
-    /// `x` (the positions at the substep's start, before the escape, each vertex still on its
-    /// side) over the frame's `remaining` time and to where they are `now`: pairs they had keep
-    /// their sides while in contact (as at a frame's start), the others and new ones take the
-    /// side they have in `x`.
-    #[allow(clippy::too_many_arguments)] // as begin_frame
-    pub(crate) fn regather(
-        &mut self,
-        x: &[Vec3],
-        v: &[Vec3],
-        inv_mass: &[f32],
-        rep: &[u32],
-        excluded: &[(u32, u32)],
-        triangles: &[[u32; 3]],
-        remaining: f32,
-        thickness: f32,
-        slack: f32,
-        escape: Escape,
-    ) {
-        self.gather(x, v, inv_mass, rep, excluded, triangles, remaining, thickness, slack, Some(escape));
-        self.stats.regathers += 1;
-        self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
 
     /// Finds the cloth's edges that cross its triangles at the frame start and pulls what went

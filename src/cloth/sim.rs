@@ -710,7 +710,7 @@ impl Cloth {
             let (th, rep) = (self.params.self_thickness, &self.seam_rep);
             let excluded = &self.self_excluded;
             sc.untangling = self.params.untangle && self.time as f32 >= self.params.seam_close_time;
-            sc.begin_frame(&self.x, &self.v, &self.inv_mass, rep, excluded, tris, dt, th, slack);
+            sc.gather(&self.x, &self.v, &self.inv_mass, rep, excluded, tris, dt, th, slack, None);
         }
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
@@ -824,7 +824,7 @@ impl Cloth {
                 let (rep, excluded, tris) = (&self.seam_rep, &self.self_excluded, self.mesh.triangles());
                 let remaining = h / (s1 - s0) * (1.0 - s0);
                 let escape = Escape { now: &self.x, escaped: &escaped };
-                sc.regather(&self.prev, &self.v, &self.inv_mass, rep, excluded, tris, remaining, th, slack, escape);
+                sc.gather(&self.prev, &self.v, &self.inv_mass, rep, excluded, tris, remaining, th, slack, Some(escape));
             }
             sc.solve(&mut self.x, &self.prev, &self.inv_mass, self.mesh.triangles(), th);
         }
