@@ -11,7 +11,8 @@
 //! thickness along the outside direction; friction acts on its motion
 //! relative to the body surface point, so a moving limb drags cloth along.
 //! A vertex that strays outside the box it gathered for queries the tree
-//! directly (counted in [`BodyStats::fallbacks`]).
+//! directly (counted in [`BodyStats::fallbacks`]), and so does a cloth edge
+//! with such an end.
 //!
 //! Inside or outside is decided by the angle-weighted pseudo-normal of the
 //! closest feature (face, edge or vertex; Bærentzen and Aanæs 2005), which
@@ -636,10 +637,6 @@ impl BodyMesh {
         s: f32,
         thickness: f32,
     ) -> Option<EdgeContact> {
-        let (lo, hi) = (self.edge_cand_start[k] as usize, self.edge_cand_start[k + 1] as usize);
-        if lo == hi {
-            return None;
-        }
         let (ia, ib) = (ia as usize, ib as usize);
         let (a, b) = (x[ia], x[ib]);
         let reach = 0.25 * a.distance(b) + thickness;
@@ -647,6 +644,26 @@ impl BodyMesh {
         // (a body ridge sharp enough to poke through it anyway meets the cloth triangles
         // as body-vertex contacts).
         if self.clearance[ia].min(self.clearance[ib]) > reach {
+            return None;
+        }
+        // An end that left the box it gathered for (a fast limb dragged it farther than its
+        // velocity at the frame start said) may have left the edge's candidates behind: the
+        // edge asks the tree where it is now, as such a vertex does.
+        let near: Vec<u32>;
+        let cands = if self.query[ia].margin(a).min(self.query[ib].margin(b)) < reach {
+            let q = Aabb::from_points(&[a, b]).inflate(reach);
+            let mut found = Vec::new();
+            self.tree.query(&q, |t| {
+                if self.boxes[t as usize].overlaps(&q) {
+                    found.push(t)
+                }
+            });
+            near = found;
+            &near[..]
+        } else {
+            &self.edge_cand[self.edge_cand_start[k] as usize..self.edge_cand_start[k + 1] as usize]
+        };
+        if cands.is_empty() {
             return None;
         }
         // The points of the cloth edge nearest each body edge that comes within `thickness`
@@ -660,7 +677,6 @@ impl BodyMesh {
         let mut best: Option<(f32, Nearest)> = None;
         let mut judged = [f32::NAN; 8];
         let mut n_judged = 0;
-        let cands = &self.edge_cand[lo..hi];
         for &t in cands {
             let c = self.triangles[t as usize].map(|i| self.corner(i, s));
             let centre = (c[0] + c[1] + c[2]) / 3.0;

@@ -109,10 +109,12 @@ impl LimbScene {
 }
 
 #[test]
-#[ignore = "known failure: 7 cloth edges cross the limb at frame 10 (edge contacts are discrete: a limb at 9 m/s passes a cloth edge between two of them)"]
 fn a_fast_limb_swinging_through_a_curtain_never_crosses_it() {
     let peak_tip_speed = 0.9 * SWING_AMPLITUDE * std::f32::consts::TAU * SWING_HZ;
     assert!(peak_tip_speed > 9.0);
+    // Frame 11 is where, with edge contacts only among the edges' frame-start candidates, the
+    // curtain dragged over the limb's tip had 5 edges through it (the tip had carried the
+    // cloth past what its frame-start velocity predicted).
     let mut s = LimbScene::new(true);
     let start = s.cloth.positions().to_vec();
     let mut pushed = 0.0f32;
@@ -125,9 +127,18 @@ fn a_fast_limb_swinging_through_a_curtain_never_crosses_it() {
     // The limb really went through: it pushed the curtain at least 20 cm forward.
     assert!(pushed > 0.2, "curtain pushed only {pushed} m");
     assert_ne!(start, s.cloth.positions());
-    assert_eq!(s.cloth.self_crossings(), 0);
     // Velocities are clamped to the speed limit.
     assert!(s.cloth.max_speed() <= s.cloth.params().max_speed * 1.0001, "speed {}", s.cloth.max_speed());
+}
+
+#[test]
+#[ignore = "known failure: the curtain the limb whips crosses itself (up to 378 edges at frame 17, 35 at frame 50)"]
+fn the_curtain_a_fast_limb_whips_never_crosses_itself() {
+    let mut s = LimbScene::new(true);
+    for f in 1..=50 {
+        s.step();
+        assert_eq!(s.cloth.self_crossings(), 0, "cloth edges crossing the curtain after frame {f}");
+    }
 }
 
 #[test]
