@@ -651,14 +651,7 @@ impl BodyMesh {
         // edge asks the tree where it is now, as such a vertex does.
         let near: Vec<u32>;
         let cands = if self.query[ia].margin(a).min(self.query[ib].margin(b)) < reach {
-            let q = Aabb::from_points(&[a, b]).inflate(reach);
-            let mut found = Vec::new();
-            self.tree.query(&q, |t| {
-                if self.boxes[t as usize].overlaps(&q) {
-                    found.push(t)
-                }
-            });
-            near = found;
+            near = self.triangles_meeting(&Aabb::from_points(&[a, b]).inflate(reach));
             &near[..]
         } else {
             &self.edge_cand[self.edge_cand_start[k] as usize..self.edge_cand_start[k + 1] as usize]
@@ -770,13 +763,18 @@ impl BodyMesh {
         }
         let r = (-hit.0).min(reach);
         let q = Aabb::around(p, r);
-        let mut near = Vec::new();
-        self.tree.query(&q, |t| {
-            if self.boxes[t as usize].overlaps(&q) {
-                near.push(t)
+        self.closest_among(p, s, self.triangles_meeting(&q).into_iter()).filter(|h| h.0.abs() <= r)
+    }
+
+    /// The triangles whose swept box this frame meets `q`.
+    fn triangles_meeting(&self, q: &Aabb) -> Vec<u32> {
+        let mut found = Vec::new();
+        self.tree.query(q, |t| {
+            if self.boxes[t as usize].overlaps(q) {
+                found.push(t)
             }
         });
-        self.closest_among(p, s, near.into_iter()).filter(|h| h.0.abs() <= r)
+        found
     }
 
     /// Closest body point to `p` among `tris` at time `s`, as [`BodyMesh::closest`].
@@ -870,13 +868,7 @@ impl BodyMesh {
         } else {
             out.fallback = true;
             out.clearance = 2.0 * thickness;
-            let mut near = Vec::new();
-            let q = Aabb::around(p, 2.0 * thickness);
-            self.tree.query(&q, |t| {
-                if self.boxes[t as usize].overlaps(&q) {
-                    near.push(t)
-                }
-            });
+            let near = self.triangles_meeting(&Aabb::around(p, 2.0 * thickness));
             self.closest(p, s1, near.into_iter(), 2.0 * thickness, DEEPEST_CONTACT)
         };
         let Some((dist, n, t, bary)) = hit else {
