@@ -143,8 +143,8 @@ fn the_curtain_a_fast_limb_whips_never_crosses_itself() {
 
 #[test]
 fn collision_runs_are_bit_identical() {
-    // The limb's first frames, where body and self contacts both act (the later frames of
-    // this scene gather millions of self pairs: too slow for CI).
+    // The limb's first frames, where body and self contacts both act: twice through the whole
+    // swing would double the fast-limb test's time in CI.
     let run = || {
         let mut s = LimbScene::new(true);
         for _ in 0..14 {
