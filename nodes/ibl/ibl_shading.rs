@@ -256,7 +256,7 @@ impl Node for IblShadingNode {
                 }
                 None => Bind::Texture(diffuse_ends),
             });
-            let switches = [
+            let mut switches = vec![
                 ("PEMS", batch.len() as u32),
                 ("FULL_MAP", u32::from(mode == IblMode::Full)),
                 ("BACKGROUND_ENV", u32::from(background == Background::Environment)),
@@ -264,6 +264,9 @@ impl Node for IblShadingNode {
                 ("JITTER", u32::from(shadows.as_ref().is_some_and(|s| s.params.jitter > 0.0))),
                 ("DIFFUSE_ENDS", u32::from(handover.is_some())),
             ];
+            if !hardware && gpu.info.backend == wgpu::Backend::Gl {
+                switches.push(("COUNTED_LEVELS", 1));
+            }
             pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &switches)?;
             previous = Some(out);
         }

@@ -13,7 +13,13 @@
 @group(0) @binding(12) var pem6: texture_2d_array<f32>;
 @group(0) @binding(13) var pem7: texture_2d_array<f32>;
 
+// Levels read by a counted loop (cube_trilinear_counted): set on wgpu's GL backend only.
+override COUNTED_LEVELS: bool = false;
+
 fn lookup(tex: texture_2d_array<f32>, d: vec3<f32>, lod: f32) -> vec3<f32> {
+    if COUNTED_LEVELS {
+        return cube_trilinear_counted(tex, u32(ibl.face_size), ibl.top_level, d, lod).rgb;
+    }
     return cube_trilinear(tex, u32(ibl.face_size), ibl.top_level, d, lod).rgb;
 }
 

@@ -234,3 +234,81 @@ fn a_direct_light_graph_matches_vulkan_on_gl() {
 fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl() {
     matches_vulkan_on_gl("still_life.ron", "image");
 }
+
+/// A white furnace on GL: glossy spheres of every glossiness in a white environment, with a
+/// white background, read 1 in every pixel. Guards the silhouettes, where the pixels of a 2x2
+/// quad read different mip levels: wgpu's GL backend checks each texel read against the size of
+/// the quad's first pixel's level on llvmpipe, and such pixels read black
+/// (shaders/ibl/cube.wgsl `cube_trilinear_counted`).
+#[test]
+fn a_white_furnace_with_pems_stays_white_on_gl() {
+    let Some(gpu) = gl() else { return };
+    let out = out_dir("gl-furnace");
+    let probe = out.join("white.hdr");
+    write_probe(&probe, 16, 8, |_, _| glam::Vec3::ONE);
+    let mut nodes = format!(
+        r#""sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.45 }}),
+        "camera": (kind: "OrbitCamera", params: {{ "distance": 2.1, "yaw": 0.0, "pitch": 0.0, "fov": 30.0 }}),
+        "gbuffer": (kind: "GBufferPass"),
+        "env": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": 16 }}),
+        "cut": (kind: "MedianCut", params: {{ "count": 11 }}),
+        "pems": (kind: "Pems", params: {{ "kernel": "box" }}),
+        "ibl": (kind: "IblShading", params: {{ "mode": "pems" }}),
+        "all": (kind: "Merge"),"#,
+        probe = probe.display().to_string(),
+    );
+    let mut links = String::from(
+        r#"("camera.camera", "gbuffer.camera"), ("env.environment", "cut.environment"),
+        ("env.environment", "pems.environment"), ("cut.lights", "pems.lights"), ("pems.pems", "ibl.pems"),
+        ("gbuffer.gbuffer", "ibl.gbuffer"), ("all.scene", "gbuffer.scene"),"#,
+    );
+    for (i, gloss) in [0.0, 0.25, 0.5, 0.75, 0.9, 1.0].iter().enumerate() {
+        let x = i as f32 - 2.5;
+        nodes += &format!(
+            r#""m{i}": (kind: "Material", params: {{ "base_color": [1.0, 1.0, 1.0], "glossiness": {gloss} }}),
+            "d{i}": (kind: "Draw", params: {{ "translate": [{x}, 0.0, 0.0] }}),"#
+        );
+        links += &format!(
+            r#"("sphere.mesh", "d{i}.mesh"), ("m{i}.material", "d{i}.material"), ("d{i}.scene", "row{}.{}"),"#,
+            i / 4,
+            ["a", "b", "c", "d"][i % 4]
+        );
+    }
+    nodes += r#""row0": (kind: "Merge"), "row1": (kind: "Merge"),"#;
+    links += r#"("row0.scene", "all.a"), ("row1.scene", "all.b"),"#;
+    let graph = out.join("furnace.ron");
+    std::fs::write(&graph, format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])")).unwrap();
+    // One 48-pixel square per sphere, as in the Vulkan furnace (tests/suite/ibl.rs).
+    let opts = RenderOptions {
+        graph_path: graph,
+        frames: (0, 0),
+        fps: 30.0,
+        width: 6 * 48,
+        height: 48,
+        out_dir: out.clone(),
+        sets: Vec::new(),
+        dumps: vec!["ibl.image".into()],
+        dump_format: None,
+        ssaa: 1,
+        progress: false,
+        command: Vec::new(),
+        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
+    };
+    render(&opts, &gpu).unwrap();
+    let img = read_exr(&out.join("ibl.image_0000.exr"));
+    // Half-float targets on GL round 1 to within 1e-3.
+    let wrong: Vec<usize> = img
+        .rgba
+        .chunks_exact(4)
+        .enumerate()
+        .filter(|(_, p)| p[..3].iter().any(|c| (c - 1.0).abs() > 1e-2))
+        .map(|(i, _)| i)
+        .collect();
+    assert!(
+        wrong.is_empty(),
+        "{} of {} pixels are not white, first {:?}",
+        wrong.len(),
+        img.rgba.len() / 4,
+        &wrong[..wrong.len().min(8)]
+    );
+}
