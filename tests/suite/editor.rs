@@ -1160,3 +1160,40 @@ fn playback_keeps_the_ui_frames_short() {
     h.get_by_label("⏸ pause").click();
     settle(&mut h);
 }
+
+/// Playback shows every frame, waiting for the worker on one it has not evaluated (so a
+/// simulation sees each frame), and plays a loop it has shown once again from the kept
+/// pictures: nothing is evaluated on the second loop, and each frame shows its first picture.
+#[test]
+fn a_played_loop_plays_again_from_the_kept_pictures() {
+    let dir = temp_dir("play-loop");
+    let path = copy_default(&dir);
+    let mut h = editor(&path);
+    h.state_mut().live.frame_range = (0, 2);
+    h.get_by_label("▶ play").click();
+    // Each new picture: (frame, stamp, evaluations finished so far).
+    let mut shown: Vec<(i64, u64, u64)> = Vec::new();
+    let t = Instant::now();
+    while shown.len() < 7 {
+        assert!(t.elapsed() < std::time::Duration::from_secs(300), "two loops of 3 frames took over 300 s: {shown:?}");
+        h.step();
+        std::thread::sleep(std::time::Duration::from_millis(8));
+        let live = &h.state().live;
+        let (Some(frame), Some(stamp)) = (live.shown_frame(), live.display().map(|d| d.stamp)) else { continue };
+        match shown.last_mut() {
+            Some(last) if last.1 == stamp => {}
+            // The same frame evaluated again (re-evaluations pick up loaded files).
+            Some(last) if last.0 == frame => *last = (frame, stamp, live.finished),
+            _ => shown.push((frame, stamp, live.finished)),
+        }
+    }
+    h.get_by_label("⏸ pause").click();
+    let frames: Vec<i64> = shown.iter().map(|s| s.0).collect();
+    // The first is the picture shown when play was pressed.
+    assert_eq!(frames, [0, 1, 2, 0, 1, 2, 0], "every frame in order: {shown:?}");
+    // Frames 1 and 2 are evaluated on the first loop; from then on the kept pictures show.
+    assert!(shown[2..].iter().all(|s| s.2 == shown[2].2), "the second loop evaluated: {shown:?}");
+    assert_eq!((shown[4].1, shown[5].1), (shown[1].1, shown[2].1), "the second loop shows the first's pictures");
+    assert_eq!(shown[3].1, shown[6].1);
+    assert_eq!(h.state().live.kept_frames().0, 3);
+}

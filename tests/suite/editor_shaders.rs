@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use werkstatt::app::editor::live::{Live, NodeState};
 use werkstatt::core::graph::{Graph, PortRef};
@@ -116,4 +116,51 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let px = centre(&live, &gpu);
     assert!(px[0] > 0.5 && px[1] < 0.1 && px[2] < 0.1, "the new shader runs: {px:?}");
+}
+
+/// The figure for docs/editor.md: the editor's live evaluation (the worker, the display
+/// conversion and read-back, no window) playing graphs/default.ron at 800x600 over frames
+/// 0..=23 twice, at 24 frames per second: frames shown per second on each loop. Ignored: it
+/// measures (about a minute on lavapipe) and asserts only that the second loop evaluated nothing.
+#[test]
+#[ignore = "a measurement: cargo test --release --test suite -- --ignored editor_shaders::playback_of_the_default_graph --nocapture"]
+fn playback_of_the_default_graph_at_800x600() {
+    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
+    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
+    let mut live = Live::new(root().join("graphs"), false);
+    live.set_size(800, 600);
+    live.sync(&graph, 1, None);
+    settle(&mut live, &gpu);
+    (live.frame_range, live.fps, live.playing) = ((0, 23), 24.0, true);
+    let mut loops = Vec::new();
+    for _ in 0..2 {
+        let (start, evaluated) = (Instant::now(), live.finished);
+        let mut shown = 0;
+        let mut last = live.shown_frame();
+        let mut tick = Instant::now();
+        // One loop: until the frame wraps back to 0.
+        while shown < 24 {
+            assert!(start.elapsed() < Duration::from_secs(600), "a loop took over 600 s");
+            std::thread::sleep(Duration::from_millis(8));
+            live.advance(tick.elapsed().as_secs_f64());
+            tick = Instant::now();
+            live.pump(Some(&gpu));
+            if live.shown_frame() != last {
+                last = live.shown_frame();
+                shown += 1;
+            }
+        }
+        let secs = start.elapsed().as_secs_f64();
+        loops.push((shown as f64 / secs, live.finished - evaluated));
+    }
+    eprintln!(
+        "figure: default.ron at 800x600, frames 0..=23 at 24 fps: first loop {:.1} frames/s ({} evaluated), second {:.1} frames/s ({} evaluated); {} frames kept, {:.0} MiB",
+        loops[0].0,
+        loops[0].1,
+        loops[1].0,
+        loops[1].1,
+        live.kept_frames().0,
+        live.kept_frames().1 as f64 / (1 << 20) as f64
+    );
+    assert_eq!(loops[1].1, 0, "the second loop evaluated frames");
 }

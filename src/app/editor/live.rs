@@ -23,6 +23,13 @@ use crate::core::resources::Resources;
 use crate::core::spec;
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage, TextureDesc};
 
+impl Display {
+    /// The picture's description without the picture (neither the GPU image nor the pixels).
+    fn without_image(&self) -> Display {
+        Display { port: self.port.clone(), image: None, pixels: None, error: self.error.clone(), stamp: self.stamp }
+    }
+}
+
 /// What a node shows on the canvas.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NodeState {
@@ -478,6 +485,64 @@ pub struct Live {
     pub shader_error: Option<String>,
     /// An error building the evaluator (should not happen: the graph is made runnable first).
     pub engine_error: Option<String>,
+    /// Pictures of the frames played so far, shown again on the next loop without evaluating.
+    played: PlayCache,
+    /// The kept picture shown now (see `played`), until the next evaluation finishes.
+    cached_shown: Option<Display>,
+    /// Whether played frames may be kept: no node takes values from another program.
+    cacheable: bool,
+    /// The frame whose picture the viewport shows (evaluated or from `played`).
+    shown_frame: Option<i64>,
+}
+
+/// Pictures of played frames for one graph version, size, view and frame rate: playback shows
+/// them again instead of evaluating, so a loop plays at its frame rate once it has been
+/// evaluated. Only the CPU pixels are kept, up to [`PLAY_CACHE_BYTES`].
+#[derive(Default)]
+struct PlayCache {
+    key: Option<PlayKey>,
+    frames: BTreeMap<i64, Display>,
+    bytes: usize,
+}
+
+/// What kept pictures are of: the graph version, size, viewed port and frame rate of [`Wanted`].
+type PlayKey = (u64, (u32, u32), Option<PortRef>, u64);
+
+/// At 800x600 this keeps 139 frames, and every frame of the editor's default 240 at its
+/// default 480x360.
+pub const PLAY_CACHE_BYTES: usize = 256 << 20;
+
+impl PlayCache {
+    fn key_of(w: &Wanted) -> PlayKey {
+        (w.graph, w.size, w.viewed.clone(), w.time.1)
+    }
+
+    fn get(&self, w: &Wanted) -> Option<&Display> {
+        if self.key.as_ref() != Some(&Self::key_of(w)) {
+            return None;
+        }
+        self.frames.get(&w.time.0)
+    }
+
+    fn clear(&mut self) {
+        *self = PlayCache::default();
+    }
+
+    /// Keeps the picture of frame `w`, forgetting pictures of another graph, size or view.
+    fn keep(&mut self, w: &Wanted, display: &Display) {
+        let Some(pixels) = display.pixels.clone() else { return };
+        let key = Self::key_of(w);
+        if self.key.as_ref() != Some(&key) {
+            self.clear();
+            self.key = Some(key);
+        }
+        let bytes = pixels.pixels.len() * 4;
+        if self.bytes + bytes > PLAY_CACHE_BYTES || self.frames.contains_key(&w.time.0) {
+            return;
+        }
+        self.bytes += bytes;
+        self.frames.insert(w.time.0, Display { image: None, pixels: Some(pixels), ..display.without_image() });
+    }
 }
 
 /// The play range the editor starts with; a turntable camera turns once over it.
@@ -527,6 +592,10 @@ impl Live {
             shaders: crate::gpu::shaders::shader_dir().map(ShaderWatch::new),
             shader_error: None,
             engine_error: None,
+            played: PlayCache::default(),
+            cached_shown: None,
+            cacheable: true,
+            shown_frame: None,
         }
     }
 
@@ -588,6 +657,8 @@ impl Live {
         self.static_errors = errors;
         self.viewed = viewed_port(graph, inspected);
         if *self.runnable != run || self.extra_roots != extra_roots {
+            self.cacheable =
+                !run.nodes.values().any(|n| spec::find(&n.kind).is_some_and(|s| s.has(Capabilities::EXTERNAL_SOURCE)));
             self.runnable = Arc::new(run);
             self.extra_roots = extra_roots;
             self.graph_version += 1;
@@ -618,8 +689,11 @@ impl Live {
         FrameTime { frame: self.frame, fps: self.fps }
     }
 
-    /// Advances the frame while playing, by `dt` seconds of wall time. A frame the worker had
-    /// no time for is skipped: it renders the newest when it is free.
+    /// Advances the frame while playing, by `dt` seconds of wall time. Every frame is shown:
+    /// playback waits for the worker on a frame it has not evaluated yet, so a simulation sees
+    /// each frame, and plays the frames kept from an earlier loop at the frame rate. With a node
+    /// fed by another program (nothing is kept) a frame the worker had no time for is skipped
+    /// instead: it renders the newest when it is free.
     pub fn advance(&mut self, dt: f64) {
         if !self.playing {
             self.play_clock = 0.0;
@@ -628,6 +702,12 @@ impl Live {
         self.play_clock += dt.clamp(0.0, 0.5);
         let step = 1.0 / self.fps;
         while self.play_clock >= step {
+            // The frame on screen, or kept to be shown at once.
+            let shown = self.shown_frame == Some(self.frame) || self.played.get(&self.wanted()).is_some();
+            if self.cacheable && !shown {
+                self.play_clock = 0.0;
+                break;
+            }
             self.play_clock -= step;
             self.frame = if self.frame >= self.frame_range.1 { self.frame_range.0 } else { self.frame + 1 };
         }
@@ -654,7 +734,7 @@ impl Live {
     /// Takes finished evaluations from the worker and sends it the next request when one is
     /// due; never waits. Returns whether a new evaluation finished. Call it every UI frame.
     pub fn pump(&mut self, gpu: Option<&Arc<GpuContext>>) -> bool {
-        let got = self.receive();
+        let mut got = self.receive();
         if let (Some(_), Some(w)) = (gpu, &mut self.shaders)
             && w.changed()
         {
@@ -662,6 +742,23 @@ impl Live {
             self.sent = None;
         }
         let wanted = self.wanted();
+        if !self.cacheable
+            || self.reset_pending
+            || self.invalidate_pending
+            || self.reload_pending
+            || self.resources.in_flight() > 0
+        {
+            self.played.clear();
+        }
+        if self.playing
+            && self.shown_frame != Some(wanted.time.0)
+            && let Some(kept) = self.played.get(&wanted)
+        {
+            self.cached_shown = Some(Display { pixels: kept.pixels.clone(), ..kept.without_image() });
+            self.shown_frame = Some(wanted.time.0);
+            got = true;
+        }
+        let from_cache = self.playing && self.played.get(&wanted).is_some();
         let graph_new = wanted.graph != self.sent_graph;
         // A gesture holds a changing value until it rests or is let go.
         let held = graph_new && self.gesture && self.held_since.is_some_and(|t| t.elapsed() < SETTLE);
@@ -671,7 +768,7 @@ impl Live {
                 f.progress.cancel();
                 f.cancelled_at = Some(Instant::now());
             }
-        } else if !held && self.user_cancelled.as_ref() != Some(&wanted) {
+        } else if !held && !from_cache && self.user_cancelled.as_ref() != Some(&wanted) {
             self.user_cancelled = None;
             let due = match &self.sent {
                 None => true,
@@ -738,7 +835,9 @@ impl Live {
         let Some(worker) = &self.worker else { return false };
         let mut got = false;
         while let Ok(done) = worker.finished.try_recv() {
+            let mut of = None;
             if let Some(f) = self.in_flight.take_if(|f| f.generation == done.generation) {
+                of = Some(f.wanted.clone());
                 if let (Some(c), Some(at)) = (&done.cancelled, f.cancelled_at) {
                     self.last_cancel = Some((c.clone(), at.elapsed()));
                 }
@@ -749,6 +848,15 @@ impl Live {
             }
             self.engine_error = done.engine_error;
             if let Some(snapshot) = done.snapshot {
+                if let (Some(w), Some(d)) = (&of, &snapshot.display)
+                    && self.cacheable
+                    && snapshot.summary.pending == 0
+                    && self.resources.in_flight() == 0
+                {
+                    self.played.keep(w, d);
+                }
+                self.shown_frame = of.map(|w| w.time.0);
+                self.cached_shown = None;
                 self.finished += 1;
                 self.last_summary = snapshot.summary;
                 self.last_eval = snapshot.eval;
@@ -858,9 +966,20 @@ impl Live {
         map.get(port).map(|p| p.summary.as_str())
     }
 
-    /// The viewport's picture of the last finished evaluation.
+    /// The viewport's picture: of the last finished evaluation, or of the frame played now
+    /// when an earlier loop kept it.
     pub fn display(&self) -> Option<&Display> {
-        self.snapshot.display.as_ref()
+        self.cached_shown.as_ref().or(self.snapshot.display.as_ref())
+    }
+
+    /// The frame whose picture the viewport shows.
+    pub fn shown_frame(&self) -> Option<i64> {
+        self.shown_frame
+    }
+
+    /// How many played frames are kept, and their bytes.
+    pub fn kept_frames(&self) -> (usize, usize) {
+        (self.played.frames.len(), self.played.bytes)
     }
 }
 
