@@ -150,6 +150,18 @@ fn cube_trilinear_counted(tex: texture_2d_array<f32>, size: u32, top: f32, d: ve
     return mix(a, b, l - f32(l0));
 }
 
+// textureLoad at a level that may differ between pixels, on wgpu's GL backend: the level is the
+// counter of a loop counting up, as in cube_trilinear_counted. Costs level + 1 masked loads.
+fn load_counted(tex: texture_2d_array<f32>, t: vec3<i32>, level: i32) -> vec4<f32> {
+    var texel = vec4<f32>(0.0);
+    for (var k = 0; k <= level; k++) {
+        if k == level {
+            texel = textureLoad(tex, t.xy, t.z, k);
+        }
+    }
+    return texel;
+}
+
 const TAU: f32 = 6.28318530718;
 const PI_F: f32 = 3.14159265359;
 

@@ -49,6 +49,9 @@ struct Ssr {
 
 // Lights of the hidden ground (0: no ground).
 override LIGHTS: u32 = 0u;
+// The environment's levels read by a counted loop (load_counted, shaders/ibl/cube.wgsl): set on
+// wgpu's GL backend only.
+override COUNTED_LEVELS: bool = false;
 
 @group(0) @binding(0) var<uniform> u: Ssr;
 @group(0) @binding(1) var g_depth: texture_2d<f32>;
@@ -234,6 +237,9 @@ fn env_texel(d: vec3<f32>, level: f32) -> vec3<f32> {
     let size = max(u32(u.size.z) >> l, 1u);
     let f = dir_to_face(d);
     let t = clamp(vec2<i32>(floor((f.uv + vec2<f32>(1.0)) * 0.5 * f32(size))), vec2<i32>(0), vec2<i32>(i32(size) - 1));
+    if COUNTED_LEVELS {
+        return load_counted(env, vec3<i32>(t, i32(f.face)), i32(l)).rgb;
+    }
     return textureLoad(env, t, i32(f.face), i32(l)).rgb;
 }
 

@@ -15,7 +15,7 @@ use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::core::graph::Graph;
 use werkstatt::core::param::ParamValue;
 use werkstatt::core::resources::Resources;
-use werkstatt::gpu::{Backend, GpuContext, read_back};
+use werkstatt::gpu::{Backend, GpuContext, Pixels, read_back};
 use werkstatt::nodes::mesh::live_link::{encode_frame, encode_topology};
 
 /// A GL context held by one test at a time. llvmpipe's GL crashed (SIGSEGV inside
@@ -276,26 +276,9 @@ fn a_white_furnace_with_pems_stays_white_on_gl() {
     }
     nodes += r#""row0": (kind: "Merge"), "row1": (kind: "Merge"),"#;
     links += r#"("row0.scene", "all.a"), ("row1.scene", "all.b"),"#;
-    let graph = out.join("furnace.ron");
-    std::fs::write(&graph, format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])")).unwrap();
+    let text = format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])");
     // One 48-pixel square per sphere, as in the Vulkan furnace (tests/suite/ibl.rs).
-    let opts = RenderOptions {
-        graph_path: graph,
-        frames: (0, 0),
-        fps: 30.0,
-        width: 6 * 48,
-        height: 48,
-        out_dir: out.clone(),
-        sets: Vec::new(),
-        dumps: vec!["ibl.image".into()],
-        dump_format: None,
-        ssaa: 1,
-        progress: false,
-        command: Vec::new(),
-        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
-    };
-    render(&opts, &gpu).unwrap();
-    let img = read_exr(&out.join("ibl.image_0000.exr"));
+    let img = render_dumps_on_gl(&gpu, &out, &text, (6 * 48, 48), &["ibl.image"]).remove(0);
     // Half-float targets on GL round 1 to within 1e-3.
     let wrong: Vec<usize> = img
         .rgba
@@ -311,4 +294,76 @@ fn a_white_furnace_with_pems_stays_white_on_gl() {
         img.rgba.len() / 4,
         &wrong[..wrong.len().min(8)]
     );
+}
+
+/// Renders frame 0 of the graph `text` at `size` on `gpu` and reads back the textures of `dumps`.
+fn render_dumps_on_gl(
+    gpu: &GpuContext,
+    out: &std::path::Path,
+    text: &str,
+    size: (u32, u32),
+    dumps: &[&str],
+) -> Vec<Pixels> {
+    let graph = out.join("graph.ron");
+    std::fs::write(&graph, text).unwrap();
+    let opts = RenderOptions {
+        graph_path: graph,
+        frames: (0, 0),
+        fps: 30.0,
+        width: size.0,
+        height: size.1,
+        out_dir: out.to_path_buf(),
+        sets: Vec::new(),
+        dumps: dumps.iter().map(|d| d.to_string()).collect(),
+        dump_format: None,
+        ssaa: 1,
+        progress: false,
+        command: Vec::new(),
+        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
+    };
+    render(&opts, gpu).unwrap();
+    dumps.iter().map(|d| read_exr(&out.join(format!("{d}_0000.exr")))).collect()
+}
+
+/// Screen-space reflections on GL: a glossy sphere alone under a uniform probe, so every ray
+/// leaves for the environment, which answers with the probe's radiance; the image stays what
+/// IblShading lit, as on Vulkan (tests/suite/ssr.rs). The environment lookups read a level per
+/// ray, which read zeros on GL before they took it from a counted loop.
+#[test]
+fn screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl() {
+    let Some(gpu) = gl() else { return };
+    let out = out_dir("gl-ssr");
+    let probe = out.join("probe.hdr");
+    write_probe(&probe, 32, 16, |_, _| glam::Vec3::splat(0.5));
+    let text = format!(
+        r#"(version: 2, nodes: {{
+        "sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.3 }}),
+        "glossy": (kind: "Material", params: {{ "base_color": [0.8, 0.8, 0.8], "glossiness": 0.95 }}),
+        "ball": (kind: "Draw", params: {{ "translate": [0.0, 0.5, 0.0] }}),
+        "camera": (kind: "OrbitCamera", params: {{ "distance": 3.0, "pitch": 10.0, "yaw": 0.0, "target": [0.0, 0.4, 0.0] }}),
+        "gbuffer": (kind: "GBufferPass"),
+        "environment": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": 32 }}),
+        "cut": (kind: "MedianCut", params: {{ "count": 1 }}),
+        "pems": (kind: "Pems"),
+        "light": (kind: "IblShading", params: {{ "mode": "full" }}),
+        "ssr": (kind: "ScreenSpaceReflections"),
+    }}, links: [
+        ("sphere.mesh", "ball.mesh"), ("glossy.material", "ball.material"),
+        ("ball.scene", "gbuffer.scene"), ("camera.camera", "gbuffer.camera"),
+        ("environment.environment", "cut.environment"), ("environment.environment", "pems.environment"),
+        ("cut.lights", "pems.lights"), ("pems.pems", "light.pems"), ("gbuffer.gbuffer", "light.gbuffer"),
+        ("gbuffer.gbuffer", "ssr.gbuffer"), ("light.image", "ssr.image"), ("environment.environment", "ssr.environment"),
+    ])"#,
+        probe = probe.display().to_string(),
+    );
+    let images = render_dumps_on_gl(&gpu, &out, &text, (160, 120), &["light.image", "ssr.image"]);
+    let (lit, reflected) = (&images[0], &images[1]);
+    let worst = lit
+        .rgba
+        .chunks_exact(4)
+        .zip(reflected.rgba.chunks_exact(4))
+        .map(|(a, b)| (0..3).map(|c| (b[c] - a[c]).abs() / a[c].max(1e-3)).fold(0.0, f32::max))
+        .fold(0.0, f32::max);
+    // 1% on Vulkan; GL's half-float targets add their rounding.
+    assert!(worst < 0.02, "an open scene under a uniform probe changed by {:.3}% on GL", 100.0 * worst);
 }
