@@ -742,7 +742,9 @@ impl Live {
             self.sent = None;
         }
         let wanted = self.wanted();
+        // Kept pictures of another graph, size or view are not shown again: free them now.
         if !self.cacheable
+            || self.played.key.as_ref().is_some_and(|k| *k != PlayCache::key_of(&wanted))
             || self.reset_pending
             || self.invalidate_pending
             || self.reload_pending
