@@ -163,4 +163,28 @@ fn playback_of_the_default_graph_at_800x600() {
         live.kept_frames().1 as f64 / (1 << 20) as f64
     );
     assert_eq!(loops[1].1, 0, "the second loop evaluated frames");
+
+    // Orbiting while paused: each turn evaluates what depends on the camera.
+    live.playing = false;
+    settle(&mut live, &gpu);
+    let cam = werkstatt::app::editor::live::camera_for(&graph, None).expect("an orbit camera");
+    live.camera = werkstatt::app::editor::live::CameraOverride::from_graph(&graph, &cam);
+    let ids: Vec<String> = graph.nodes.keys().cloned().collect();
+    let before: Vec<u64> = ids.iter().map(|id| live.runs(id)).collect();
+    let start = Instant::now();
+    let turns = 10;
+    for _ in 0..turns {
+        live.camera.as_mut().expect("set above").orbit(10.0, 0.0);
+        live.sync(&graph, 1, None);
+        settle(&mut live, &gpu);
+    }
+    let per_turn = start.elapsed().as_secs_f64() / turns as f64;
+    let rerun: Vec<&str> =
+        ids.iter().zip(&before).filter(|(id, b)| live.runs(id) > **b).map(|(id, _)| id.as_str()).collect();
+    eprintln!(
+        "figure: default.ron at 800x600, orbiting: {:.1} evaluations/s ({:.0} ms each); re-run: {}",
+        1.0 / per_turn,
+        per_turn * 1e3,
+        rerun.join(", ")
+    );
 }

@@ -235,48 +235,20 @@ fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl() {
     matches_vulkan_on_gl("still_life.ron", "image");
 }
 
-/// A white furnace on GL: glossy spheres of every glossiness in a white environment, with a
-/// white background, read 1 in every pixel. Guards the silhouettes, where the pixels of a 2x2
-/// quad read different mip levels: wgpu's GL backend checks each texel read against the size of
-/// the quad's first pixel's level on llvmpipe, and such pixels read black
-/// (shaders/ibl/cube.wgsl `cube_trilinear_counted`).
+/// A white furnace on GL: glossy spheres of every glossiness in a white environment read 1 in
+/// every pixel. Guards the silhouettes, where neighbouring pixels read different mip levels:
+/// wgpu's GL backend checks each texel read against `textureSize(tex, level)`, which llvmpipe
+/// answers with the first pixel's level of those it shades together, and such pixels read black
+/// (33 here) before the lookups took their levels from a counted loop (shaders/ibl/cube.wgsl
+/// `cube_trilinear_counted`).
 #[test]
 fn a_white_furnace_with_pems_stays_white_on_gl() {
     let Some(gpu) = gl() else { return };
     let out = out_dir("gl-furnace");
     let probe = out.join("white.hdr");
     write_probe(&probe, 16, 8, |_, _| glam::Vec3::ONE);
-    let mut nodes = format!(
-        r#""sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.45 }}),
-        "camera": (kind: "OrbitCamera", params: {{ "distance": 2.1, "yaw": 0.0, "pitch": 0.0, "fov": 30.0 }}),
-        "gbuffer": (kind: "GBufferPass"),
-        "env": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": 16 }}),
-        "cut": (kind: "MedianCut", params: {{ "count": 11 }}),
-        "pems": (kind: "Pems", params: {{ "kernel": "box" }}),
-        "ibl": (kind: "IblShading", params: {{ "mode": "pems" }}),
-        "all": (kind: "Merge"),"#,
-        probe = probe.display().to_string(),
-    );
-    let mut links = String::from(
-        r#"("camera.camera", "gbuffer.camera"), ("env.environment", "cut.environment"),
-        ("env.environment", "pems.environment"), ("cut.lights", "pems.lights"), ("pems.pems", "ibl.pems"),
-        ("gbuffer.gbuffer", "ibl.gbuffer"), ("all.scene", "gbuffer.scene"),"#,
-    );
-    for (i, gloss) in [0.0, 0.25, 0.5, 0.75, 0.9, 1.0].iter().enumerate() {
-        let x = i as f32 - 2.5;
-        nodes += &format!(
-            r#""m{i}": (kind: "Material", params: {{ "base_color": [1.0, 1.0, 1.0], "glossiness": {gloss} }}),
-            "d{i}": (kind: "Draw", params: {{ "translate": [{x}, 0.0, 0.0] }}),"#
-        );
-        links += &format!(
-            r#"("sphere.mesh", "d{i}.mesh"), ("m{i}.material", "d{i}.material"), ("d{i}.scene", "row{}.{}"),"#,
-            i / 4,
-            ["a", "b", "c", "d"][i % 4]
-        );
-    }
-    nodes += r#""row0": (kind: "Merge"), "row1": (kind: "Merge"),"#;
-    links += r#"("row0.scene", "all.a"), ("row1.scene", "all.b"),"#;
-    let text = format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])");
+    let gloss = [0.0, 0.25, 0.5, 0.75, 0.9, 1.0];
+    let text = sphere_row_graph(&probe, 16, 11, &gloss, 1.0, r#""mode": "pems""#, r#""kernel": "box""#);
     // One 48-pixel square per sphere, as in the Vulkan furnace (tests/suite/ibl.rs).
     let img = render_dumps_on_gl(&gpu, &out, &text, (6 * 48, 48), &["ibl.image"]).remove(0);
     // Half-float targets on GL round 1 to within 1e-3.

@@ -24,47 +24,9 @@ fn forest() -> PathBuf {
     root().join("assets/hdri/forest.hdr")
 }
 
-/// A row of spheres (one per glossiness, albedo `albedo`) lit by `probe` through the whole
-/// IBL chain; `ibl` adds IblShading parameters, `pems` Pems parameters.
+/// A row of spheres lit through the whole IBL chain (`common::sphere_row_graph`).
 fn sphere_graph(probe: &Path, size: u32, count: usize, gloss: &[f32], albedo: f32, ibl: &str, pems: &str) -> Graph {
-    let mut nodes = format!(
-        r#""sphere": (kind: "Primitive", params: {{ "shape": "sphere", "radius": 0.45 }}),
-        "camera": (kind: "OrbitCamera", params: {{ "distance": {dist}, "yaw": 0.0, "pitch": 0.0, "fov": 30.0 }}),
-        "gbuffer": (kind: "GBufferPass"),
-        "env": (kind: "EnvironmentMap", params: {{ "path": {probe:?}, "size": {size} }}),
-        "cut": (kind: "MedianCut", params: {{ "count": {count} }}),
-        "pems": (kind: "Pems", params: {{ {pems} }}),
-        "ibl": (kind: "IblShading", params: {{ {ibl} }}),
-        "out": (kind: "Preview"),
-        "#,
-        dist = 2.1,
-        probe = probe.display().to_string(),
-    );
-    let mut links = String::from(
-        r#"("camera.camera", "gbuffer.camera"), ("env.environment", "cut.environment"),
-        ("env.environment", "pems.environment"), ("cut.lights", "pems.lights"), ("pems.pems", "ibl.pems"),
-        ("gbuffer.gbuffer", "ibl.gbuffer"), ("ibl.image", "out.image"),"#,
-    );
-    let merges = gloss.len().div_ceil(4);
-    for (i, g) in gloss.iter().enumerate() {
-        let x = (i as f32 - (gloss.len() as f32 - 1.0) / 2.0) * 1.0;
-        nodes += &format!(
-            r#""m{i}": (kind: "Material", params: {{ "base_color": [{albedo}, {albedo}, {albedo}], "glossiness": {g} }}),
-            "d{i}": (kind: "Draw", params: {{ "translate": [{x}, 0.0, 0.0] }}),"#
-        );
-        links += &format!(
-            r#"("sphere.mesh", "d{i}.mesh"), ("m{i}.material", "d{i}.material"), ("d{i}.scene", "row{}.{}"),"#,
-            i / 4,
-            ["a", "b", "c", "d"][i % 4]
-        );
-    }
-    for m in 0..merges {
-        nodes += &format!(r#""row{m}": (kind: "Merge"),"#);
-        links += &format!(r#"("row{m}.scene", "all.{}"),"#, ["a", "b", "c", "d"][m]);
-    }
-    nodes += r#""all": (kind: "Merge"),"#;
-    links += r#"("all.scene", "gbuffer.scene"),"#;
-    let text = format!("(version: 1, nodes: {{ {nodes} }}, links: [ {links} ])");
+    let text = sphere_row_graph(probe, size, count, gloss, albedo, ibl, pems);
     Graph::load_str(&text, "ibl-test.ron".as_ref()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
