@@ -500,7 +500,8 @@ impl Node for ShadowAtlasNode {
             sizes: cx.choice("sizes"),
             fit_view: match cx.optional::<Camera>("camera") {
                 Some(camera) if cx.bool("fit_to_view") => {
-                    Some(View::new(&camera, cx.settings.width, cx.settings.height).inv_view_proj)
+                    let (w, h) = cx.frame_size();
+                    Some(View::new(&camera, w, h).inv_view_proj)
                 }
                 _ => None,
             },

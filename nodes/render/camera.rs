@@ -61,7 +61,7 @@ impl Node for OrbitCameraNode {
         // Only an animated camera reads the time, so a still one is not re-run every frame.
         let turn = if cx.bool("turntable") {
             let frame = cx.time().frame;
-            let Some((first, last)) = cx.settings.frames else {
+            let Some((first, last)) = cx.frame_range() else {
                 return Err(NodeError::msg("turntable needs a frame range, and this evaluation has none"));
             };
             360.0 * (frame - first) as f64 / (last - first + 1) as f64

@@ -37,7 +37,8 @@ impl Node for GBufferPassNode {
         let gpu = cx.gpu()?;
         let items: Arc<Vec<DrawItem>> = cx.input("scene")?;
         let camera: Camera = cx.input("camera")?;
-        let view = View::new(&camera, cx.settings.width, cx.settings.height);
+        let (w, h) = cx.frame_size();
+        let view = View::new(&camera, w, h);
         let gbuffer = Arc::new(self.drawer.gbuffer(gpu, &items, camera, view)?);
         // The per-channel ports are further handles to the same textures.
         cx.set("color", Arc::new(gbuffer.color.share()));

@@ -107,7 +107,8 @@ impl Node for TessellateNode {
         }
         let max_level = cx.int("max_level") as u32;
         let settings = Settings { mode: cx.choice("mode"), max_level, pn: cx.bool("pn") };
-        let view = View::new(&camera, cx.settings.width, cx.settings.height);
+        let (w, h) = cx.frame_size();
+        let view = View::new(&camera, w, h);
         let lod = ViewLod {
             view_proj: view.view_proj,
             eye: camera.eye,

@@ -210,7 +210,8 @@ impl Node for WovenClothNode {
             None
         };
         let on_gpu = cx.choice::<Evaluate>("evaluate") == Evaluate::Gpu;
-        let view_proj = camera.map(|c| View::new(&c, cx.settings.width, cx.settings.height).view_proj.as_dmat4());
+        let (w, h) = cx.frame_size();
+        let view_proj = camera.map(|c| View::new(&c, w, h).view_proj.as_dmat4());
         let patch = yarn.nodes as f64 * yarn.spacing;
         let grids = resample(&mesh, patch).map_err(|e| port_err("surface", e))?;
         let budget = cx.int("max_triangles") as usize;

@@ -36,6 +36,8 @@ struct NodeState {
     status: NodeStatus,
     outputs: Vec<Option<Value>>,
     uses_time: bool,
+    /// Its last run read the frame size ([`EvalCx::frame_size`]): a new size re-runs it.
+    uses_size: bool,
     /// Resources and external signals the last run depended on, with the versions it saw.
     touched: Vec<(SlotRef, u64)>,
     signals: Vec<(ChangeSignal, u64)>,
@@ -73,8 +75,11 @@ pub struct Evaluator {
     state: Vec<NodeState>,
     scratch_inputs: Vec<Option<Value>>,
     next_version: u64,
-    /// Hash of the frame settings of the last evaluation: a new size or folder re-runs everything.
+    /// Hash of the frame settings of the last evaluation but the size: a new folder or frame
+    /// range re-runs everything.
     settings_hash: u64,
+    /// Hash of the frame size of the last evaluation: a new size re-runs the nodes that read it.
+    size_hash: u64,
 }
 
 /// Counts of one frame's evaluation.
@@ -143,6 +148,7 @@ impl Evaluator {
             scratch_inputs: Vec::new(),
             next_version: 1,
             settings_hash: 0,
+            size_hash: 0,
         };
         ev.rebuild(graph, extra_roots, HashMap::new())?;
         Ok(ev)
@@ -208,6 +214,7 @@ impl Evaluator {
                     status: NodeStatus::NotRun,
                     outputs: vec![None; spec.outputs.len()],
                     uses_time: false,
+                    uses_size: false,
                     touched: Vec::new(),
                     signals: Vec::new(),
                     warnings: Vec::new(),
@@ -334,14 +341,13 @@ impl Evaluator {
     ) -> Result<FrameSummary, (FrameSummary, Cancelled)> {
         let mut cancelled = None;
         let mut summary = FrameSummary::default();
-        self.settings_hash = {
+        let hash = |value: &dyn Fn(&mut std::collections::hash_map::DefaultHasher)| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            std::hash::Hash::hash(
-                &(settings.width, settings.height, &settings.base_dir, settings.frames, gpu.is_some()),
-                &mut h,
-            );
+            value(&mut h);
             std::hash::Hasher::finish(&h)
         };
+        self.settings_hash = hash(&|h| std::hash::Hash::hash(&(&settings.base_dir, settings.frames, gpu.is_some()), h));
+        self.size_hash = hash(&|h| std::hash::Hash::hash(&(settings.width, settings.height), h));
         self.released.iter_mut().for_each(|r| *r = false);
         for oi in 0..self.order.len() {
             let n = self.order[oi];
@@ -428,6 +434,9 @@ impl Evaluator {
             h = mix(h, time.frame as u64);
             h = mix(h, time.fps.to_bits());
         }
+        if state.uses_size {
+            h = mix(h, self.size_hash);
+        }
         for (slot, seen) in &state.touched {
             h = mix(h, if as_seen { *seen } else { slot.version() });
         }
@@ -460,7 +469,7 @@ impl Evaluator {
         // The node's GPU work runs in its own validation error scope.
         let scope = gpu.map(|g| g.begin_node(&self.ids[n]));
         let start = Instant::now();
-        let (result, used_time, misuse) = {
+        let (result, used_time, used_size, misuse) = {
             let mut cx = EvalCx {
                 node_id: &self.ids[n],
                 spec,
@@ -479,6 +488,7 @@ impl Evaluator {
                 products: &mut products,
                 misuse: RefCell::new(Vec::new()),
                 settings,
+                used_size: false,
                 progress,
             };
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.instance.eval(&mut cx)));
@@ -490,7 +500,7 @@ impl Evaluator {
                     .unwrap_or_default();
                 Err(NodeError::msg(format!("{INTERNAL_ERROR} (panic) in {}: {what}", spec.kind)))
             });
-            (r, cx.used_time, cx.misuse.into_inner())
+            (r, cx.used_time, cx.used_size, cx.misuse.into_inner())
         };
         if matches!(result, Err(NodeError::Cancelled)) {
             // Nothing of the run is kept: its commands are dropped, it counts as not run, and a
@@ -528,6 +538,7 @@ impl Evaluator {
         state.ran_last_frame = true;
         state.runs += 1;
         state.uses_time = used_time;
+        state.uses_size = used_size;
         match result {
             Ok(()) => {
                 state.status = NodeStatus::Ok;

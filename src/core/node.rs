@@ -277,7 +277,10 @@ pub struct EvalCx<'a> {
     pub(crate) products: &'a mut Vec<Product>,
     /// Programming errors found while the node ran (see [`INTERNAL_ERROR`]).
     pub(crate) misuse: RefCell<Vec<String>>,
-    pub settings: &'a FrameSettings,
+    /// Read through [`EvalCx::frame_size`], [`EvalCx::frame_range`] and [`EvalCx::path`], so
+    /// that only nodes that read the frame size re-run when it changes.
+    pub(crate) settings: &'a FrameSettings,
+    pub(crate) used_size: bool,
     pub(crate) progress: &'a crate::core::progress::Progress,
 }
 
@@ -439,6 +442,18 @@ impl<'a> EvalCx<'a> {
     pub fn time(&mut self) -> FrameTime {
         self.used_time = true;
         self.time
+    }
+
+    /// The frame's width and height in pixels. Reading it makes the node re-run whenever the
+    /// size changes (nodes that take the size from an input image re-run through that input).
+    pub fn frame_size(&mut self) -> (u32, u32) {
+        self.used_size = true;
+        (self.settings.width, self.settings.height)
+    }
+
+    /// The host's frame range, if it has one (a render's `--frames`, the editor's slider).
+    pub fn frame_range(&self) -> Option<(i64, i64)> {
+        self.settings.frames
     }
 
     pub fn gpu(&self) -> Result<&'a GpuContext, NodeError> {

@@ -164,27 +164,69 @@ fn playback_of_the_default_graph_at_800x600() {
     );
     assert_eq!(loops[1].1, 0, "the second loop evaluated frames");
 
-    // Orbiting while paused: each turn evaluates what depends on the camera.
+    // Orbiting while paused: each turn evaluates what depends on the camera, at the full size
+    // and then at the size used while the view moves (`Live::navigating`).
     live.playing = false;
     settle(&mut live, &gpu);
     let cam = werkstatt::app::editor::live::camera_for(&graph, None).expect("an orbit camera");
     live.camera = werkstatt::app::editor::live::CameraOverride::from_graph(&graph, &cam);
     let ids: Vec<String> = graph.nodes.keys().cloned().collect();
-    let before: Vec<u64> = ids.iter().map(|id| live.runs(id)).collect();
-    let start = Instant::now();
-    let turns = 10;
-    for _ in 0..turns {
+    for navigating in [false, true] {
+        live.navigating = navigating;
         live.camera.as_mut().expect("set above").orbit(10.0, 0.0);
         live.sync(&graph, 1, None);
         settle(&mut live, &gpu);
+        let before: Vec<u64> = ids.iter().map(|id| live.runs(id)).collect();
+        let start = Instant::now();
+        let turns = 10;
+        for _ in 0..turns {
+            live.camera.as_mut().expect("set above").orbit(10.0, 0.0);
+            live.sync(&graph, 1, None);
+            settle(&mut live, &gpu);
+        }
+        let per_turn = start.elapsed().as_secs_f64() / turns as f64;
+        let rerun: Vec<&str> =
+            ids.iter().zip(&before).filter(|(id, b)| live.runs(id) > **b).map(|(id, _)| id.as_str()).collect();
+        let size = live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size);
+        eprintln!(
+            "figure: default.ron at 800x600, orbiting (navigating: {navigating}, pictures {size:?}): {:.1} evaluations/s ({:.0} ms each); re-run: {}",
+            1.0 / per_turn,
+            per_turn * 1e3,
+            rerun.join(", ")
+        );
     }
-    let per_turn = start.elapsed().as_secs_f64() / turns as f64;
-    let rerun: Vec<&str> =
-        ids.iter().zip(&before).filter(|(id, b)| live.runs(id) > **b).map(|(id, _)| id.as_str()).collect();
-    eprintln!(
-        "figure: default.ron at 800x600, orbiting: {:.1} evaluations/s ({:.0} ms each); re-run: {}",
-        1.0 / per_turn,
-        per_turn * 1e3,
-        rerun.join(", ")
-    );
+    // The view at rest again: the full size, without running the simulation again.
+    let garment_runs = live.runs("garment");
+    live.navigating = false;
+    settle(&mut live, &gpu);
+    assert_eq!(live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size), Some([800, 600]));
+    assert_eq!(live.runs("garment"), garment_runs, "the end of a navigation re-ran the simulation");
+}
+
+/// While the view moves (`Live::navigating`) frames are half as wide and high, and only what
+/// reads the frame size re-runs for it (the G-buffer, and the shadow atlas, which fits its
+/// tiles to the view): the cloth, the light probe, the median cut and the PEMs keep their
+/// results, and the full size comes back when the view rests.
+#[test]
+fn a_moving_view_renders_at_half_size_and_reruns_only_what_reads_the_size() {
+    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
+    let graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
+    let mut live = Live::new(root().join("graphs"), false);
+    live.set_size(64, 48);
+    live.sync(&graph, 1, None);
+    settle(&mut live, &gpu);
+    let size = |live: &Live| live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size);
+    assert_eq!(size(&live), Some([64, 48]));
+    let upstream = ["cloth", "pems", "median_cut", "environment"];
+    let runs = |live: &Live| upstream.map(|id| live.runs(id));
+    let before = runs(&live);
+    let gbuffer = live.runs("gbuffer");
+    live.navigating = true;
+    settle(&mut live, &gpu);
+    assert_eq!(size(&live), Some([32, 24]), "half size while the view moves");
+    live.navigating = false;
+    settle(&mut live, &gpu);
+    assert_eq!(size(&live), Some([64, 48]), "the full size when it rests");
+    assert_eq!(live.runs("gbuffer"), gbuffer + 2, "the G-buffer ran at each size");
+    assert_eq!(runs(&live), before, "{upstream:?} re-ran for a new size");
 }

@@ -355,7 +355,7 @@ fn ran_ids(ev: &Evaluator, ids: &[&str]) -> Vec<String> {
 }
 
 #[test]
-fn new_frame_settings_rerun_every_planned_node() {
+fn a_new_folder_reruns_every_planned_node_and_a_new_size_none_that_ignores_it() {
     let g = graph(DIAMOND);
     let mut ev = Evaluator::new(&g, &[]).unwrap();
     let res = Resources::new(false);
@@ -363,13 +363,13 @@ fn new_frame_settings_rerun_every_planned_node() {
     let small = FrameSettings { width: 64, height: 48, ..FrameSettings::default() };
     assert_eq!(ev.evaluate(frame(0), None, &res, &small).ran, planned.len());
     assert_eq!(ev.evaluate(frame(0), None, &res, &small).ran, 0, "the same settings run nothing");
-    // Another size, then another folder: nodes may depend on either, so all re-run once.
+    // Another size: no node here reads it (`EvalCx::frame_size`), so none re-runs.
     let wider = FrameSettings { width: 65, ..small.clone() };
-    assert_eq!(ev.evaluate(frame(0), None, &res, &wider).ran, planned.len(), "a new size");
-    assert_eq!(ran_ids(&ev, &planned).len(), planned.len());
-    assert_eq!(ev.evaluate(frame(0), None, &res, &wider).ran, 0);
+    assert_eq!(ev.evaluate(frame(0), None, &res, &wider).ran, 0, "a new size");
+    // Another folder: any node may resolve a path against it, so all re-run once.
     let moved = FrameSettings { base_dir: "elsewhere".into(), ..wider.clone() };
     assert_eq!(ev.evaluate(frame(0), None, &res, &moved).ran, planned.len(), "a new base folder");
+    assert_eq!(ran_ids(&ev, &planned).len(), planned.len());
     assert_eq!(ev.evaluate(frame(0), None, &res, &moved).ran, 0);
     assert_eq!(scalar(&ev, "out"), 10.0);
 }
@@ -685,4 +685,34 @@ fn a_fixed_frame_export_skips_its_work_on_other_frames() {
     ev.evaluate(frame(3), Some(gpu), &res, &settings);
     assert!(positions(&ev, "cloth", "surface") != cloth0, "the flag should move in the wind");
     assert!(positions(&ev, "export", "mesh") == export0, "the export ran again on frame 3");
+}
+
+/// A new frame size re-runs the nodes that read it (the G-buffer pass) and what they feed, and
+/// nothing upstream: the mesh, the material, the draw and the camera keep their results.
+#[test]
+fn a_new_size_reruns_the_nodes_that_read_it_and_their_consumers_only() {
+    let g = graph(
+        r#"(version: 1, nodes: {
+        "sphere": (kind: "Primitive", params: { "shape": "sphere" }),
+        "m": (kind: "Material"),
+        "d": (kind: "Draw"),
+        "camera": (kind: "OrbitCamera"),
+        "gbuffer": (kind: "GBufferPass"),
+        "out": (kind: "Preview"),
+    }, links: [
+        ("sphere.mesh", "d.mesh"), ("m.material", "d.material"), ("d.scene", "gbuffer.scene"),
+        ("camera.camera", "gbuffer.camera"), ("gbuffer.color", "out.image"),
+    ])"#,
+    );
+    let mut ev = Evaluator::new(&g, &[]).unwrap();
+    let res = Resources::new(false);
+    let gpu = crate::common::gpu();
+    let small = FrameSettings { width: 32, height: 24, ..FrameSettings::default() };
+    assert_eq!(ev.evaluate(frame(0), Some(gpu), &res, &small).ran, 6);
+    let wider = FrameSettings { width: 40, ..small.clone() };
+    ev.evaluate(frame(0), Some(gpu), &res, &wider);
+    assert_eq!(ran_ids(&ev, &["sphere", "m", "d", "camera", "gbuffer", "out"]), ["gbuffer", "out"]);
+    let color = ev.output("gbuffer", "color").and_then(|v| v.as_texture()).expect("a colour target");
+    assert_eq!((color.width, color.height), (40, 24), "the G-buffer has the new size");
+    assert_eq!(ev.evaluate(frame(0), Some(gpu), &res, &wider).ran, 0, "the same size again");
 }

@@ -458,6 +458,10 @@ pub struct Live {
     held_since: Option<Instant>,
     /// Whether a pointer gesture (a drag) is going on: set by the window every frame.
     pub gesture: bool,
+    /// Whether the view is being turned or zoomed: set by the viewport every frame. Meanwhile
+    /// frames are evaluated at half the width and height ([`NAVIGATION_SCALE`]), and at the full
+    /// size once it stops.
+    pub navigating: bool,
     reset_pending: bool,
     invalidate_pending: bool,
     reload_pending: bool,
@@ -545,6 +549,11 @@ impl PlayCache {
     }
 }
 
+/// How much smaller frames are while the view moves (see [`Live::navigating`]): only the nodes
+/// that read the frame size re-run for it (the G-buffer and what it feeds), so each step of an
+/// orbit costs about a quarter of the screen-space passes.
+pub const NAVIGATION_SCALE: u32 = 2;
+
 /// The play range the editor starts with; a turntable camera turns once over it.
 const DEFAULT_FRAME_RANGE: (i64, i64) = (0, 239);
 
@@ -573,6 +582,7 @@ impl Live {
             sent_graph: u64::MAX,
             held_since: None,
             gesture: false,
+            navigating: false,
             reset_pending: false,
             invalidate_pending: false,
             reload_pending: false,
@@ -723,10 +733,15 @@ impl Live {
     }
 
     fn wanted(&self) -> Wanted {
+        let (w, h) = (self.settings.width, self.settings.height);
         Wanted {
             graph: self.graph_version,
             time: (self.frame, self.fps.to_bits()),
-            size: (self.settings.width, self.settings.height),
+            size: if self.navigating {
+                ((w / NAVIGATION_SCALE).max(16), (h / NAVIGATION_SCALE).max(16))
+            } else {
+                (w, h)
+            },
             viewed: self.viewed.clone(),
         }
     }
@@ -808,7 +823,7 @@ impl Live {
             generation,
             graph: graph_new.then(|| (self.runnable.clone(), self.extra_roots.clone())),
             time: self.time(),
-            settings: self.settings.clone(),
+            settings: FrameSettings { width: wanted.size.0, height: wanted.size.1, ..self.settings.clone() },
             viewed: wanted.viewed.clone(),
             reset: std::mem::take(&mut self.reset_pending),
             invalidate: std::mem::take(&mut self.invalidate_pending),

@@ -196,9 +196,11 @@ impl Viewport {
             .map(|c| c.node.clone())
             .filter(|n| state.graph.nodes.contains_key(n))
             .or_else(|| camera_for(&state.graph, Some(&port.node)));
+        live.navigating = false;
         let Some(camera) = camera else { return };
         let drag = response.drag_delta();
         let wheel = if response.hovered() { ui.input(|i| i.smooth_scroll_delta.y) } else { 0.0 };
+        live.navigating = response.dragged() || wheel != 0.0;
         if drag != Vec2::ZERO || wheel != 0.0 {
             let mut cam = live
                 .camera
