@@ -125,13 +125,13 @@ fn cube_trilinear(tex: texture_2d_array<f32>, size: u32, top: f32, d: vec3<f32>,
 }
 
 // cube_trilinear for wgpu's GL backend on llvmpipe. That backend guards every textureLoad with
-// `textureSize(tex, level)`, and llvmpipe answers the query with the level of the first pixel
-// of the group it shades at once, so where such pixels read different levels (a glossy
-// silhouette beside the background) a pixel whose level is finer than the first's read zeros. Here each load's
-// level is the counter of a loop counting up from 0, the same in every pixel still looping, and
-// one that stopped earlier holds a smaller one: the query then sees a level at most the pixel's
-// own, whose size admits its texels. Costs l1 + 1 bilinear lookups instead of two: on llvmpipe's
-// GL the default graph's IblShading took 368 ms a frame instead of 177.
+// `textureSize(tex, level)`, and llvmpipe answers the query with the level of the first pixel of
+// the group it shades at once, so where such pixels read different levels (a glossy silhouette
+// beside the background) a pixel whose level is finer than the first's read zeros. Here each
+// load's level is the counter of a loop counting up from 0, the same in every pixel still
+// looping, and one that stopped earlier holds a smaller one: the query then sees a level at most
+// the pixel's own, whose size admits its texels. Costs l1 + 1 bilinear lookups instead of two: on
+// llvmpipe's GL the default graph's IblShading took 368 ms a frame instead of 177.
 fn cube_trilinear_counted(tex: texture_2d_array<f32>, size: u32, top: f32, d: vec3<f32>, lod: f32) -> vec4<f32> {
     let l = clamp(lod, 0.0, top);
     let l0 = i32(floor(l));

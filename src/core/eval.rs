@@ -341,13 +341,13 @@ impl Evaluator {
     ) -> Result<FrameSummary, (FrameSummary, Cancelled)> {
         let mut cancelled = None;
         let mut summary = FrameSummary::default();
-        let hash = |value: &dyn Fn(&mut std::collections::hash_map::DefaultHasher)| {
+        fn hash_of(value: impl std::hash::Hash) -> u64 {
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            value(&mut h);
+            value.hash(&mut h);
             std::hash::Hasher::finish(&h)
-        };
-        self.settings_hash = hash(&|h| std::hash::Hash::hash(&(&settings.base_dir, settings.frames, gpu.is_some()), h));
-        self.size_hash = hash(&|h| std::hash::Hash::hash(&(settings.width, settings.height), h));
+        }
+        self.settings_hash = hash_of((&settings.base_dir, settings.frames, gpu.is_some()));
+        self.size_hash = hash_of((settings.width, settings.height));
         self.released.iter_mut().for_each(|r| *r = false);
         for oi in 0..self.order.len() {
             let n = self.order[oi];

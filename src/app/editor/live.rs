@@ -23,13 +23,6 @@ use crate::core::resources::Resources;
 use crate::core::spec;
 use crate::gpu::{FullscreenPass, GpuContext, GpuImage, TextureDesc};
 
-impl Display {
-    /// The picture's description without the picture (neither the GPU image nor the pixels).
-    fn without_image(&self) -> Display {
-        Display { port: self.port.clone(), image: None, pixels: None, error: self.error.clone(), stamp: self.stamp }
-    }
-}
-
 /// What a node shows on the canvas.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NodeState {
@@ -307,6 +300,13 @@ pub struct Display {
     pub stamp: u64,
 }
 
+impl Display {
+    /// The picture's description without the picture (neither the GPU image nor the pixels).
+    fn without_image(&self) -> Display {
+        Display { port: self.port.clone(), image: None, pixels: None, error: self.error.clone(), stamp: self.stamp }
+    }
+}
+
 /// What the UI shows of one node, from the last finished evaluation.
 #[derive(Clone, Debug)]
 struct NodeShot {
@@ -512,8 +512,8 @@ struct PlayCache {
 /// What kept pictures are of: the graph version, size, viewed port and frame rate of [`Wanted`].
 type PlayKey = (u64, (u32, u32), Option<PortRef>, u64);
 
-/// At 800x600 this keeps 139 frames, and every frame of the editor's default 240 at its
-/// default 480x360.
+/// The most bytes of kept playback pictures: 139 frames at 800x600, and every frame of the
+/// editor's default 240 at its default 480x360.
 pub const PLAY_CACHE_BYTES: usize = 256 << 20;
 
 impl PlayCache {
