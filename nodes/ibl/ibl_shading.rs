@@ -264,7 +264,7 @@ impl Node for IblShadingNode {
                 ("JITTER", u32::from(shadows.as_ref().is_some_and(|s| s.params.jitter > 0.0))),
                 ("DIFFUSE_ENDS", u32::from(handover.is_some())),
             ];
-            if !hardware && gpu.info.backend == wgpu::Backend::Gl {
+            if !hardware && gpu.counted_levels() {
                 switches.push(("COUNTED_LEVELS", 1));
             }
             pass.draw_specialized(gpu, &binds, &[&out.view], &[out.format], &switches)?;

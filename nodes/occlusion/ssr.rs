@@ -187,8 +187,7 @@ impl Node for SsrNode {
             Bind::Texture(shadows.as_ref().map_or(&g.normal, |a| &a.atlas)),
             Bind::Sampler(SamplerKind::LinearClamp),
         ];
-        let constants =
-            [("LIGHTS", count as u32), ("COUNTED_LEVELS", u32::from(gpu.info.backend == wgpu::Backend::Gl))];
+        let constants = [("LIGHTS", count as u32), ("COUNTED_LEVELS", u32::from(gpu.counted_levels()))];
         let passes = self.passes.get_or_insert_with(|| GatherResolve::new("ssr.wgsl"));
         let out = passes.run(gpu, "ssr", &g, &image, bytemuck::bytes_of(&u), &binds, &constants)?;
         cx.set("image", Arc::new(out));

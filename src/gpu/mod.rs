@@ -395,6 +395,14 @@ impl GpuContext {
         self.info.backend != wgpu::Backend::Gl && hdr_filterable
     }
 
+    /// Whether shaders must read texels at a level that differs between neighbouring pixels
+    /// through a loop counting up the levels (shaders/ibl/cube.wgsl `cube_trilinear_counted`,
+    /// `load_counted`; their `COUNTED_LEVELS` overrides): on wgpu's GL backend, whose bounds
+    /// check asks for one level's size per group of pixels on llvmpipe.
+    pub fn counted_levels(&self) -> bool {
+        self.info.backend == wgpu::Backend::Gl
+    }
+
     // ---- creation (counted) ----
 
     /// Creates a texture. Every texture is made here, so [`GpuContext::created`] is honest.

@@ -767,15 +767,15 @@ impl Live {
         {
             self.played.clear();
         }
-        if self.playing
+        let kept = if self.playing { self.played.get(&wanted) } else { None };
+        let from_cache = kept.is_some();
+        if let Some(kept) = kept
             && self.shown_frame != Some(wanted.time.0)
-            && let Some(kept) = self.played.get(&wanted)
         {
             self.cached_shown = Some(Display { pixels: kept.pixels.clone(), ..kept.without_image() });
             self.shown_frame = Some(wanted.time.0);
             got = true;
         }
-        let from_cache = self.playing && self.played.get(&wanted).is_some();
         let graph_new = wanted.graph != self.sent_graph;
         // A gesture holds a changing value until it rests or is let go.
         let held = graph_new && self.gesture && self.held_since.is_some_and(|t| t.elapsed() < SETTLE);
