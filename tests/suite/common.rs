@@ -92,6 +92,19 @@ pub fn render_graph(
     sets: &[&str],
     dumps: &[&str],
 ) -> anyhow::Result<Stats> {
+    render_graph_on(gpu(), graph, out, frames, size, sets, dumps)
+}
+
+/// [`render_graph`] on the device `gpu` (another backend).
+pub fn render_graph_on(
+    gpu: &GpuContext,
+    graph: &Path,
+    out: &Path,
+    frames: (i64, i64),
+    size: (u32, u32),
+    sets: &[&str],
+    dumps: &[&str],
+) -> anyhow::Result<Stats> {
     let opts = RenderOptions {
         graph_path: graph.to_path_buf(),
         frames,
@@ -107,7 +120,7 @@ pub fn render_graph(
         command: Vec::new(),
         pending_timeout: werkstatt::app::render::PENDING_LIMIT,
     };
-    render(&opts, gpu())
+    render(&opts, gpu)
 }
 
 pub fn read_exr(path: &Path) -> Pixels {

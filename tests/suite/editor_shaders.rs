@@ -21,6 +21,17 @@ fn settle(live: &mut Live, gpu: &Arc<GpuContext>) {
     assert!(live.wait_idle(Some(gpu), Duration::from_secs(120)), "evaluation did not settle in 120 s");
 }
 
+/// A device, graphs/`name` and the editor's live evaluation of it at `size`, settled.
+fn live_on(name: &str, size: (u32, u32)) -> (Arc<GpuContext>, Graph, Live) {
+    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
+    let graph = Graph::load(&root().join("graphs").join(name)).unwrap();
+    let mut live = Live::new(root().join("graphs"), false);
+    live.set_size(size.0, size.1);
+    live.sync(&graph, 1, None);
+    settle(&mut live, &gpu);
+    (gpu, graph, live)
+}
+
 /// The centre pixel of the graph's output image.
 fn centre(live: &Live, gpu: &GpuContext) -> [f32; 4] {
     let value = live.output(&PortRef::parse("image.image").unwrap()).expect("the image was rendered");
@@ -66,12 +77,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
         std::fs::create_dir_all(dir.join(path).parent().unwrap()).unwrap();
         std::fs::copy(root().join("shaders").join(path), dir.join(path)).unwrap();
     }
-    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
-    let mut graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
-    let mut live = Live::new(root().join("graphs"), false);
-    live.set_size(64, 48);
-    live.sync(&graph, 1, None);
-    settle(&mut live, &gpu);
+    let (gpu, mut graph, mut live) = live_on("still_life.ron", (64, 48));
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let original = std::fs::read_to_string(dir.join("render/tonemap.wgsl")).unwrap();
     let exposure = |graph: &mut Graph, live: &mut Live, value: f64, generation: u64| {
@@ -125,12 +131,7 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
 #[test]
 #[ignore = "a measurement: cargo test --release --test suite -- --ignored editor_shaders::playback_of_the_default_graph --nocapture"]
 fn playback_of_the_default_graph_at_800x600() {
-    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
-    let graph = Graph::load(&root().join("graphs/default.ron")).unwrap();
-    let mut live = Live::new(root().join("graphs"), false);
-    live.set_size(800, 600);
-    live.sync(&graph, 1, None);
-    settle(&mut live, &gpu);
+    let (gpu, graph, mut live) = live_on("default.ron", (800, 600));
     (live.frame_range, live.fps, live.playing) = ((0, 23), 24.0, true);
     let mut loops = Vec::new();
     for _ in 0..2 {
@@ -209,12 +210,7 @@ fn playback_of_the_default_graph_at_800x600() {
 /// results, and the full size comes back when the view rests.
 #[test]
 fn a_moving_view_renders_at_half_size_and_reruns_only_what_reads_the_size() {
-    let gpu = Arc::new(GpuContext::headless(Backend::from_env().unwrap()).expect("a software adapter (lavapipe)"));
-    let graph = Graph::load(&root().join("graphs/still_life.ron")).unwrap();
-    let mut live = Live::new(root().join("graphs"), false);
-    live.set_size(64, 48);
-    live.sync(&graph, 1, None);
-    settle(&mut live, &gpu);
+    let (gpu, _, mut live) = live_on("still_life.ron", (64, 48));
     let size = |live: &Live| live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size);
     assert_eq!(size(&live), Some([64, 48]));
     let upstream = ["cloth", "pems", "median_cut", "environment"];

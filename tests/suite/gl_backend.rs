@@ -10,7 +10,6 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use crate::common::*;
-use werkstatt::app::render::{RenderOptions, render};
 use werkstatt::core::eval::{Evaluator, FrameSettings, FrameTime, NodeStatus};
 use werkstatt::core::graph::Graph;
 use werkstatt::core::param::ParamValue;
@@ -67,22 +66,8 @@ fn render_on(
     dumps: &[&str],
     sets: &[String],
 ) -> anyhow::Result<()> {
-    let opts = RenderOptions {
-        graph_path: root().join("graphs").join(graph),
-        frames,
-        fps: 30.0,
-        width: 96,
-        height: 72,
-        out_dir: out.to_path_buf(),
-        sets: sets.to_vec(),
-        dumps: dumps.iter().map(|s| s.to_string()).collect(),
-        dump_format: None,
-        ssaa: 1,
-        progress: false,
-        command: Vec::new(),
-        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
-    };
-    render(&opts, gpu).map(|_| ())
+    let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+    render_graph_on(gpu, &root().join("graphs").join(graph), out, frames, (96, 72), &sets, dumps).map(|_| ())
 }
 
 #[test]
@@ -278,22 +263,7 @@ fn render_dumps_on_gl(
 ) -> Vec<Pixels> {
     let graph = out.join("graph.ron");
     std::fs::write(&graph, text).unwrap();
-    let opts = RenderOptions {
-        graph_path: graph,
-        frames: (0, 0),
-        fps: 30.0,
-        width: size.0,
-        height: size.1,
-        out_dir: out.to_path_buf(),
-        sets: Vec::new(),
-        dumps: dumps.iter().map(|d| d.to_string()).collect(),
-        dump_format: None,
-        ssaa: 1,
-        progress: false,
-        command: Vec::new(),
-        pending_timeout: werkstatt::app::render::PENDING_LIMIT,
-    };
-    render(&opts, gpu).unwrap();
+    render_graph_on(gpu, &graph, out, (0, 0), size, &[], dumps).unwrap();
     dumps.iter().map(|d| read_exr(&out.join(format!("{d}_0000.exr")))).collect()
 }
 
