@@ -45,6 +45,12 @@ impl Aabb {
     pub fn margin(&self, p: Vec3) -> f32 {
         (p - self.min).min(self.max - p).min_element()
     }
+    /// Squared distance from `p` to the box (0 inside): no point in the box is nearer.
+    #[inline]
+    pub fn distance_squared(&self, p: Vec3) -> f32 {
+        let outside = (self.min - p).max(p - self.max).max(Vec3::ZERO);
+        outside.length_squared()
+    }
     #[inline]
     pub fn inflate(self, r: f32) -> Aabb {
         Aabb { min: self.min - Vec3::splat(r), max: self.max + Vec3::splat(r) }

@@ -845,13 +845,24 @@ impl Cloth {
                 0.5 * p.body_thickness,
             );
             let all = 0..self.x.len() as u32;
-            body.collide(all, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, p.body_friction);
+            let exact = edge_passes > 0;
+            body.collide(
+                all,
+                &mut self.x,
+                &self.prev,
+                &self.inv_mass,
+                s0,
+                s1,
+                p.body_thickness,
+                p.body_friction,
+                exact,
+            );
             if welded {
                 // The contacts above moved sewn vertices apart; join them again and keep the
                 // joined point out of the body (without friction, so they move as one).
                 weld(&mut self.x, &self.inv_mass, &self.seam_groups);
                 let sewn = self.seam_groups.iter().flatten().copied();
-                body.collide(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0);
+                body.collide(sewn, &mut self.x, &self.prev, &self.inv_mass, s0, s1, p.body_thickness, 0.0, exact);
             }
             if edge_passes > 0 {
                 // After the weld, and moving each welded group as one: a weld after the
