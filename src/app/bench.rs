@@ -1829,7 +1829,7 @@ pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
-    (substeps, iterations, untangle, arm_spread): (Option<u32>, u32, bool, f64),
+    (substeps, iterations, untangle, struts, arm_spread): (Option<u32>, u32, bool, bool, f64),
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1852,6 +1852,7 @@ pub fn drape_garment(
         sim: crate::cloth::SimParams {
             self_collision: true,
             untangle,
+            struts,
             substeps,
             iterations,
             ..DrapeParams::default().sim

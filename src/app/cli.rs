@@ -450,6 +450,10 @@ enum BenchWhat {
         /// Leave cloth found through the cloth where it is (the `Garment` node's `untangle` off).
         #[arg(long)]
         no_untangle: bool,
+        /// Without the struts that hold a panel's vertices within their pattern distance (the
+        /// `Garment` node's `struts` off).
+        #[arg(long)]
+        no_struts: bool,
         /// The avatar's arms spread out from its sides (degrees), as the graphs have them: at 0
         /// MakeHuman's arms pass through its torso in the walk, with the cloth between.
         #[arg(long, default_value_t = 30.0)]
@@ -1288,6 +1292,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     frames,
                     check_every,
                     no_untangle,
+                    no_struts,
                     arm_spread,
                     obj_dir,
                     json,
@@ -1298,7 +1303,10 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 "{} on the walking MakeHuman avatar (arms spread {arm_spread} degrees), self-collision on, {} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
                 pattern.display(),
                 substeps.map_or("the Garment node's".to_string(), |n| n.to_string()),
-                if no_untangle { ", untangling off" } else { "" }
+                [(no_untangle, ", untangling off"), (no_struts, ", struts off")]
+                    .iter()
+                    .filter_map(|&(off, what)| off.then_some(what))
+                    .collect::<String>()
             );
             let mut rows = Vec::new();
             for edge in edges {
@@ -1307,7 +1315,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
-                    (substeps, iterations, !no_untangle, arm_spread),
+                    (substeps, iterations, !no_untangle, !no_struts, arm_spread),
                     settle,
                     frames,
                     check_every,

@@ -26,7 +26,7 @@ impl Default for DrapeParams {
         // sweeps per substep: with one, the corners where three or four panels meet (the
         // armpits) stay 1.2 mm open after a second of sewing the shirt; with two, under 1 mm.
         DrapeParams {
-            sim: SimParams { seam_close_time: 0.4, iterations: 2, ..SimParams::default() },
+            sim: SimParams { seam_close_time: 0.4, iterations: 2, struts: true, ..SimParams::default() },
             sewing_frames: 30,
         }
     }
@@ -39,9 +39,10 @@ impl DrapeParams {
     /// Simulator substeps per 1/60 s frame for a garment of `edge_cm` edges: `per_cm` for each
     /// 1/cm of resolution (with 20: 20 at 1 cm, 40 at 0.5 cm), never fewer than 20. A fixed
     /// number of Gauss-Seidel sweeps carries a load across fewer edges the finer the mesh, so
-    /// the same substeps make a finer garment stretchier: the shirt's 99th-percentile edge
-    /// strain was 11 % at 1 cm with 20 substeps (6.8 % with 30, 5.1 % with 40), and at 0.5 cm
-    /// with 20 it stretched 38 % and slid off the shoulders (docs/garments.md).
+    /// the same substeps make a finer garment stretchier: without struts, the shirt's
+    /// 99th-percentile edge strain was 11 % at 1 cm with 20 substeps (6.8 % with 30, 5.1 % with
+    /// 40; with struts 5.2 % with 20), and at 0.5 cm with 20 it stretched 38 % and slid off the
+    /// shoulders (docs/garments.md).
     pub fn substeps_for(edge_cm: f64, per_cm: f64) -> u32 {
         let n = per_cm / edge_cm.max(1e-3);
         (n.round().min(1000.0) as u32).clamp(20, 1000)
