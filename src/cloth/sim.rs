@@ -33,7 +33,8 @@ const SELF_EXCLUSION: f32 = 1.5;
 const LAST_EDGE_PASSES: usize = 4;
 
 /// Strut lengths ([`SimParams::struts`]) in mean edge lengths: 2, 5 and 12 brought the shirt's
-/// 99th-percentile edge strain at 1 cm and 20 substeps from 11 % to 4-5 % (one span, 3: 6 %).
+/// 99th-percentile edge strain at 1 cm and 20 substeps from 11 % to about 5 % (one span, 3:
+/// 6 %; docs/garments.md).
 const STRUT_SPANS: [f32; 3] = [2.0, 5.0, 12.0];
 
 /// Cosine of the widest angle between a strut and its direction (23 degrees).
@@ -408,7 +409,7 @@ pub struct Cloth {
     part_shears: Vec<usize>,
     part_bends: Vec<usize>,
     /// Strut vertex pairs ([`SimParams::struts`]) in sweep order, their longest lengths, and
-    /// where each part's end.
+    /// where each part's struts end ([`sweep_order`]).
     struts: Vec<[u32; 2]>,
     strut_max: Vec<f32>,
     part_struts: Vec<usize>,
