@@ -846,7 +846,7 @@ impl Cloth {
             0.0
         };
         let welded = seam_scale == 0.0 && self.params.seam_compliance == 0.0;
-        for _ in 0..self.params.iterations {
+        for sweep_index in 0..self.params.iterations {
             let (l_edge, rest) = self.lambda.split_at_mut(self.edges.len());
             let (l_bend, rest) = rest.split_at_mut(self.bends.len());
             let (l_shear, l_seam) = rest.split_at_mut(self.shears.len());
@@ -893,8 +893,10 @@ impl Cloth {
                     p.seam_compliance / (h * h),
                 );
             }
-            if !self.struts.is_empty() {
-                // After the seams: a strut ending on a sewn vertex pulls the weld's point.
+            if !self.struts.is_empty() && sweep_index + 1 == self.params.iterations {
+                // After the seams: a strut ending on a sewn vertex pulls the weld's point. Once a
+                // substep, after its last sweep: in every sweep they held the shirt 5.2 %
+                // instead of 5.5 % for 15 % more time a frame.
                 let bounds = &self.part_struts;
                 let strut = |part: usize, x: &mut [Vec3]| {
                     let base = if part < SWEEP_PARTS { self.part_vertices[part] } else { 0 };

@@ -41,7 +41,7 @@ impl DrapeParams {
     /// number of Gauss-Seidel sweeps carries a load across fewer edges the finer the mesh, so
     /// the same substeps make a finer garment stretchier: without struts, the shirt's
     /// 99th-percentile edge strain was 11 % at 1 cm with 20 substeps (6.8 % with 30, 5.1 % with
-    /// 40; with struts 5.2 % with 20), and at 0.5 cm with 20 it stretched 38 % and slid off the
+    /// 40; with struts 5.5 % with 20), and at 0.5 cm with 20 it stretched 38 % and slid off the
     /// shoulders (docs/garments.md).
     pub fn substeps_for(edge_cm: f64, per_cm: f64) -> u32 {
         let n = per_cm / edge_cm.max(1e-3);
