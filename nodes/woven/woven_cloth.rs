@@ -211,13 +211,10 @@ impl Node for WovenClothNode {
         };
         let on_gpu = cx.choice::<Evaluate>("evaluate") == Evaluate::Gpu;
         // Only a camera makes the frame size matter (and re-run this node when it changes).
-        let view_proj = match camera {
-            Some(c) => {
-                let (w, h) = cx.frame_size();
-                Some(View::new(&c, w, h).view_proj.as_dmat4())
-            }
-            None => None,
-        };
+        let view_proj = camera.map(|c| {
+            let (w, h) = cx.frame_size();
+            View::new(&c, w, h).view_proj.as_dmat4()
+        });
         let patch = yarn.nodes as f64 * yarn.spacing;
         let grids = resample(&mesh, patch).map_err(|e| port_err("surface", e))?;
         let budget = cx.int("max_triangles") as usize;

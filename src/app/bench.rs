@@ -1824,12 +1824,23 @@ fn write_obj(
     Ok(crate::io::atomic::write_atomic(&dir.join(name), s.as_bytes())?)
 }
 
+/// How `werkstatt bench drape` simulates the garment (its command line's options).
+pub struct DrapeSetup {
+    /// Substeps per 1/60 s frame (`None`: as the `Garment` node takes them for the edge length).
+    pub substeps: Option<u32>,
+    pub iterations: u32,
+    pub untangle: bool,
+    pub struts: bool,
+    /// The avatar's arms spread from its sides (degrees).
+    pub arm_spread: f64,
+}
+
 #[allow(clippy::too_many_arguments)] // the command line's options
 pub fn drape_garment(
     avatar_dir: &std::path::Path,
     pattern: &std::path::Path,
     edge_cm: f64,
-    (substeps, iterations, untangle, struts, arm_spread): (Option<u32>, u32, bool, bool, f64),
+    setup: &DrapeSetup,
     settle_frames: usize,
     walk_frames: usize,
     check_every: usize,
@@ -1839,9 +1850,9 @@ pub fn drape_garment(
     use crate::cloth::FRAME_DT;
     use crate::garment::drape::{Drape, DrapeParams};
     use crate::garment::{Fit, garmentcode, sleeves::fit_sleeves};
-    let substeps = substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm, DrapeParams::SUBSTEPS_PER_CM));
+    let substeps = setup.substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm, DrapeParams::SUBSTEPS_PER_CM));
     let mut avatar = WalkingAvatar::load(avatar_dir)?;
-    avatar.arm_spread = arm_spread.to_radians();
+    avatar.arm_spread = setup.arm_spread.to_radians();
     let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
     let mut sewn = garmentcode::load(pattern)?.sew(edge_cm, fit)?;
     fit_sleeves(&mut sewn, &crate::garment::sleeves::ArmAxis::of_avatar(&avatar)?);
@@ -1851,10 +1862,10 @@ pub fn drape_garment(
     let params = DrapeParams {
         sim: crate::cloth::SimParams {
             self_collision: true,
-            untangle,
-            struts,
+            untangle: setup.untangle,
+            struts: setup.struts,
             substeps,
-            iterations,
+            iterations: setup.iterations,
             ..DrapeParams::default().sim
         },
         ..DrapeParams::default()

@@ -1308,6 +1308,13 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     .filter_map(|&(off, what)| off.then_some(what))
                     .collect::<String>()
             );
+            let setup = crate::app::bench::DrapeSetup {
+                substeps,
+                iterations,
+                untangle: !no_untangle,
+                struts: !no_struts,
+                arm_spread,
+            };
             let mut rows = Vec::new();
             for edge in edges {
                 let dir = obj_dir.as_ref().map(|d| d.join(format!("edge_{edge}cm")));
@@ -1315,7 +1322,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     &avatar,
                     &pattern,
                     edge,
-                    (substeps, iterations, !no_untangle, !no_struts, arm_spread),
+                    &setup,
                     settle,
                     frames,
                     check_every,

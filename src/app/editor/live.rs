@@ -301,9 +301,10 @@ pub struct Display {
 }
 
 impl Display {
-    /// The picture's description without the picture (neither the GPU image nor the pixels).
-    fn without_image(&self) -> Display {
-        Display { port: self.port.clone(), image: None, pixels: None, error: self.error.clone(), stamp: self.stamp }
+    /// The picture without its GPU image: what playback keeps and shows again.
+    fn cpu_copy(&self) -> Display {
+        let (port, pixels, error) = (self.port.clone(), self.pixels.clone(), self.error.clone());
+        Display { port, image: None, pixels, error, stamp: self.stamp }
     }
 }
 
@@ -534,7 +535,7 @@ impl PlayCache {
 
     /// Keeps the picture of frame `w`, forgetting pictures of another graph, size or view.
     fn keep(&mut self, w: &Wanted, display: &Display) {
-        let Some(pixels) = display.pixels.clone() else { return };
+        let Some(pixels) = &display.pixels else { return };
         let key = Self::key_of(w);
         if self.key.as_ref() != Some(&key) {
             self.clear();
@@ -545,7 +546,7 @@ impl PlayCache {
             return;
         }
         self.bytes += bytes;
-        self.frames.insert(w.time.0, Display { image: None, pixels: Some(pixels), ..display.without_image() });
+        self.frames.insert(w.time.0, display.cpu_copy());
     }
 }
 
@@ -772,7 +773,7 @@ impl Live {
         if let Some(kept) = kept
             && self.shown_frame != Some(wanted.time.0)
         {
-            self.cached_shown = Some(Display { pixels: kept.pixels.clone(), ..kept.without_image() });
+            self.cached_shown = Some(kept.cpu_copy());
             self.shown_frame = Some(wanted.time.0);
             got = true;
         }
