@@ -563,7 +563,7 @@ impl BodyMesh {
         let p = self.corner(b, s);
         let [ia, ib, ic] = tris[t as usize].map(|j| j as usize);
         let moved = |i: usize| x[i].distance(prev[i]);
-        let reach = thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
+        let reach = || thickness + p.distance(self.corner(b, s0)) + moved(ia).max(moved(ib)).max(moved(ic));
         let (n, d, [ba, bu, bv]) = track_side(p, [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)?;
         let wsum = w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
         if wsum == 0.0 {

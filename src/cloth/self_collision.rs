@@ -572,7 +572,7 @@ fn pair_contact(
     let (i, t) = (pair.0 as usize, pair.1);
     let [ia, ib, ic] = triangles[t as usize].map(|j| j as usize);
     let moved = |k: usize| x[k].distance(prev[k]);
-    let reach = thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
+    let reach = || thickness + moved(i) + moved(ia).max(moved(ib)).max(moved(ic));
     let forced = pair.2.abs() > 1.0;
     let (n, d, [ba, bu, bv]) = track_side(x[i], [x[ia], x[ib], x[ic]], &mut pair.2, thickness, reach)?;
     let wsum = w[i] + w[ia] * ba * ba + w[ib] * bu * bu + w[ic] * bv * bv;
@@ -588,7 +588,8 @@ fn pair_contact(
 /// normal pointing to the recorded `side`, the distance `d` of `p` along it
 /// and the projection's barycentrics when `p` must be pushed (over the
 /// triangle, closer than `thickness` on the recorded side or behind it by
-/// less than `reach`, what the two moved this substep). Where `p` is not over
+/// less than `reach`, what the two moved this substep, asked only then: most pairs are
+/// farther than the thickness, and the four distances cost more than the rest). Where `p` is not over
 /// the triangle, or farther behind than it can have got by passing through
 /// it, the side is updated instead: `p` went around the border.
 #[inline]
@@ -597,7 +598,7 @@ pub(crate) fn track_side(
     tri: [Vec3; 3],
     side: &mut f32,
     thickness: f32,
-    reach: f32,
+    reach: impl FnOnce() -> f32,
 ) -> Option<(Vec3, f32, [f32; 3])> {
     let [a, b, c] = tri;
     let (e1, e2) = (b - a, c - a);
@@ -632,7 +633,7 @@ pub(crate) fn track_side(
         }
         return None;
     }
-    if d < -reach && side.abs() <= 1.0 {
+    if side.abs() <= 1.0 && d < -reach() {
         if d_raw != 0.0 {
             *side = d_raw.signum();
         }
