@@ -1108,6 +1108,24 @@ mod tests {
     }
 
     #[test]
+    fn candidates_found_in_chunks_are_laid_out_in_item_order() {
+        // Item i has i % 5 candidates, 1000 i + j: several chunks, found on the cores.
+        let count = 3 * CANDIDATE_CHUNK + 17;
+        let (mut starts, mut out) = (vec![9], vec![9]);
+        candidates_in_chunks(count, &mut starts, &mut out, |i, found| {
+            found.extend((0..i as u32 % 5).map(|j| 1000 * i as u32 + j));
+        });
+        let mut want_starts = vec![0u32];
+        let mut want = Vec::new();
+        for i in 0..count as u32 {
+            want.extend((0..i % 5).map(|j| 1000 * i + j));
+            want_starts.push(want.len() as u32);
+        }
+        assert_eq!(starts, want_starts);
+        assert_eq!(out, want);
+    }
+
+    #[test]
     fn segment_closest_points() {
         // Skew perpendicular segments: nearest at (0.25, 0, 0) and (0.25, 0, 1).
         let (s, t, d2) =
