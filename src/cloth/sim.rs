@@ -338,9 +338,9 @@ impl Rest<'_> {
                         }
                     }
                 });
-                for (_, j) in best {
-                    let (a, b) = (p[i], p.get(j as usize).copied().unwrap_or_default());
-                    if j != u32::MAX && (1..4).all(|k| on_piece(a.lerp(b, k as f32 / 4.0), piece_ids[i])) {
+                for (_, j) in best.into_iter().filter(|b| b.1 != u32::MAX) {
+                    let (a, b) = (p[i], p[j as usize]);
+                    if (1..4).all(|k| on_piece(a.lerp(b, k as f32 / 4.0), piece_ids[i])) {
                         out.push(([i as u32, j], a.distance(b)));
                     }
                 }
@@ -1534,9 +1534,6 @@ fn weld(x: &mut [Vec3], w: &[f32], groups: &[Vec<u32>]) {
     }
 }
 
-/// Unilateral long-range attachments: a vertex farther from its anchor pin
-/// than its rest path length is moved back onto that sphere. The pin has
-/// infinite mass, so only the free vertex moves.
 /// Inequality distance constraints `|x_a - x_b| <= max`, rigid (PBD): they only ever pull
 /// two vertices of a piece back to their distance on the pattern, which the cloth unstretched
 /// cannot exceed, so they never fight a fold.
@@ -1559,6 +1556,9 @@ fn solve_struts(x: &mut [Vec3], base: usize, w: &[f32], struts: &[[u32; 2]], max
     }
 }
 
+/// Unilateral long-range attachments: a vertex farther from its anchor pin
+/// than its rest path length is moved back onto that sphere. The pin has
+/// infinite mass, so only the free vertex moves.
 fn solve_tethers(x: &mut [Vec3], tethers: &[(u32, u32, f32)]) {
     for &(i, anchor, max) in tethers {
         let d = x[i as usize] - x[anchor as usize];
