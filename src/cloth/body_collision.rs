@@ -201,35 +201,8 @@ pub fn segment_closest_params(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> (f32, f32, 
     (s, t, (a + d1 * s).distance_squared(c + d2 * t))
 }
 
-/// Items a thread takes at a time in [`candidates_in_chunks`].
+/// Items a thread takes at a time in the frame start's search for candidate triangles.
 const CANDIDATE_CHUNK: usize = 512;
-
-/// Each of `count` items' candidates (`find` appends item `i`'s), found on the cores in chunks
-/// and laid out in item order as CSR (`starts`, `out`): the same for any thread count.
-fn candidates_in_chunks(
-    count: usize,
-    starts: &mut Vec<u32>,
-    out: &mut Vec<u32>,
-    find: impl Fn(usize, &mut Vec<u32>) + Sync + Send,
-) {
-    let threads = if count >= 2 * CANDIDATE_CHUNK { 0 } else { 1 };
-    let chunks = crate::core::parallel::map(count.div_ceil(CANDIDATE_CHUNK), threads, |c| {
-        let (mut found, mut ends) = (Vec::new(), Vec::with_capacity(CANDIDATE_CHUNK));
-        for i in c * CANDIDATE_CHUNK..((c + 1) * CANDIDATE_CHUNK).min(count) {
-            find(i, &mut found);
-            ends.push(found.len() as u32);
-        }
-        (found, ends)
-    });
-    starts.clear();
-    out.clear();
-    starts.push(0);
-    for (found, ends) in chunks {
-        let base = out.len() as u32;
-        starts.extend(ends.iter().map(|e| base + e));
-        out.extend(found);
-    }
-}
 
 /// Distance from `p` to the segment `ab`.
 fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
@@ -410,38 +383,51 @@ impl BodyMesh {
         // Predicted sweep, a little longer than the velocity says.
         self.query.extend((0..x.len()).map(|i| Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]).inflate(radius)));
         let (tree, boxes, query) = (&self.tree, &self.boxes, &self.query);
-        candidates_in_chunks(x.len(), &mut self.cand_start, &mut self.cand, |i, cand| {
-            let q = query[i];
-            if inv_mass[i] > 0.0 && q.overlaps(&all) {
-                tree.query(&q, |t| {
-                    if boxes[t as usize].overlaps(&q) {
-                        cand.push(t)
-                    }
-                });
-            }
-        });
+        crate::core::parallel::csr_in_chunks(
+            x.len(),
+            CANDIDATE_CHUNK,
+            &mut self.cand_start,
+            &mut self.cand,
+            |i, cand| {
+                let q = query[i];
+                if inv_mass[i] > 0.0 && q.overlaps(&all) {
+                    tree.query(&q, |t| {
+                        if boxes[t as usize].overlaps(&q) {
+                            cand.push(t)
+                        }
+                    });
+                }
+            },
+        );
         self.stats.candidates = self.cand.len();
         // Edges: the union of their ends' sweeps. Only edges with an end near the body can
         // cross it between their ends (a chord sags L^2 / 8R, under the slack for the
         // edge lengths a body-sized garment has).
         let cand_start = &self.cand_start;
-        candidates_in_chunks(cloth_edges.len(), &mut self.edge_cand_start, &mut self.edge_cand, |k, cand| {
-            let [a, b] = cloth_edges[k].map(|i| i as usize);
-            let near = |i: usize| cand_start[i] < cand_start[i + 1];
-            if (inv_mass[a] > 0.0 || inv_mass[b] > 0.0) && (near(a) || near(b)) {
-                let q = query[a].union(query[b]);
-                // The box of a slanted edge is mostly far from it: keep the triangles whose
-                // bounding sphere comes within reach of the segment (its ends' sweeps included).
-                let sweep = (v[a].length().max(v[b].length())) * (1.25 * dt) + radius;
-                let (pa, pb) = (x[a], x[b]);
-                tree.query(&q, |t| {
-                    let bx = &boxes[t as usize];
-                    if bx.overlaps(&q) && point_segment_distance(bx.center(), pa, pb) <= bx.half_diagonal() + sweep {
-                        cand.push(t)
-                    }
-                });
-            }
-        });
+        crate::core::parallel::csr_in_chunks(
+            cloth_edges.len(),
+            CANDIDATE_CHUNK,
+            &mut self.edge_cand_start,
+            &mut self.edge_cand,
+            |k, cand| {
+                let [a, b] = cloth_edges[k].map(|i| i as usize);
+                let near = |i: usize| cand_start[i] < cand_start[i + 1];
+                if (inv_mass[a] > 0.0 || inv_mass[b] > 0.0) && (near(a) || near(b)) {
+                    let q = query[a].union(query[b]);
+                    // The box of a slanted edge is mostly far from it: keep the triangles whose
+                    // bounding sphere comes within reach of the segment (its ends' sweeps included).
+                    let sweep = (v[a].length().max(v[b].length())) * (1.25 * dt) + radius;
+                    let (pa, pb) = (x[a], x[b]);
+                    tree.query(&q, |t| {
+                        let bx = &boxes[t as usize];
+                        if bx.overlaps(&q) && point_segment_distance(bx.center(), pa, pb) <= bx.half_diagonal() + sweep
+                        {
+                            cand.push(t)
+                        }
+                    });
+                }
+            },
+        );
         self.stats.edge_candidates = self.edge_cand.len();
         self.clearance.clear();
         self.clearance.resize(x.len(), f32::INFINITY);
@@ -1105,24 +1091,6 @@ mod tests {
     /// Signed volume: positive when the mesh is closed and wound CCW outside.
     fn volume(pos: &[Vec3], tris: &[[u32; 3]]) -> f32 {
         tris.iter().map(|t| pos[t[0] as usize].dot(pos[t[1] as usize].cross(pos[t[2] as usize])) / 6.0).sum()
-    }
-
-    #[test]
-    fn candidates_found_in_chunks_are_laid_out_in_item_order() {
-        // Item i has i % 5 candidates, 1000 i + j: several chunks, found on the cores.
-        let count = 3 * CANDIDATE_CHUNK + 17;
-        let (mut starts, mut out) = (vec![9], vec![9]);
-        candidates_in_chunks(count, &mut starts, &mut out, |i, found| {
-            found.extend((0..i as u32 % 5).map(|j| 1000 * i as u32 + j));
-        });
-        let mut want_starts = vec![0u32];
-        let mut want = Vec::new();
-        for i in 0..count as u32 {
-            want.extend((0..i % 5).map(|j| 1000 * i + j));
-            want_starts.push(want.len() as u32);
-        }
-        assert_eq!(starts, want_starts);
-        assert_eq!(out, want);
     }
 
     #[test]

@@ -36,11 +36,45 @@ pub fn map<T: Send>(count: usize, threads: usize, f: impl Fn(usize) -> T + Sync 
 /// per core; below two chunks on the calling thread alone (handing out costs more than it saves).
 pub fn map_in_chunks<T: Send>(count: usize, chunk_len: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
     let chunk_len = chunk_len.max(1);
-    let threads = if count >= 2 * chunk_len { 0 } else { 1 };
-    let chunks = map(count.div_ceil(chunk_len), threads, |c| {
+    let chunks = map(count.div_ceil(chunk_len), chunk_threads(count, chunk_len), |c| {
         (c * chunk_len..((c + 1) * chunk_len).min(count)).map(&f).collect::<Vec<T>>()
     });
     chunks.into_iter().flatten().collect()
+}
+
+/// Each of `count` items' lists (`find(i, list)` appends item `i`'s), found as
+/// [`map_in_chunks`] finds its items and laid out in item order as CSR: item `i`'s are
+/// `out[starts[i]..starts[i + 1]]`. One list per chunk, not per item.
+pub fn csr_in_chunks<T: Send>(
+    count: usize,
+    chunk_len: usize,
+    starts: &mut Vec<u32>,
+    out: &mut Vec<T>,
+    find: impl Fn(usize, &mut Vec<T>) + Sync + Send,
+) {
+    let chunk_len = chunk_len.max(1);
+    let chunks = map(count.div_ceil(chunk_len), chunk_threads(count, chunk_len), |c| {
+        let (mut found, mut ends) = (Vec::new(), Vec::with_capacity(chunk_len));
+        for i in c * chunk_len..((c + 1) * chunk_len).min(count) {
+            find(i, &mut found);
+            ends.push(found.len() as u32);
+        }
+        (found, ends)
+    });
+    starts.clear();
+    out.clear();
+    starts.push(0);
+    for (found, ends) in chunks {
+        let base = out.len() as u32;
+        starts.extend(ends.iter().map(|e| base + e));
+        out.extend(found);
+    }
+}
+
+/// One thread per core from two chunks up; below, the calling thread alone (handing out costs
+/// more than it saves).
+fn chunk_threads(count: usize, chunk_len: usize) -> usize {
+    if count >= 2 * chunk_len { 0 } else { 1 }
 }
 
 /// `f(index, chunk)` for every `chunk_len`-long chunk of `out` (the last may be shorter), on
@@ -70,6 +104,24 @@ pub fn for_each<T: Send>(items: Vec<T>, f: impl Fn(T) + Sync + Send) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn lists_found_in_chunks_are_laid_out_in_item_order() {
+        // Item i has i % 5 entries, 1000 i + j: several chunks, found on the cores.
+        let count = 3 * 64 + 17;
+        let (mut starts, mut out) = (vec![9], vec![9]);
+        super::csr_in_chunks(count, 64, &mut starts, &mut out, |i, found| {
+            found.extend((0..i as u32 % 5).map(|j| 1000 * i as u32 + j));
+        });
+        let mut want_starts = vec![0u32];
+        let mut want = Vec::new();
+        for i in 0..count as u32 {
+            want.extend((0..i % 5).map(|j| 1000 * i + j));
+            want_starts.push(want.len() as u32);
+        }
+        assert_eq!(starts, want_starts);
+        assert_eq!(out, want);
+    }
+
     #[test]
     fn results_come_in_index_order_for_any_thread_count() {
         for threads in [0, 1, 2, 7] {
