@@ -860,20 +860,12 @@ impl BodyMesh {
         let which: Vec<u32> = which.collect();
         // Each vertex's contact depends on it and the body alone: found on the cores in
         // chunks, applied in order, so the result is the same for any thread count.
-        let threads = if which.len() >= 2 * CONTACT_CHUNK { 0 } else { 1 };
-        let this = &*self;
-        let positions = &*x;
-        let chunks = crate::core::parallel::map(which.len().div_ceil(CONTACT_CHUNK), threads, |c| {
-            let chunk = &which[c * CONTACT_CHUNK..((c + 1) * CONTACT_CHUNK).min(which.len())];
-            chunk
-                .iter()
-                .map(|&i| {
-                    let i = i as usize;
-                    this.vertex_contact(i, positions, prev, inv_mass, s0, s1, thickness, friction, exact_clearance)
-                })
-                .collect::<Vec<_>>()
+        let (this, positions) = (&*self, &*x);
+        let contacts = crate::core::parallel::map_in_chunks(which.len(), CONTACT_CHUNK, |k| {
+            let i = which[k] as usize;
+            this.vertex_contact(i, positions, prev, inv_mass, s0, s1, thickness, friction, exact_clearance)
         });
-        for (&i, contact) in which.iter().zip(chunks.iter().flatten()) {
+        for (&i, contact) in which.iter().zip(&contacts) {
             let i = i as usize;
             self.clearance[i] = contact.clearance;
             if let Some(d) = contact.outside {
