@@ -1497,6 +1497,8 @@ pub struct DrapeReport {
     /// Worst over the walking frames (checked every `check_every` frames).
     pub max_body_crossings: usize,
     pub max_self_crossings: usize,
+    /// Checked walking frames with any cloth edge through a cloth triangle.
+    pub self_crossing_frames: usize,
     pub min_clearance_mm: f32,
     /// Worst 99th-percentile edge strain (%) over the checked frames.
     pub max_p99_strain_percent: f32,
@@ -1606,7 +1608,9 @@ impl DrapeReport {
         self.max_speed = self.max_speed.max(cloth.max_speed());
         if check {
             self.max_body_crossings = self.max_body_crossings.max(cloth.body_crossings());
-            self.max_self_crossings = self.max_self_crossings.max(cloth.self_crossings());
+            let crossings = cloth.self_crossings();
+            self.max_self_crossings = self.max_self_crossings.max(crossings);
+            self.self_crossing_frames += usize::from(crossings > 0);
             if let Some(c) = cloth.body_clearance(0.05) {
                 self.min_clearance_mm = self.min_clearance_mm.min(c * 1e3);
             }
@@ -1939,11 +1943,11 @@ pub fn drape_garment(
 }
 
 impl MarkdownRow for GarmentDrapeReport {
-    const HEADER: &'static str = "| edge cm | substeps | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
+    const HEADER: &'static str = "| edge cm | substeps | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max / walk frames with any) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
     fn markdown(&self) -> String {
         let d = &self.drape;
         format!(
-            "| {} | {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} | {:.2} | {:.2} | {:.1} |",
+            "| {} | {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} / {} | {:.2} | {:.2} | {:.1} |",
             self.edge_cm,
             self.substeps,
             d.particles,
@@ -1958,6 +1962,7 @@ impl MarkdownRow for GarmentDrapeReport {
             d.max_body_crossings,
             self.settled_self_crossings,
             d.max_self_crossings,
+            d.self_crossing_frames,
             d.min_clearance_mm,
             self.max_seam_gap_mm,
             d.max_p99_strain_percent

@@ -23,7 +23,9 @@
 //! What got through anyway (a seam closing across a folded panel pulls harder than the
 //! contacts) would be held there by the same rule, so each frame also looks for cloth edges
 //! crossing cloth triangles and forces the pairs of what is through back to the other side
-//! ([`SelfCollision::untangle`]).
+//! ([`SelfCollision::untangle`]); an end of a crossing edge found through is also pushed
+//! along the triangle's normal while the edge crosses, since its pairs act only over the
+//! triangle. Vertices sewn together are one point there: judged and pushed together.
 
 use glam::Vec3;
 
@@ -90,6 +92,10 @@ pub struct SelfCollision {
     /// Each vertex's and each triangle's pattern piece.
     piece: Vec<u32>,
     tri_piece: Vec<u32>,
+    /// This frame's vertices found through a triangle that a cloth edge from them crosses:
+    /// `(vertex, the edge's other end, triangle, side it belongs on)`
+    /// ([`SelfCollision::untangle`]).
+    through_edges: Vec<(u32, u32, u32, f32)>,
     pub stats: SelfStats,
 }
 
@@ -148,6 +154,7 @@ impl SelfCollision {
             reach: Vec::new(),
             piece: pieces.to_vec(),
             tri_piece,
+            through_edges: Vec::new(),
             stats: SelfStats::default(),
         }
     }
@@ -193,7 +200,10 @@ impl SelfCollision {
         within: Option<Escape>,
     ) {
         match within {
-            None => self.stats = SelfStats::default(),
+            None => {
+                self.stats = SelfStats::default();
+                self.through_edges.clear();
+            }
             Some(_) => self.stats.regathers += 1,
         }
         let sweep = |i: usize| {
@@ -341,7 +351,11 @@ impl SelfCollision {
     ///   triangle of its own piece; of another piece, one sharing a corner with a crossed
     ///   triangle or with a corner in a part that is through) is given the other side;
     /// - an end of a crossing edge whose mesh neighbours lie mostly on the other side of the
-    ///   triangle's plane is through it.
+    ///   triangle's plane is through it (a sewn end: the neighbours of all the vertices sewn
+    ///   there), and so are the vertices sewn to it. Besides its pairs, such an end is pushed
+    ///   along the triangle's normal while its edge crosses ([`SelfCollision::solve`]): an
+    ///   edge crossing near the triangle's border has its ends off the triangle, where the
+    ///   pairs do not act.
     ///
     /// Such pairs are forced: pushed back however deep (a thickness per pair and substep at
     /// most) until back on their side or off the triangle's border, in the frames their
@@ -399,6 +413,24 @@ impl SelfCollision {
                 sewn[r as usize] = true;
             }
         }
+        // Each seam group's vertices (CSR by representative): one point of the garment.
+        let mut group_start = vec![0u32; n + 1];
+        for &r in rep {
+            group_start[r as usize + 1] += 1;
+        }
+        for i in 0..n {
+            group_start[i + 1] += group_start[i];
+        }
+        let mut group = vec![0u32; n];
+        let mut fill = group_start.clone();
+        for (v, &r) in rep.iter().enumerate() {
+            group[fill[r as usize] as usize] = v as u32;
+            fill[r as usize] += 1;
+        }
+        let group_of = |v: u32| {
+            let r = rep[v as usize] as usize;
+            &group[group_start[r] as usize..group_start[r + 1] as usize]
+        };
         let mut part = vec![u32::MAX; n];
         let mut sizes: Vec<usize> = Vec::new();
         let mut stack = Vec::new();
@@ -470,18 +502,37 @@ impl SelfCollision {
         }
 
         // Ends of crossing edges through the triangle by their neighbours.
+        // Such an end (with the vertices sewn there with it) is also pushed along the
+        // triangle's normal while its edge crosses: its pairs act only over the triangle, and
+        // an edge crossing near the border has its ends off it.
         let mut through: Vec<u32> = Vec::new();
         for &(k, t) in &crossing {
-            through.extend(
-                edges[k].into_iter().filter(|&v| self.through_side(x, rep, v, triangles[t as usize]).is_some()),
-            );
+            let tri = triangles[t as usize];
+            for (v, other) in [(edges[k][0], edges[k][1]), (edges[k][1], edges[k][0])] {
+                if let Some(side) = self.through_side(x, rep, group_of(v), tri) {
+                    through.push(v);
+                    self.through_edges.extend(group_of(v).iter().map(|&m| (m, other, t, side)));
+                }
+            }
         }
         through.sort_unstable();
         through.dedup();
         for v in through {
             for k in range(v) {
-                if let Some(side) = self.through_side(x, rep, v, triangles[self.pairs[k].1 as usize]) {
+                if let Some(side) = self.through_side(x, rep, group_of(v), triangles[self.pairs[k].1 as usize]) {
                     force.push((k, side));
+                }
+            }
+        }
+        // A sewn vertex goes through with the vertices it is sewn to: forced alone, the others'
+        // pairs with the triangle held it where it was.
+        for i in 0..force.len() {
+            let (k, side) = force[i];
+            let (v, t) = (self.pairs[k].0, self.pairs[k].1);
+            for &u in group_of(v).iter().filter(|&&u| u != v) {
+                let of_u = &self.pairs[range(u)];
+                if let Ok(j) = of_u.binary_search_by_key(&t, |p| p.1) {
+                    force.push((first[u as usize] as usize + j, side));
                 }
             }
         }
@@ -494,24 +545,27 @@ impl SelfCollision {
         }
     }
 
-    /// The side of `tri`'s plane that vertex `v` belongs on, when it is on the other: at least
-    /// two thirds of its mesh neighbours (two or more, not sewn to the triangle) are there.
-    fn through_side(&self, x: &[Vec3], rep: &[u32], v: u32, tri: [u32; 3]) -> Option<f32> {
+    /// The side of `tri`'s plane that a point of the garment (a vertex, or the vertices sewn
+    /// together there, `group`) belongs on, when it is on the other: at least two thirds of
+    /// its mesh neighbours (two or more, not sewn to the triangle) are there.
+    fn through_side(&self, x: &[Vec3], rep: &[u32], group: &[u32], tri: [u32; 3]) -> Option<f32> {
         let [a, b, c] = tri.map(|j| x[j as usize]);
         let n = (b - a).cross(c - a);
         let side = |p: Vec3| (p - a).dot(n);
-        let own = side(x[v as usize]);
+        let own = side(x[group[0] as usize]);
         if own == 0.0 {
             return None;
         }
         let corners = tri.map(|j| rep[j as usize]);
         let (mut counted, mut other) = (0, 0);
-        for &u in &self.ring[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize] {
-            if corners.contains(&rep[u as usize]) {
-                continue;
+        for &v in group {
+            for &u in &self.ring[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize] {
+                if corners.contains(&rep[u as usize]) {
+                    continue;
+                }
+                counted += 1;
+                other += usize::from(side(x[u as usize]) * own < 0.0);
             }
-            counted += 1;
-            other += usize::from(side(x[u as usize]) * own < 0.0);
         }
         (counted >= 2 && 3 * other >= 2 * counted).then(|| -own.signum())
     }
@@ -555,7 +609,53 @@ impl SelfCollision {
             }
             self.stats.contacts += 1;
         }
+        for &(v, other, t, side) in &self.through_edges {
+            let tri = triangles[t as usize];
+            let [a, b, c] = tri.map(|j| x[j as usize]);
+            let (p, q) = (x[v as usize], x[other as usize]);
+            if !super::intersections::segment_hits_triangle(p, q, a, b, c) {
+                continue;
+            }
+            let n = (b - a).cross(c - a).normalize_or_zero() * side;
+            let (dp, dq) = ((p - a).dot(n), (q - a).dot(n));
+            if dp >= 0.0 || dq <= dp {
+                continue;
+            }
+            // Where the edge meets the triangle's plane carries the triangle's share.
+            let hit = p + (q - p) * (dp / (dp - dq));
+            let bary = barycentrics(hit, a, b, c);
+            let wsum = w[v as usize] + (0..3).map(|j| w[tri[j] as usize] * bary[j] * bary[j]).sum::<f32>();
+            if wsum == 0.0 {
+                continue;
+            }
+            let step = (thickness - dp).min(thickness) / wsum;
+            x[v as usize] += n * (w[v as usize] * step);
+            for j in 0..3 {
+                x[tri[j] as usize] -= n * (w[tri[j] as usize] * bary[j] * step);
+            }
+            // Its pair with the triangle, if it has one, goes with it.
+            if let Ok(k) = self.pairs.binary_search_by_key(&(v, t), |p| (p.0, p.1)) {
+                self.pairs[k].2 = FORCED * side;
+            }
+            self.stats.contacts += 1;
+        }
     }
+}
+
+/// Barycentrics of `p`'s projection onto triangle `a b c`, clamped to it.
+fn barycentrics(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> [f32; 3] {
+    let (e1, e2) = (b - a, c - a);
+    let cross = e1.cross(e2);
+    let len2 = cross.length_squared();
+    if len2 < 1e-20 {
+        return [1.0 / 3.0; 3];
+    }
+    let rel = p - a;
+    let bu = (rel.cross(e2).dot(cross) / len2).max(0.0);
+    let bv = (e1.cross(rel).dot(cross) / len2).max(0.0);
+    let ba = (1.0 - bu - bv).max(0.0);
+    let sum = ba + bu + bv;
+    [ba / sum, bu / sum, bv / sum]
 }
 
 /// A self-contact pair's push (normal, step along it per inverse mass, barycentrics), with its
@@ -640,4 +740,85 @@ pub(crate) fn track_side(
         return None;
     }
     Some((n * sign, d, [ba, bu, bv]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloth::intersections::count_self_crossings;
+
+    const CM: f32 = 0.01;
+
+    /// Triangle 0 1 2 (piece 1) in the plane z = 0 and vertex 3 half a millimetre under it just
+    /// off its border, with an edge 3-4 up through the triangle (the rest of piece 0 around
+    /// 3 lies above): 3 is through, and not over the triangle, so its pair never pushes it.
+    /// `sewn`: 3 has one neighbour above and one below, and a vertex of piece 2 sewn to it has
+    /// two above: only the two together say where the point belongs.
+    fn crossing_off_the_border(sewn: bool) -> (Vec<Vec3>, Vec<[u32; 3]>, Vec<u32>, Vec<u32>) {
+        let p = |x: f32, y: f32, z_mm: f32| Vec3::new(x * CM, y * CM, z_mm * 0.001);
+        let mut x = vec![p(0.0, 0.0, 0.0), p(2.0, 0.0, 0.0), p(0.0, 2.0, 0.0), p(-0.1, 0.6, -0.5), p(1.0, 0.6, 2.0)];
+        let (triangles, pieces, rep);
+        if sewn {
+            x.extend([p(-2.0, 0.9, -0.5), x[3], p(-0.6, 0.2, 2.5), p(-1.0, 0.6, 2.5)]);
+            triangles = vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]];
+            pieces = vec![1, 1, 1, 0, 0, 0, 2, 2, 2];
+            rep = vec![0, 1, 2, 3, 4, 5, 3, 7, 8];
+        } else {
+            x.extend([p(-0.6, 1.0, 2.5), p(-0.6, 0.2, 2.5)]);
+            triangles = vec![[0, 1, 2], [3, 4, 5], [3, 6, 4]];
+            pieces = vec![1, 1, 1, 0, 0, 0, 0];
+            rep = (0..7).collect();
+        }
+        (x, triangles, pieces, rep)
+    }
+
+    fn untangled(sewn: bool) -> (Vec<Vec3>, usize, usize) {
+        let (mut x, triangles, pieces, rep) = crossing_off_the_border(sewn);
+        let mut edges: Vec<[u32; 2]> = triangles
+            .iter()
+            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+            .map(|[a, b]| [a.min(b), a.max(b)])
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let before = count_self_crossings(&x, &rep, &edges, &triangles);
+        let (n, thickness) = (x.len(), 0.002);
+        let (v, w) = (vec![Vec3::ZERO; n], vec![1.0; n]);
+        let mut sc = SelfCollision::new(&x, &triangles, &edges, &pieces);
+        sc.untangling = true;
+        for _ in 0..3 {
+            sc.gather(&x, &v, &w, &rep, &[], &triangles, 1.0 / 60.0, thickness, 0.001, None);
+            for _ in 0..20 {
+                let prev = x.clone();
+                sc.solve(&mut x, &prev, &w, &triangles, thickness);
+                // The weld, as the simulator keeps sewn vertices together.
+                if sewn {
+                    let mid = (x[3] + x[6]) * 0.5;
+                    (x[3], x[6]) = (mid, mid);
+                }
+            }
+        }
+        let after = count_self_crossings(&x, &rep, &edges, &triangles);
+        (x, before, after)
+    }
+
+    #[test]
+    fn a_vertex_through_a_triangle_off_its_border_is_pushed_back_along_its_edge() {
+        let (x, before, after) = untangled(false);
+        assert!(before > 0, "the scene starts tangled");
+        assert_eq!(after, 0, "{before} crossings at the start");
+        let normal = (x[1] - x[0]).cross(x[2] - x[0]).normalize();
+        assert!((x[3] - x[0]).dot(normal) > 0.0, "vertex 3 at {} is back over the triangle's plane", x[3]);
+    }
+
+    #[test]
+    fn sewn_vertices_are_judged_and_pushed_as_one_point() {
+        let (x, before, after) = untangled(true);
+        assert!(before > 0, "the scene starts tangled");
+        assert_eq!(after, 0, "{before} crossings at the start");
+        let normal = (x[1] - x[0]).cross(x[2] - x[0]).normalize();
+        for v in [3, 6] {
+            assert!((x[v] - x[0]).dot(normal) > 0.0, "vertex {v} at {} is back over the triangle's plane", x[v]);
+        }
+    }
 }
