@@ -55,7 +55,7 @@ pub static GARMENT: NodeSpec = NodeSpec {
         ParamSpec::new(
             "substeps_per_cm",
             ParamKind::Float { default: DrapeParams::SUBSTEPS_PER_CM, min: 1.0, max: 500.0 },
-            "Simulator substeps per 1/60 s frame for each 1/cm of edge length, at least 20 a frame (the default gives 20 at 1.5 cm, 30 at 1 cm, 60 at 0.5 cm): finer cloth needs more to hold its stretch. More holds it closer at more cost: through a 10 s walk the 1 cm shirt's 99th-percentile edge strain reaches 10.3 % with 20 a frame, 4.7 % with 30 (1.3 times the time), 3.3 % with 40 (1.6 times).",
+            "Simulator substeps per 1/60 s frame for each 1/cm of edge length, at least 20 a frame (the default gives 20 at 1 cm, 40 at 0.5 cm): finer cloth needs more to hold its stretch. More holds it closer at more cost: through a 10 s walk the 1 cm shirt's 99th-percentile edge strain reaches 10.3 % with 20 a frame, 4.7 % with 30 (1.3 times the time; set 30 here for the 5 % gate at 1 cm), 3.3 % with 40.",
         ),
         ParamSpec::new(
             "scale",

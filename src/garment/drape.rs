@@ -33,14 +33,14 @@ impl Default for DrapeParams {
 }
 
 impl DrapeParams {
-    /// The `Garment` node's default substeps per 1/60 s frame for each 1/cm of edge length: 30
-    /// keeps the 1 cm shirt's 99th-percentile edge strain under 5 % through the 10 s walk (4.7 %;
-    /// 10.3 % with 20), and gives the 20 that `graphs/default.ron`'s 1.5 cm shirt and its saved
-    /// drape were made with.
-    pub const SUBSTEPS_PER_CM: f64 = 30.0;
+    /// The `Garment` node's default substeps per 1/60 s frame for each 1/cm of edge length. 30
+    /// holds the 1 cm shirt's strain under 5 % through the 10 s walk, but gives 60 at 0.5 cm,
+    /// where the shirt then settled with 51 cloth-cloth crossings against none with 40
+    /// (docs/garments.md), so the default stays 20.
+    pub const SUBSTEPS_PER_CM: f64 = 20.0;
 
     /// Simulator substeps per 1/60 s frame for a garment of `edge_cm` edges: `per_cm` for each
-    /// 1/cm of resolution (with 30: 30 at 1 cm, 60 at 0.5 cm), never fewer than 20. A fixed
+    /// 1/cm of resolution (with 20: 20 at 1 cm, 40 at 0.5 cm), never fewer than 20. A fixed
     /// number of Gauss-Seidel sweeps carries a load across fewer edges the finer the mesh, so
     /// the same substeps make a finer garment stretchier: without struts, the shirt's
     /// 99th-percentile edge strain was 11 % at 1 cm with 20 substeps (6.8 % with 30, 5.1 % with

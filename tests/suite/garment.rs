@@ -339,9 +339,9 @@ fn drape_shirt(on_body: bool, params: &DrapeParams, frames: u32) -> Drape {
 #[test]
 fn finer_garments_take_more_substeps() {
     let n = |edge| DrapeParams::substeps_for(edge, DrapeParams::SUBSTEPS_PER_CM);
-    assert_eq!((n(3.0), n(1.5)), (20, 20), "coarse garments keep the 20 the graphs and the saved drape were made with");
-    assert_eq!((n(1.0), n(0.5), n(0.25)), (30, 60, 120));
-    // The node's knob: 40 per cm gives 40 at 1 cm; never under 20.
+    assert_eq!((n(3.0), n(1.5), n(1.0)), (20, 20, 20), "coarse garments keep the 20 the graphs were made with");
+    assert_eq!((n(0.5), n(0.25)), (40, 80));
+    // The node's knob: 40 per cm doubles them at 1 cm; never under 20.
     assert_eq!((DrapeParams::substeps_for(1.0, 40.0), DrapeParams::substeps_for(1.0, 5.0)), (40, 20));
 }
 
