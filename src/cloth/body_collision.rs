@@ -80,6 +80,17 @@ impl Welds<'_> {
         self.groups.get(self.group_of[v] as usize).map(Vec::as_slice)
     }
 
+    /// The vertices welded into one point with `v`, `v` among them (`v` alone when not sewn).
+    pub fn members(&self, v: u32) -> impl Iterator<Item = u32> + '_ {
+        let group = self.group(v as usize);
+        group.into_iter().flatten().copied().chain(group.is_none().then_some(v))
+    }
+
+    /// Whether `v` is sewn to another vertex.
+    pub fn is_sewn(&self, v: u32) -> bool {
+        self.group(v as usize).is_some()
+    }
+
     /// `w` with each group's vertices carrying the group's inverse mass, 1 / Σ (1 / w): how
     /// hard the group as a whole is to move (zero when one of them is pinned, its mass
     /// infinite).

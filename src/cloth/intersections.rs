@@ -11,27 +11,33 @@ use super::bvh::{Aabb, AabbTree};
 /// touching within float precision counts as crossing, a segment in the
 /// triangle's plane does not).
 pub fn segment_hits_triangle(a: Vec3, b: Vec3, p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
+    segment_triangle_hit(a, b, p0, p1, p2).is_some()
+}
+
+/// Where segment `a`-`b` crosses triangle `p0 p1 p2`, as the triangle's barycentrics there (by
+/// [`segment_hits_triangle`]'s rule).
+pub fn segment_triangle_hit(a: Vec3, b: Vec3, p0: Vec3, p1: Vec3, p2: Vec3) -> Option<[f32; 3]> {
     let d = b - a;
     let e1 = p1 - p0;
     let e2 = p2 - p0;
     let pv = d.cross(e2);
     let det = e1.dot(pv);
     if det.abs() < 1e-14 {
-        return false;
+        return None;
     }
     let inv = 1.0 / det;
     let tv = a - p0;
     let u = tv.dot(pv) * inv;
     if !(0.0..=1.0).contains(&u) {
-        return false;
+        return None;
     }
     let qv = tv.cross(e1);
     let v = d.dot(qv) * inv;
     if v < 0.0 || u + v > 1.0 {
-        return false;
+        return None;
     }
     let t = e2.dot(qv) * inv;
-    (0.0..=1.0).contains(&t)
+    (0.0..=1.0).contains(&t).then_some([1.0 - u - v, u, v])
 }
 
 /// Number of `edges` of a mesh that cross one of its `triangles` not sharing

@@ -29,6 +29,7 @@
 
 use glam::Vec3;
 
+use super::body_collision::Welds;
 use super::bvh::{Aabb, AabbTree};
 
 /// The most triangles one vertex is paired with in a frame (those it can reach soonest kept:
@@ -83,9 +84,6 @@ pub struct SelfCollision {
     /// The edge (index into `edges`) of each `ring` entry.
     ring_edge: Vec<u32>,
     edges: Vec<[u32; 2]>,
-    /// Whether [`SelfCollision::untangle`] runs (the simulator turns it on once the seams have
-    /// closed: while they close, panels pass each other on their way).
-    pub(crate) untangling: bool,
     /// Where each vertex may go before the frame's pairs no longer cover it: its predicted
     /// sweep widened by half the slack ([`SelfCollision::escaped`]).
     reach: Vec<Aabb>,
@@ -150,7 +148,6 @@ impl SelfCollision {
             ring,
             ring_edge,
             edges: edges.to_vec(),
-            untangling: false,
             reach: Vec::new(),
             piece: pieces.to_vec(),
             tri_piece,
@@ -177,8 +174,8 @@ impl SelfCollision {
 
     /// The pairs over the next `dt` from `x` moving at `v` (see the module's doc).
     ///
-    /// At the frame start (`within` is `None`): every vertex's, then, when untangling, what the
-    /// frame starts with through the cloth forced back. Within the frame, for the vertices that
+    /// At the frame start (`within` is `None`): every vertex's (the simulator then untangles,
+    /// [`SelfCollision::untangle`], once the seams have closed). Within the frame, for the vertices that
     /// [`SelfCollision::escaped`] (`x` then the positions at the substep's start, before the
     /// escape, each vertex still on its side, and `dt` what is left of the frame): only those
     /// of the vertices near the triangles around an escaped vertex (the others keep theirs; all
@@ -323,9 +320,6 @@ impl SelfCollision {
                 pair.2 = side;
             }
         }
-        if within.is_none() && self.untangling {
-            self.untangle(x, rep, triangles);
-        }
         self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
 
@@ -340,6 +334,9 @@ impl SelfCollision {
         (0..x.len() as u32).filter(|&i| self.reach[i as usize].margin(x[i as usize]) < 0.0).collect()
     }
 
+    /// Run after the frame start's [`SelfCollision::gather`] once the seams have closed (while
+    /// they close, panels pass each other on their way); `welds`: the seam groups, each one point.
+    ///
     /// Finds the cloth's edges that cross its triangles at the frame start and pulls what went
     /// through back. Side tracking keeps a vertex on the side it was gathered on, so cloth that
     /// got through (pulled by a seam closing across a folded panel, or out of the pairs' reach
@@ -360,7 +357,7 @@ impl SelfCollision {
     /// Such pairs are forced: pushed back however deep (a thickness per pair and substep at
     /// most) until back on their side or off the triangle's border, in the frames their
     /// crossing is found (and while within a thickness of the triangle).
-    fn untangle(&mut self, x: &[Vec3], rep: &[u32], triangles: &[[u32; 3]]) {
+    pub(crate) fn untangle(&mut self, x: &[Vec3], rep: &[u32], welds: &Welds, triangles: &[[u32; 3]]) {
         // The candidates of an edge are the triangles its ends are paired with: a crossing
         // farther from both ends than the pairs reach (long edges) is not found.
         let mut first = vec![0u32; x.len() + 1];
@@ -406,37 +403,13 @@ impl SelfCollision {
         for &(k, _) in &crossing {
             cut[k] = true;
         }
-        let mut sewn = vec![false; n];
-        for (v, &r) in rep.iter().enumerate() {
-            if r as usize != v {
-                sewn[v] = true;
-                sewn[r as usize] = true;
-            }
-        }
-        // Each seam group's vertices (CSR by representative): one point of the garment.
-        let mut group_start = vec![0u32; n + 1];
-        for &r in rep {
-            group_start[r as usize + 1] += 1;
-        }
-        for i in 0..n {
-            group_start[i + 1] += group_start[i];
-        }
-        let mut group = vec![0u32; n];
-        let mut fill = group_start.clone();
-        for (v, &r) in rep.iter().enumerate() {
-            group[fill[r as usize] as usize] = v as u32;
-            fill[r as usize] += 1;
-        }
-        let group_of = |v: u32| {
-            let r = rep[v as usize] as usize;
-            &group[group_start[r] as usize..group_start[r + 1] as usize]
-        };
+        let sewn = |v: u32| welds.is_sewn(v);
         let mut part = vec![u32::MAX; n];
         let mut sizes: Vec<usize> = Vec::new();
         let mut stack = Vec::new();
         for &(k, _) in &crossing {
             for v in edges[k] {
-                if sewn[v as usize] || part[v as usize] != u32::MAX {
+                if sewn(v) || part[v as usize] != u32::MAX {
                     continue;
                 }
                 let id = sizes.len() as u32;
@@ -448,7 +421,7 @@ impl SelfCollision {
                     let (lo, hi) = (self.ring_start[u as usize] as usize, self.ring_start[u as usize + 1] as usize);
                     for j in lo..hi {
                         let w = self.ring[j];
-                        if !cut[self.ring_edge[j] as usize] && !sewn[w as usize] && part[w as usize] == u32::MAX {
+                        if !cut[self.ring_edge[j] as usize] && !sewn(w) && part[w as usize] == u32::MAX {
                             part[w as usize] = id;
                             stack.push(w);
                         }
@@ -509,9 +482,9 @@ impl SelfCollision {
         for &(k, t) in &crossing {
             let tri = triangles[t as usize];
             for (v, other) in [(edges[k][0], edges[k][1]), (edges[k][1], edges[k][0])] {
-                if let Some(side) = self.through_side(x, rep, group_of(v), tri) {
+                if let Some(side) = self.through_side(x, rep, welds, v, tri) {
                     through.push(v);
-                    self.through_edges.extend(group_of(v).iter().map(|&m| (m, other, t, side)));
+                    self.through_edges.extend(welds.members(v).map(|m| (m, other, t, side)));
                 }
             }
         }
@@ -519,7 +492,7 @@ impl SelfCollision {
         through.dedup();
         for v in through {
             for k in range(v) {
-                if let Some(side) = self.through_side(x, rep, group_of(v), triangles[self.pairs[k].1 as usize]) {
+                if let Some(side) = self.through_side(x, rep, welds, v, triangles[self.pairs[k].1 as usize]) {
                     force.push((k, side));
                 }
             }
@@ -529,7 +502,7 @@ impl SelfCollision {
         for i in 0..force.len() {
             let (k, side) = force[i];
             let (v, t) = (self.pairs[k].0, self.pairs[k].1);
-            for &u in group_of(v).iter().filter(|&&u| u != v) {
+            for u in welds.members(v).filter(|&u| u != v) {
                 let of_u = &self.pairs[range(u)];
                 if let Ok(j) = of_u.binary_search_by_key(&t, |p| p.1) {
                     force.push((first[u as usize] as usize + j, side));
@@ -545,21 +518,21 @@ impl SelfCollision {
         }
     }
 
-    /// The side of `tri`'s plane that a point of the garment (a vertex, or the vertices sewn
-    /// together there, `group`) belongs on, when it is on the other: at least two thirds of
-    /// its mesh neighbours (two or more, not sewn to the triangle) are there.
-    fn through_side(&self, x: &[Vec3], rep: &[u32], group: &[u32], tri: [u32; 3]) -> Option<f32> {
+    /// The side of `tri`'s plane that a point of the garment (vertex `v` with the vertices
+    /// welded to it) belongs on, when it is on the other: at least two thirds of its mesh
+    /// neighbours (two or more, not sewn to the triangle) are there.
+    fn through_side(&self, x: &[Vec3], rep: &[u32], welds: &Welds, v: u32, tri: [u32; 3]) -> Option<f32> {
         let [a, b, c] = tri.map(|j| x[j as usize]);
         let n = (b - a).cross(c - a);
         let side = |p: Vec3| (p - a).dot(n);
-        let own = side(x[group[0] as usize]);
+        let own = side(x[v as usize]);
         if own == 0.0 {
             return None;
         }
         let corners = tri.map(|j| rep[j as usize]);
         let (mut counted, mut other) = (0, 0);
-        for &v in group {
-            for &u in &self.ring[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize] {
+        for m in welds.members(v) {
+            for &u in &self.ring[self.ring_start[m as usize] as usize..self.ring_start[m as usize + 1] as usize] {
                 if corners.contains(&rep[u as usize]) {
                     continue;
                 }
@@ -612,18 +585,16 @@ impl SelfCollision {
         for &(v, other, t, side) in &self.through_edges {
             let tri = triangles[t as usize];
             let [a, b, c] = tri.map(|j| x[j as usize]);
-            let (p, q) = (x[v as usize], x[other as usize]);
-            if !super::intersections::segment_hits_triangle(p, q, a, b, c) {
+            let p = x[v as usize];
+            // Where the edge crosses carries the triangle's share.
+            let Some(bary) = super::intersections::segment_triangle_hit(p, x[other as usize], a, b, c) else {
                 continue;
-            }
+            };
             let n = (b - a).cross(c - a).normalize_or_zero() * side;
-            let (dp, dq) = ((p - a).dot(n), (q - a).dot(n));
-            if dp >= 0.0 || dq <= dp {
+            let dp = (p - a).dot(n);
+            if dp >= 0.0 {
                 continue;
             }
-            // Where the edge meets the triangle's plane carries the triangle's share.
-            let hit = p + (q - p) * (dp / (dp - dq));
-            let bary = barycentrics(hit, a, b, c);
             let wsum = w[v as usize] + (0..3).map(|j| w[tri[j] as usize] * bary[j] * bary[j]).sum::<f32>();
             if wsum == 0.0 {
                 continue;
@@ -640,22 +611,6 @@ impl SelfCollision {
             self.stats.contacts += 1;
         }
     }
-}
-
-/// Barycentrics of `p`'s projection onto triangle `a b c`, clamped to it.
-fn barycentrics(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> [f32; 3] {
-    let (e1, e2) = (b - a, c - a);
-    let cross = e1.cross(e2);
-    let len2 = cross.length_squared();
-    if len2 < 1e-20 {
-        return [1.0 / 3.0; 3];
-    }
-    let rel = p - a;
-    let bu = (rel.cross(e2).dot(cross) / len2).max(0.0);
-    let bv = (e1.cross(rel).dot(cross) / len2).max(0.0);
-    let ba = (1.0 - bu - bv).max(0.0);
-    let sum = ba + bu + bv;
-    [ba / sum, bu / sum, bv / sum]
 }
 
 /// A self-contact pair's push (normal, step along it per inverse mass, barycentrics), with its
@@ -786,10 +741,14 @@ mod tests {
         let before = count_self_crossings(&x, &rep, &edges, &triangles);
         let (n, thickness) = (x.len(), 0.002);
         let (v, w) = (vec![Vec3::ZERO; n], vec![1.0; n]);
+        let mut group_of = vec![u32::MAX; n];
+        let groups: Vec<Vec<u32>> = if sewn { vec![vec![3, 6]] } else { Vec::new() };
+        groups.iter().flatten().for_each(|&v| group_of[v as usize] = 0);
+        let welds = Welds { group_of: &group_of, groups: &groups };
         let mut sc = SelfCollision::new(&x, &triangles, &edges, &pieces);
-        sc.untangling = true;
         for _ in 0..3 {
             sc.gather(&x, &v, &w, &rep, &[], &triangles, 1.0 / 60.0, thickness, 0.001, None);
+            sc.untangle(&x, &rep, &welds, &triangles);
             for _ in 0..20 {
                 let prev = x.clone();
                 sc.solve(&mut x, &prev, &w, &triangles, thickness);

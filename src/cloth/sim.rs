@@ -798,8 +798,11 @@ impl Cloth {
                 .get_or_insert_with(|| SelfCollision::new(&self.x, tris, &self.edges, self.mesh.piece_ids()));
             let (th, rep) = (self.params.self_thickness, &self.seam_rep);
             let excluded = &self.self_excluded;
-            sc.untangling = self.params.untangle && self.time as f32 >= self.params.seam_close_time;
             sc.gather(&self.x, &self.v, &self.inv_mass, rep, excluded, tris, dt, th, slack, None);
+            if self.params.untangle && self.time as f32 >= self.params.seam_close_time {
+                let welds = Welds { group_of: &self.seam_group_of, groups: &self.seam_groups };
+                sc.untangle(&self.x, rep, &welds, tris);
+            }
         }
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
         let n = self.params.substeps;
