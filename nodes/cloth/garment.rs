@@ -59,12 +59,12 @@ pub static GARMENT: NodeSpec = NodeSpec {
         ),
         ParamSpec::new(
             "scale",
-            ParamKind::Float { default: 0.969, min: 0.01, max: 100.0 },
+            ParamKind::Float { default: Fit::ON_MAKEHUMAN.scale.x, min: 0.01, max: 100.0 },
             "Scales the pattern's placement (not its panels) about the origin; the default fits GarmentCode's 172 cm body to MakeHuman's 166.6 cm.",
         ),
         ParamSpec::new(
             "offset",
-            ParamKind::Vec3 { default: [0.0, 0.0, 3.0] },
+            ParamKind::Vec3 { default: Fit::ON_MAKEHUMAN.offset.to_array() },
             "Moves the placement (cm, after scaling); the default centres GarmentCode's panels on MakeHuman's chest.",
         ),
         ParamSpec::new(

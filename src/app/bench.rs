@@ -1837,6 +1837,8 @@ pub struct DrapeSetup {
     pub struts: bool,
     /// The avatar's arms spread from its sides (degrees).
     pub arm_spread: f64,
+    /// The placement's offset (cm), as the `Garment` node's `offset`.
+    pub offset_cm: glam::DVec3,
 }
 
 #[allow(clippy::too_many_arguments)] // the command line's options
@@ -1857,7 +1859,7 @@ pub fn drape_garment(
     let substeps = setup.substeps.unwrap_or_else(|| DrapeParams::substeps_for(edge_cm, DrapeParams::SUBSTEPS_PER_CM));
     let mut avatar = WalkingAvatar::load(avatar_dir)?;
     avatar.arm_spread = setup.arm_spread.to_radians();
-    let fit = Fit { scale: glam::DVec3::splat(0.969), offset: glam::DVec3::new(0.0, 0.0, 3.0) };
+    let fit = Fit { offset: setup.offset_cm, ..Fit::ON_MAKEHUMAN };
     let mut sewn = garmentcode::load(pattern)?.sew(edge_cm, fit)?;
     fit_sleeves(&mut sewn, &crate::garment::sleeves::ArmAxis::of_avatar(&avatar)?);
     let body = avatar.rest_body();

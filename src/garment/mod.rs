@@ -157,6 +157,13 @@ pub struct Fit {
     pub offset: DVec3,
 }
 
+impl Fit {
+    /// GarmentCode's placements on MakeHuman, as the `Garment` node takes them by default:
+    /// scaled from GarmentCode's 172 cm body to MakeHuman's 166.6 cm, and 3 cm forward, which
+    /// centres the panels on MakeHuman's chest.
+    pub const ON_MAKEHUMAN: Fit = Fit { scale: DVec3::splat(0.969), offset: DVec3::new(0.0, 0.0, 3.0) };
+}
+
 impl Default for Fit {
     fn default() -> Self {
         Fit { scale: DVec3::ONE, offset: DVec3::ZERO }
