@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use glam::{DVec2, DVec3, Vec3};
+use glam::{DVec2, Vec3};
 use serde_json::Value;
 
 use werkstatt::avatar::walk::WalkingAvatar;
@@ -314,7 +314,7 @@ fn rest_avatar() -> (BodyMesh, [ArmAxis; 2]) {
 /// defaults do, its sleeves slid up the arms when on the body.
 fn shirt_on(arms: Option<&[ArmAxis]>) -> (Sewn, Vec<SleeveFit>) {
     let p = garmentcode::load(&pattern_path("shirt_mean")).unwrap();
-    let fit = Fit { scale: DVec3::splat(0.969), offset: DVec3::new(0.0, 0.0, 3.0) };
+    let fit = Fit::ON_MAKEHUMAN;
     let mut sewn = p.sew(3.0, fit).unwrap();
     let fits = arms.map(|a| fit_sleeves(&mut sewn, a)).unwrap_or_default();
     (sewn, fits)
