@@ -998,22 +998,44 @@ impl BodyMesh {
     /// Indices of the segments `[a, b]` (cloth edges) that cross a body
     /// triangle (end pose).
     pub fn crossings(&self, x: &[Vec3], edges: &[[u32; 2]]) -> Vec<usize> {
-        let mut out = Vec::new();
-        for (i, e) in edges.iter().enumerate() {
-            let (a, b) = (x[e[0] as usize], x[e[1] as usize]);
-            let q = Aabb::from_points(&[a, b]);
-            let mut hit = false;
-            self.tree.query(&q, |t| {
-                if !hit {
-                    let [p0, p1, p2] = self.triangles[t as usize].map(|i| self.end[i as usize]);
-                    hit = super::intersections::segment_hits_triangle(a, b, p0, p1, p2);
-                }
-            });
-            if hit {
-                out.push(i);
+        (0..edges.len())
+            .filter(|&i| self.segment_crosses(x[edges[i][0] as usize], x[edges[i][1] as usize], &self.end))
+            .collect()
+    }
+
+    /// Whether the segment `a`-`b` crosses a body triangle with its corners at `corners` (the
+    /// frame's start or end pose).
+    fn segment_crosses(&self, a: Vec3, b: Vec3, corners: &[Vec3]) -> bool {
+        let mut hit = false;
+        self.tree.query(&Aabb::from_points(&[a, b]), |t| {
+            if !hit {
+                let [p0, p1, p2] = self.triangles[t as usize].map(|i| corners[i as usize]);
+                hit = super::intersections::segment_hits_triangle(a, b, p0, p1, p2);
             }
+        });
+        hit
+    }
+
+    /// Where a seam pair at `a` and `b` is to meet when the body, as the frame starts, lies
+    /// between them: their midpoint, moved out of the body to `thickness` when it is inside or
+    /// nearer; and the body's outward normal at each of the two vertices where the body is
+    /// within `reach` of it (zero where not). `None` when the segment misses the body: the pair
+    /// closes along it.
+    pub(crate) fn seam_meeting(&self, a: Vec3, b: Vec3, thickness: f32, reach: f32) -> Option<(Vec3, [Vec3; 2])> {
+        if !self.segment_crosses(a, b, &self.start) {
+            return None;
         }
-        out
+        let m = 0.5 * (a + b);
+        // The segment crosses the surface within half its length of `m`, so the nearest
+        // surface point is among these triangles.
+        let near = self.triangles_meeting(&Aabb::around(m, 0.5 * a.distance(b) + thickness));
+        let (d, n, ..) = self.closest_among(m, 0.0, near.into_iter())?;
+        let at = if d < thickness { m + n * (thickness - d) } else { m };
+        let normal = |p: Vec3| {
+            let near = self.triangles_meeting(&Aabb::around(p, reach));
+            self.closest_among(p, 0.0, near.into_iter()).filter(|h| h.0 <= reach).map_or(Vec3::ZERO, |h| h.1)
+        };
+        Some((at, [normal(a), normal(b)]))
     }
 }
 

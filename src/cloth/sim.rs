@@ -32,6 +32,18 @@ const SELF_EXCLUSION: f32 = 1.5;
 /// Most passes of the body's edge contacts on a frame's last substep.
 const LAST_EDGE_PASSES: usize = 4;
 
+/// How far below its length at a substep's start a closing seam pair is pulled, in steps of
+/// its schedule (`Cloth::set_seam_targets`): 1 would only keep pace, 2 lets a pair that fell
+/// behind catch up.
+const SEAM_CATCH_UP: f32 = 2.0;
+
+/// The widest stitch gap (m) at which rigid seams are welded: twice the body thickness, so
+/// that the weld's jump cannot carry a pair through the body.
+const WELD_GAP: f32 = 0.005;
+
+/// When rigid seams are welded even with pairs still open across the body, in closing times.
+const WELD_DEADLINE: f32 = 3.0;
+
 /// Strut lengths ([`SimParams::struts`]) in mean edge lengths: 2, 5 and 12 brought the shirt's
 /// 99th-percentile edge strain at 1 cm and 20 substeps from 11 % to about 5 % (one span, 3:
 /// 6 %; docs/garments.md).
@@ -415,6 +427,20 @@ pub struct Cloth {
     part_struts: Vec<usize>,
     seams: Vec<[u32; 2]>,
     seam_gap: Vec<f32>,
+    /// Per seam pair, the rest length it was last solved to: it only shrinks (see
+    /// [`Cloth::set_seam_targets`]).
+    seam_rest: Vec<f32>,
+    /// Per seam pair, where it is to meet this frame when the body lies between its two
+    /// vertices, and the body's outward normal at each of them (`BodyMesh::seam_meeting`).
+    seam_meeting: Vec<Option<(Vec3, [Vec3; 2])>>,
+    /// This substep's closing seams (see [`Cloth::set_seam_targets`]): the pairs that close
+    /// along their own line with their rest lengths, and the pairs that meet at a point outside
+    /// the body, with each vertex's distance to keep from it.
+    seams_free: Vec<[u32; 2]>,
+    seams_free_rest: Vec<f32>,
+    seams_meeting: Vec<SeamMeeting>,
+    /// The seams have closed and are solved as welds from here on (see [`Cloth::step_frame`]).
+    seams_welded: bool,
     /// Vertices joined by seams, transitively (four at a corner where four panels meet).
     seam_groups: Vec<Vec<u32>>,
     /// Per vertex, the index of its seam group (`u32::MAX` when not sewn).
@@ -546,7 +572,9 @@ impl Cloth {
             .collect();
 
         let seams = mesh.seam_pairs().to_vec();
-        let seam_gap = seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
+        let seam_count = seams.len();
+        let seam_gap: Vec<f32> =
+            seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
         let seam_groups = seam_groups(&seams, n);
         let mut seam_group_of = vec![u32::MAX; n];
@@ -584,7 +612,13 @@ impl Cloth {
             strut_max,
             part_struts,
             seams,
+            seam_meeting: vec![None; seam_count],
+            seams_free: Vec::new(),
+            seams_free_rest: Vec::new(),
+            seams_meeting: Vec::new(),
+            seam_rest: seam_gap.clone(),
             seam_gap,
+            seams_welded: false,
             seam_groups,
             seam_group_of,
             weld_inv_mass,
@@ -790,6 +824,13 @@ impl Cloth {
         if let Some(body) = &mut self.body {
             let (th, tris) = (self.params.body_thickness, self.mesh.triangles());
             body.begin_frame(&self.x, &self.v, &self.inv_mass, tris, &self.edges, dt, th, th + slack);
+            if !self.seams_welded {
+                for (k, &[a, b]) in self.seams.iter().enumerate() {
+                    let (a, b) = (self.x[a as usize], self.x[b as usize]);
+                    self.seam_meeting[k] =
+                        if a.distance(b) > WELD_GAP { body.seam_meeting(a, b, th, th + slack) } else { None };
+                }
+            }
         }
         if self.params.self_collision {
             let tris = self.mesh.triangles();
@@ -805,6 +846,19 @@ impl Cloth {
             }
         }
         self.timings.detection_ms += t0.elapsed().as_secs_f64() * 1e3;
+        let p = &self.params;
+        let t = self.time as f32;
+        if !self.seams_welded && p.seam_compliance == 0.0 && t >= p.seam_close_time {
+            // Rigid seams are welded once every pair with the body between its vertices has
+            // come within `WELD_GAP` (the weld would snap it shut through the body), or at the
+            // latest `WELD_DEADLINE` closing times in. The other pairs are snapped shut: where
+            // the garment is tighter than the body, only stretching closes them.
+            let open = |k: usize| {
+                let [a, b] = self.seams[k];
+                self.seam_meeting[k].is_some() && self.x[a as usize].distance(self.x[b as usize]) > WELD_GAP
+            };
+            self.seams_welded = t >= WELD_DEADLINE * p.seam_close_time || !(0..self.seams.len()).any(open);
+        }
         let n = self.params.substeps;
         for k in 0..n {
             // Chords sag into the body slowly (they move with their vertices, which the vertex
@@ -819,6 +873,55 @@ impl Cloth {
             body.end_frame();
         }
         self.frame += 1;
+    }
+
+    /// Each seam pair's rest length for the substep starting now (after `prev` is set): the
+    /// schedule's, which closes linearly from the initial gap to zero over `seam_close_time`,
+    /// but at most [`SEAM_CATCH_UP`] times the schedule's step below the pair's length at the
+    /// substep's start. A pair that falls behind (the body or the cloth in its way) is not
+    /// pulled to the schedule at once: straight to it, the pencil dress's strap pairs went into
+    /// the shoulders every substep and the body contacts pushed them back out, a centimetre each
+    /// way, which left them sliding at the 25 m/s speed limit.
+    ///
+    /// A pair with the body between its vertices at the frame's start meets at a point outside
+    /// the body instead ([`SeamMeeting`]; its length is the path through that point): pulled
+    /// along their line, however slowly, two vertices facing each other across a shoulder press
+    /// straight into it and stay.
+    fn set_seam_targets(&mut self, h: f32) {
+        let close = self.params.seam_close_time;
+        let scale = if close > 0.0 { (1.0 - self.time as f32 / close).max(0.0) } else { 0.0 };
+        self.seams_free.clear();
+        self.seams_free_rest.clear();
+        self.seams_meeting.clear();
+        for (k, &[a, b]) in self.seams.iter().enumerate() {
+            let (pa, pb) = (self.prev[a as usize], self.prev[b as usize]);
+            let meeting = self.seam_meeting[k];
+            let [da, db] = match meeting {
+                Some((m, _)) => [pa.distance(m), pb.distance(m)],
+                None => [pa.distance(pb), 0.0],
+            };
+            let now = da + db;
+            let gap = self.seam_gap[k];
+            // Never apart: a pair ahead of its schedule stays where it is; and never longer
+            // than before: a pair pulled apart by the other constraints and the contacts
+            // after its own is pulled back (measured from the substep's start alone, those
+            // opened the Simon shirt's seams a few millimetres a frame once gravity was on).
+            let rest =
+                if close > 0.0 { (gap * scale).max(now - SEAM_CATCH_UP * gap * h / close).min(now) } else { 0.0 };
+            let rest = rest.min(self.seam_rest[k]);
+            self.seam_rest[k] = rest;
+            match meeting {
+                // Each vertex's share of the path's length in proportion to its part of it.
+                Some((at, normal)) if now > 0.0 => {
+                    let keep = [rest * da / now, rest * db / now];
+                    self.seams_meeting.push(SeamMeeting { pair: [a, b], at, keep, normal })
+                }
+                _ => {
+                    self.seams_free.push([a, b]);
+                    self.seams_free_rest.push(rest);
+                }
+            }
+        }
     }
 
     /// One substep from `s0` to `s1` (fractions of the frame, for the body's motion), with
@@ -843,12 +946,10 @@ impl Cloth {
         }
 
         self.lambda.fill(0.0);
-        let seam_scale = if self.params.seam_close_time > 0.0 {
-            (1.0 - self.time as f32 / self.params.seam_close_time).max(0.0)
-        } else {
-            0.0
-        };
-        let welded = seam_scale == 0.0 && self.params.seam_compliance == 0.0;
+        let welded = self.seams_welded;
+        if !welded {
+            self.set_seam_targets(h);
+        }
         for sweep_index in 0..self.params.iterations {
             let (l_edge, rest) = self.lambda.split_at_mut(self.edges.len());
             let (l_bend, rest) = rest.split_at_mut(self.bends.len());
@@ -886,15 +987,12 @@ impl Cloth {
                 // cloth's stretch at the sweep counts used here.
                 weld(x, w, &self.seam_groups);
             } else {
-                solve_distances(
-                    x,
-                    0,
-                    w,
-                    &self.seams,
-                    |k| self.seam_gap[k] * seam_scale,
-                    l_seam,
-                    p.seam_compliance / (h * h),
-                );
+                let rest = &self.seams_free_rest;
+                let alpha = p.seam_compliance / (h * h);
+                solve_distances(x, 0, w, &self.seams_free, |k| rest[k], l_seam, alpha);
+                for m in &self.seams_meeting {
+                    m.solve(x, w, alpha);
+                }
             }
             if !self.struts.is_empty() && sweep_index + 1 == self.params.iterations {
                 // After the seams: a strut ending on a sewn vertex pulls the weld's point. Once a
@@ -1180,6 +1278,10 @@ impl Cloth {
         self.v.copy_from_slice(velocities);
         self.time = *time;
         self.frame = *frame;
+        // Welded again at the next frame if every pair is closed (as when it was saved).
+        self.seams_welded = false;
+        let gap = |&[a, b]: &[u32; 2]| positions[a as usize].distance(positions[b as usize]);
+        self.seam_rest = self.seams.iter().map(gap).collect();
         self.self_collision = self.params.self_collision.then(|| {
             SelfCollision::with_sides(&self.x, self.mesh.triangles(), &self.edges, self.mesh.piece_ids(), sides)
         });
@@ -1313,6 +1415,38 @@ fn split_at_bounds<'a, T>(mut s: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [
         s = rest;
     }
     pieces
+}
+
+/// A closing seam pair that meets at a point `at` outside the body: each vertex is kept at
+/// `keep` from it, and not moved into the body where it lies against it (the body's outward
+/// `normal` there, zero where it does not).
+#[derive(Clone, Debug)]
+struct SeamMeeting {
+    pair: [u32; 2],
+    at: Vec3,
+    keep: [f32; 2],
+    normal: [Vec3; 2],
+}
+
+impl SeamMeeting {
+    /// Moves each vertex to its `keep` distance from `at`, a fixed point, with compliance
+    /// `alpha` (already divided by the substep squared). Both ways: a vertex that its momentum
+    /// carries nearer is held back, so it approaches no faster than its schedule allows (pulled
+    /// only, the panels of `a_seam_with_the_body_between_its_sides_closes_round_the_body` flew
+    /// off their box at 3 m/s). The part of the move into the body is
+    /// left out: the body contacts would push it back, and their friction held a vertex pulled
+    /// at a shallow angle where it was (a flat side under a point 3 cm up and 5 cm in).
+    fn solve(&self, x: &mut [Vec3], w: &[f32], alpha: f32) {
+        for ((&v, &keep), &n) in self.pair.iter().zip(&self.keep).zip(&self.normal) {
+            let (v, wv) = (v as usize, w[v as usize]);
+            let d = x[v] - self.at;
+            let len = d.length();
+            if wv > 0.0 && len > 0.0 {
+                let pull = d * -((len - keep) / len * wv / (wv + alpha));
+                x[v] += pull - n * pull.dot(n).min(0.0);
+            }
+        }
+    }
 }
 
 /// XPBD distance constraints `|x_a - x_b| = rest(k)`, with `alpha` the compliance over the
@@ -1630,6 +1764,62 @@ mod tests {
         };
         let (without, with) = (strain(false), strain(true));
         assert!(with < 0.5 * without, "p99 strain {with} with struts, {without} without");
+    }
+
+    /// Two 10 cm squares hanging in front of and behind a box, their top edges sewn together
+    /// along a line through the box, 3 cm below its top: the seam closes over the top, slowly.
+    #[test]
+    fn a_seam_with_the_body_between_its_sides_closes_round_the_body() {
+        use crate::cloth::body_collision::box_mesh;
+        use crate::cloth::pattern::{EdgeRef, Seam};
+        let squares =
+            vec![Piece::new("front", rectangle_outline(10.0, 10.0)), Piece::new("back", rectangle_outline(10.0, 10.0))];
+        // Edge 2 is the top, right to left; the back is mirrored, so its top runs left to right.
+        let seam = Seam { a: EdgeRef { piece: 0, edge: 2 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
+        let mesh = PatternMesh::build(squares, vec![seam], 1.0).unwrap();
+        let (rest, pieces) = (mesh.rest_positions(), mesh.piece_ids());
+        let corner = |piece: u32| {
+            let of_piece = (0..rest.len()).filter(|&i| pieces[i] == piece);
+            of_piece.map(|i| rest[i]).fold(Vec2::INFINITY, Vec2::min)
+        };
+        let corners = [corner(0), corner(1)];
+        let x: Vec<Vec3> = (0..rest.len())
+            .map(|i| {
+                let q = (rest[i] - corners[pieces[i] as usize]) * CM;
+                let y = q.y - 0.1;
+                if pieces[i] == 0 { Vec3::new(q.x - 0.05, y, 0.055) } else { Vec3::new(0.05 - q.x, y, -0.055) }
+            })
+            .collect();
+        let params = SimParams { gravity: Vec3::ZERO, iterations: 2, seam_close_time: 0.4, ..SimParams::default() };
+        let mut cloth = Cloth::new(mesh, x, params);
+        for &[a, b] in cloth.seam_pairs() {
+            let (pa, pb) = (cloth.positions()[a as usize], cloth.positions()[b as usize]);
+            assert!((pa - pb - Vec3::new(0.0, 0.0, 0.11)).length() < 1e-4, "pair {pa} {pb}");
+        }
+        // The box: 20 cm wide, 10 cm deep, its top at y = 3 cm.
+        let (pos, tris) = box_mesh(Vec3::new(0.0, -0.06, 0.0), Vec3::new(0.1, 0.09, 0.05), glam::Quat::IDENTITY, 20);
+        cloth.set_body(Some(BodyMesh::new(pos, tris)));
+        // As the `Garment` node sews: gravity off for half a second, while the seams close.
+        let mut fastest = 0.0f32;
+        for frame in 0..90 {
+            if frame == 30 {
+                cloth.set_gravity(Vec3::new(0.0, -9.81, 0.0));
+            }
+            cloth.step_frame(FRAME_DT);
+            if frame < 30 {
+                fastest = fastest.max(cloth.max_speed());
+            }
+        }
+        let x = cloth.positions();
+        let widest = cloth.seam_pairs().iter().map(|&[a, b]| x[a as usize].distance(x[b as usize])).fold(0.0, f32::max);
+        assert!(widest < 1e-3, "a stitch {} mm open", widest * 1e3);
+        let lowest = cloth.seam_pairs().iter().map(|&[a, _]| x[a as usize].y).fold(f32::INFINITY, f32::min);
+        assert!(lowest > 0.03, "the seam at {lowest} m, not over the box's top");
+        let clearance = cloth.body_clearance(0.05).unwrap();
+        assert!(clearance > 0.9 * cloth.params().body_thickness, "{} mm from the box", clearance * 1e3);
+        // Pulled straight to its schedule, the seam's vertices went into the box every substep
+        // and came out sliding at the speed limit.
+        assert!(fastest < 5.0, "a vertex at {fastest} m/s while sewing");
     }
 
     #[test]
