@@ -28,7 +28,7 @@ pub static GARMENT: NodeSpec = NodeSpec {
         PortSpec::optional(
             "joints",
             PortType::Joints,
-            "The body's joints at rest (Avatar's joints output): sleeve panels are slid along their arms (shoulder to elbow) to sit around them; without it they stay where the pattern places them.",
+            "The body's joints at rest (Avatar's joints output): sleeve panels are slid along their arms to the armholes, and one-piece sleeves (sewn to themselves) are wrapped round the whole arm, shoulder to wrist, turned back at the wrist where longer; without it they stay where the pattern places them.",
         ),
     ],
     outputs: &[

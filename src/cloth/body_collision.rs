@@ -978,6 +978,15 @@ impl BodyMesh {
         if tl > 0.0 { tangential * (friction * depth / tl).min(1.0) } else { Vec3::ZERO }
     }
 
+    /// Where `p` goes to be `thickness` outside the body (end pose), along the body's normal at
+    /// its nearest point; `None` when it already is, or is deeper inside than `reach`.
+    pub fn pushed_out(&self, p: Vec3, thickness: f32, reach: f32) -> Option<Vec3> {
+        let mut near = Vec::new();
+        self.tree.query(&Aabb::around(p, reach.max(thickness)), |t| near.push(t));
+        let (d, n, ..) = self.closest(p, 1.0, near.into_iter(), thickness, reach)?;
+        (d < thickness).then(|| p + n * (thickness - d))
+    }
+
     /// Smallest signed distance of any of `points` to the body (end pose), or
     /// `None` when none is within `max_distance`.
     pub fn min_clearance(&self, points: &[Vec3], max_distance: f32) -> Option<f32> {

@@ -52,6 +52,15 @@ const STRUT_COS: f32 = 0.92;
 /// Pattern coordinates are centimetres; the simulation runs in metres.
 pub const CM: f32 = 0.01;
 
+/// Edges more strained than this at the start are eased into their rest lengths
+/// ([`Cloth::ease_strained_edges`]); GarmentCode's placements, scaled 3 % to MakeHuman, are not.
+const EASE_STRAIN: f32 = 0.05;
+
+/// How deep in the body (m) a start position is still pushed out ([`Cloth::start_outside_body`]):
+/// a sleeve's hem round a hand is a centimetre in; deeper, the nearest surface may be the far
+/// side of a limb.
+const START_REACH: f32 = 0.03;
+
 /// Time-varying wind. The gust pattern is a sum of sines whose phases come
 /// from `seed`: deterministic, smooth in time, and travelling downwind so a
 /// flag sees gust fronts move along it.
@@ -401,6 +410,13 @@ pub struct Cloth {
 
     edges: Vec<[u32; 2]>,
     edge_rest: Vec<f32>,
+    /// Edges that start strained (a sleeve wrapped round a bent arm): (edge, length at the
+    /// start, rest length). Their rest lengths go from the first to the second while the seams
+    /// close ([`Cloth::ease_strained_edges`]).
+    eased_edges: Vec<(usize, f32, f32)>,
+    /// Struts that start longer than their longest, eased as the edges: (strut, length at the
+    /// start, longest).
+    eased_struts: Vec<(usize, f32, f32)>,
     /// `[edge a, edge b, opposite c, opposite d]` per interior edge.
     bends: Vec<[u32; 4]>,
     /// Cotangent weights `K`, the compliance scale `(A0 + A1) / 3` and the rest value of
@@ -595,6 +611,8 @@ impl Cloth {
             force: vec![Vec3::ZERO; n],
             edges,
             edge_rest,
+            eased_edges: Vec::new(),
+            eased_struts: Vec::new(),
             bends,
             bend_k,
             shears,
@@ -653,6 +671,60 @@ impl Cloth {
     }
     pub fn body_mut(&mut self) -> Option<&mut BodyMesh> {
         self.body.as_mut()
+    }
+
+    /// Moves the free vertices that start inside the body, or nearer it than its thickness, out
+    /// to the thickness along the body's normal (a garment placed round a limb that its panels
+    /// cut into, as a sleeve's hem round the hand); returns how many moved. Without it the
+    /// first substep's contacts throw them out at up to the speed limit.
+    pub fn start_outside_body(&mut self) -> usize {
+        let Some(body) = &self.body else { return 0 };
+        let th = self.params.body_thickness;
+        let mut moved = 0;
+        for (x, &w) in self.x.iter_mut().zip(&self.inv_mass) {
+            if w > 0.0
+                && let Some(to) = body.pushed_out(*x, th, START_REACH)
+            {
+                *x = to;
+                moved += 1;
+            }
+        }
+        moved
+    }
+
+    /// Eases the edges whose length at the start is more than [`EASE_STRAIN`] off their rest
+    /// length into it: their rest lengths start at today's lengths and reach the pattern's
+    /// linearly at `seam_close_time`, as the seams close. A panel placed bent (a sleeve wrapped
+    /// round a bent arm stretches 25 % outside the elbow) would otherwise spring back in the
+    /// first substeps. Returns how many edges are eased.
+    pub fn ease_strained_edges(&mut self) -> usize {
+        self.eased_edges = (self.edges.iter().zip(&self.edge_rest).enumerate())
+            .map(|(e, (&[a, b], &rest))| (e, self.x[a as usize].distance(self.x[b as usize]), rest))
+            .filter(|&(_, start, rest)| (start / rest - 1.0).abs() > EASE_STRAIN)
+            .collect();
+        // The struts across a stretched part would pull it back as its edges would.
+        self.eased_struts = (self.struts.iter().zip(&self.strut_max).enumerate())
+            .map(|(k, (&[a, b], &max))| (k, self.x[a as usize].distance(self.x[b as usize]), max))
+            .filter(|&(_, start, max)| start > max * (1.0 + EASE_STRAIN))
+            .collect();
+        self.set_eased_rest();
+        self.eased_edges.len()
+    }
+
+    /// The eased edges' rest lengths at the current time.
+    fn set_eased_rest(&mut self) {
+        let close = self.params.seam_close_time;
+        let f = if close > 0.0 { (self.time as f32 / close).min(1.0) } else { 1.0 };
+        for &(e, start, rest) in &self.eased_edges {
+            self.edge_rest[e] = start + (rest - start) * f;
+        }
+        for &(k, start, max) in &self.eased_struts {
+            self.strut_max[k] = start + (max - start) * f;
+        }
+        if f >= 1.0 {
+            self.eased_edges.clear();
+            self.eased_struts.clear();
+        }
     }
 
     /// Changes gravity (m/s²), e.g. off while a garment is sewn, on once it is closed.
@@ -814,6 +886,9 @@ impl Cloth {
         let h = dt / self.params.substeps as f32;
         self.timings = StepTimings::default();
         let t0 = Instant::now();
+        if !(self.eased_edges.is_empty() && self.eased_struts.is_empty()) {
+            self.set_eased_rest();
+        }
         // Contacts are gathered once per frame over the predicted motion; the slack covers
         // motion the prediction misses (self-contacts are gathered again where it does not).
         let slack = self.slack();
@@ -1765,6 +1840,39 @@ mod tests {
 
     /// Two 10 cm squares hanging in front of and behind a box, their top edges sewn together
     /// along a line through the box, 3 cm below its top: the seam closes over the top, slowly.
+    #[test]
+    fn a_panel_placed_stretched_eases_into_its_rest_lengths_as_the_seams_close() {
+        // A 10 cm square placed 30 % larger, curled over a quarter circle: as a sleeve wrapped
+        // round a bent arm starts out strained. Its struts on, as the `Garment` node's default.
+        let mesh = PatternMesh::build(vec![Piece::new("square", rectangle_outline(10.0, 10.0))], vec![], 1.0).unwrap();
+        let x: Vec<Vec3> = mesh
+            .rest_positions()
+            .iter()
+            .map(|p| {
+                let (angle, q) = (p.x * 0.1 * std::f32::consts::FRAC_PI_2, *p * CM * 1.3);
+                Vec3::new(angle.sin() * 0.08, q.y, angle.cos() * 0.08)
+            })
+            .collect();
+        let params = SimParams { gravity: Vec3::ZERO, struts: true, seam_close_time: 0.4, ..SimParams::default() };
+        let run = |ease: bool| {
+            let mut cloth = Cloth::new(mesh.clone(), x.clone(), params.clone());
+            if ease {
+                assert!(cloth.ease_strained_edges() > 100);
+            }
+            let mut fastest = 0.0f32;
+            for _ in 0..30 {
+                cloth.step_frame(FRAME_DT);
+                fastest = fastest.max(cloth.max_speed());
+            }
+            (fastest, cloth.strain_percentile(0.99))
+        };
+        let (eased, sprung) = (run(true), run(false));
+        // Eased, it shrinks to its rest lengths over the closing time (its fastest vertex at
+        // 0.53 m/s); not eased, it springs back in the first substeps (at 5.3 m/s).
+        assert!(eased.0 < 1.0 && eased.1.abs() < 0.02, "eased: fastest {} m/s, p99 strain {}", eased.0, eased.1);
+        assert!(sprung.0 > 3.0, "not eased: fastest {} m/s", sprung.0);
+    }
+
     #[test]
     fn a_seam_with_the_body_between_its_sides_closes_round_the_body() {
         use crate::cloth::body_collision::box_mesh;

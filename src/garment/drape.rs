@@ -64,6 +64,8 @@ impl Drape {
         let gravity = params.sim.gravity;
         let mut cloth = Cloth::new(sewn.mesh.clone(), sewn.positions.clone(), params.sim.clone());
         cloth.set_body(body);
+        cloth.start_outside_body();
+        cloth.ease_strained_edges();
         if params.sewing_frames > 0 {
             cloth.set_gravity(Vec3::ZERO);
         }
