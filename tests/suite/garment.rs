@@ -522,10 +522,11 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
     for _ in 0..40 {
         drape.step(None);
     }
-    // Half a second from the rest pose to the walk's first frame, then ten seconds of walking.
+    // Half a second from the rest pose to the walk's first frame, then four seconds of walking
+    // (four strides; the ten seconds of `werkstatt bench drape --frames 630` took 43 s of CI).
     let first = pose_at(0.0);
     let th = params.sim.body_thickness;
-    for f in 0..630 {
+    for f in 0..270 {
         let body: Vec<Vec3> = if f < 30 {
             rest.iter().zip(&first).map(|(r, w)| r.lerp(*w, (f + 1) as f32 / 30.0)).collect()
         } else {
@@ -541,13 +542,12 @@ fn the_shirt_stays_outside_the_body_through_the_walk() {
             .map(|[a, b]| (a + b) * 0.5)
             .collect();
         let (gap, clearance) = (drape.max_seam_gap(), c.body_clearance(0.05));
-        eprintln!(
-            "frame {f}: seam gap {gap} m, body crossings {}, self crossings {}, clearance {clearance:?} m, p99 strain {}, max speed {}",
-            crossings.len(),
-            c.self_crossings(),
-            c.strain_percentile(0.99),
-            c.max_speed()
-        );
+        if f % 30 == 29 {
+            // What the asserts do not cover, every half second (each a pass over the whole shirt).
+            let (self_crossings, strain) = (c.self_crossings(), c.strain_percentile(0.99));
+            let speed = c.max_speed();
+            eprintln!("frame {f}: self crossings {self_crossings}, p99 strain {strain}, max speed {speed}");
+        }
         assert!(c.positions().iter().chain(c.velocities()).all(|v| v.is_finite()), "NaN at frame {f}");
         assert!(gap < 0.001, "frame {f}: sewn vertices {gap} m apart");
         assert!(crossings.is_empty(), "frame {f}: cloth edges crossing the body at {crossings:?}");
