@@ -264,7 +264,7 @@ fn for_cells(dims: [u32; 3], lo: [u32; 3], hi: [u32; 3], mut f: impl FnMut(usize
 }
 
 /// Closest point on the segment `ab` to `p` (`a` when the segment is a point).
-pub(crate) fn closest_point_on_segment(p: Vec3, a: Vec3, b: Vec3) -> Vec3 {
+pub fn closest_point_on_segment(p: Vec3, a: Vec3, b: Vec3) -> Vec3 {
     let ab = b - a;
     let len2 = ab.length_squared();
     let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };

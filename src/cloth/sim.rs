@@ -675,21 +675,18 @@ impl Cloth {
 
     /// Moves the free vertices that start inside the body, or nearer it than its thickness, out
     /// to the thickness along the body's normal (a garment placed round a limb that its panels
-    /// cut into, as a sleeve's hem round the hand); returns how many moved. Without it the
-    /// first substep's contacts throw them out at up to the speed limit.
-    pub fn start_outside_body(&mut self) -> usize {
-        let Some(body) = &self.body else { return 0 };
+    /// cut into, as a sleeve's hem round the hand). Without it the first substep's contacts
+    /// throw them out at up to the speed limit.
+    pub fn start_outside_body(&mut self) {
+        let Some(body) = &self.body else { return };
         let th = self.params.body_thickness;
-        let mut moved = 0;
         for (x, &w) in self.x.iter_mut().zip(&self.inv_mass) {
             if w > 0.0
                 && let Some(to) = body.pushed_out(*x, th, START_REACH)
             {
                 *x = to;
-                moved += 1;
             }
         }
-        moved
     }
 
     /// Eases the edges whose length at the start is more than [`EASE_STRAIN`] off their rest
@@ -1838,8 +1835,6 @@ mod tests {
         assert!(with < 0.5 * without, "p99 strain {with} with struts, {without} without");
     }
 
-    /// Two 10 cm squares hanging in front of and behind a box, their top edges sewn together
-    /// along a line through the box, 3 cm below its top: the seam closes over the top, slowly.
     #[test]
     fn a_panel_placed_stretched_eases_into_its_rest_lengths_as_the_seams_close() {
         // A 10 cm square placed 30 % larger, curled over a quarter circle: as a sleeve wrapped
@@ -1873,6 +1868,8 @@ mod tests {
         assert!(sprung.0 > 3.0, "not eased: fastest {} m/s", sprung.0);
     }
 
+    /// Two 10 cm squares hanging in front of and behind a box, their top edges sewn together
+    /// along a line through the box, 3 cm below its top: the seam closes over the top, slowly.
     #[test]
     fn a_seam_with_the_body_between_its_sides_closes_round_the_body() {
         use crate::cloth::body_collision::box_mesh;

@@ -202,8 +202,10 @@ impl SleeveWrap {
         let (m0, m1) = (mid(*pairs.first()?), mid(*pairs.last()?));
         let along = (m1 - m0).try_normalize()?;
         // The cap is at the end the panel reaches farthest past the seam.
-        let t: Vec<f32> = flat_cm.iter().map(|p| (*p - m0).dot(along)).collect();
-        let (lo, hi) = t.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        let (lo, hi) = flat_cm
+            .iter()
+            .map(|p| (*p - m0).dot(along))
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), t| (l.min(t), h.max(t)));
         let seam_end = (m1 - m0).length();
         let (s_dir, cap_top) = if -lo > hi - seam_end { (along, lo) } else { (-along, -hi) };
         let across = s_dir.perp();

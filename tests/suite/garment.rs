@@ -10,6 +10,7 @@ use glam::{DVec2, Vec3};
 use serde_json::Value;
 
 use werkstatt::avatar::walk::WalkingAvatar;
+use werkstatt::cloth::collider::closest_point_on_segment;
 use werkstatt::cloth::{BodyMesh, SimParams};
 use werkstatt::garment::drape::{Drape, DrapeParams};
 use werkstatt::garment::sleeves::{ArmAxis, SleeveFit, fit_sleeves};
@@ -354,10 +355,7 @@ fn a_one_piece_sleeve_is_wrapped_round_the_whole_arm() {
         let sleeve: Vec<Vec3> =
             (0..sewn.positions.len() as u32).filter(on_sleeve).map(|v| sewn.positions[v as usize]).collect();
         let bone = |p: Vec3| {
-            let d = |a: Vec3, b: Vec3| {
-                let t = ((p - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
-                p.distance(a + (b - a) * t)
-            };
+            let d = |a, b| p.distance(closest_point_on_segment(p, a, b));
             d(arm.shoulder, arm.elbow).min(d(arm.elbow, arm.wrist))
         };
         let nearest = sleeve.iter().map(|&p| bone(p)).fold(f32::MAX, f32::min);
