@@ -17,31 +17,13 @@ use werkstatt::core::resources::Resources;
 use werkstatt::gpu::{Backend, GpuContext, Pixels, read_back};
 use werkstatt::nodes::mesh::live_link::{encode_frame, encode_topology};
 
-/// A GL context held by one test at a time. llvmpipe's GL crashed (SIGSEGV inside
-/// swrast_dri.so during a queue submit, with a second GL context working on the other test
-/// thread) when two of these tests ran at once, so each holds the lock until its context is gone.
-struct Gl {
-    gpu: GpuContext,
-    // Declared after `gpu`: fields drop in order, so the context is gone before the lock opens.
-    _one_at_a_time: std::sync::MutexGuard<'static, ()>,
-}
-
-impl std::ops::Deref for Gl {
-    type Target = GpuContext;
-    fn deref(&self) -> &GpuContext {
-        &self.gpu
-    }
-}
-
-/// The GL context, or `None` (test skipped) where the machine has no EGL library.
-fn gl() -> Option<Gl> {
-    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+/// The GL context, or `None` (checks skipped) where the machine has no EGL library.
+fn gl() -> Option<GpuContext> {
     match GpuContext::headless(Backend::Gl) {
         Ok(gpu) => {
             assert_eq!(gpu.info.backend, wgpu::Backend::Gl);
             crate::common::skip_driver_teardown_at_exit();
-            Some(Gl { gpu, _one_at_a_time: guard })
+            Some(gpu)
         }
         Err(e) => {
             let egl = [
@@ -58,6 +40,45 @@ fn gl() -> Option<Gl> {
     }
 }
 
+/// Every GL check below, in one test on one context. llvmpipe's GL crashed (SIGSEGV inside
+/// swrast_dri.so during a queue submit) with a second GL context working on another test thread;
+/// as separate tests behind a lock, the checks kept a second test thread waiting for 24 s of the
+/// suite's 103. Each check runs to its end whatever the others do; the failures are listed by
+/// name (their messages are above them in the output).
+#[test]
+fn every_check_on_gl() {
+    let Some(gpu) = gl() else { return };
+    let checks: [(&str, fn(&GpuContext)); 7] = [
+        (
+            "gl_formats_are_renderable_where_lavapipe_uses_r32float",
+            gl_formats_are_renderable_where_lavapipe_uses_r32float,
+        ),
+        ("every_graph_renders_on_gl", every_graph_renders_on_gl),
+        ("a_direct_light_graph_matches_vulkan_on_gl", a_direct_light_graph_matches_vulkan_on_gl),
+        (
+            "the_still_life_with_image_based_lighting_matches_vulkan_on_gl",
+            the_still_life_with_image_based_lighting_matches_vulkan_on_gl,
+        ),
+        ("a_white_furnace_with_pems_stays_white_on_gl", a_white_furnace_with_pems_stays_white_on_gl),
+        (
+            "screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl",
+            screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl,
+        ),
+        ("the_live_link_graph_renders_on_gl", render_livelink),
+    ];
+    let failed: Vec<&str> = checks
+        .iter()
+        .filter(|(name, check)| {
+            let start = Instant::now();
+            let passed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(&gpu))).is_ok();
+            eprintln!("{name}: {} in {:.1} s", if passed { "passed" } else { "FAILED" }, start.elapsed().as_secs_f64());
+            !passed
+        })
+        .map(|(name, _)| *name)
+        .collect();
+    assert!(failed.is_empty(), "{} of {} GL checks failed: {failed:?}", failed.len(), checks.len());
+}
+
 fn render_on(
     gpu: &GpuContext,
     graph: &str,
@@ -70,9 +91,7 @@ fn render_on(
     render_graph_on(gpu, &root().join("graphs").join(graph), out, frames, (96, 72), &sets, dumps).map(|_| ())
 }
 
-#[test]
-fn gl_formats_are_renderable_where_lavapipe_uses_r32float() {
-    let Some(gpu) = gl() else { return };
+fn gl_formats_are_renderable_where_lavapipe_uses_r32float(gpu: &GpuContext) {
     let f = gpu.formats();
     // Whatever llvmpipe offers, every role has a format the device renders and samples.
     for format in [f.linear_depth, f.hdr, f.matrix_f16, f.ldr] {
@@ -95,21 +114,8 @@ fn gl_formats_are_renderable_where_lavapipe_uses_r32float() {
     }
 }
 
-// Every graph, in two tests that take every other graph: together they are the suite's longest
-// test, and two run on parallel threads.
-#[test]
-fn every_graph_renders_on_gl_part_1_of_2() {
-    every_graph_renders_on_gl(0, 2);
-}
-
-#[test]
-fn every_graph_renders_on_gl_part_2_of_2() {
-    every_graph_renders_on_gl(1, 2);
-}
-
-/// Graph `part`, `part + parts`, ... of the sorted graphs/ folder render on GL, none black.
-fn every_graph_renders_on_gl(part: usize, parts: usize) {
-    let Some(gpu) = gl() else { return };
+/// Every graph of the graphs/ folder renders on GL, none black (livelink.ron in its own check).
+fn every_graph_renders_on_gl(gpu: &GpuContext) {
     let mut graphs: Vec<String> = std::fs::read_dir(root().join("graphs"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -120,15 +126,11 @@ fn every_graph_renders_on_gl(part: usize, parts: usize) {
     // The regression manifest's overrides keep each graph small (fewer lights, smaller maps):
     // what this checks is that every node kind runs on GL, not the full-size figures.
     let manifest = werkstatt::app::regress::Manifest::load(&root().join("tests/references/manifest.ron")).unwrap();
-    for name in graphs.iter().skip(part).step_by(parts) {
-        if name == "livelink.ron" {
-            render_livelink(&gpu);
-            continue;
-        }
+    for name in graphs.iter().filter(|n| *n != "livelink.ron") {
         let out = out_dir(&format!("gl-{name}"));
         let stem = name.trim_end_matches(".ron");
         let sets = manifest.cases.get(stem).map(|c| c.sets.clone()).unwrap_or_default();
-        render_on(&gpu, name, &out, (0, 0), &[], &sets).unwrap_or_else(|e| panic!("{name} on GL: {e:#}"));
+        render_on(gpu, name, &out, (0, 0), &[], &sets).unwrap_or_else(|e| panic!("{name} on GL: {e:#}"));
         let images: Vec<_> = std::fs::read_dir(&out)
             .unwrap()
             .map(|e| e.unwrap().path())
@@ -191,10 +193,9 @@ fn render_livelink(gpu: &GpuContext) {
 /// The same image as on lavapipe, within a GL tolerance: llvmpipe's GL rasterizes and
 /// interpolates a little differently (edges, the sphere's silhouette), and where it cannot
 /// render 32-bit floats the linear depth is stored as 16-bit floats.
-fn matches_vulkan_on_gl(graph: &str, output: &str) {
-    let Some(gl_gpu) = gl() else { return };
+fn matches_vulkan_on_gl(gl_gpu: &GpuContext, graph: &str, output: &str) {
     let (gl_out, vk_out) = (out_dir(&format!("gl-match-{graph}")), out_dir(&format!("vk-match-{graph}")));
-    render_on(&gl_gpu, graph, &gl_out, (0, 0), &[], &[]).unwrap();
+    render_on(gl_gpu, graph, &gl_out, (0, 0), &[], &[]).unwrap();
     render_on(gpu(), graph, &vk_out, (0, 0), &[], &[]).unwrap();
     let file = format!("{output}_0000.png");
     let (a, b) = (read_png(&gl_out.join(&file)), read_png(&vk_out.join(&file)));
@@ -208,16 +209,14 @@ fn matches_vulkan_on_gl(graph: &str, output: &str) {
     );
 }
 
-#[test]
-fn a_direct_light_graph_matches_vulkan_on_gl() {
-    matches_vulkan_on_gl("spot.ron", "preview");
+fn a_direct_light_graph_matches_vulkan_on_gl(gpu: &GpuContext) {
+    matches_vulkan_on_gl(gpu, "spot.ron", "preview");
 }
 
 /// Image-based lighting (cube faces kept as 2D arrays, which wgpu's GL backend would turn into
 /// cube maps at 6 layers) and the VSM shadow atlas (depth read as float) on GL.
-#[test]
-fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl() {
-    matches_vulkan_on_gl("still_life.ron", "image");
+fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl(gpu: &GpuContext) {
+    matches_vulkan_on_gl(gpu, "still_life.ron", "image");
 }
 
 /// A white furnace on GL: glossy spheres of every glossiness in a white environment read 1 in
@@ -226,16 +225,14 @@ fn the_still_life_with_image_based_lighting_matches_vulkan_on_gl() {
 /// answers with the first pixel's level of those it shades together, and such pixels read black
 /// (33 here) before the lookups took their levels from a counted loop (shaders/ibl/cube.wgsl
 /// `cube_trilinear_counted`).
-#[test]
-fn a_white_furnace_with_pems_stays_white_on_gl() {
-    let Some(gpu) = gl() else { return };
+fn a_white_furnace_with_pems_stays_white_on_gl(gpu: &GpuContext) {
     let out = out_dir("gl-furnace");
     let probe = out.join("white.hdr");
     write_probe(&probe, 16, 8, |_, _| glam::Vec3::ONE);
     let gloss = [0.0, 0.25, 0.5, 0.75, 0.9, 1.0];
     let text = sphere_row_graph(&probe, 16, 11, &gloss, 1.0, r#""mode": "pems""#, r#""kernel": "box""#);
     // One 48-pixel square per sphere, as in the Vulkan furnace (tests/suite/ibl.rs).
-    let img = render_dumps_on_gl(&gpu, &out, &text, (6 * 48, 48), &["ibl.image"]).remove(0);
+    let img = render_dumps_on_gl(gpu, &out, &text, (6 * 48, 48), &["ibl.image"]).remove(0);
     // Half-float targets on GL round 1 to within 1e-3.
     let wrong: Vec<usize> = img
         .rgba
@@ -271,9 +268,7 @@ fn render_dumps_on_gl(
 /// leaves for the environment, which answers with the probe's radiance; the image stays what
 /// IblShading lit, as on Vulkan (tests/suite/ssr.rs). The environment lookups read a level per
 /// ray, which read zeros on GL before they took it from a counted loop.
-#[test]
-fn screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl() {
-    let Some(gpu) = gl() else { return };
+fn screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl(gpu: &GpuContext) {
     let out = out_dir("gl-ssr");
     let probe = out.join("probe.hdr");
     write_probe(&probe, 32, 16, |_, _| glam::Vec3::splat(0.5));
@@ -298,7 +293,7 @@ fn screen_space_reflections_of_a_uniform_probe_keep_the_image_on_gl() {
     ])"#,
         probe = probe.display().to_string(),
     );
-    let images = render_dumps_on_gl(&gpu, &out, &text, (160, 120), &["light.image", "ssr.image"]);
+    let images = render_dumps_on_gl(gpu, &out, &text, (160, 120), &["light.image", "ssr.image"]);
     let (lit, reflected) = (&images[0], &images[1]);
     let worst = lit
         .rgba
