@@ -40,6 +40,9 @@ fn gl() -> Option<GpuContext> {
     }
 }
 
+/// A check on the GL context, by name.
+type GlCheck = (&'static str, fn(&GpuContext));
+
 /// Every GL check below, in one test on one context. llvmpipe's GL crashed (SIGSEGV inside
 /// swrast_dri.so during a queue submit) with a second GL context working on another test thread;
 /// as separate tests behind a lock, the checks kept a second test thread waiting for 24 s of the
@@ -48,7 +51,7 @@ fn gl() -> Option<GpuContext> {
 #[test]
 fn every_check_on_gl() {
     let Some(gpu) = gl() else { return };
-    let checks: [(&str, fn(&GpuContext)); 7] = [
+    let checks: [GlCheck; 7] = [
         (
             "gl_formats_are_renderable_where_lavapipe_uses_r32float",
             gl_formats_are_renderable_where_lavapipe_uses_r32float,
