@@ -73,7 +73,7 @@ pub(crate) fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<
 }
 
 /// The median of samples (the mean of the middle two of an even count); `v` is not empty.
-fn median(mut v: Vec<f64>) -> f64 {
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     let mid = v.len() / 2;
     if v.len().is_multiple_of(2) { (v[mid - 1] + v[mid]) / 2.0 } else { v[mid] }

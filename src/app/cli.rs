@@ -399,6 +399,29 @@ enum BenchWhat {
         #[arg(long, default_value_t = 20000)]
         frames: usize,
     },
+    /// The editor's viewport on a graph, through the evaluation the window drives (headless):
+    /// the first frame, the timeline's first loop (each frame evaluated, simulations stepped),
+    /// its replay from the kept pictures, and turning the view (half size while it turns, full
+    /// size at rest). Milliseconds and pictures a second.
+    #[cfg(feature = "editor")]
+    Editor {
+        #[arg(long, default_value = "graphs/default.ron")]
+        graph: PathBuf,
+        /// The viewport's size.
+        #[arg(long, default_value = "800x600")]
+        size: String,
+        /// The timeline's frames 0..N.
+        #[arg(long, default_value_t = 24)]
+        frames: i64,
+        /// Turns of the view measured each way.
+        #[arg(long, default_value_t = 12)]
+        orbit_steps: usize,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
     /// Cloth simulation time per frame against triangle count (tablecloth over a torus).
     Cloth {
         #[arg(long, default_value = "2000,5000,10000,20000,50000", value_delimiter = ',')]
@@ -1398,6 +1421,18 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                 let title = format!("PEM lobe shape error at equal volume, {size}^2 faces");
                 crate::io::atomic::write_atomic(&path, crate::app::bench::pem_lobes_svg(&rows, &title).as_bytes())?;
             }
+            if let Some(path) = json {
+                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        #[cfg(feature = "editor")]
+        Command::Bench { what: BenchWhat::Editor { graph, size, frames, orbit_steps, json, backend } } => {
+            let size = parse_size(&size)?;
+            let gpu = std::sync::Arc::new(GpuContext::headless(pick_backend(backend)?)?);
+            let rows = crate::app::bench_editor::editor(&gpu, &graph, size, frames, orbit_steps)?;
+            println!("{} in the editor's viewport, on {}:\n", graph.display(), gpu.info.name);
+            print!("{}", crate::app::bench::markdown_table(&rows));
             if let Some(path) = json {
                 crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }

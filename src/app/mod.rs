@@ -5,6 +5,8 @@
 mod bench;
 mod bench_all;
 mod bench_btf;
+#[cfg(feature = "editor")]
+mod bench_editor;
 mod bench_woven;
 pub mod cli;
 pub mod compare;

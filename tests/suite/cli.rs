@@ -704,3 +704,45 @@ fn bench_all_writes_every_benchs_rows_and_a_summary_within_its_budget() {
     assert_ne!(code, 0);
     assert!(err.contains("\"ssoa\"") && err.contains("attachments, table1"), "{err}");
 }
+
+/// `bench editor` plays a graph's loop through the editor's evaluation: every frame of the
+/// first loop evaluated, the replay from kept pictures, the turning view at half size.
+#[cfg(feature = "editor")]
+#[test]
+fn bench_editor_measures_the_first_loop_the_replay_and_the_turning_view() {
+    let dir = temp("bench-editor");
+    let json = dir.join("editor.json");
+    let (code, out, err) = werkstatt(&[
+        "bench",
+        "editor",
+        "--graph",
+        "graphs/still_life.ron",
+        "--size",
+        "64x48",
+        "--frames",
+        "3",
+        "--orbit-steps",
+        "2",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(out.contains("| replay (kept pictures) | 64x48 | 3 | 0 |"), "{out}");
+    let rows: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let field = |i: usize, name: &str| rows[i][name].as_u64().unwrap();
+    let phases: Vec<&str> = rows.as_array().unwrap().iter().map(|r| r["phase"].as_str().unwrap()).collect();
+    assert_eq!(phases.len(), 5, "{phases:?}");
+    // Frames 1 and 2 evaluated once each; the replay of 0..3 all from kept pictures.
+    assert_eq!((field(1, "samples"), field(1, "evaluations")), (2, 2), "{rows}");
+    assert_eq!((field(2, "samples"), field(2, "evaluations")), (3, 0), "{rows}");
+    // Each turn of the view is one evaluation, at half size while turning.
+    assert_eq!((field(3, "width"), field(3, "height"), field(3, "evaluations")), (32, 24, 2), "{rows}");
+    assert_eq!((field(4, "width"), field(4, "evaluations")), (64, 2), "{rows}");
+    assert!(rows.as_array().unwrap().iter().all(|r| r["median_ms"].as_f64().unwrap() > 0.0), "{rows}");
+
+    // A graph without an orbit camera is refused, naming it.
+    let (code, _, err) = werkstatt(&["bench", "editor", "--graph", "graphs/scalars.ron", "--frames", "2"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("scalars.ron") && err.contains("no orbit camera"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use werkstatt::app::editor::live::{Live, NodeState};
 use werkstatt::core::graph::{Graph, PortRef};
@@ -122,86 +122,6 @@ fn shaders_reload_and_a_broken_one_keeps_the_last_good_pipeline() {
     assert_eq!(live.state("tonemap"), NodeState::Ok);
     let px = centre(&live, &gpu);
     assert!(px[0] > 0.5 && px[1] < 0.1 && px[2] < 0.1, "the new shader runs: {px:?}");
-}
-
-/// The figure for docs/editor.md: the editor's live evaluation (the worker, the display
-/// conversion and read-back, no window) playing graphs/default.ron at 800x600 over frames
-/// 0..=23 twice, at 24 frames per second: frames shown per second on each loop. Ignored: it
-/// measures (about a minute on lavapipe) and asserts only that the second loop evaluated nothing.
-#[test]
-#[ignore = "a measurement: cargo test --release --test suite -- --ignored editor_shaders::playback_of_the_default_graph --nocapture"]
-fn playback_of_the_default_graph_at_800x600() {
-    let (gpu, graph, mut live) = live_on("default.ron", (800, 600));
-    (live.frame_range, live.fps, live.playing) = ((0, 23), 24.0, true);
-    let mut loops = Vec::new();
-    for _ in 0..2 {
-        let (start, evaluated) = (Instant::now(), live.finished);
-        let mut shown = 0;
-        let mut last = live.shown_frame();
-        let mut tick = Instant::now();
-        // One loop: until the frame wraps back to 0.
-        while shown < 24 {
-            assert!(start.elapsed() < Duration::from_secs(600), "a loop took over 600 s");
-            std::thread::sleep(Duration::from_millis(8));
-            live.advance(tick.elapsed().as_secs_f64());
-            tick = Instant::now();
-            live.pump(Some(&gpu));
-            if live.shown_frame() != last {
-                last = live.shown_frame();
-                shown += 1;
-            }
-        }
-        let secs = start.elapsed().as_secs_f64();
-        loops.push((shown as f64 / secs, live.finished - evaluated));
-    }
-    eprintln!(
-        "figure: default.ron at 800x600, frames 0..=23 at 24 fps: first loop {:.1} frames/s ({} evaluated), second {:.1} frames/s ({} evaluated); {} frames kept, {:.0} MiB",
-        loops[0].0,
-        loops[0].1,
-        loops[1].0,
-        loops[1].1,
-        live.kept_frames().0,
-        live.kept_frames().1 as f64 / (1 << 20) as f64
-    );
-    assert_eq!(loops[1].1, 0, "the second loop evaluated frames");
-
-    // Orbiting while paused: each turn evaluates what depends on the camera, at the full size
-    // and then at the size used while the view moves (`Live::navigating`).
-    live.playing = false;
-    settle(&mut live, &gpu);
-    let cam = werkstatt::app::editor::live::camera_for(&graph, None).expect("an orbit camera");
-    live.camera = werkstatt::app::editor::live::CameraOverride::from_graph(&graph, &cam);
-    let ids: Vec<String> = graph.nodes.keys().cloned().collect();
-    for navigating in [false, true] {
-        live.navigating = navigating;
-        live.camera.as_mut().expect("set above").orbit(10.0, 0.0);
-        live.sync(&graph, 1, None);
-        settle(&mut live, &gpu);
-        let before: Vec<u64> = ids.iter().map(|id| live.runs(id)).collect();
-        let start = Instant::now();
-        let turns = 10;
-        for _ in 0..turns {
-            live.camera.as_mut().expect("set above").orbit(10.0, 0.0);
-            live.sync(&graph, 1, None);
-            settle(&mut live, &gpu);
-        }
-        let per_turn = start.elapsed().as_secs_f64() / turns as f64;
-        let rerun: Vec<&str> =
-            ids.iter().zip(&before).filter(|(id, b)| live.runs(id) > **b).map(|(id, _)| id.as_str()).collect();
-        let size = live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size);
-        eprintln!(
-            "figure: default.ron at 800x600, orbiting (navigating: {navigating}, pictures {size:?}): {:.1} evaluations/s ({:.0} ms each); re-run: {}",
-            1.0 / per_turn,
-            per_turn * 1e3,
-            rerun.join(", ")
-        );
-    }
-    // The view at rest again: the full size, without running the simulation again.
-    let garment_runs = live.runs("garment");
-    live.navigating = false;
-    settle(&mut live, &gpu);
-    assert_eq!(live.display().and_then(|d| d.pixels.as_ref()).map(|p| p.size), Some([800, 600]));
-    assert_eq!(live.runs("garment"), garment_runs, "the end of a navigation re-ran the simulation");
 }
 
 /// While the view moves (`Live::navigating`) frames are half as wide and high, and only what
