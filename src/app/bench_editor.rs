@@ -17,7 +17,7 @@ use crate::gpu::GpuContext;
 /// The longest any one step may take before the bench gives up.
 const STEP_DEADLINE: Duration = Duration::from_secs(300);
 
-/// Degrees the view turns per orbit step (a mouse drag of 20 points).
+/// The mouse drag (points) of each turn of the view: 8 degrees of yaw.
 const ORBIT_DRAG_POINTS: f32 = 20.0;
 
 /// One phase of `werkstatt bench editor`.
