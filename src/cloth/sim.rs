@@ -695,13 +695,11 @@ impl Cloth {
     /// round a bent arm stretches 25 % outside the elbow) would otherwise spring back in the
     /// first substeps. Returns how many edges are eased.
     pub fn ease_strained_edges(&mut self) -> usize {
-        self.eased_edges = (self.edges.iter().zip(&self.edge_rest).enumerate())
-            .map(|(e, (&[a, b], &rest))| (e, self.x[a as usize].distance(self.x[b as usize]), rest))
+        self.eased_edges = lengths_and_targets(&self.x, &self.edges, &self.edge_rest)
             .filter(|&(_, start, rest)| (start / rest - 1.0).abs() > EASE_STRAIN)
             .collect();
         // The struts across a stretched part would pull it back as its edges would.
-        self.eased_struts = (self.struts.iter().zip(&self.strut_max).enumerate())
-            .map(|(k, (&[a, b], &max))| (k, self.x[a as usize].distance(self.x[b as usize]), max))
+        self.eased_struts = lengths_and_targets(&self.x, &self.struts, &self.strut_max)
             .filter(|&(_, start, max)| start > max * (1.0 + EASE_STRAIN))
             .collect();
         self.set_eased_rest();
@@ -712,11 +710,10 @@ impl Cloth {
     fn set_eased_rest(&mut self) {
         let close = self.params.seam_close_time;
         let f = if close > 0.0 { (self.time as f32 / close).min(1.0) } else { 1.0 };
-        for &(e, start, rest) in &self.eased_edges {
-            self.edge_rest[e] = start + (rest - start) * f;
-        }
-        for &(k, start, max) in &self.eased_struts {
-            self.strut_max[k] = start + (max - start) * f;
+        for (eased, lengths) in [(&self.eased_edges, &mut self.edge_rest), (&self.eased_struts, &mut self.strut_max)] {
+            for &(k, start, target) in eased {
+                lengths[k] = start + (target - start) * f;
+            }
         }
         if f >= 1.0 {
             self.eased_edges.clear();
@@ -1416,6 +1413,15 @@ impl Cloth {
             .zip(&self.edge_rest)
             .map(|(e, &r)| self.x[e[0] as usize].distance(self.x[e[1] as usize]) / r - 1.0)
     }
+}
+
+/// Each pair's index, its length in `x` and its target length.
+fn lengths_and_targets<'a>(
+    x: &'a [Vec3],
+    pairs: &'a [[u32; 2]],
+    targets: &'a [f32],
+) -> impl Iterator<Item = (usize, f32, f32)> + 'a {
+    pairs.iter().zip(targets).enumerate().map(|(k, (&[a, b], &t))| (k, x[a as usize].distance(x[b as usize]), t))
 }
 
 /// Parts the constraint sweeps split the vertices into, as index ranges (a pattern's vertices
