@@ -238,6 +238,9 @@ fn normals(pos: &[Vec3], tris: &[[u32; 3]], face: &mut Vec<Vec3>, vert: &mut Vec
     }
 }
 
+/// Triangles' boxes a thread takes at a time when the frame starts.
+const BOX_CHUNK: usize = 4096;
+
 /// Vertices a thread takes at a time in [`BodyMesh::collide`]; fewer than two chunks run on the
 /// calling thread alone.
 const CONTACT_CHUNK: usize = 512;
@@ -380,11 +383,14 @@ impl BodyMesh {
         radius: f32,
     ) {
         self.stats = BodyStats::default();
-        for (k, t) in self.triangles.iter().enumerate() {
-            let [a, b, c] = t.map(|i| i as usize);
-            self.boxes[k] = Aabb::from_points(&[self.start[a], self.start[b], self.start[c]])
-                .union(Aabb::from_points(&[self.end[a], self.end[b], self.end[c]]));
-        }
+        let (triangles, start, end) = (&self.triangles, &self.start, &self.end);
+        crate::core::parallel::for_each_chunk(&mut self.boxes, BOX_CHUNK, 0, |chunk, out| {
+            for (j, out) in out.iter_mut().enumerate() {
+                let [a, b, c] = triangles[chunk * BOX_CHUNK + j].map(|i| i as usize);
+                *out = Aabb::from_points(&[start[a], start[b], start[c]])
+                    .union(Aabb::from_points(&[end[a], end[b], end[c]]));
+            }
+        });
         self.tree.refit(&self.boxes);
         self.body_travel = self.start.iter().zip(&self.end).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max);
         self.last_outside.clear();
@@ -462,57 +468,58 @@ impl BodyMesh {
         radius: f32,
     ) {
         let sweep = |i: usize| Aabb::from_points(&[x[i], x[i] + v[i] * (1.25 * dt)]);
-        self.cloth_boxes.clear();
-        self.cloth_boxes.extend(tris.iter().map(|t| {
-            let [a, b, c] = t.map(|i| i as usize);
-            sweep(a).union(sweep(b)).union(sweep(c)).inflate(0.5 * radius)
-        }));
+        self.cloth_boxes.resize(tris.len(), Aabb::EMPTY);
+        crate::core::parallel::for_each_chunk(&mut self.cloth_boxes, BOX_CHUNK, 0, |chunk, out| {
+            for (j, out) in out.iter_mut().enumerate() {
+                let [a, b, c] = tris[chunk * BOX_CHUNK + j].map(|i| i as usize);
+                *out = sweep(a).union(sweep(b)).union(sweep(c)).inflate(0.5 * radius);
+            }
+        });
         let tree = self.cloth_tree.get_or_insert_with(|| AabbTree::build(&self.cloth_boxes));
         tree.refit(&self.cloth_boxes);
         std::mem::swap(&mut self.vt_pairs, &mut self.vt_previous);
-        self.vt_pairs.clear();
         let all = tree.bounds();
-        let mut prev_k = 0;
-        for b in 0..self.end.len() {
-            let q = Aabb::from_points(&[self.start[b], self.end[b]]).inflate(0.5 * radius);
+        // Each body vertex's pairs on the cores in chunks, appended in vertex order: the same
+        // for any thread count.
+        let (tree, boxes, previous, (start, end)) =
+            (&*tree, &self.cloth_boxes, &self.vt_previous, (&self.start, &self.end));
+        let found = crate::core::parallel::map_in_chunks(self.end.len(), CANDIDATE_CHUNK, |b| {
+            let mut pairs = Vec::new();
+            let q = Aabb::from_points(&[start[b], end[b]]).inflate(0.5 * radius);
             if !q.overlaps(&all) {
-                continue;
+                return (pairs, false);
             }
-            let first = self.vt_pairs.len();
-            let (boxes, pairs) = (&self.cloth_boxes, &mut self.vt_pairs);
             tree.query(&q, |t| {
                 if boxes[t as usize].overlaps(&q) && tris[t as usize].iter().any(|&i| inv_mass[i as usize] > 0.0) {
                     pairs.push((b as u32, t, 0.0));
                 }
             });
-            let p = self.start[b];
+            let p = start[b];
             // A cloth that sped up (a heap, a caught hem) sweeps boxes over the whole body:
             // keep the nearest triangles, as self-collision does, so pairs stay bounded.
-            if self.vt_pairs.len() - first > MAX_PAIRS_PER_VERTEX {
-                for pair in &mut self.vt_pairs[first..] {
+            if pairs.len() > MAX_PAIRS_PER_VERTEX {
+                for pair in &mut pairs {
                     let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                     pair.2 = p.distance(super::collider::closest_point_on_triangle(p, a, bb, c));
                 }
             }
-            if cap_and_sort(&mut self.vt_pairs, first) {
-                self.stats.vertex_pairs_capped += 1;
-            }
-            for pair in &mut self.vt_pairs[first..] {
+            let capped = cap_and_sort(&mut pairs, 0);
+            // The vertex's pairs of the last frame, sorted by triangle.
+            let from = previous.partition_point(|o| (o.0 as usize) < b);
+            let had = &previous[from..from + previous[from..].partition_point(|o| o.0 as usize == b)];
+            for pair in &mut pairs {
                 let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                 let n = (bb - a).cross(c - a).normalize_or_zero();
                 let d = (p - a).dot(n);
-                let mut side = if d >= 0.0 { 1.0 } else { -1.0 };
-                if d.abs() < thickness {
-                    let prev = &self.vt_previous;
-                    while prev_k < prev.len() && (prev[prev_k].0, prev[prev_k].1) < (pair.0, pair.1) {
-                        prev_k += 1;
-                    }
-                    if let Some(old) = prev.get(prev_k).filter(|o| (o.0, o.1) == (pair.0, pair.1)) {
-                        side = old.2;
-                    }
-                }
-                pair.2 = side;
+                let kept = had.binary_search_by_key(&pair.1, |o| o.1).ok().filter(|_| d.abs() < thickness);
+                pair.2 = kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2);
             }
+            (pairs, capped)
+        });
+        self.vt_pairs.clear();
+        for (pairs, capped) in found {
+            self.vt_pairs.extend(pairs);
+            self.stats.vertex_pairs_capped += usize::from(capped);
         }
         self.stats.vertex_pairs = self.vt_pairs.len();
     }

@@ -46,6 +46,9 @@ const FORCED: f32 = 2.0;
 /// (`parallel::map_in_chunks`).
 const PAIR_CHUNK: usize = 512;
 
+/// Triangles' and vertices' boxes a thread takes at a time in [`SelfCollision::gather`].
+const BOX_CHUNK: usize = 4096;
+
 /// Pairs a thread takes at a time in [`SelfCollision::solve`]'s search for those that act.
 const SOLVE_CHUNK: usize = 2048;
 
@@ -208,10 +211,12 @@ impl SelfCollision {
             within.map_or(predicted, |w| predicted.grow(w.now[i]))
         };
         let r = 0.5 * (thickness + slack);
-        for (k, t) in triangles.iter().enumerate() {
-            let [a, b, c] = t.map(|i| i as usize);
-            self.boxes[k] = sweep(a).union(sweep(b)).union(sweep(c)).inflate(r);
-        }
+        crate::core::parallel::for_each_chunk(&mut self.boxes, BOX_CHUNK, 0, |chunk, out| {
+            for (j, out) in out.iter_mut().enumerate() {
+                let [a, b, c] = triangles[chunk * BOX_CHUNK + j].map(|i| i as usize);
+                *out = sweep(a).union(sweep(b)).union(sweep(c)).inflate(r);
+            }
+        });
         self.tree.refit(&self.boxes);
         // Those near the triangles around an escaped vertex (as far as its longest edge).
         // Many escaped: every vertex, as cheap as finding them one by one.
@@ -236,19 +241,25 @@ impl SelfCollision {
             self.reach.clear();
             self.reach.resize(x.len(), Aabb::EMPTY);
         }
-        for (i, reach) in self.reach.iter_mut().enumerate() {
-            if gathered(i) {
-                *reach = sweep(i).inflate(0.5 * slack);
+        crate::core::parallel::for_each_chunk(&mut self.reach, BOX_CHUNK, 0, |chunk, out| {
+            for (j, reach) in out.iter_mut().enumerate() {
+                let i = chunk * BOX_CHUNK + j;
+                if gathered(i) {
+                    *reach = sweep(i).inflate(0.5 * slack);
+                }
             }
-        }
+        });
         std::mem::swap(&mut self.pairs, &mut self.previous);
-        self.pairs.clear();
-        // Each vertex's pairs (its query of the tree, capped and sorted) on the cores in chunks,
-        // then appended and given their sides in vertex order: the same for any thread count.
-        let (tree, boxes) = (&self.tree, &self.boxes);
+        // Each vertex's pairs (its query of the tree, capped and sorted, with their sides) on
+        // the cores in chunks, then appended in vertex order: the same for any thread count.
+        let (tree, boxes, previous) = (&self.tree, &self.boxes, &self.previous);
         let found = crate::core::parallel::map_in_chunks(x.len(), PAIR_CHUNK, |i| {
+            // The vertex's pairs of the last gather, sorted by triangle.
+            let from = previous.partition_point(|p| (p.0 as usize) < i);
+            let had = &previous[from..from + previous[from..].partition_point(|p| p.0 as usize == i)];
             if !gathered(i) {
-                return None;
+                // Not gathered again: the pairs it has.
+                return (had.to_vec(), false);
             }
             let q = sweep(i).inflate(r);
             let mut pairs = Vec::new();
@@ -277,48 +288,24 @@ impl SelfCollision {
                 }
             });
             let capped = cap_and_sort(&mut pairs, 0);
-            Some((pairs, capped))
-        });
-        let mut prev_k = 0;
-        for (i, found) in found.into_iter().enumerate() {
-            let Some((pairs, capped)) = found else {
-                // Not gathered again: the pairs it has.
-                while self.previous.get(prev_k).is_some_and(|p| (p.0 as usize) < i) {
-                    prev_k += 1;
-                }
-                while let Some(&p) = self.previous.get(prev_k).filter(|p| p.0 as usize == i) {
-                    self.pairs.push(p);
-                    prev_k += 1;
-                }
-                continue;
-            };
-            let start = self.pairs.len();
-            self.pairs.extend(pairs);
-            if capped {
-                self.stats.capped += 1;
-            }
-            for pair in &mut self.pairs[start..] {
+            for pair in &mut pairs {
                 let [a, b, c] = triangles[pair.1 as usize].map(|j| x[j as usize]);
                 let n = (b - a).cross(c - a).normalize_or_zero();
                 let d = (x[i] - a).dot(n);
-                let mut side = if d >= 0.0 { 1.0 } else { -1.0 };
-                while prev_k < self.previous.len()
-                    && (self.previous[prev_k].0, self.previous[prev_k].1) < (pair.0, pair.1)
-                {
-                    prev_k += 1;
-                }
                 // In contact, the side last frame had (a pair forced back by the untangling
                 // deeper than that is forced again while its crossing is found). The same
                 // within a frame: keeping deeper sides there too (all, or the forced ones)
                 // pulled vertices back from depth, and the walk gate test's shirt had cloth
                 // through cloth in 618 (all) or 148 (forced) of its 630 frames, against 58.
-                if let Some(p) = self.previous.get(prev_k).filter(|p| (p.0, p.1) == (pair.0, pair.1))
-                    && d.abs() < thickness
-                {
-                    side = p.2;
-                }
-                pair.2 = side;
+                let kept = had.binary_search_by_key(&pair.1, |p| p.1).ok().filter(|_| d.abs() < thickness);
+                pair.2 = kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2);
             }
+            (pairs, capped)
+        });
+        self.pairs.clear();
+        for (pairs, capped) in found {
+            self.pairs.extend(pairs);
+            self.stats.capped += usize::from(capped);
         }
         self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
