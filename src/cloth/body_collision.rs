@@ -26,7 +26,7 @@
 use glam::Vec3;
 
 use super::bvh::{Aabb, AabbTree};
-use super::self_collision::{MAX_PAIRS_PER_VERTEX, cap_and_sort, track_side};
+use super::self_collision::{MAX_PAIRS_PER_VERTEX, cap_and_sort, gathered_side, pairs_of, track_side};
 
 /// A body mesh moving from pose to pose, one pose per frame.
 #[derive(Clone, Debug)]
@@ -504,15 +504,9 @@ impl BodyMesh {
                 }
             }
             let capped = cap_and_sort(&mut pairs, 0);
-            // The vertex's pairs of the last frame, sorted by triangle.
-            let from = previous.partition_point(|o| (o.0 as usize) < b);
-            let had = &previous[from..from + previous[from..].partition_point(|o| o.0 as usize == b)];
+            let had = pairs_of(previous, b);
             for pair in &mut pairs {
-                let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
-                let n = (bb - a).cross(c - a).normalize_or_zero();
-                let d = (p - a).dot(n);
-                let kept = had.binary_search_by_key(&pair.1, |o| o.1).ok().filter(|_| d.abs() < thickness);
-                pair.2 = kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2);
+                pair.2 = gathered_side(had, pair.1, p, tris[pair.1 as usize].map(|j| x[j as usize]), thickness);
             }
             (pairs, capped)
         });

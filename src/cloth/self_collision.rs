@@ -66,6 +66,22 @@ pub(crate) fn cap_and_sort(pairs: &mut Vec<(u32, u32, f32)>, first: usize) -> bo
     capped
 }
 
+/// Vertex `v`'s pairs in `pairs` (sorted by vertex, then triangle).
+pub(crate) fn pairs_of(pairs: &[(u32, u32, f32)], v: usize) -> &[(u32, u32, f32)] {
+    let from = pairs.partition_point(|p| (p.0 as usize) < v);
+    &pairs[from..from + pairs[from..].partition_point(|p| p.0 as usize == v)]
+}
+
+/// The side a point `p` gathered against triangle `t` (corners `tri`) takes: in contact
+/// (closer than `thickness` to its plane), the side of its pair with `t` among `had` (its pairs
+/// of the last gather, sorted by triangle) where it had one; else the side it is on.
+pub(crate) fn gathered_side(had: &[(u32, u32, f32)], t: u32, p: Vec3, tri: [Vec3; 3], thickness: f32) -> f32 {
+    let [a, b, c] = tri;
+    let d = (p - a).dot((b - a).cross(c - a).normalize_or_zero());
+    let kept = had.binary_search_by_key(&t, |p| p.1).ok().filter(|_| d.abs() < thickness);
+    kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2)
+}
+
 /// Vertices that left the region their pairs cover within a frame ([`SelfCollision::escaped`]),
 /// and where every vertex is now.
 #[derive(Clone, Copy)]
@@ -254,9 +270,7 @@ impl SelfCollision {
         // the cores in chunks, then appended in vertex order: the same for any thread count.
         let (tree, boxes, previous) = (&self.tree, &self.boxes, &self.previous);
         let found = crate::core::parallel::map_in_chunks(x.len(), PAIR_CHUNK, |i| {
-            // The vertex's pairs of the last gather, sorted by triangle.
-            let from = previous.partition_point(|p| (p.0 as usize) < i);
-            let had = &previous[from..from + previous[from..].partition_point(|p| p.0 as usize == i)];
+            let had = pairs_of(previous, i);
             if !gathered(i) {
                 // Not gathered again: the pairs it has.
                 return (had.to_vec(), false);
@@ -289,16 +303,13 @@ impl SelfCollision {
             });
             let capped = cap_and_sort(&mut pairs, 0);
             for pair in &mut pairs {
-                let [a, b, c] = triangles[pair.1 as usize].map(|j| x[j as usize]);
-                let n = (b - a).cross(c - a).normalize_or_zero();
-                let d = (x[i] - a).dot(n);
                 // In contact, the side last frame had (a pair forced back by the untangling
                 // deeper than that is forced again while its crossing is found). The same
                 // within a frame: keeping deeper sides there too (all, or the forced ones)
                 // pulled vertices back from depth, and the walk gate test's shirt had cloth
                 // through cloth in 618 (all) or 148 (forced) of its 630 frames, against 58.
-                let kept = had.binary_search_by_key(&pair.1, |p| p.1).ok().filter(|_| d.abs() < thickness);
-                pair.2 = kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2);
+                let tri = triangles[pair.1 as usize].map(|j| x[j as usize]);
+                pair.2 = gathered_side(had, pair.1, x[i], tri, thickness);
             }
             (pairs, capped)
         });
