@@ -72,6 +72,11 @@ pub(crate) fn median_ms(frames: usize, work: &mut dyn FnMut() -> anyhow::Result<
     Ok(median(samples))
 }
 
+/// Milliseconds since `t`.
+pub(super) fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
 /// The median of samples (the mean of the middle two of an even count); `v` is not empty.
 pub(super) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -266,7 +271,7 @@ pub fn cloth(sizes: &[usize], warmup: usize, frames: usize) -> Vec<ClothRow> {
                 .map(|_| {
                     let t = Instant::now();
                     cloth.step_frame(FRAME_DT);
-                    t.elapsed().as_secs_f64() * 1e3
+                    ms_since(t)
                 })
                 .collect();
             let cpu_ms = match (cpu_start, cpu_ns()) {

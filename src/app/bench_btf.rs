@@ -7,7 +7,7 @@ use std::time::Instant;
 use glam::{Vec2, Vec3};
 use serde::Serialize;
 
-use super::bench::MarkdownRow;
+use super::bench::{MarkdownRow, ms_since};
 use crate::btf::directions::Sampling;
 use crate::btf::hem::{EigenWeightsets, Frame, Visibility, WeightTable};
 use crate::btf::pca::{Centring, compress};
@@ -117,14 +117,14 @@ pub fn hem(small: bool, mut report: impl FnMut(&HemRow)) -> anyhow::Result<Vec<H
         let frames: Vec<Frame> = (0..n * n).map(|v| Frame::from_tangents(normals[v], tu[v], tv[v])).collect();
         let t = Instant::now();
         let vis = Visibility::compute(&positions, &frames, &indices, &sampling, hemicube, env_size, 0)?;
-        let vpt_ms = ms(t);
+        let vpt_ms = ms_since(t);
         let first = env(0.0);
         let t = Instant::now();
         let g = vis.light_sums(&first, 0)?;
-        let light_sums_ms = ms(t);
+        let light_sums_ms = ms_since(t);
         let t = Instant::now();
         let u = table.weight_sets(&g, 0);
-        let weight_sets_ms = ms(t);
+        let weight_sets_ms = ms_since(t);
         let mut row = HemRow {
             mesh: format!("folded panel {n}x{n}"),
             vertices: n * n,
@@ -149,11 +149,11 @@ pub fn hem(small: bool, mut report: impl FnMut(&HemRow)) -> anyhow::Result<Vec<H
             let sums: Vec<Vec<f32>> =
                 (0..count).map(|a| vis.light_sums(&env(a as f32 * step), 0)).collect::<anyhow::Result<_>>()?;
             let eig = EigenWeightsets::new(&table, &sums, 5, 0)?;
-            row.eigen_build_ms = Some(ms(t));
+            row.eigen_build_ms = Some(ms_since(t));
             drop(sums);
             let t = Instant::now();
             let approx = eig.weight_set_at(0.5, 0);
-            row.eigen_update_ms = Some(ms(t));
+            row.eigen_update_ms = Some(ms_since(t));
             let norm = |x: &mut dyn Iterator<Item = f32>| x.map(|x| x as f64 * x as f64).sum::<f64>().sqrt();
             let error = |approx: &[f32], degrees: f32| -> anyhow::Result<f64> {
                 let direct = table.weight_sets(&vis.light_sums(&env(degrees), 0)?, 0);
@@ -254,10 +254,6 @@ pub fn tiers(mut report: impl FnMut(&TierRow)) -> anyhow::Result<Vec<TierRow>> {
 }
 
 const MIB: f64 = 1024.0 * 1024.0;
-
-fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
-}
 
 /// One frame-rate row of Table 2 on this machine's GPU: a sphere of about `vertices` shaded
 /// by BtfShading under the sun alone (PLS) or under the forest probe through HEM, with the
@@ -360,7 +356,7 @@ pub fn frames(
                 };
                 let t = Instant::now();
                 step()?;
-                let first = ms(t);
+                let first = ms_since(t);
                 Ok((first, super::bench::median_ms(frames, &mut step)?))
             };
             let (_, pls_ms) = time(false)?;

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
-use super::bench::{MarkdownRow, median};
+use super::bench::{MarkdownRow, median, ms_since};
 use crate::app::editor::live::{CameraOverride, Live, NodeState, camera_for};
 use crate::core::graph::Graph;
 use crate::gpu::GpuContext;
@@ -152,10 +152,6 @@ fn play(
 fn shown_size(live: &Live) -> Option<(u32, u32)> {
     let [w, h] = live.display()?.pixels.as_ref()?.size;
     Some((w as u32, h as u32))
-}
-
-fn ms_since(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
 }
 
 /// Pumps until the evaluation is done, then fails on a node that failed.

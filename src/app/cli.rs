@@ -1428,14 +1428,14 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         }
         #[cfg(feature = "editor")]
         Command::Bench { what: BenchWhat::Editor { graph, size, frames, orbit_steps, json, backend } } => {
-            let size = parse_size(&size)?;
-            let gpu = std::sync::Arc::new(GpuContext::headless(pick_backend(backend)?)?);
+            // GpuBench's parts, with the editor's own default size.
+            let out = GpuBench { size, json, backend };
+            let (gpu, size) = out.open()?;
+            let gpu = std::sync::Arc::new(gpu);
             let rows = crate::app::bench_editor::editor(&gpu, &graph, size, frames, orbit_steps)?;
             println!("{} in the editor's viewport, on {}:\n", graph.display(), gpu.info.name);
             print!("{}", crate::app::bench::markdown_table(&rows));
-            if let Some(path) = json {
-                crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-            }
+            out.write_json(&rows)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { what: BenchWhat::Graph { nodes, frames } } => {
