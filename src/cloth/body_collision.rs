@@ -483,12 +483,13 @@ impl BodyMesh {
         // for any thread count.
         let (tree, boxes, previous, (start, end)) =
             (&*tree, &self.cloth_boxes, &self.vt_previous, (&self.start, &self.end));
-        let found = crate::core::parallel::map_in_chunks(self.end.len(), CANDIDATE_CHUNK, |b| {
-            let mut pairs = Vec::new();
+        let out = &mut self.vt_pairs;
+        let capped = crate::core::parallel::flat_in_chunks(self.end.len(), CANDIDATE_CHUNK, out, |b, pairs| {
             let q = Aabb::from_points(&[start[b], end[b]]).inflate(0.5 * radius);
             if !q.overlaps(&all) {
-                return (pairs, false);
+                return false;
             }
+            let first = pairs.len();
             tree.query(&q, |t| {
                 if boxes[t as usize].overlaps(&q) && tris[t as usize].iter().any(|&i| inv_mass[i as usize] > 0.0) {
                     pairs.push((b as u32, t, 0.0));
@@ -497,24 +498,20 @@ impl BodyMesh {
             let p = start[b];
             // A cloth that sped up (a heap, a caught hem) sweeps boxes over the whole body:
             // keep the nearest triangles, as self-collision does, so pairs stay bounded.
-            if pairs.len() > MAX_PAIRS_PER_VERTEX {
-                for pair in &mut pairs {
+            if pairs.len() - first > MAX_PAIRS_PER_VERTEX {
+                for pair in &mut pairs[first..] {
                     let [a, bb, c] = tris[pair.1 as usize].map(|j| x[j as usize]);
                     pair.2 = p.distance(super::collider::closest_point_on_triangle(p, a, bb, c));
                 }
             }
-            let capped = cap_and_sort(&mut pairs, 0);
+            let capped = cap_and_sort(pairs, first);
             let had = pairs_of(previous, b);
-            for pair in &mut pairs {
+            for pair in &mut pairs[first..] {
                 pair.2 = gathered_side(had, pair.1, p, tris[pair.1 as usize].map(|j| x[j as usize]), thickness);
             }
-            (pairs, capped)
+            capped
         });
-        self.vt_pairs.clear();
-        for (pairs, capped) in found {
-            self.vt_pairs.extend(pairs);
-            self.stats.vertex_pairs_capped += usize::from(capped);
-        }
+        self.stats.vertex_pairs_capped += capped;
         self.stats.vertex_pairs = self.vt_pairs.len();
     }
 

@@ -269,14 +269,15 @@ impl SelfCollision {
         // Each vertex's pairs (its query of the tree, capped and sorted, with their sides) on
         // the cores in chunks, then appended in vertex order: the same for any thread count.
         let (tree, boxes, previous) = (&self.tree, &self.boxes, &self.previous);
-        let found = crate::core::parallel::map_in_chunks(x.len(), PAIR_CHUNK, |i| {
+        let capped = crate::core::parallel::flat_in_chunks(x.len(), PAIR_CHUNK, &mut self.pairs, |i, pairs| {
             let had = pairs_of(previous, i);
             if !gathered(i) {
                 // Not gathered again: the pairs it has.
-                return (had.to_vec(), false);
+                pairs.extend_from_slice(had);
+                return false;
             }
             let q = sweep(i).inflate(r);
-            let mut pairs = Vec::new();
+            let first = pairs.len();
             tree.query(&q, |t| {
                 let tri = triangles[t as usize];
                 // Not its own triangles, nor those of the vertices it is sewn to.
@@ -301,8 +302,8 @@ impl SelfCollision {
                     pairs.push((i as u32, t, d - closing));
                 }
             });
-            let capped = cap_and_sort(&mut pairs, 0);
-            for pair in &mut pairs {
+            let capped = cap_and_sort(pairs, first);
+            for pair in &mut pairs[first..] {
                 // In contact, the side last frame had (a pair forced back by the untangling
                 // deeper than that is forced again while its crossing is found). The same
                 // within a frame: keeping deeper sides there too (all, or the forced ones)
@@ -311,13 +312,9 @@ impl SelfCollision {
                 let tri = triangles[pair.1 as usize].map(|j| x[j as usize]);
                 pair.2 = gathered_side(had, pair.1, x[i], tri, thickness);
             }
-            (pairs, capped)
+            capped
         });
-        self.pairs.clear();
-        for (pairs, capped) in found {
-            self.pairs.extend(pairs);
-            self.stats.capped += usize::from(capped);
-        }
+        self.stats.capped += capped;
         self.stats.pairs = self.stats.pairs.max(self.pairs.len());
     }
 

@@ -52,23 +52,53 @@ pub fn csr_in_chunks<T: Send>(
     out: &mut Vec<T>,
     find: impl Fn(usize, &mut Vec<T>) + Sync + Send,
 ) {
-    let chunk_len = chunk_len.max(1);
-    let chunks = map(count.div_ceil(chunk_len), chunk_threads(count, chunk_len), |c| {
-        let (mut found, mut ends) = (Vec::new(), Vec::with_capacity(chunk_len));
-        for i in c * chunk_len..((c + 1) * chunk_len).min(count) {
-            find(i, &mut found);
-            ends.push(found.len() as u32);
-        }
-        (found, ends)
-    });
     starts.clear();
     out.clear();
     starts.push(0);
-    for (found, ends) in chunks {
+    for (found, ends) in lists_in_chunks(count, chunk_len, find) {
         let base = out.len() as u32;
-        starts.extend(ends.iter().map(|e| base + e));
+        starts.extend(ends.iter().map(|&(end, ())| base + end));
         out.extend(found);
     }
+}
+
+/// Each of `count` items' lists (`find(i, list)` appends item `i`'s and says whether to count
+/// it), found as [`csr_in_chunks`] finds them and appended to `out` in item order; returns how
+/// many items `find` counted. For lists that carry their item.
+pub fn flat_in_chunks<T: Send>(
+    count: usize,
+    chunk_len: usize,
+    out: &mut Vec<T>,
+    find: impl Fn(usize, &mut Vec<T>) -> bool + Sync + Send,
+) -> usize {
+    out.clear();
+    let mut counted = 0;
+    for (found, ends) in lists_in_chunks(count, chunk_len, find) {
+        counted += ends.iter().filter(|(_, c)| *c).count();
+        out.extend(found);
+    }
+    counted
+}
+
+/// One chunk's items' lists appended into one, and each item's end in it with what `find`
+/// returned for it.
+type ChunkLists<T, R> = (Vec<T>, Vec<(u32, R)>);
+
+/// [`ChunkLists`] of every `chunk_len` items, in order.
+fn lists_in_chunks<T: Send, R: Send>(
+    count: usize,
+    chunk_len: usize,
+    find: impl Fn(usize, &mut Vec<T>) -> R + Sync + Send,
+) -> Vec<ChunkLists<T, R>> {
+    let chunk_len = chunk_len.max(1);
+    map(count.div_ceil(chunk_len), chunk_threads(count, chunk_len), |c| {
+        let (mut found, mut ends) = (Vec::new(), Vec::with_capacity(chunk_len));
+        for i in c * chunk_len..((c + 1) * chunk_len).min(count) {
+            let r = find(i, &mut found);
+            ends.push((found.len() as u32, r));
+        }
+        (found, ends)
+    })
 }
 
 /// One thread per core from two chunks up; below, the calling thread alone (handing out costs
@@ -120,6 +150,14 @@ mod tests {
         }
         assert_eq!(starts, want_starts);
         assert_eq!(out, want);
+        // The same lists appended flat, counting the items with four entries.
+        let mut flat = vec![9];
+        let counted = super::flat_in_chunks(count, 64, &mut flat, |i, found| {
+            found.extend((0..i as u32 % 5).map(|j| 1000 * i as u32 + j));
+            i % 5 == 4
+        });
+        assert_eq!(flat, want);
+        assert_eq!(counted, (0..count).filter(|i| i % 5 == 4).count());
     }
 
     #[test]
