@@ -484,7 +484,7 @@ impl BodyMesh {
         let (tree, boxes, previous, (start, end)) =
             (&*tree, &self.cloth_boxes, &self.vt_previous, (&self.start, &self.end));
         let out = &mut self.vt_pairs;
-        let capped = crate::core::parallel::flat_in_chunks(self.end.len(), CANDIDATE_CHUNK, out, |b, pairs| {
+        let capped = crate::core::parallel::flat_in_chunks(end.len(), CANDIDATE_CHUNK, out, |b, pairs| {
             let q = Aabb::from_points(&[start[b], end[b]]).inflate(0.5 * radius);
             if !q.overlaps(&all) {
                 return false;

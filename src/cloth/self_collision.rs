@@ -78,7 +78,8 @@ pub(crate) fn pairs_of(pairs: &[(u32, u32, f32)], v: usize) -> &[(u32, u32, f32)
 pub(crate) fn gathered_side(had: &[(u32, u32, f32)], t: u32, p: Vec3, tri: [Vec3; 3], thickness: f32) -> f32 {
     let [a, b, c] = tri;
     let d = (p - a).dot((b - a).cross(c - a).normalize_or_zero());
-    let kept = had.binary_search_by_key(&t, |p| p.1).ok().filter(|_| d.abs() < thickness);
+    // Most gathered pairs are farther than the thickness: no search for those.
+    let kept = (d.abs() < thickness).then(|| had.binary_search_by_key(&t, |p| p.1).ok()).flatten();
     kept.map_or(if d >= 0.0 { 1.0 } else { -1.0 }, |k| had[k].2)
 }
 
