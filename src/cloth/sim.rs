@@ -46,6 +46,9 @@ const WELD_GAP: f32 = 0.005;
 /// 6 %; docs/garments.md).
 const STRUT_SPANS: [f32; 3] = [2.0, 5.0, 12.0];
 
+/// Strut lengths across the seams ([`Rest::seam_struts`]) in mean edge lengths.
+const SEAM_STRUT_SPANS: [f32; 1] = [2.0];
+
 /// Cosine of the widest angle between a strut and its direction (23 degrees).
 const STRUT_COS: f32 = 0.92;
 
@@ -181,7 +184,9 @@ pub struct SimParams {
     pub max_speed: f32,
     /// Struts: keep vertices of one flat piece no farther apart than they are on the pattern,
     /// at [`STRUT_SPANS`] edge lengths, so a load crosses the piece in a few sweeps instead of
-    /// one edge per sweep (flat rest only). Off by default here; the `Garment` node turns it on.
+    /// one edge per sweep, and, once the seams are welded, vertices either side of a seam no
+    /// farther apart than the way between them through it (flat rest only). Off by default
+    /// here; the `Garment` node turns it on.
     pub struts: bool,
 }
 
@@ -311,39 +316,15 @@ impl Rest<'_> {
     /// rest the straight distance is not the way along the cloth.
     fn struts(&self, triangles: &[[u32; 3]], piece_ids: &[u32]) -> Vec<([u32; 2], f32)> {
         let Rest::Flat(p) = self else { return Vec::new() };
-        if triangles.is_empty() {
-            return Vec::new();
-        }
-        let edge_sum: f32 = triangles
-            .iter()
-            .map(|t| (0..3).map(|k| p[t[k] as usize].distance(p[t[(k + 1) % 3] as usize])).sum::<f32>())
-            .sum();
-        let h = edge_sum / (3 * triangles.len()) as f32;
-        let flat_box = |points: &[Vec2]| Aabb::from_points(&points.iter().map(|q| q.extend(0.0)).collect::<Vec<_>>());
-        let tri_tree =
-            AabbTree::build(&triangles.iter().map(|t| flat_box(&t.map(|i| p[i as usize]))).collect::<Vec<_>>());
-        let on_piece = |q: Vec2, piece: u32| {
-            let mut found = false;
-            tri_tree.query(&Aabb::around(q.extend(0.0), 0.0), |t| {
-                let tri = triangles[t as usize];
-                let [a, b, c] = tri.map(|i| p[i as usize]);
-                let det = (b - a).perp_dot(c - a);
-                if found || piece_ids[tri[0] as usize] != piece || det == 0.0 {
-                    return;
-                }
-                let (u, v) = ((q - a).perp_dot(c - a) / det, (b - a).perp_dot(q - a) / det);
-                found = u >= -1e-4 && v >= -1e-4 && u + v <= 1.0 + 1e-4;
-            });
-            found
-        };
-        let vertex_tree = AabbTree::build(&p.iter().map(|&q| flat_box(&[q])).collect::<Vec<_>>());
+        let Some(layout) = FlatLayout::new(p, triangles, piece_ids) else { return Vec::new() };
+        let h = layout.mean_edge;
         let directions = [0.0f32, 45.0, 90.0, 135.0].map(|a| Vec2::from_angle(a.to_radians()));
         let mut out = Vec::new();
         for span in STRUT_SPANS {
             let (near, far) = ((span - 0.5) * h, (span + 0.5) * h);
             for i in 0..p.len() {
                 let mut best = [(f32::NEG_INFINITY, u32::MAX); 4];
-                vertex_tree.query(&Aabb::around(p[i].extend(0.0), far), |j| {
+                layout.vertices_within(p[i], far, |j| {
                     let offset = p[j as usize] - p[i];
                     let r = offset.length();
                     if piece_ids[j as usize] != piece_ids[i] || r < near || r > far {
@@ -358,12 +339,66 @@ impl Rest<'_> {
                 });
                 for (_, j) in best.into_iter().filter(|b| b.1 != u32::MAX) {
                     let (a, b) = (p[i], p[j as usize]);
-                    if (1..4).all(|k| on_piece(a.lerp(b, k as f32 / 4.0), piece_ids[i])) {
+                    if layout.line_on_piece(a, b, piece_ids[i]) {
                         out.push(([i as u32, j], a.distance(b)));
                     }
                 }
             }
         }
+        out
+    }
+
+    /// Struts across the seams ([`SimParams::struts`]; acting once the seams are welded): from
+    /// each sewn pair, at each of [`STRUT_SPANS`], the vertices half the span straight in from
+    /// the seam on either side, no farther apart than the shortest way between them through a
+    /// sewn pair nearby (each leg straight on its piece). That is a way along the sewn cloth, so
+    /// the cloth unstretched never puts them farther apart, and the strut never fights a fold.
+    /// Struts within a piece stop at its edges, and the load a seam carries (a shirt hangs from
+    /// its shoulder seams) stretched the edges with a sewn end most.
+    fn seam_struts(&self, triangles: &[[u32; 3]], piece_ids: &[u32], seams: &[[u32; 2]]) -> Vec<([u32; 2], f32)> {
+        let Rest::Flat(p) = self else { return Vec::new() };
+        let Some(layout) = FlatLayout::new(p, triangles, piece_ids) else { return Vec::new() };
+        let h = layout.mean_edge;
+        let inward = boundary_inward_normals(&layout);
+        let mut out: Vec<([u32; 2], f32)> = Vec::new();
+        for span in SEAM_STRUT_SPANS {
+            let depth = 0.5 * span * h;
+            // The vertex of `v`'s piece nearest the point `depth` in from the seam at `v`.
+            let straight_in = |v: u32| -> Option<u32> {
+                let piece = piece_ids[v as usize];
+                let target = p[v as usize] + inward[v as usize]? * depth;
+                let mut best: Option<(f32, u32)> = None;
+                layout.vertices_within(target, 0.5 * h, |j| {
+                    let d = p[j as usize].distance(target);
+                    if piece_ids[j as usize] == piece && d <= 0.5 * h && best.is_none_or(|b| (d, j) < b) {
+                        best = Some((d, j));
+                    }
+                });
+                best.map(|b| b.1).filter(|&j| layout.line_on_piece(p[v as usize], p[j as usize], piece))
+            };
+            for &[a, b] in seams {
+                let (Some(i), Some(j)) = (straight_in(a), straight_in(b)) else { continue };
+                let (piece_a, piece_b) = (piece_ids[a as usize], piece_ids[b as usize]);
+                // The shortest way through the pairs of this seam's pieces near this one.
+                let way = seams
+                    .iter()
+                    .filter(|&&[c, d]| {
+                        piece_ids[c as usize] == piece_a
+                            && piece_ids[d as usize] == piece_b
+                            && p[c as usize].distance(p[a as usize]) <= depth
+                    })
+                    .filter(|&&[c, d]| {
+                        layout.line_on_piece(p[i as usize], p[c as usize], piece_a)
+                            && layout.line_on_piece(p[d as usize], p[j as usize], piece_b)
+                    })
+                    .map(|&[c, d]| p[i as usize].distance(p[c as usize]) + p[d as usize].distance(p[j as usize]))
+                    .fold(p[i as usize].distance(p[a as usize]) + p[b as usize].distance(p[j as usize]), f32::min);
+                out.push(([i.min(j), i.max(j)], way));
+            }
+        }
+        // A pair met from several sewn pairs keeps its shortest way.
+        out.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+        out.dedup_by_key(|s| s.0);
         out
     }
 
@@ -438,6 +473,10 @@ pub struct Cloth {
     struts: Vec<[u32; 2]>,
     strut_max: Vec<f32>,
     part_struts: Vec<usize>,
+    /// Struts across the seams and their longest lengths ([`Rest::seam_struts`]), solved once
+    /// the seams are welded: before, the panels are apart and the seams close on their schedule.
+    seam_struts: Vec<[u32; 2]>,
+    seam_strut_max: Vec<f32>,
     seams: Vec<[u32; 2]>,
     seam_gap: Vec<f32>,
     /// Per seam pair, the rest length it was last solved to: it only shrinks (see
@@ -588,6 +627,11 @@ impl Cloth {
             .collect();
 
         let seams = mesh.seam_pairs().to_vec();
+        let (seam_struts, seam_strut_max) = if params.struts {
+            rest.seam_struts(mesh.triangles(), mesh.piece_ids(), &seams).into_iter().unzip()
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let seam_gap: Vec<f32> =
             seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
@@ -628,6 +672,8 @@ impl Cloth {
             struts,
             strut_max,
             part_struts,
+            seam_struts,
+            seam_strut_max,
             seams,
             seam_meeting: vec![None; seam_gap.len()],
             seams_free: Vec::new(),
@@ -1083,6 +1129,9 @@ impl Cloth {
                 let within: Vec<_> = split_at_bounds(x, &self.part_vertices).into_iter().enumerate().collect();
                 crate::core::parallel::for_each(within, |(part, x)| strut(part, x));
                 strut(SWEEP_PARTS, x);
+            }
+            if welded && sweep_index + 1 == self.params.iterations {
+                solve_struts(x, 0, w, &self.seam_struts, &self.seam_strut_max);
             }
             if p.tethers {
                 solve_tethers(x, &self.tethers);
@@ -1755,6 +1804,95 @@ fn weld(x: &mut [Vec3], w: &[f32], groups: &[Vec<u32>]) {
     }
 }
 
+/// A flat rest's pieces, for laying struts: the mean edge length and lookups of the triangles
+/// and vertices by position.
+struct FlatLayout<'a> {
+    p: &'a [Vec2],
+    triangles: &'a [[u32; 3]],
+    piece_ids: &'a [u32],
+    mean_edge: f32,
+    triangle_tree: AabbTree,
+    vertex_tree: AabbTree,
+}
+
+impl<'a> FlatLayout<'a> {
+    fn new(p: &'a [Vec2], triangles: &'a [[u32; 3]], piece_ids: &'a [u32]) -> Option<Self> {
+        if triangles.is_empty() {
+            return None;
+        }
+        let edge_sum: f32 = triangles
+            .iter()
+            .map(|t| (0..3).map(|k| p[t[k] as usize].distance(p[t[(k + 1) % 3] as usize])).sum::<f32>())
+            .sum();
+        let flat_box = |points: &[Vec2]| Aabb::from_points(&points.iter().map(|q| q.extend(0.0)).collect::<Vec<_>>());
+        Some(FlatLayout {
+            p,
+            triangles,
+            piece_ids,
+            mean_edge: edge_sum / (3 * triangles.len()) as f32,
+            triangle_tree: AabbTree::build(
+                &triangles.iter().map(|t| flat_box(&t.map(|i| p[i as usize]))).collect::<Vec<_>>(),
+            ),
+            vertex_tree: AabbTree::build(&p.iter().map(|&q| flat_box(&[q])).collect::<Vec<_>>()),
+        })
+    }
+
+    /// Whether `q` lies on a triangle of `piece`.
+    fn on_piece(&self, q: Vec2, piece: u32) -> bool {
+        let mut found = false;
+        self.triangle_tree.query(&Aabb::around(q.extend(0.0), 0.0), |t| {
+            let tri = self.triangles[t as usize];
+            let [a, b, c] = tri.map(|i| self.p[i as usize]);
+            let det = (b - a).perp_dot(c - a);
+            if found || self.piece_ids[tri[0] as usize] != piece || det == 0.0 {
+                return;
+            }
+            let (u, v) = ((q - a).perp_dot(c - a) / det, (b - a).perp_dot(q - a) / det);
+            found = u >= -1e-4 && v >= -1e-4 && u + v <= 1.0 + 1e-4;
+        });
+        found
+    }
+
+    /// Whether the straight line from `a` to `b` stays on `piece` (checked at its quarters).
+    fn line_on_piece(&self, a: Vec2, b: Vec2, piece: u32) -> bool {
+        (1..4).all(|k| self.on_piece(a.lerp(b, k as f32 / 4.0), piece))
+    }
+
+    /// Calls `f` with the vertices in the square of half-side `r` round `q` (and maybe others).
+    fn vertices_within(&self, q: Vec2, r: f32, f: impl FnMut(u32)) {
+        self.vertex_tree.query(&Aabb::around(q.extend(0.0), r), f);
+    }
+}
+
+/// Each boundary vertex's unit normal into its piece (from its neighbours along the boundary),
+/// `None` inside the pieces and where the boundary turns too sharply to say.
+fn boundary_inward_normals(layout: &FlatLayout<'_>) -> Vec<Option<Vec2>> {
+    let p = layout.p;
+    let mut half: Vec<[u32; 2]> =
+        layout.triangles.iter().flat_map(|t| (0..3).map(move |k| sorted_pair(t[k], t[(k + 1) % 3]))).collect();
+    half.sort_unstable();
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); p.len()];
+    for run in half.chunk_by(|a, b| a == b) {
+        if let [[a, b]] = run {
+            neighbours[*a as usize].push(*b);
+            neighbours[*b as usize].push(*a);
+        }
+    }
+    (0..p.len())
+        .map(|v| {
+            let [prev, next] = neighbours[v][..] else { return None };
+            let normal = (p[next as usize] - p[prev as usize]).perp().try_normalize()?;
+            let piece = layout.piece_ids[v];
+            let step = 0.25 * layout.mean_edge;
+            [normal, -normal].into_iter().find(|&n| layout.on_piece(p[v] + n * step, piece))
+        })
+        .collect()
+}
+
+fn sorted_pair(a: u32, b: u32) -> [u32; 2] {
+    [a.min(b), a.max(b)]
+}
+
 /// Inequality distance constraints `|x_a - x_b| <= max`, rigid (PBD): they only ever pull
 /// two vertices of a piece back to their distance on the pattern, which the cloth unstretched
 /// cannot exceed, so they never fight a fold.
@@ -1827,6 +1965,46 @@ mod tests {
         }
         let spans: Vec<f32> = struts.iter().map(|s| s.1 / (CM * 1.0)).collect();
         assert!(spans.iter().any(|&l| l > 10.0), "long struts too");
+    }
+
+    /// Two 10 x 20 cm panels sewn end to end: flat, the sewn cloth is one 10 x 40 cm sheet, so
+    /// the way along the cloth between any two of its points is the straight line across it.
+    #[test]
+    fn seam_struts_join_the_pieces_no_shorter_than_the_way_along_the_sewn_cloth() {
+        use crate::cloth::pattern::{EdgeRef, Seam};
+        let panels =
+            vec![Piece::new("top", rectangle_outline(10.0, 20.0)), Piece::new("bottom", rectangle_outline(10.0, 20.0))];
+        // The top's lower edge (0, left to right) on the bottom's upper edge (2, right to left).
+        let seam = Seam { a: EdgeRef { piece: 0, edge: 0 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
+        let mesh = PatternMesh::build(panels, vec![seam], 1.0).unwrap();
+        let (p, pieces) = (mesh.rest_positions(), mesh.piece_ids());
+        let corner =
+            |piece: u32| (0..p.len()).filter(|&i| pieces[i] == piece).map(|i| p[i]).fold(Vec2::INFINITY, Vec2::min);
+        let corners = [corner(0), corner(1)];
+        // The sheet: the bottom panel below the top one.
+        let sheet = |v: u32| {
+            let q = p[v as usize] - corners[pieces[v as usize] as usize];
+            if pieces[v as usize] == 0 { q } else { q - Vec2::new(0.0, 20.0) }
+        };
+        for &[a, b] in mesh.seam_pairs() {
+            assert!(sheet(a).distance(sheet(b)) < 1e-4, "sewn pair {a}-{b} apart on the sheet");
+        }
+        let rest = Rest::Flat(p.iter().map(|q| *q * CM).collect());
+        let struts = rest.seam_struts(mesh.triangles(), pieces, mesh.seam_pairs());
+        // Every sewn pair but the two at the corners, where the boundary turns and there is no
+        // straight in.
+        let pairs = mesh.seam_pairs().len();
+        assert_eq!(struts.len(), pairs - 2, "{} struts for {pairs} sewn pairs", struts.len());
+        for &([a, b], max) in &struts {
+            assert_ne!(pieces[a as usize], pieces[b as usize], "strut {a}-{b} on one piece");
+            let way = sheet(a).distance(sheet(b)) * CM;
+            // Never shorter than the way along the cloth (it would pull unstretched cloth), and
+            // not much longer (it would hold nothing).
+            assert!(max >= way - 1e-6, "strut {a}-{b}: longest {max} under the way {way}");
+            assert!(max <= way * 1.01, "strut {a}-{b}: longest {max} for the way {way}");
+        }
+        // About an edge into either side.
+        assert!(struts.iter().all(|s| (0.015..0.03).contains(&s.1)), "struts {struts:?}");
     }
 
     /// A 20 x 60 cm panel hanging from its top edge: the struts carry its weight to the top
