@@ -1470,7 +1470,32 @@ pub fn export(
 
 #[cfg(test)]
 mod tests {
-    use super::median;
+    use super::{DrapeReport, GarmentDrapeReport, median, placement_summary};
+
+    #[test]
+    fn the_placement_summary_gives_each_edge_lengths_mean_and_range() {
+        let row = |edge_cm: f64, frame_ms: f64, crossings: usize, strain: f32| GarmentDrapeReport {
+            edge_cm,
+            drape: DrapeReport {
+                frame_ms,
+                max_self_crossings: crossings,
+                min_clearance_mm: 2.4,
+                max_p99_strain_percent: strain,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let rows = [row(1.0, 100.0, 3, 7.0), row(0.5, 900.0, 0, 3.0), row(1.0, 140.0, 22, 8.0)];
+        let lines: Vec<String> = placement_summary(&rows).lines().map(str::to_string).collect();
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        assert!(lines[0].starts_with("0.5 cm over 1 placements"), "{}", lines[0]);
+        assert!(lines[1].starts_with("1 cm over 2 placements"), "{}", lines[1]);
+        for part in
+            ["ms/frame 120.0 (100.0-140.0)", "self crossings walk max 12.5 (3.0-22.0)", "p99 strain % 7.5 (7.0-8.0)"]
+        {
+            assert!(lines[1].contains(part), "{part} in {}", lines[1]);
+        }
+    }
 
     #[test]
     fn the_median_of_an_even_count_is_the_mean_of_the_middle_two() {
@@ -1800,6 +1825,8 @@ impl MarkdownRow for ShadowRow {
 #[derive(Debug, Default, serde::Serialize)]
 pub struct GarmentDrapeReport {
     pub edge_cm: f64,
+    /// The placement's offset (cm).
+    pub offset_cm: [f64; 3],
     pub substeps: u32,
     /// Settling and the timed walk, as for the skirt.
     #[serde(flatten)]
@@ -1884,6 +1911,7 @@ pub fn drape_garment(
     let mut drape = Drape::new(&sewn, &params, Some(body));
     let mut r = GarmentDrapeReport {
         edge_cm,
+        offset_cm: setup.offset_cm.to_array(),
         substeps,
         drape: DrapeReport {
             particles: drape.cloth.vertex_count(),
@@ -1949,12 +1977,42 @@ pub fn drape_garment(
     Ok(r)
 }
 
+/// A line per edge length over the placements `rows` ran at: each figure's mean and range
+/// (`werkstatt bench drape` with `--offset` more than once).
+pub fn placement_summary(rows: &[GarmentDrapeReport]) -> String {
+    let mut edges: Vec<f64> = rows.iter().map(|r| r.edge_cm).collect();
+    edges.sort_by(f64::total_cmp);
+    edges.dedup();
+    let mut s = String::new();
+    for edge in edges {
+        let at: Vec<&GarmentDrapeReport> = rows.iter().filter(|r| r.edge_cm == edge).collect();
+        let spread = |figure: &dyn Fn(&GarmentDrapeReport) -> f64, digits: usize| {
+            let values: Vec<f64> = at.iter().map(|r| figure(r)).collect();
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let (lo, hi) =
+                values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            format!("{mean:.digits$} ({lo:.digits$}-{hi:.digits$})")
+        };
+        s.push_str(&format!(
+            "{edge} cm over {} placements, mean (range): ms/frame {}, self crossings walk max {}, walk frames with any {}, min clearance mm {}, p99 strain % {}\n",
+            at.len(),
+            spread(&|r| r.drape.frame_ms, 1),
+            spread(&|r| r.drape.max_self_crossings as f64, 1),
+            spread(&|r| r.drape.self_crossing_frames as f64, 1),
+            spread(&|r| f64::from(r.drape.min_clearance_mm), 2),
+            spread(&|r| f64::from(r.drape.max_p99_strain_percent), 1),
+        ));
+    }
+    s
+}
+
 impl MarkdownRow for GarmentDrapeReport {
-    const HEADER: &'static str = "| edge cm | substeps | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max / walk frames with any) | min clearance mm | max gap mm | p99 strain % |\n|---:|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
+    const HEADER: &'static str = "| edge cm | offset cm | substeps | particles | settled (frames, ms) | ms/frame | detection | constraints | self | body | body crossings (settled / walk max) | self crossings (settled / walk max / walk frames with any) | min clearance mm | max gap mm | p99 strain % |\n|---:|---|---:|---:|---|---:|---:|---:|---:|---:|---|---|---:|---:|---:|";
     fn markdown(&self) -> String {
         let d = &self.drape;
+        let [x, y, z] = self.offset_cm;
         format!(
-            "| {} | {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} / {} | {:.2} | {:.2} | {:.1} |",
+            "| {} | {x},{y},{z} | {} | {} | {}, {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} / {} | {} / {} / {} | {:.2} | {:.2} | {:.1} |",
             self.edge_cm,
             self.substeps,
             d.particles,

@@ -284,9 +284,9 @@ enum SamplingArg {
 }
 
 /// "a,b,c" as three numbers, for `flag` that takes them as `names` ("r,g,b").
-fn parse_three(flag: &str, names: &str, text: &str) -> anyhow::Result<[f32; 3]> {
+fn parse_three<T: std::str::FromStr + Copy>(flag: &str, names: &str, text: &str) -> anyhow::Result<[T; 3]> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let numbers: Vec<f32> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    let numbers: Vec<T> = parts.iter().filter_map(|p| p.parse().ok()).collect();
     anyhow::ensure!(parts.len() == 3 && numbers.len() == 3, "{flag} takes three numbers \"{names}\", not {text:?}");
     Ok([numbers[0], numbers[1], numbers[2]])
 }
@@ -483,9 +483,13 @@ enum BenchWhat {
         arm_spread: f64,
         /// Moves the pattern's placement (cm: x,y,z), as the `Garment` node's `offset` (its
         /// default when left out). graphs/garment_dress.ron sets 0,4,3: lower, the pencil
-        /// dress's strap seams close through the shoulders and it falls.
-        #[arg(long, allow_hyphen_values = true)]
-        offset: Option<String>,
+        /// dress's strap seams close through the shoulders and it falls. Given more than once,
+        /// each placement runs in turn and a line per edge length after the table gives the
+        /// mean and range of the figures over them: the worst frame's strain and crossings
+        /// change by a point or more between placements millimetres apart, so compare changes
+        /// over several.
+        #[arg(long, allow_hyphen_values = true, action = clap::ArgAction::Append)]
+        offset: Vec<String>,
         /// Write the start, settled and last cloth and every body pose as OBJ here (the
         /// Blender peer, peers/blender_drape.py, reads them).
         #[arg(long)]
@@ -1328,12 +1332,15 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     ..
                 },
         } => {
-            let offset_cm = match offset {
-                Some(text) => glam::Vec3::from(parse_three("--offset", "x,y,z", &text)?).as_dvec3(),
-                None => crate::garment::Fit::ON_MAKEHUMAN.offset,
+            let offsets_cm = if offset.is_empty() {
+                vec![crate::garment::Fit::ON_MAKEHUMAN.offset]
+            } else {
+                let parse = |text: &String| parse_three::<f64>("--offset", "x,y,z", text).map(glam::DVec3::from);
+                offset.iter().map(parse).collect::<anyhow::Result<Vec<_>>>()?
             };
+            let placed = offsets_cm.iter().map(|o| format!("{o}")).collect::<Vec<_>>().join(", ");
             println!(
-                "{} placed at offset {offset_cm} cm on the walking MakeHuman avatar (arms spread {arm_spread} degrees), self-collision on, {} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
+                "{} placed at offset {placed} cm on the walking MakeHuman avatar (arms spread {arm_spread} degrees), self-collision on, {} substeps per 1/60 s frame, {iterations} sweeps each, {frames} timed frames of walking{}",
                 pattern.display(),
                 substeps.map_or("the Garment node's".to_string(), |n| n.to_string()),
                 [(no_untangle, ", untangling off"), (no_struts, ", struts off")]
@@ -1341,30 +1348,40 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     .filter_map(|&(off, what)| off.then_some(what))
                     .collect::<String>()
             );
-            let setup = crate::app::bench::DrapeSetup {
-                substeps,
-                iterations,
-                untangle: !no_untangle,
-                struts: !no_struts,
-                arm_spread,
-                offset_cm,
-            };
             let mut rows = Vec::new();
-            for edge in edges {
-                let dir = obj_dir.as_ref().map(|d| d.join(format!("edge_{edge}cm")));
-                let r = crate::app::bench::drape_garment(
-                    &avatar,
-                    &pattern,
-                    edge,
-                    &setup,
-                    settle,
-                    frames,
-                    check_every,
-                    dir.as_deref(),
-                )?;
-                rows.push(r);
+            for &offset_cm in &offsets_cm {
+                let setup = crate::app::bench::DrapeSetup {
+                    substeps,
+                    iterations,
+                    untangle: !no_untangle,
+                    struts: !no_struts,
+                    arm_spread,
+                    offset_cm,
+                };
+                for &edge in &edges {
+                    let placement = if offsets_cm.len() > 1 {
+                        format!("offset_{},{},{}", offset_cm.x, offset_cm.y, offset_cm.z)
+                    } else {
+                        String::new()
+                    };
+                    let dir = obj_dir.as_ref().map(|d| d.join(&placement).join(format!("edge_{edge}cm")));
+                    let r = crate::app::bench::drape_garment(
+                        &avatar,
+                        &pattern,
+                        edge,
+                        &setup,
+                        settle,
+                        frames,
+                        check_every,
+                        dir.as_deref(),
+                    )?;
+                    rows.push(r);
+                }
             }
             print!("{}", crate::app::bench::markdown_table(&rows));
+            if offsets_cm.len() > 1 {
+                print!("{}", crate::app::bench::placement_summary(&rows));
+            }
             if let Some(path) = json {
                 crate::io::atomic::write_atomic(&path, serde_json::to_string_pretty(&rows)?.as_bytes())?;
             }
@@ -1451,14 +1468,23 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
 
 #[cfg(test)]
 mod tests {
-    use super::parse_three;
+    use super::{BenchWhat, Cli, Command, parse_three};
+    use clap::Parser;
+
+    #[test]
+    fn bench_drape_takes_several_placements() {
+        let cli =
+            Cli::try_parse_from(["werkstatt", "bench", "drape", "--offset", "0,0,3", "--offset", "-0.2,0,3"]).unwrap();
+        let Command::Bench { what: BenchWhat::Drape { offset, .. } } = cli.command else { panic!("not bench drape") };
+        assert_eq!(offset, ["0,0,3", "-0.2,0,3"]);
+    }
 
     #[test]
     fn three_numbers_parse_and_anything_else_names_the_flag() {
-        assert_eq!(parse_three("--offset", "x,y,z", "0,4,3").unwrap(), [0.0, 4.0, 3.0]);
-        assert_eq!(parse_three("--offset", "x,y,z", "-1.5, 2,3").unwrap(), [-1.5, 2.0, 3.0]);
+        assert_eq!(parse_three::<f32>("--offset", "x,y,z", "0,4,3").unwrap(), [0.0, 4.0, 3.0]);
+        assert_eq!(parse_three::<f32>("--offset", "x,y,z", "-1.5, 2,3").unwrap(), [-1.5, 2.0, 3.0]);
         for bad in ["1,2", "1,2,3,4", "a,2,3", ""] {
-            let err = parse_three("--offset", "x,y,z", bad).unwrap_err().to_string();
+            let err = parse_three::<f32>("--offset", "x,y,z", bad).unwrap_err().to_string();
             assert!(err.contains("--offset takes three numbers \"x,y,z\""), "{bad:?}: {err}");
         }
     }
