@@ -46,7 +46,9 @@ const WELD_GAP: f32 = 0.005;
 /// 6 %; docs/garments.md).
 const STRUT_SPANS: [f32; 3] = [2.0, 5.0, 12.0];
 
-/// Strut lengths across the seams ([`Rest::seam_struts`]) in mean edge lengths.
+/// Strut lengths across the seams ([`Rest::seam_struts`]) in mean edge lengths: 2 took the
+/// shirt's worst-frame 99th-percentile strain in a 2 s walk from 8.8 % to 7.4 %; 2, 5 and 12,
+/// as within pieces, did no better and collapsed the pencil dress in its walk (docs/garments.md).
 const SEAM_STRUT_SPANS: [f32; 1] = [2.0];
 
 /// Cosine of the widest angle between a strut and its direction (23 degrees).
@@ -349,7 +351,7 @@ impl Rest<'_> {
     }
 
     /// Struts across the seams ([`SimParams::struts`]; acting once the seams are welded): from
-    /// each sewn pair, at each of [`STRUT_SPANS`], the vertices half the span straight in from
+    /// each sewn pair, at each of [`SEAM_STRUT_SPANS`], the vertices half the span straight in from
     /// the seam on either side, no farther apart than the shortest way between them through a
     /// sewn pair nearby (each leg straight on its piece). That is a way along the sewn cloth, so
     /// the cloth unstretched never puts them farther apart, and the strut never fights a fold.
