@@ -310,98 +310,11 @@ impl Rest<'_> {
         pairs
     }
 
-    /// Strut pairs `(vertices, pattern distance)` ([`SimParams::struts`]): from each vertex, at
-    /// each of [`STRUT_SPANS`] mean edge lengths (give or take half an edge), the vertex of its
-    /// piece nearest each of four directions (0, 45, 90 and 135 degrees, within 23 degrees),
-    /// where the straight line between them stays on the piece (a notch or an armhole between
-    /// them makes the way along the cloth longer than the line). Flat rest only: on a shaped
-    /// rest the straight distance is not the way along the cloth.
-    fn struts(&self, triangles: &[[u32; 3]], piece_ids: &[u32]) -> Vec<([u32; 2], f32)> {
-        let Rest::Flat(p) = self else { return Vec::new() };
-        let Some(layout) = FlatLayout::new(p, triangles, piece_ids) else { return Vec::new() };
-        let h = layout.mean_edge;
-        let directions = [0.0f32, 45.0, 90.0, 135.0].map(|a| Vec2::from_angle(a.to_radians()));
-        let mut out = Vec::new();
-        for span in STRUT_SPANS {
-            let (near, far) = ((span - 0.5) * h, (span + 0.5) * h);
-            for i in 0..p.len() {
-                let mut best = [(f32::NEG_INFINITY, u32::MAX); 4];
-                layout.vertices_within(p[i], far, |j| {
-                    let offset = p[j as usize] - p[i];
-                    let r = offset.length();
-                    if piece_ids[j as usize] != piece_ids[i] || r < near || r > far {
-                        return;
-                    }
-                    for (k, d) in directions.iter().enumerate() {
-                        let cos = offset.dot(*d) / r;
-                        if cos > STRUT_COS && (cos, u32::MAX - j) > (best[k].0, u32::MAX - best[k].1) {
-                            best[k] = (cos, j);
-                        }
-                    }
-                });
-                for (_, j) in best.into_iter().filter(|b| b.1 != u32::MAX) {
-                    let (a, b) = (p[i], p[j as usize]);
-                    if layout.line_on_piece(a, b, piece_ids[i]) {
-                        out.push(([i as u32, j], a.distance(b)));
-                    }
-                }
-            }
-        }
-        out
-    }
-
-    /// Struts across the seams ([`SimParams::struts`]; acting once the seams are welded): from
-    /// each sewn pair, at each of [`SEAM_STRUT_SPANS`], the vertices half the span straight in from
-    /// the seam on either side, no farther apart than the shortest way between them through a
-    /// sewn pair nearby (each leg straight on its piece). That is a way along the sewn cloth, so
-    /// the cloth unstretched never puts them farther apart, and the strut never fights a fold.
-    /// Struts within a piece stop at its edges, and the load a seam carries (a shirt hangs from
-    /// its shoulder seams) stretched the edges with a sewn end most.
-    fn seam_struts(&self, triangles: &[[u32; 3]], piece_ids: &[u32], seams: &[[u32; 2]]) -> Vec<([u32; 2], f32)> {
-        let Rest::Flat(p) = self else { return Vec::new() };
-        let Some(layout) = FlatLayout::new(p, triangles, piece_ids) else { return Vec::new() };
-        let h = layout.mean_edge;
-        let inward = boundary_inward_normals(&layout);
-        let mut out: Vec<([u32; 2], f32)> = Vec::new();
-        for span in SEAM_STRUT_SPANS {
-            let depth = 0.5 * span * h;
-            // The vertex of `v`'s piece nearest the point `depth` in from the seam at `v`.
-            let straight_in = |v: u32| -> Option<u32> {
-                let piece = piece_ids[v as usize];
-                let target = p[v as usize] + inward[v as usize]? * depth;
-                let mut best: Option<(f32, u32)> = None;
-                layout.vertices_within(target, 0.5 * h, |j| {
-                    let d = p[j as usize].distance(target);
-                    if piece_ids[j as usize] == piece && d <= 0.5 * h && best.is_none_or(|b| (d, j) < b) {
-                        best = Some((d, j));
-                    }
-                });
-                best.map(|b| b.1).filter(|&j| layout.line_on_piece(p[v as usize], p[j as usize], piece))
-            };
-            for &[a, b] in seams {
-                let (Some(i), Some(j)) = (straight_in(a), straight_in(b)) else { continue };
-                let (piece_a, piece_b) = (piece_ids[a as usize], piece_ids[b as usize]);
-                // The shortest way through the pairs of this seam's pieces near this one.
-                let way = seams
-                    .iter()
-                    .filter(|&&[c, d]| {
-                        piece_ids[c as usize] == piece_a
-                            && piece_ids[d as usize] == piece_b
-                            && p[c as usize].distance(p[a as usize]) <= depth
-                    })
-                    .filter(|&&[c, d]| {
-                        layout.line_on_piece(p[i as usize], p[c as usize], piece_a)
-                            && layout.line_on_piece(p[d as usize], p[j as usize], piece_b)
-                    })
-                    .map(|&[c, d]| p[i as usize].distance(p[c as usize]) + p[d as usize].distance(p[j as usize]))
-                    .fold(p[i as usize].distance(p[a as usize]) + p[b as usize].distance(p[j as usize]), f32::min);
-                out.push(([i.min(j), i.max(j)], way));
-            }
-        }
-        // A pair met from several sewn pairs keeps its shortest way.
-        out.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
-        out.dedup_by_key(|s| s.0);
-        out
+    /// The flat rest's pieces laid out for struts ([`SimParams::struts`]); `None` on a shaped
+    /// rest, where the straight distance is not the way along the cloth.
+    fn flat_layout<'a>(&'a self, triangles: &'a [[u32; 3]], piece_ids: &'a [u32]) -> Option<FlatLayout<'a>> {
+        let Rest::Flat(p) = self else { return None };
+        FlatLayout::new(p, triangles, piece_ids)
     }
 
     /// `|Σ K_i x_i|` of a bending stencil at rest: zero where the rest is flat; on a shaped
@@ -593,8 +506,7 @@ impl Cloth {
             }
         }
         half.sort_unstable();
-        let mut edges = Vec::new();
-        let mut bends = Vec::new();
+        let (mut edges, mut bends, mut boundary) = (Vec::new(), Vec::new(), Vec::new());
         let mut i = 0;
         while i < half.len() {
             let (a, b, opp) = half[i];
@@ -603,6 +515,7 @@ impl Cloth {
                 bends.push([a, b, opp, half[i + 1].2]);
                 i += 2;
             } else {
+                boundary.push([a, b]);
                 i += 1;
             }
         }
@@ -615,7 +528,8 @@ impl Cloth {
         let shears: Vec<[u32; 3]> = order.iter().map(|&k| shears[k]).collect();
         let shear_inv: Vec<[f32; 4]> = order.iter().map(|&k| shear_inv[k]).collect();
         let shear_area: Vec<f32> = order.iter().map(|&k| shear_area[k]).collect();
-        let struts = if params.struts { rest.struts(mesh.triangles(), mesh.piece_ids()) } else { Vec::new() };
+        let layout = if params.struts { rest.flat_layout(mesh.triangles(), mesh.piece_ids()) } else { None };
+        let struts = layout.as_ref().map_or_else(Vec::new, FlatLayout::struts);
         let pairs: Vec<[u32; 2]> = struts.iter().map(|s| s.0).collect();
         let (order, part_struts) = sweep_order(&pairs, &part_vertices);
         let (struts, strut_max) = order.iter().map(|&k| struts[k]).unzip();
@@ -629,11 +543,8 @@ impl Cloth {
             .collect();
 
         let seams = mesh.seam_pairs().to_vec();
-        let (seam_struts, seam_strut_max) = if params.struts {
-            rest.seam_struts(mesh.triangles(), mesh.piece_ids(), &seams).into_iter().unzip()
-        } else {
-            (Vec::new(), Vec::new())
-        };
+        let (seam_struts, seam_strut_max) =
+            layout.as_ref().map_or_else(Default::default, |l| l.seam_struts(&seams, &boundary).into_iter().unzip());
         let seam_gap: Vec<f32> =
             seams.iter().map(|s| positions[s[0] as usize].distance(positions[s[1] as usize])).collect();
 
@@ -1839,6 +1750,116 @@ impl<'a> FlatLayout<'a> {
         })
     }
 
+    /// Strut pairs `(vertices, pattern distance)` ([`SimParams::struts`]): from each vertex, at
+    /// each of [`STRUT_SPANS`] mean edge lengths (give or take half an edge), the vertex of its
+    /// piece nearest each of four directions (0, 45, 90 and 135 degrees, within 23 degrees),
+    /// where the straight line between them stays on the piece (a notch or an armhole between
+    /// them makes the way along the cloth longer than the line).
+    fn struts(&self) -> Vec<([u32; 2], f32)> {
+        let (layout, p, piece_ids, h) = (self, self.p, self.piece_ids, self.mean_edge);
+        let directions = [0.0f32, 45.0, 90.0, 135.0].map(|a| Vec2::from_angle(a.to_radians()));
+        let mut out = Vec::new();
+        for span in STRUT_SPANS {
+            let (near, far) = ((span - 0.5) * h, (span + 0.5) * h);
+            for i in 0..p.len() {
+                let mut best = [(f32::NEG_INFINITY, u32::MAX); 4];
+                layout.vertices_within(p[i], far, |j| {
+                    let offset = p[j as usize] - p[i];
+                    let r = offset.length();
+                    if piece_ids[j as usize] != piece_ids[i] || r < near || r > far {
+                        return;
+                    }
+                    for (k, d) in directions.iter().enumerate() {
+                        let cos = offset.dot(*d) / r;
+                        if cos > STRUT_COS && (cos, u32::MAX - j) > (best[k].0, u32::MAX - best[k].1) {
+                            best[k] = (cos, j);
+                        }
+                    }
+                });
+                for (_, j) in best.into_iter().filter(|b| b.1 != u32::MAX) {
+                    let (a, b) = (p[i], p[j as usize]);
+                    if layout.line_on_piece(a, b, piece_ids[i]) {
+                        out.push(([i as u32, j], a.distance(b)));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Struts across the seams ([`SimParams::struts`]; acting once the seams are welded): from
+    /// each sewn pair, at each of [`SEAM_STRUT_SPANS`], the vertices half the span straight in from
+    /// the seam on either side, no farther apart than the shortest way between them through a
+    /// sewn pair nearby (each leg straight on its piece). That is a way along the sewn cloth, so
+    /// the cloth unstretched never puts them farther apart, and the strut never fights a fold.
+    /// Struts within a piece stop at its edges, and the load a seam carries (a shirt hangs from
+    /// its shoulder seams) stretched the edges with a sewn end most. `boundary`: the edges of
+    /// one triangle.
+    fn seam_struts(&self, seams: &[[u32; 2]], boundary: &[[u32; 2]]) -> Vec<([u32; 2], f32)> {
+        let (layout, p, piece_ids, h) = (self, self.p, self.piece_ids, self.mean_edge);
+        let inward = self.inward_normals(boundary);
+        let mut out: Vec<([u32; 2], f32)> = Vec::new();
+        for span in SEAM_STRUT_SPANS {
+            let depth = 0.5 * span * h;
+            // The vertex of `v`'s piece nearest the point `depth` in from the seam at `v`.
+            let straight_in = |v: u32| -> Option<u32> {
+                let piece = piece_ids[v as usize];
+                let target = p[v as usize] + inward[v as usize]? * depth;
+                let mut best: Option<(f32, u32)> = None;
+                layout.vertices_within(target, 0.5 * h, |j| {
+                    let d = p[j as usize].distance(target);
+                    if piece_ids[j as usize] == piece && d <= 0.5 * h && best.is_none_or(|b| (d, j) < b) {
+                        best = Some((d, j));
+                    }
+                });
+                best.map(|b| b.1).filter(|&j| layout.line_on_piece(p[v as usize], p[j as usize], piece))
+            };
+            for &[a, b] in seams {
+                let (Some(i), Some(j)) = (straight_in(a), straight_in(b)) else { continue };
+                let (piece_a, piece_b) = (piece_ids[a as usize], piece_ids[b as usize]);
+                // The shortest way through the pairs of this seam's pieces near this one.
+                let way = seams
+                    .iter()
+                    .filter(|&&[c, d]| {
+                        piece_ids[c as usize] == piece_a
+                            && piece_ids[d as usize] == piece_b
+                            && p[c as usize].distance(p[a as usize]) <= depth
+                    })
+                    .filter(|&&[c, d]| {
+                        layout.line_on_piece(p[i as usize], p[c as usize], piece_a)
+                            && layout.line_on_piece(p[d as usize], p[j as usize], piece_b)
+                    })
+                    .map(|&[c, d]| p[i as usize].distance(p[c as usize]) + p[d as usize].distance(p[j as usize]))
+                    .fold(p[i as usize].distance(p[a as usize]) + p[b as usize].distance(p[j as usize]), f32::min);
+                out.push(([i.min(j), i.max(j)], way));
+            }
+        }
+        // A pair met from several sewn pairs keeps its shortest way.
+        out.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+        out.dedup_by_key(|s| s.0);
+        out
+    }
+
+    /// Each boundary vertex's unit normal into its piece (from its neighbours along the
+    /// `boundary` edges), `None` inside the pieces and where the boundary turns too sharply to
+    /// say.
+    fn inward_normals(&self, boundary: &[[u32; 2]]) -> Vec<Option<Vec2>> {
+        let p = self.p;
+        let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); p.len()];
+        for &[a, b] in boundary {
+            neighbours[a as usize].push(b);
+            neighbours[b as usize].push(a);
+        }
+        (0..p.len())
+            .map(|v| {
+                let [prev, next] = neighbours[v][..] else { return None };
+                let normal = (p[next as usize] - p[prev as usize]).perp().try_normalize()?;
+                let step = 0.25 * self.mean_edge;
+                [normal, -normal].into_iter().find(|&n| self.on_piece(p[v] + n * step, self.piece_ids[v]))
+            })
+            .collect()
+    }
+
     /// Whether `q` lies on a triangle of `piece`.
     fn on_piece(&self, q: Vec2, piece: u32) -> bool {
         let mut found = false;
@@ -1864,35 +1885,6 @@ impl<'a> FlatLayout<'a> {
     fn vertices_within(&self, q: Vec2, r: f32, f: impl FnMut(u32)) {
         self.vertex_tree.query(&Aabb::around(q.extend(0.0), r), f);
     }
-}
-
-/// Each boundary vertex's unit normal into its piece (from its neighbours along the boundary),
-/// `None` inside the pieces and where the boundary turns too sharply to say.
-fn boundary_inward_normals(layout: &FlatLayout<'_>) -> Vec<Option<Vec2>> {
-    let p = layout.p;
-    let mut half: Vec<[u32; 2]> =
-        layout.triangles.iter().flat_map(|t| (0..3).map(move |k| sorted_pair(t[k], t[(k + 1) % 3]))).collect();
-    half.sort_unstable();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); p.len()];
-    for run in half.chunk_by(|a, b| a == b) {
-        if let [[a, b]] = run {
-            neighbours[*a as usize].push(*b);
-            neighbours[*b as usize].push(*a);
-        }
-    }
-    (0..p.len())
-        .map(|v| {
-            let [prev, next] = neighbours[v][..] else { return None };
-            let normal = (p[next as usize] - p[prev as usize]).perp().try_normalize()?;
-            let piece = layout.piece_ids[v];
-            let step = 0.25 * layout.mean_edge;
-            [normal, -normal].into_iter().find(|&n| layout.on_piece(p[v] + n * step, piece))
-        })
-        .collect()
-}
-
-fn sorted_pair(a: u32, b: u32) -> [u32; 2] {
-    [a.min(b), a.max(b)]
 }
 
 /// Inequality distance constraints `|x_a - x_b| <= max`, rigid (PBD): they only ever pull
@@ -1950,7 +1942,7 @@ mod tests {
         let mesh = u_and_square(1.0);
         let p = mesh.rest_positions();
         let rest = Rest::Flat(p.iter().map(|q| *q * CM).collect());
-        let struts = rest.struts(mesh.triangles(), mesh.piece_ids());
+        let struts = rest.flat_layout(mesh.triangles(), mesh.piece_ids()).unwrap().struts();
         assert!(struts.len() > 3 * p.len(), "{} struts for {} vertices", struts.len(), p.len());
         let u = mesh.piece_meshes()[0].vertices.clone();
         let corner = u.clone().map(|v| p[v as usize]).fold(Vec2::INFINITY, Vec2::min);
@@ -1969,6 +1961,11 @@ mod tests {
         assert!(spans.iter().any(|&l| l > 10.0), "long struts too");
     }
 
+    /// The lower left corner of `piece`'s bounding box on the pattern.
+    fn piece_corner(rest: &[Vec2], pieces: &[u32], piece: u32) -> Vec2 {
+        (0..rest.len()).filter(|&i| pieces[i] == piece).map(|i| rest[i]).fold(Vec2::INFINITY, Vec2::min)
+    }
+
     /// Two 10 x 20 cm panels sewn end to end: flat, the sewn cloth is one 10 x 40 cm sheet, so
     /// the way along the cloth between any two of its points is the straight line across it.
     #[test]
@@ -1980,9 +1977,7 @@ mod tests {
         let seam = Seam { a: EdgeRef { piece: 0, edge: 0 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
         let mesh = PatternMesh::build(panels, vec![seam], 1.0).unwrap();
         let (p, pieces) = (mesh.rest_positions(), mesh.piece_ids());
-        let corner =
-            |piece: u32| (0..p.len()).filter(|&i| pieces[i] == piece).map(|i| p[i]).fold(Vec2::INFINITY, Vec2::min);
-        let corners = [corner(0), corner(1)];
+        let corners = [piece_corner(p, pieces, 0), piece_corner(p, pieces, 1)];
         // The sheet: the bottom panel below the top one.
         let sheet = |v: u32| {
             let q = p[v as usize] - corners[pieces[v as usize] as usize];
@@ -1991,8 +1986,10 @@ mod tests {
         for &[a, b] in mesh.seam_pairs() {
             assert!(sheet(a).distance(sheet(b)) < 1e-4, "sewn pair {a}-{b} apart on the sheet");
         }
-        let rest = Rest::Flat(p.iter().map(|q| *q * CM).collect());
-        let struts = rest.seam_struts(mesh.triangles(), pieces, mesh.seam_pairs());
+        let x: Vec<Vec3> = p.iter().map(|q| q.extend(0.0) * CM).collect();
+        let cloth = Cloth::new(mesh.clone(), x, SimParams { struts: true, ..SimParams::default() });
+        let struts: Vec<([u32; 2], f32)> =
+            cloth.seam_struts.iter().copied().zip(cloth.seam_strut_max.iter().copied()).collect();
         // Every sewn pair but the two at the corners, where the boundary turns and there is no
         // straight in.
         let pairs = mesh.seam_pairs().len();
@@ -2075,11 +2072,7 @@ mod tests {
         let seam = Seam { a: EdgeRef { piece: 0, edge: 2 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
         let mesh = PatternMesh::build(squares, vec![seam], 1.0).unwrap();
         let (rest, pieces) = (mesh.rest_positions(), mesh.piece_ids());
-        let corner = |piece: u32| {
-            let of_piece = (0..rest.len()).filter(|&i| pieces[i] == piece);
-            of_piece.map(|i| rest[i]).fold(Vec2::INFINITY, Vec2::min)
-        };
-        let corners = [corner(0), corner(1)];
+        let corners = [piece_corner(rest, pieces, 0), piece_corner(rest, pieces, 1)];
         let x: Vec<Vec3> = (0..rest.len())
             .map(|i| {
                 let q = (rest[i] - corners[pieces[i] as usize]) * CM;
