@@ -132,7 +132,7 @@ impl MatrixTextureNode {
         let gpu_mesh = mesh.gpu(gpu);
         let formats = [target_format; 3];
         let pipeline = gpu.render_pipeline(&RenderPipelineDesc {
-            fragment_entry: entry,
+            fragment_entry: Some(entry),
             ..RenderPipelineDesc::new("matrix_texture.wgsl", &[], &[Some(Vertex::layout())], &formats)
         })?;
         gpu.record(|enc| {

@@ -4,8 +4,6 @@
 struct TileView {
     // The view's projection folded with the map of its clip space into the tile.
     to_tile: mat4x4<f32>,
-    // The tile in texels: x0, y0, x1, y1.
-    rect: vec4<f32>,
 };
 
 struct Tiles {

@@ -401,7 +401,7 @@ impl FullscreenPass {
     ) -> anyhow::Result<()> {
         let layout = self.bindings.layout(gpu, binds);
         let pipeline = gpu.render_pipeline(&RenderPipelineDesc {
-            fragment_entry: self.fragment_entry,
+            fragment_entry: Some(self.fragment_entry),
             constants,
             ..RenderPipelineDesc::fullscreen(self.shader, &[Some(&layout)], formats)
         })?;

@@ -39,7 +39,9 @@ impl std::error::Error for ShaderError {}
 pub struct RenderPipelineDesc<'a> {
     pub shader: &'a str,
     pub vertex_entry: &'a str,
-    pub fragment_entry: &'a str,
+    /// `None`: no fragment stage (depth only, which a software rasterizer tests before any
+    /// shading).
+    pub fragment_entry: Option<&'a str>,
     /// Bind group layouts by group index (`None`: the group is unused).
     pub groups: &'a [Option<&'a wgpu::BindGroupLayout>],
     pub vertex_buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
@@ -65,7 +67,7 @@ impl<'a> RenderPipelineDesc<'a> {
         RenderPipelineDesc {
             shader,
             vertex_entry: "vs_main",
-            fragment_entry: "fs_main",
+            fragment_entry: Some("fs_main"),
             groups,
             vertex_buffers,
             targets,
@@ -322,9 +324,9 @@ pub(crate) fn render_pipeline(
                 buffers: desc.vertex_buffers,
                 compilation_options: options.clone(),
             },
-            fragment: Some(wgpu::FragmentState {
+            fragment: desc.fragment_entry.map(|entry| wgpu::FragmentState {
                 module,
-                entry_point: Some(desc.fragment_entry),
+                entry_point: Some(entry),
                 targets: &targets,
                 compilation_options: options,
             }),

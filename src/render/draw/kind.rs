@@ -138,6 +138,8 @@ pub struct KindDraw {
 pub struct PipelineKey {
     pub shader: &'static str,
     pub entry: &'static str,
+    /// The fragment entry point; `None` for depth only.
+    pub fragment: Option<&'static str>,
     /// Group 1 with the pass's cell texture (items under grids of several cells).
     pub cells: bool,
     /// Names the vertex buffer layouts and group 2 layout given with the key.
@@ -196,6 +198,7 @@ impl PassCx<'_> {
         }
         let pipeline = self.gpu.render_pipeline(&RenderPipelineDesc {
             vertex_entry: key.entry,
+            fragment_entry: key.fragment,
             depth: Some((self.depth, wgpu::CompareFunction::Less)),
             constants: &constants,
             cull: key.cull,
@@ -240,7 +243,9 @@ impl PassCx<'_> {
         let cuboid = matches!(stage, VertexStage::Cuboid(_));
         let items = if cuboid { ItemVertex::cuboid_layout() } else { ItemVertex::layout() };
         let vertex = [Some(crate::mesh::Vertex::shading_layout()), Some(items)];
-        let key = PipelineKey { shader, entry, cells, inputs: "mesh", constants: Vec::new(), cull, material };
+        // Depth tiles need no fragment stage: the scissor keeps each draw inside its tile.
+        let fragment = (self.target == TargetKind::GBuffer).then_some("fs_main");
+        let key = PipelineKey { shader, entry, fragment, cells, inputs: "mesh", constants: Vec::new(), cull, material };
         self.pipeline(key, None, &vertex)
     }
 }

@@ -4,8 +4,9 @@
 //! - [`SceneDrawer::gbuffer`]: the deferred renderer's G-buffer (dissertation section 4.2);
 //! - [`SceneDrawer::depth_tiles`]: depth only, into tiles of one depth texture, one view per
 //!   tile (shadow maps: a light per tile of an atlas). Each draw is recorded once per tile (the
-//!   tile's index in group 3, wgpu having no geometry shader). A fragment outside its tile is
-//!   discarded, so a tile never spills into its neighbours.
+//!   tile's index in group 3, wgpu having no geometry shader), scissored to the tile, so a tile
+//!   never spills into its neighbours. Without a fragment test the pipelines of plain meshes
+//!   have no fragment stage: lavapipe then bins and depth-tests only the tile's texels.
 //!
 //! Both go through one function, [`SceneDrawer::draw`]: it composes the items' transforms
 //! ([`compose`]), writes their objects ([`objects`]) and asks each item's kind
@@ -64,7 +65,7 @@ impl Default for SceneDrawer {
     fn default() -> Self {
         SceneDrawer {
             frame: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
-            tiles: Bindings::new(wgpu::ShaderStages::VERTEX_FRAGMENT),
+            tiles: Bindings::new(wgpu::ShaderStages::VERTEX),
             tile_index: Bindings::new(wgpu::ShaderStages::VERTEX),
             objects: BufferRing::new("objects", wgpu::BufferUsages::STORAGE),
             object_groups: Vec::new(),
@@ -83,12 +84,16 @@ struct Target<'a> {
     kind: TargetKind,
     label: &'static str,
     group0: (wgpu::BindGroupLayout, wgpu::BindGroup),
-    /// Depth tiles: the layout of group 3 and one group per tile; each draw is recorded once
-    /// per tile.
-    tile_index: Option<(wgpu::BindGroupLayout, Vec<wgpu::BindGroup>)>,
+    /// Depth tiles: the layout of group 3 and each tile's draw state; each draw is recorded
+    /// once per tile.
+    tile_index: Option<(wgpu::BindGroupLayout, Vec<TileDraw>)>,
     colors: &'a [&'a GpuImage],
     depth: &'a GpuImage,
 }
+
+/// A tile of a depth-tiles target as its draws bind it: group 3 (its index) and its scissor
+/// rectangle (x, y, width, height).
+type TileDraw = (wgpu::BindGroup, [u32; 4]);
 
 /// One draw as prepared: its items, their object group and the kind's draw.
 struct Prepared {
@@ -168,9 +173,12 @@ impl SceneDrawer {
         let group = self.tiles.bind_group(gpu, &layout, &binds);
         let index_layout = self.tile_index.layout(gpu, &[Bind::Uniform(&[0u8; 16])]);
         let index_groups = (0..tiles.len() as u32)
-            .map(|t| {
+            .zip(tiles)
+            .map(|(t, tile)| {
                 let index = [t, 0, 0, 0];
-                self.tile_index.bind_group(gpu, &index_layout, &[Bind::Uniform(bytemuck::bytes_of(&index))])
+                let group =
+                    self.tile_index.bind_group(gpu, &index_layout, &[Bind::Uniform(bytemuck::bytes_of(&index))]);
+                (group, tile.rect)
             })
             .collect();
         let target = Target {
@@ -282,13 +290,8 @@ impl SceneDrawer {
 
 /// Records the prepared draws, each item's transform from `item_buffer`: each draw once, or
 /// where `tiles` has bind groups (a depth target's tile indices), once per tile with its group
-/// bound as group 3.
-fn record(
-    pass: &mut wgpu::RenderPass<'_>,
-    prepared: &[Prepared],
-    item_buffer: &wgpu::Buffer,
-    tiles: &[wgpu::BindGroup],
-) {
+/// bound as group 3 and the scissor on its rectangle.
+fn record(pass: &mut wgpu::RenderPass<'_>, prepared: &[Prepared], item_buffer: &wgpu::Buffer, tiles: &[TileDraw]) {
     let mut bound = Bound::default();
     for p in prepared {
         let (range, k) = (p.range, &p.draw);
@@ -322,8 +325,9 @@ fn record(
         if tiles.is_empty() {
             call(pass);
         }
-        for group in tiles {
+        for (group, [x, y, w, h]) in tiles {
             pass.set_bind_group(3, group, &[]);
+            pass.set_scissor_rect(*x, *y, *w, *h);
             call(pass);
         }
     }

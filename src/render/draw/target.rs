@@ -23,13 +23,11 @@ pub struct FrameUniform {
 }
 
 /// shaders/render/depth_tiles.wgsl `TileView`: a tile's view-projection folded with the map from clip
-/// space into its rectangle of the texture, and that rectangle in texels (x0, y0, x1, y1) for
-/// the fragment test.
+/// space into its rectangle of the texture (the pass's scissor clips each draw to the rectangle).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct TileUniform {
     to_tile: [[f32; 4]; 4],
-    rect: [f32; 4],
 }
 
 #[repr(C)]
@@ -40,7 +38,7 @@ pub struct TilesUniform {
 
 impl TilesUniform {
     pub fn new(tiles: &[Tile], width: u32, height: u32) -> TilesUniform {
-        let mut uniform = TilesUniform { tiles: [TileUniform { to_tile: [[0.0; 4]; 4], rect: [0.0; 4] }; MAX_TILES] };
+        let mut uniform = TilesUniform { tiles: [TileUniform { to_tile: [[0.0; 4]; 4] }; MAX_TILES] };
         for (u, t) in uniform.tiles.iter_mut().zip(tiles) {
             *u = tile_uniform(t, width, height);
         }
@@ -61,5 +59,5 @@ fn tile_uniform(t: &Tile, width: u32, height: u32) -> TileUniform {
         Vec4::new(0.0, 0.0, 1.0, 0.0),
         Vec4::new((x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0, 1.0),
     );
-    TileUniform { to_tile: (scale_bias * t.view_proj).to_cols_array_2d(), rect: [x, y, x + tw, y + th] }
+    TileUniform { to_tile: (scale_bias * t.view_proj).to_cols_array_2d() }
 }

@@ -44,15 +44,25 @@ impl ItemKind for AttachedDraw {
         let layout = warp_layout(gpu, wgpu::ShaderStages::VERTEX);
         let uniform = self.settings.uniform();
         let group = cx.group2.bind_group(gpu, &layout, &warp_binds(&self.matrix, &uniform));
-        let (shader, entry) = match cx.pass.target {
-            TargetKind::GBuffer => ("attach.wgsl", "vs_main"),
-            TargetKind::DepthTiles => ("depth.wgsl", "vs_attached"),
+        // Depth: a fragment stage only to drop the primitives of outlier instances.
+        let (shader, entry, fragment) = match cx.pass.target {
+            TargetKind::GBuffer => ("attach.wgsl", "vs_main", "fs_main"),
+            TargetKind::DepthTiles => ("depth.wgsl", "vs_attached", "fs_attached"),
         };
         // The variant without seams compiles the partner reads out (`SEAMS` in shaders/warp/warp.wgsl).
         let mut constants = vec![("SEAMS", u32::from(self.matrix.has_seams()))];
         constants.extend(self.settings.constants(self.per_instance_frames()));
         let material = item.material.features();
-        let key = PipelineKey { shader, entry, cells: false, inputs: "attached", constants, cull: None, material };
+        let key = PipelineKey {
+            shader,
+            entry,
+            fragment: Some(fragment),
+            cells: false,
+            inputs: "attached",
+            constants,
+            cull: None,
+            material,
+        };
         let vertex = [Some(Vertex::layout()), Some(InstanceData::layout())];
         let mesh = item.mesh.gpu(gpu);
         Ok(Some(KindDraw {

@@ -38,6 +38,7 @@ impl ItemKind for PnPixels {
         let key = PipelineKey {
             shader: "gbuffer_pn.wgsl",
             entry: "vs_main",
+            fragment: Some("fs_main"),
             cells: false,
             inputs: "pn mesh",
             constants: Vec::new(),
