@@ -26,7 +26,13 @@ impl Default for DrapeParams {
         // sweeps per substep: with one, the corners where three or four panels meet (the
         // armpits) stay 1.2 mm open after a second of sewing the shirt; with two, under 1 mm.
         DrapeParams {
-            sim: SimParams { seam_close_time: 0.4, iterations: 2, struts: true, ..SimParams::default() },
+            sim: SimParams {
+                seam_close_time: 0.4,
+                iterations: 2,
+                struts: true,
+                strain_limit: Some(0.03),
+                ..SimParams::default()
+            },
             sewing_frames: 30,
         }
     }
