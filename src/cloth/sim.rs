@@ -1908,9 +1908,10 @@ impl<'a> FlatLayout<'a> {
     }
 }
 
-/// Inequality distance constraints `|x_a - x_b| <= max`, rigid (PBD): they only ever pull
-/// two vertices of a piece back to their distance on the pattern, which the cloth unstretched
-/// cannot exceed, so they never fight a fold.
+/// Inequality distance constraints `|x_a - x_b| <= max(k)`, rigid (PBD): they only ever pull
+/// two vertices together. For struts, back to their distance on the pattern, which the cloth
+/// unstretched cannot exceed, so they never fight a fold; for the strain limit, an edge back to
+/// `1 + limit` times its rest length.
 fn solve_struts(x: &mut [Vec3], base: usize, w: &[f32], struts: &[[u32; 2]], max: impl Fn(usize) -> f32) {
     for (k, &[a, b]) in struts.iter().enumerate() {
         let max = max(k);
