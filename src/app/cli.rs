@@ -1358,12 +1358,12 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
                     arm_spread,
                     offset_cm,
                 };
+                // Each placement's OBJs in a folder of their own when there are several.
+                let placement = match offsets_cm.len() {
+                    1 => String::new(),
+                    _ => format!("offset_{},{},{}", offset_cm.x, offset_cm.y, offset_cm.z),
+                };
                 for &edge in &edges {
-                    let placement = if offsets_cm.len() > 1 {
-                        format!("offset_{},{},{}", offset_cm.x, offset_cm.y, offset_cm.z)
-                    } else {
-                        String::new()
-                    };
                     let dir = obj_dir.as_ref().map(|d| d.join(&placement).join(format!("edge_{edge}cm")));
                     let r = crate::app::bench::drape_garment(
                         &avatar,

@@ -1968,7 +1968,7 @@ mod tests {
         let struts = rest.flat_layout(mesh.triangles(), mesh.piece_ids()).unwrap().struts();
         assert!(struts.len() > 3 * p.len(), "{} struts for {} vertices", struts.len(), p.len());
         let u = mesh.piece_meshes()[0].vertices.clone();
-        let corner = u.clone().map(|v| p[v as usize]).fold(Vec2::INFINITY, Vec2::min);
+        let corner = piece_corner(p, mesh.piece_ids(), 0);
         let local = |v: u32| p[v as usize] - corner;
         for &([a, b], max) in &struts {
             assert_eq!(mesh.piece_ids()[a as usize], mesh.piece_ids()[b as usize], "strut {a}-{b} joins two pieces");
@@ -1989,18 +1989,26 @@ mod tests {
         (0..rest.len()).filter(|&i| pieces[i] == piece).map(|i| rest[i]).fold(Vec2::INFINITY, Vec2::min)
     }
 
+    /// Two `width` x `height` cm rectangles at 1 cm edges, edge `edges[0]` of the first sewn
+    /// to edge `edges[1]` of the second, reversed (edge 0 runs along the bottom left to right,
+    /// edge 2 along the top right to left); also each piece's [`piece_corner`].
+    fn sewn_rectangles(names: [&str; 2], width: f32, height: f32, edges: [usize; 2]) -> (PatternMesh, [Vec2; 2]) {
+        use crate::cloth::pattern::{EdgeRef, Seam};
+        let pieces = names.map(|name| Piece::new(name, rectangle_outline(width, height))).to_vec();
+        let (a, b) = (EdgeRef { piece: 0, edge: edges[0] }, EdgeRef { piece: 1, edge: edges[1] });
+        let mesh = PatternMesh::build(pieces, vec![Seam { a, b, reversed: true }], 1.0).unwrap();
+        let (p, ids) = (mesh.rest_positions(), mesh.piece_ids());
+        let corners = [piece_corner(p, ids, 0), piece_corner(p, ids, 1)];
+        (mesh, corners)
+    }
+
     /// Two 10 x 20 cm panels sewn end to end: flat, the sewn cloth is one 10 x 40 cm sheet, so
     /// the way along the cloth between any two of its points is the straight line across it.
     #[test]
     fn seam_struts_join_the_pieces_no_shorter_than_the_way_along_the_sewn_cloth() {
-        use crate::cloth::pattern::{EdgeRef, Seam};
-        let panels =
-            vec![Piece::new("top", rectangle_outline(10.0, 20.0)), Piece::new("bottom", rectangle_outline(10.0, 20.0))];
-        // The top's lower edge (0, left to right) on the bottom's upper edge (2, right to left).
-        let seam = Seam { a: EdgeRef { piece: 0, edge: 0 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
-        let mesh = PatternMesh::build(panels, vec![seam], 1.0).unwrap();
+        // The top's lower edge on the bottom's upper edge.
+        let (mesh, corners) = sewn_rectangles(["top", "bottom"], 10.0, 20.0, [0, 2]);
         let (p, pieces) = (mesh.rest_positions(), mesh.piece_ids());
-        let corners = [piece_corner(p, pieces, 0), piece_corner(p, pieces, 1)];
         // The sheet: the bottom panel below the top one.
         let sheet = |v: u32| {
             let q = p[v as usize] - corners[pieces[v as usize] as usize];
@@ -2108,14 +2116,9 @@ mod tests {
     #[test]
     fn a_seam_with_the_body_between_its_sides_closes_round_the_body() {
         use crate::cloth::body_collision::box_mesh;
-        use crate::cloth::pattern::{EdgeRef, Seam};
-        let squares =
-            vec![Piece::new("front", rectangle_outline(10.0, 10.0)), Piece::new("back", rectangle_outline(10.0, 10.0))];
-        // Edge 2 is the top, right to left; the back is mirrored, so its top runs left to right.
-        let seam = Seam { a: EdgeRef { piece: 0, edge: 2 }, b: EdgeRef { piece: 1, edge: 2 }, reversed: true };
-        let mesh = PatternMesh::build(squares, vec![seam], 1.0).unwrap();
+        // The tops sewn; the back is mirrored, so its top runs left to right.
+        let (mesh, corners) = sewn_rectangles(["front", "back"], 10.0, 10.0, [2, 2]);
         let (rest, pieces) = (mesh.rest_positions(), mesh.piece_ids());
-        let corners = [piece_corner(rest, pieces, 0), piece_corner(rest, pieces, 1)];
         let x: Vec<Vec3> = (0..rest.len())
             .map(|i| {
                 let q = (rest[i] - corners[pieces[i] as usize]) * CM;
